@@ -1,0 +1,100 @@
+"""Plain data the simulator emits beside the tracker's frames: store geometry and ground truth.
+
+Everything here is numpy only, so the recording and scoring code can use it without MuJoCo.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from tracker.types import Frame
+
+
+class BoxKind(enum.Enum):
+    """What a box of the store is, for drawing and for occlusion bookkeeping."""
+
+    FLOOR = "floor"
+    WALL = "wall"
+    SHELF = "shelf"
+    CHECKOUT = "checkout"
+    ENTRANCE = "entrance"
+    EXIT = "exit"
+
+
+@dataclass(frozen=True)
+class Box:
+    """An axis-aligned-in-yaw box of the store.
+
+    Attributes:
+        kind: what it is.
+        center_m: (x, y, z) of the box centre in the world frame.
+        size_m: full extents (x, y, z) before the yaw rotation.
+        yaw_rad: rotation about the world z axis.
+    """
+
+    kind: BoxKind
+    center_m: tuple[float, float, float]
+    size_m: tuple[float, float, float]
+    yaw_rad: float = 0.0
+
+
+@dataclass(frozen=True, eq=False)
+class PoseTruth:
+    """The true 3D poses of everybody in the store at one instant.
+
+    Attributes:
+        t_s: true time, seconds since the scenario start.
+        person_ids: (P,) int64 ids of the people present.
+        poses: (P, J, 3) keypoints in the world frame, metres.
+    """
+
+    t_s: float
+    person_ids: np.ndarray
+    poses: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class DetectionTruth:
+    """What really lies behind each detection of one camera frame (rows match `Frame` rows).
+
+    Attributes:
+        capture_s: the true capture time of the frame (the stamp is the camera's jittered clock).
+        delivery_s: when the frame reached the tracker; frames are delivered in this order.
+        person_ids: (D,) int64 person behind each detection, -1 for a false positive.
+        keypoints_px: (D, J, 2) true distorted pixel position of each joint (NaN for a false positive).
+        in_image: (D, J) bool, the joint is in front of the camera and inside the image.
+        occluded: (D, J) bool, the ray to the joint first hits a shelf, a wall or another person.
+        self_occluded: (D, J) bool, the ray first hits another limb of the same person.
+        effects: (D,) int, bit mask of `DetectionEffect` values applied to the detection.
+    """
+
+    capture_s: float
+    delivery_s: float
+    person_ids: np.ndarray
+    keypoints_px: np.ndarray
+    in_image: np.ndarray
+    occluded: np.ndarray
+    self_occluded: np.ndarray
+    effects: np.ndarray
+
+
+class DetectionEffect(enum.IntFlag):
+    """Detector effects recorded per detection, so that statistics can be measured from a recording."""
+
+    NONE = 0
+    FRAGMENT = 1
+    DUPLICATE = 2
+    PHANTOM = 4
+    LEFT_RIGHT_SWAP = 8
+    GROSS_ERROR = 16
+
+
+@dataclass(frozen=True, eq=False)
+class CameraFrame:
+    """One delivered camera frame: what the tracker sees and the truth behind it."""
+
+    frame: Frame
+    truth: DetectionTruth
