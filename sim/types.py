@@ -94,7 +94,14 @@ class DetectionEffect(enum.IntFlag):
 
 @dataclass(frozen=True, eq=False)
 class CameraFrame:
-    """One delivered camera frame: what the tracker sees and the truth behind it."""
+    """One delivered camera frame: what the tracker sees and the truth behind it.
+
+    Attributes:
+        frame: the detections as the tracker receives them.
+        truth: per-detection truth, rows matching `frame`.
+        poses_at_capture: everybody's true 3D pose at the true capture time.
+    """
 
     frame: Frame
     truth: DetectionTruth
+    poses_at_capture: PoseTruth

@@ -183,3 +183,21 @@ class Target:
     pose: np.ndarray
     stamp_s: float
     state: TargetState = TargetState.CONFIRMED
+
+
+@dataclass(frozen=True, eq=False)
+class TrackerOutput:
+    """What the tracker reported after one frame: the targets and where each detection went.
+
+    Attributes:
+        stamp_s: stamp of the frame that was processed.
+        camera: name of that frame's camera.
+        targets: confirmed targets after the update, poses at `stamp_s`.
+        detection_target_ids: (D,) int64 id of the target each detection of the frame was assigned
+            to (including a target it helped start), -1 for a detection left unassigned.
+    """
+
+    stamp_s: float
+    camera: str
+    targets: list[Target]
+    detection_target_ids: np.ndarray
