@@ -68,13 +68,19 @@ class Scenario:
         return hashlib.sha256(self.source_text.encode()).hexdigest()
 
 
+def scenario_dirs() -> list[Path]:
+    """Where shipped scenarios are looked up: `./scenarios`, then the source checkout's."""
+    return [Path("scenarios"), SCENARIO_DIR]
+
+
 def resolve_path(name_or_path: str | Path | None) -> Path:
     """Maps None to the default scenario and a bare name to `scenarios/NAME.toml`."""
-    if name_or_path is None:
-        return SCENARIO_DIR / f"{DEFAULT_SCENARIO}.toml"
-    path = Path(name_or_path)
-    if not path.suffix and not path.exists() and (SCENARIO_DIR / f"{path.name}.toml").exists():
-        return SCENARIO_DIR / f"{path.name}.toml"
+    path = Path(name_or_path if name_or_path is not None else DEFAULT_SCENARIO)
+    if path.suffix or path.exists():
+        return path
+    for folder in scenario_dirs():
+        if (folder / f"{path.name}.toml").is_file():
+            return folder / f"{path.name}.toml"
     return path
 
 
@@ -94,7 +100,7 @@ def load(name_or_path: str | Path | None = None, overrides: dict | None = None) 
     try:
         text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
-        shipped = ", ".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
+        shipped = ", ".join(sorted({p.stem for d in scenario_dirs() for p in d.glob("*.toml")}))
         raise ScenarioError(f"{path}: no such scenario file (shipped scenarios: {shipped})") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError(f"{path}: cannot read scenario: {e}") from None

@@ -1,0 +1,255 @@
+"""The `crossview` command line: generate, track, score, run, info, bench and the dataset tools.
+
+Every command prints a one-line error and exits with status 2 on bad input; only this module prints.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+EXIT_BAD_INPUT = 2
+EXIT_INTERRUPTED = 130
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse with the project's exit status for bad arguments and a one-line message."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"{text} must be > 0 seconds")
+    return value
+
+
+def _non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text} must be >= 0")
+    return value
+
+
+def _positive_int(text: str) -> int:
+    value = _non_negative_int(text)
+    if value == 0:
+        raise argparse.ArgumentTypeError("0 must be >= 1")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="crossview", description=__doc__.splitlines()[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    def scenario_options(p):
+        p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
+        p.add_argument("--duration", type=_positive_float, help="simulated seconds (default: the scenario's)")
+        p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
+        p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
+
+    def tracker_options(p):
+        p.add_argument("--method", default="crossview", choices=("crossview", "baseline"))
+        p.add_argument("--preset", default="store", help="tracker preset: campus, shelf or store (default store)")
+        p.add_argument("--config", type=Path, help="TOML file of tracker parameters over the preset")
+
+    p = sub.add_parser("run", help="generate, track and score a scenario (default: the built-in store)")
+    p.add_argument("scenario", nargs="?", help="scenario file or shipped name (default store_layout1)")
+    scenario_options(p)
+    tracker_options(p)
+    p.add_argument("--out", type=Path, default=Path("recordings"), help="output folder (default recordings/)")
+    p.add_argument("--json", type=Path, help="score JSON path (default OUT/NAME.score.json)")
+
+    p = sub.add_parser("generate", help="simulate a scenario into a recording")
+    p.add_argument("scenario", help="scenario file or shipped name")
+    p.add_argument("-o", "--output", type=Path, required=True, help="recording to write (.mcap)")
+    scenario_options(p)
+
+    p = sub.add_parser("track", help="run a tracker over a recording")
+    p.add_argument("recording", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True, help="tracks file to write (.mcap)")
+    tracker_options(p)
+
+    p = sub.add_parser("score", help="score a tracks file against its recording")
+    p.add_argument("recording", type=Path)
+    p.add_argument("tracks", type=Path)
+    p.add_argument("--json", type=Path, help="write the score JSON here")
+
+    p = sub.add_parser("info", help="describe a recording or tracks file")
+    p.add_argument("file", type=Path)
+    p.add_argument("--allow-truncated", action="store_true", help="report the readable prefix of a cut file")
+
+    p = sub.add_parser("detector-stats", help="measure the synthetic detector's error statistics in a recording")
+    p.add_argument("recording", type=Path)
+
+    p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
+    p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
+    p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
+
+    p = sub.add_parser("export", help="write tracks in the paper's dataset layout")
+    p.add_argument("tracks", type=Path)
+    p.add_argument("--format", default="crossview-json", choices=("crossview-json",))
+    p.add_argument("-o", "--output", type=Path, required=True)
+
+    p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
+    p.add_argument("dataset", type=Path)
+    p.add_argument("-o", "--output", type=Path, required=True)
+
+    p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
+    p.add_argument("--json", type=Path, help="write the figures here")
+    p.add_argument("--duration", type=_positive_float, default=20.0, help="simulated seconds per case")
+    return parser
+
+
+def _cmd_run(args) -> None:
+    from crossview import pipeline
+
+    scenario = pipeline.load_scenario(
+        args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
+    )
+    out = args.out
+    rec_path = out / f"{scenario.name}.mcap"
+    tracks_path = out / f"{scenario.name}.tracks.mcap"
+    json_path = args.json or out / f"{scenario.name}.score.json"
+    for path in (rec_path, tracks_path, json_path):
+        pipeline.check_writable(path)
+    progress = not args.no_progress
+    gen = pipeline.generate(scenario, rec_path, progress=progress)
+    print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s")
+    trk = pipeline.track(
+        rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config, progress=progress
+    )
+    print(f"tracked   {trk.path}: {trk.updates} updates at {trk.tracker_fps:.1f} FPS (all cameras once)")
+    report, result = pipeline.score(rec_path, tracks_path, progress=progress)
+    pipeline.write_json(result, json_path)
+    print(report.table())
+    print(f"score JSON: {json_path}")
+
+
+def _cmd_generate(args) -> None:
+    from crossview import pipeline
+
+    scenario = pipeline.load_scenario(
+        args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
+    )
+    gen = pipeline.generate(scenario, args.output, progress=not args.no_progress)
+    print(f"{gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s")
+
+
+def _cmd_track(args) -> None:
+    from crossview import pipeline
+
+    trk = pipeline.track(
+        args.recording, args.output, method=args.method, preset=args.preset, config_path=args.config,
+        progress=not args.no_progress,
+    )
+    print(f"{trk.path}: {trk.updates} updates, {trk.tracker_fps:.1f} FPS (all cameras once), "
+          f"{trk.camera_frames_per_s:.0f} camera frames/s")
+
+
+def _cmd_score(args) -> None:
+    from crossview import pipeline
+
+    if args.json:
+        pipeline.check_writable(args.json)
+    report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress)
+    print(report.table())
+    if args.json:
+        pipeline.write_json(result, args.json)
+
+
+def _cmd_info(args) -> None:
+    from crossview import recording
+
+    print(recording.format_info(recording.info(args.file, allow_truncated=args.allow_truncated)))
+
+
+def _cmd_detector_stats(args) -> None:
+    from crossview import recording
+    from crossview.detector_stats import detector_stats, format_detector_stats
+
+    rec = recording.open_recording(args.recording)
+    print(format_detector_stats(detector_stats(rec.frames())))
+
+
+def _cmd_evaluate(args) -> None:
+    from crossview.scoring.campus import evaluate, format_evaluation
+
+    print(format_evaluation(evaluate(args.dataset, args.result)))
+
+
+def _cmd_export(args) -> None:
+    from crossview import pipeline, recording
+    from crossview.datasets import write_result_3d
+
+    pipeline.check_writable(args.output)
+    tracks = recording.open_tracks(args.tracks)
+    write_result_3d(tracks.outputs(), args.output)
+    print(f"{args.output}: written")
+
+
+def _cmd_convert(args) -> None:
+    from crossview import pipeline
+    from crossview.datasets import convert
+
+    pipeline.check_writable(args.output)
+    convert(args.dataset, args.output)
+    print(f"{args.output}: written")
+
+
+def _cmd_bench(args) -> None:
+    from crossview import bench
+
+    bench.main(json_path=args.json, duration_s=args.duration, progress=not args.no_progress)
+
+
+COMMANDS = {
+    "run": _cmd_run,
+    "generate": _cmd_generate,
+    "track": _cmd_track,
+    "score": _cmd_score,
+    "info": _cmd_info,
+    "detector-stats": _cmd_detector_stats,
+    "evaluate": _cmd_evaluate,
+    "export": _cmd_export,
+    "convert": _cmd_convert,
+    "bench": _cmd_bench,
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
+    )
+    try:
+        COMMANDS[args.command](args)
+    except KeyboardInterrupt:
+        print("crossview: interrupted; no partial output was kept", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except (ValueError, OSError) as e:
+        # Bad input: scenario, recording and config errors are ValueErrors that name the file and key.
+        if args.verbose:
+            raise
+        message = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if isinstance(e, OSError) and e.filename:
+            message = f"{e.filename}: {e.strerror}"
+        print(f"crossview {args.command}: error: {message}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

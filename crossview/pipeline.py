@@ -1,0 +1,228 @@
+"""The stages of the main job, each a function the CLI and the benchmarks call: generate, track, score.
+
+Stages talk only through files (a recording, a tracks file) so that each can be run, inspected and
+replaced on its own, and `run` is nothing more than the three in a row.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from tqdm import tqdm
+
+from crossview import recording
+from sim import scenario as scenario_mod
+from sim.types import CameraFrame
+
+log = logging.getLogger(__name__)
+
+METHODS = ("crossview", "baseline")
+
+
+def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
+    """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor.
+
+    Args:
+        count: number of cameras, >= 1.
+        width_m, depth_m: floor extents along x (columns) and y (rows).
+    """
+    if count < 1:
+        raise ValueError(f"--cameras: {count} must be >= 1")
+    aspect = width_m / depth_m
+    rows = min(
+        (r for r in range(1, count + 1) if count % r == 0),
+        key=lambda r: abs(math.log((count // r) / r / aspect)),
+    )
+    return rows, count // rows
+
+
+def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None) -> scenario_mod.Scenario:
+    """Loads a scenario with the command line's overrides applied (validated like the file)."""
+    overrides = {}
+    if duration_s is not None:
+        overrides["duration_s"] = duration_s
+    if seed is not None:
+        overrides["seed"] = seed
+    if people is not None:
+        overrides["crowd.people"] = people
+    scenario = scenario_mod.load(path, overrides)
+    if cameras is not None:
+        rows, cols = camera_grid(cameras, scenario.store.width_m, scenario.store.depth_m)
+        scenario = scenario_mod.load(path, {**overrides, "cameras.rows": rows, "cameras.cols": cols})
+    return scenario
+
+
+def check_writable(path: Path) -> None:
+    """Fails early, before any work, when `path` cannot be created."""
+    folder = path.parent if str(path.parent) else Path(".")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"{folder}: output folder cannot be created ({e.strerror})") from None
+    if not os.access(folder, os.W_OK):
+        raise ValueError(f"{folder}: output folder is not writable; choose another with --out / -o")
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder; give a file name ending in .mcap")
+
+
+@dataclass(frozen=True)
+class GenerateResult:
+    path: Path
+    num_cameras: int
+    num_frames: int
+    wall_s: float
+
+
+def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True) -> GenerateResult:
+    """Simulates `scenario` for its duration and writes the recording to `out` atomically."""
+    from sim.simulate import Simulation  # MuJoCo is only needed for this stage
+
+    check_writable(out)
+    start = time.perf_counter()
+    sim = Simulation(scenario, scenario.seed)
+    header = recording.RecordingHeader(
+        scenario_name=scenario.name,
+        scenario_text=scenario.source_text,
+        scenario_digest=scenario.digest,
+        seed=scenario.seed,
+        duration_s=scenario.duration_s,
+        skeleton_name=sim.skeleton.name,
+        software_version=recording.software_version(),
+        format_version=recording.FORMAT_VERSION,
+    )
+    frames = 0
+    with (
+        recording.RecordingWriter(out, header, sim.cameras, sim.boxes) as writer,
+        tqdm(total=scenario.duration_s, unit="sim s", desc="generate", disable=not progress, leave=False) as bar,
+    ):
+        for event in sim.events(scenario.duration_s):
+            writer.write(event)
+            if isinstance(event, CameraFrame):
+                frames += 1
+            else:
+                bar.update(max(0.0, min(event.t_s, scenario.duration_s) - bar.n))
+    return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start)
+
+
+def make_tracker(method: str, cameras, preset: str, config_path: Path | None, skeleton):
+    """The tracker of `method` configured from a preset and optionally a TOML file."""
+    from tracker.baseline import BaselineTracker
+    from tracker.config import TrackerConfig
+    from tracker.tracker import Tracker
+
+    config = TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
+    if method == "crossview":
+        return Tracker(cameras, config, skeleton), config
+    if method == "baseline":
+        return BaselineTracker(cameras, config, skeleton), config
+    raise ValueError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
+
+
+@dataclass(frozen=True)
+class TrackResult:
+    path: Path
+    updates: int
+    tracker_s: float
+    num_cameras: int
+
+    @property
+    def camera_frames_per_s(self) -> float:
+        return self.updates / self.tracker_s if self.tracker_s > 0 else math.nan
+
+    @property
+    def tracker_fps(self) -> float:
+        """Frames per second in the paper's sense: one frame is every camera updated once."""
+        return self.camera_frames_per_s / self.num_cameras
+
+
+def track(
+    rec_path: Path,
+    out: Path,
+    *,
+    method: str = "crossview",
+    preset: str = "store",
+    config_path: Path | None = None,
+    progress: bool = True,
+) -> TrackResult:
+    """Runs a tracker over a recording's frames in delivery order and writes the tracks file."""
+    from tracker.types import SKELETONS
+
+    check_writable(out)
+    rec = recording.open_recording(rec_path)
+    skeleton = SKELETONS[rec.header.skeleton_name]
+    tracker, config = make_tracker(method, rec.cameras, preset, config_path, skeleton)
+    header = recording.TracksHeader(
+        scenario_name=rec.header.scenario_name,
+        scenario_digest=rec.header.scenario_digest,
+        seed=rec.header.seed,
+        method=method,
+        preset=preset,
+        config=_jsonable(dataclasses.asdict(config)),
+        skeleton_name=skeleton.name,
+        software_version=recording.software_version(),
+        format_version=recording.FORMAT_VERSION,
+    )
+    updates = 0
+    tracker_s = 0.0
+    with recording.TracksWriter(out, header, rec.cameras) as writer:
+        for camera_frame in tqdm(rec.frames(), unit="frame", desc="track", disable=not progress, leave=False):
+            start = time.perf_counter()
+            tracker.update(camera_frame.frame)
+            tracker_s += time.perf_counter() - start
+            updates += 1
+            writer.write(tracker.last_output)
+        writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras)})
+    return TrackResult(out, updates, tracker_s, len(rec.cameras))
+
+
+def _jsonable(value):
+    """Config dicts as JSON-safe values (Enums by value, tuples as lists)."""
+    return json.loads(json.dumps(value, default=lambda v: getattr(v, "value", str(v))))
+
+
+def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
+    """Scores a tracks file against the recording it was made from; returns (report, json dict)."""
+    from crossview.scoring import score as score_outputs
+
+    rec = recording.open_recording(rec_path)
+    tracks = recording.open_tracks(tracks_path)
+    if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
+        raise ValueError(
+            f"{tracks_path}: tracks were made from scenario {tracks.header.scenario_name!r} seed {tracks.header.seed} "
+            f"(digest {tracks.header.scenario_digest[:12]}), not from {rec_path} "
+            f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
+        )
+    truth = list(rec.truth())
+    outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
+    report = score_outputs(truth, outputs, rec.frames(), rec.cameras)
+    summary = tracks.summary or {}
+    tracker_s = summary.get("tracker_s") or 0.0
+    updates = summary.get("updates") or len(outputs)
+    cams = len(rec.cameras)
+    frames_per_s = updates / tracker_s if tracker_s > 0 else None
+    people = {int(i) for p in truth for i in p.person_ids}
+    result = report.to_json(
+        scenario=rec.header.scenario_name,
+        seed=rec.header.seed,
+        num_cameras=cams,
+        num_people=len(people),
+        duration_s=rec.header.duration_s,
+        tracker_fps=frames_per_s / cams if frames_per_s else None,
+        camera_frames_per_s=frames_per_s,
+    )
+    return report, result
+
+
+def write_json(result: dict, path: Path) -> None:
+    """Writes the score JSON atomically (a temporary file renamed at the end)."""
+    check_writable(path)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(result, indent=2, sort_keys=False) + "\n", encoding="utf-8")
+    os.replace(tmp, path)
