@@ -1,0 +1,121 @@
+"""`crossview bench`: speed of every stage on the shipped stores, as medians and ratios from one run.
+
+Speed is measured here and written in notes, never asserted in tests: these machines are noisy.
+"""
+
+from __future__ import annotations
+
+import platform
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from crossview import pipeline, recording
+
+CASES = ("store_layout1", "store_layout2")
+
+
+def _round_times(update_s: list[float], num_cameras: int) -> list[float]:
+    """Sums per-update times over consecutive rounds of `num_cameras` updates (one paper 'frame')."""
+    rounds = len(update_s) // num_cameras
+    return [sum(update_s[i * num_cameras : (i + 1) * num_cameras]) for i in range(rounds)]
+
+
+def bench_tracker(rec_path: Path, method: str = "crossview", preset: str = "store") -> dict:
+    """Times every tracker update over a recording's frames (decoded beforehand, so I/O is excluded)."""
+    rec = recording.open_recording(rec_path)
+    frames = [cf.frame for cf in rec.frames()]
+    tracker, _ = pipeline.make_tracker(method, rec.cameras, preset, None, _skeleton(rec))
+    update_s = []
+    for frame in frames:
+        start = time.perf_counter()
+        tracker.update(frame)
+        update_s.append(time.perf_counter() - start)
+    rounds = _round_times(update_s, len(rec.cameras))
+    total = sum(update_s)
+    return {
+        "method": method,
+        "camera_frames": len(frames),
+        "tracker_fps_median": 1.0 / statistics.median(rounds) if rounds else None,
+        "tracker_fps_mean": len(rounds) / sum(rounds) if rounds else None,
+        "camera_frames_per_s": len(frames) / total if total else None,
+        "update_ms_p50": 1e3 * float(np.percentile(update_s, 50)),
+        "update_ms_p95": 1e3 * float(np.percentile(update_s, 95)),
+    }
+
+
+def _skeleton(rec):
+    from tracker.types import SKELETONS
+
+    return SKELETONS[rec.header.skeleton_name]
+
+
+def bench_people_only(scenario, duration_s: float) -> dict:
+    """Simulated seconds per wall second for the people and their keypoints alone, at 100 Hz."""
+    from sim.rng import child_rng
+    from sim.world import World
+
+    world = World(scenario, child_rng(scenario.seed, "crowd"))
+    ticks = np.arange(0.0, duration_s, 0.01)
+    start = time.perf_counter()
+    for t in ticks:
+        world.advance(float(t))
+    wall = time.perf_counter() - start
+    return {"people_only_realtime_factor": duration_s / wall}
+
+
+def bench_read(rec_path: Path) -> dict:
+    """Camera frames decoded per second when streaming a recording."""
+    start = time.perf_counter()
+    count = sum(1 for _ in recording.open_recording(rec_path).frames())
+    wall = time.perf_counter() - start
+    return {"read_camera_frames_per_s": count / wall, "bytes_per_camera_frame": rec_path.stat().st_size / count}
+
+
+def run_case(name: str, duration_s: float, folder: Path, progress: bool) -> dict:
+    scenario = pipeline.load_scenario(name, duration_s=duration_s)
+    rec_path = folder / f"{name}.mcap"
+    gen = pipeline.generate(scenario, rec_path, progress=progress)
+    result = {
+        "scenario": name,
+        "duration_s": duration_s,
+        "num_cameras": gen.num_cameras,
+        "num_people": scenario.crowd.people,
+        "generate_realtime_factor": duration_s / gen.wall_s,
+    }
+    result.update(bench_people_only(scenario, duration_s))
+    result.update(bench_read(rec_path))
+    result["crossview"] = bench_tracker(rec_path, "crossview")
+    result["baseline"] = bench_tracker(rec_path, "baseline")
+    return result
+
+
+def format_results(results: list[dict]) -> str:
+    lines = [
+        f"{'scenario':<15} {'cams':>4} {'people':>6} {'gen x RT':>8} {'people x RT':>11} "
+        f"{'read fr/s':>9} {'B/frame':>7} {'FPS med':>8} {'FPS mean':>8} {'base FPS':>8}"
+    ]
+    for r in results:
+        lines.append(
+            f"{r['scenario']:<15} {r['num_cameras']:>4} {r['num_people']:>6} {r['generate_realtime_factor']:>8.1f} "
+            f"{r['people_only_realtime_factor']:>11.0f} {r['read_camera_frames_per_s']:>9.0f} "
+            f"{r['bytes_per_camera_frame']:>7.0f} {r['crossview']['tracker_fps_median']:>8.1f} "
+            f"{r['crossview']['tracker_fps_mean']:>8.1f} {r['baseline']['tracker_fps_median']:>8.1f}"
+        )
+    lines.append("FPS: one frame = every camera updated once (the paper's convention); x RT: faster than real time")
+    return "\n".join(lines)
+
+
+def main(json_path: Path | None = None, duration_s: float = 20.0, progress: bool = True) -> list[dict]:
+    if json_path:
+        pipeline.check_writable(json_path)
+    with tempfile.TemporaryDirectory(prefix="crossview-bench-") as tmp:
+        results = [run_case(name, duration_s, Path(tmp), progress) for name in CASES]
+    print(format_results(results))
+    if json_path:
+        payload = {"machine": platform.platform(), "python": platform.python_version(), "cases": results}
+        pipeline.write_json(payload, json_path)
+    return results
