@@ -1,0 +1,1 @@
+"""Glue: the command line, the recording format, scoring, benchmarks and dataset tools."""

@@ -1,0 +1,1 @@
+"""The cross-view tracker of Chen et al. (CVPR 2020) and its baseline: numpy and scipy only."""

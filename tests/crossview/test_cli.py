@@ -1,0 +1,61 @@
+"""The command line's contract for bad input: one line naming the problem, exit status 2, no output file."""
+
+import pytest
+
+from crossview.cli import EXIT_BAD_INPUT, main
+
+
+def _run_bad(capsys, argv):
+    status = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT
+    assert len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    return err
+
+
+def test_missing_scenario_names_the_path(tmp_path, capsys):
+    out = tmp_path / "a.mcap"
+    err = _run_bad(capsys, ["generate", str(tmp_path / "missing.toml"), "-o", str(out)])
+    assert "missing.toml: no such scenario file" in err
+    assert not out.exists()
+
+
+def test_malformed_toml_names_the_file(tmp_path, capsys):
+    bad = tmp_path / "broken.toml"
+    bad.write_text("[store\n")
+    err = _run_bad(capsys, ["generate", str(bad), "-o", str(tmp_path / "a.mcap")])
+    assert "broken.toml: malformed TOML" in err
+
+
+def test_unknown_key_is_named(tmp_path, capsys):
+    bad = tmp_path / "typo.toml"
+    bad.write_text("[crowd]\npeeple = 3\n")
+    err = _run_bad(capsys, ["generate", str(bad), "-o", str(tmp_path / "a.mcap")])
+    assert "typo.toml: unknown key 'crowd.peeple'" in err
+
+
+def test_negative_duration_is_refused(tmp_path, capsys):
+    err = _run_bad(capsys, ["generate", "store_layout1", "-o", str(tmp_path / "a.mcap"), "--duration", "-5"])
+    assert "--duration" in err and "-5" in err
+    assert not (tmp_path / "a.mcap").exists()
+
+
+def test_negative_duration_in_the_file_is_refused(tmp_path, capsys):
+    bad = tmp_path / "neg.toml"
+    bad.write_text("duration_s = -1.0\n")
+    err = _run_bad(capsys, ["run", str(bad), "--out", str(tmp_path)])
+    assert "neg.toml: duration_s: -1.0 must be > 0" in err
+
+
+def test_unwritable_output_folder_is_named(tmp_path, capsys):
+    blocker = tmp_path / "file"
+    blocker.write_text("not a folder")
+    err = _run_bad(capsys, ["run", "--duration", "1", "--out", str(blocker / "sub")])
+    assert str(blocker / "sub") in err
+    assert list(tmp_path.iterdir()) == [blocker]
+
+
+@pytest.mark.parametrize("argv", [["run", "--cameras", "0"], ["run", "--seed", "-1"], ["track"]])
+def test_bad_arguments_exit_2(capsys, argv):
+    _run_bad(capsys, argv)
