@@ -1,0 +1,215 @@
+"""Scoring: pose accuracy, ground-plane identity metrics, HOTA and association accuracy in one run.
+
+`score` compares tracker outputs with the simulator's ground truth on a regular evaluation grid:
+
+- grid: ticks t_k = t_0 + k / eval_rate_hz from the first to the last truth sample;
+- at each tick the latest tracker output with stamp <= tick is taken (outputs sorted by stamp, on equal
+  stamps the later one delivered), and its targets are compared with the truth interpolated at that
+  output's stamp (a tracker output stamped at t is compared with the truth at t);
+- a tick with no output yet, or whose latest output is older than `OUTPUT_MAX_AGE_S`, is compared
+  with the truth at the tick and no targets (every person missed).
+
+The grid makes the MOT counts comparable across camera counts: a 12-camera rig produces many more
+outputs per second than a 3-camera one, but both are scored eval_rate_hz times per second.
+Association accuracy uses every delivered camera frame; the per-camera 2D scores every output of
+each camera. See docs/metrics.md.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+
+from crossview.scoring.association import association_accuracy, projected_2d_scores
+from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
+from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
+from crossview.scoring.pose import PoseAccumulator
+from crossview.scoring.report import JSON_KEYS, ScoreReport
+from sim.types import CameraFrame, PoseTruth
+from tracker.types import Camera, TargetState, TrackerOutput
+
+__all__ = ["JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TruthTimeline", "score"]
+
+logger = logging.getLogger(__name__)
+
+OUTPUT_MAX_AGE_S = 1.0
+"""A tracker output older than this at a grid tick no longer stands for the tracker's belief, seconds."""
+_SCORED_STATES = (TargetState.CONFIRMED, TargetState.LOST)
+
+
+class ScoringError(ValueError):
+    """Tracks and truth that cannot be scored together (another recording, wrong joint layout)."""
+
+
+class TruthTimeline:
+    """The ground-truth stream, interpolated linearly in time.
+
+    A person is present at t only when present in both neighbouring samples; outside the sampled span
+    the nearest end sample is used up to half a sampling period away, beyond that nobody is present.
+
+    Args:
+        truth: PoseTruth samples (any order), poses (P, J, 3).
+    """
+
+    def __init__(self, truth: Sequence[PoseTruth]):
+        order = np.argsort([s.t_s for s in truth], kind="stable")
+        self.samples = [truth[i] for i in order]
+        self.times = np.array([s.t_s for s in self.samples], dtype=np.float64)
+        period = float(np.median(np.diff(self.times))) if len(self.times) > 1 else 0.0
+        self._edge_s = period / 2 + 1e-9
+        self.num_joints = next((np.asarray(s.poses).shape[1] for s in self.samples if len(s.person_ids)), 17)
+
+    def _sample(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+        s = self.samples[i]
+        return np.asarray(s.person_ids, dtype=np.int64), np.asarray(s.poses, dtype=np.float64).reshape(
+            len(s.person_ids), -1, 3)
+
+    def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(ids (P,), poses (P, J, 3)) of the people present at time t."""
+        empty = (np.zeros(0, dtype=np.int64), np.zeros((0, self.num_joints, 3)))
+        n = len(self.times)
+        if n == 0:
+            return empty
+        i = int(np.searchsorted(self.times, t, side="right")) - 1
+        if i < 0 or i >= n - 1:
+            edge = 0 if i < 0 else n - 1
+            return self._sample(edge) if abs(self.times[edge] - t) <= self._edge_s else empty
+        t0, t1 = self.times[i], self.times[i + 1]
+        ids0, poses0 = self._sample(i)
+        if t == t0 or t1 == t0:
+            return ids0, poses0
+        ids1, poses1 = self._sample(i + 1)
+        common, i0, i1 = np.intersect1d(ids0, ids1, assume_unique=True, return_indices=True)
+        keep = np.sort(i0)  # first sample's order
+        j1 = i1[np.argsort(i0)]
+        w = (t - t0) / (t1 - t0)
+        return ids0[keep], (1 - w) * poses0[keep] + w * poses1[j1]
+
+    @property
+    def span(self) -> tuple[float, float]:
+        return (float(self.times[0]), float(self.times[-1])) if len(self.times) else (0.0, 0.0)
+
+
+def _targets(out: TrackerOutput) -> tuple[np.ndarray, np.ndarray]:
+    targets = [t for t in out.targets if t.state in _SCORED_STATES]
+    ids = np.array([t.id for t in targets], dtype=np.int64)
+    poses = np.zeros((0, 17, 3))
+    if targets:
+        poses = np.array([np.asarray(t.pose, dtype=np.float64) for t in targets])
+        if poses.ndim != 3 or poses.shape[1:] != (17, 3):
+            raise ScoringError(
+                f"tracker output {out.camera}@{out.stamp_s}: target poses have shape {poses.shape[1:]}, expected "
+                "(17, 3) COCO-17"
+            )
+    return ids, poses
+
+
+def _check_same_recording(timeline: TruthTimeline, outputs: Sequence[TrackerOutput], cameras) -> None:
+    if cameras is not None:
+        names = {c.name for c in cameras}
+        foreign = sorted({o.camera for o in outputs} - names)
+        if foreign:
+            raise ScoringError(f"tracks come from cameras {foreign} not in this recording ({sorted(names)})")
+    if outputs and len(timeline.times):
+        t0, t1 = timeline.span
+        inside = sum(t0 - OUTPUT_MAX_AGE_S <= o.stamp_s <= t1 + OUTPUT_MAX_AGE_S for o in outputs)
+        if inside == 0:
+            raise ScoringError(
+                f"no tracker output stamp falls in the recording's span {t0:.2f}..{t1:.2f} s; "
+                "the tracks belong to another recording"
+            )
+
+
+def score(
+    truth: Sequence[PoseTruth],
+    outputs: Sequence[TrackerOutput],
+    camera_frames: Iterable[CameraFrame] | None = None,
+    cameras: Sequence[Camera] | None = None,
+    *,
+    eval_rate_hz: float = 10.0,
+    root_threshold_m: float = ROOT_MATCH_THRESHOLD_M,
+    hota_zero_distance_m: float = HOTA_ZERO_DISTANCE_M,
+) -> ScoreReport:
+    """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
+
+    Args:
+        truth: true poses (COCO-17, metres), e.g. 100 Hz.
+        outputs: tracker outputs in delivery order.
+        camera_frames: delivered frames with per-detection truth; enables association accuracy.
+        cameras: calibrated cameras; enables the per-camera 2D scores.
+        eval_rate_hz: rate of the evaluation grid.
+        root_threshold_m: ground-plane gate of MOTA/IDF1, metres.
+        hota_zero_distance_m: distance at which the HOTA similarity reaches 0, metres.
+
+    Returns:
+        the report; metrics that cannot be measured are None.
+
+    Raises:
+        ScoringError: tracks that do not belong to the truth, or targets not in COCO-17.
+    """
+    if not eval_rate_hz > 0:
+        raise ValueError(f"eval_rate_hz={eval_rate_hz}: must be > 0")
+    if not hota_zero_distance_m > 0:
+        raise ValueError(f"hota_zero_distance_m={hota_zero_distance_m}: must be > 0 metres")
+    timeline = TruthTimeline(truth)
+    if timeline.num_joints != 17:
+        raise ScoringError(f"truth poses have {timeline.num_joints} joints, expected 17 (COCO-17)")
+    outputs = list(outputs)
+    _check_same_recording(timeline, outputs, cameras)
+    ordered = sorted(outputs, key=lambda o: o.stamp_s)  # stable: equal stamps keep delivery order
+    stamps = np.array([o.stamp_s for o in ordered], dtype=np.float64)
+
+    pose_acc = PoseAccumulator()
+    id_acc = IdentityAccumulator(root_threshold_m)
+    hota_truth, hota_targets, hota_sims = [], [], []
+    report = ScoreReport(eval_rate_hz=eval_rate_hz, root_threshold_m=root_threshold_m,
+                         hota_zero_distance_m=hota_zero_distance_m)
+    t_start, t_end = timeline.span
+    num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
+    for k in range(num_ticks):
+        tick = t_start + k / eval_rate_hz
+        j = int(np.searchsorted(stamps, tick, side="right")) - 1
+        if j >= 0 and tick - stamps[j] <= OUTPUT_MAX_AGE_S:
+            t_ids, t_poses = _targets(ordered[j])
+            g_ids, g_poses = timeline.at(stamps[j])
+        else:
+            t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, 17, 3))
+            g_ids, g_poses = timeline.at(tick)
+        pose_acc.update(g_ids, g_poses, t_poses)
+        id_acc.update(g_ids, g_poses, t_ids, t_poses)
+        hota_truth.append(g_ids)
+        hota_targets.append(t_ids)
+        hota_sims.append(ground_similarity(body_roots(g_poses), body_roots(t_poses), hota_zero_distance_m))
+        report.truth_person_instants += len(g_ids)
+    report.eval_instants = num_ticks
+
+    p = pose_acc.result()
+    report.pcp, report.pcp_per_actor, report.pcp_per_group = p.pcp, p.pcp_per_actor, p.pcp_per_group
+    report.mpjpe_mm, report.mpjpe_per_group_mm = p.mpjpe_mm, p.mpjpe_per_group_mm
+    report.pck_50mm, report.pck_100mm, report.pck_150mm = p.pck.get(50), p.pck.get(100), p.pck.get(150)
+    report.pck_per_group, report.nan_joints = p.pck_per_group, p.num_nan_joints
+
+    ident = id_acc.result()
+    report.mota, report.motp_m, report.idf1 = ident.mota, ident.motp_m, ident.idf1
+    report.idp, report.idr = ident.idp, ident.idr
+    report.id_switches, report.false_positives = ident.id_switches, ident.false_positives
+    report.false_negatives = ident.false_negatives
+    if ident.num_truth == 0 and ident.num_predictions == 0:
+        report.idf1 = None  # nothing to identify: undefined rather than 0
+
+    h = hota(hota_truth, hota_targets, hota_sims)
+    if report.truth_person_instants or ident.num_predictions:
+        report.hota, report.deta, report.assa, report.loca = h.hota, h.deta, h.assa, h.loca
+
+    if camera_frames is not None:
+        a = association_accuracy(camera_frames, outputs)
+        report.association_accuracy = a.overall
+        report.association_accuracy_per_camera = a.per_camera
+        report.false_positive_detections_assigned = a.false_positive_assigned
+        if a.frames_without_output:
+            logger.warning("association accuracy: %d camera frames had no tracker output", a.frames_without_output)
+    if cameras is not None:
+        report.camera_2d = projected_2d_scores(outputs, cameras, timeline.at)
+    return report
