@@ -1,22 +1,393 @@
-"""Ceiling camera rigs: placement, intrinsics from resolution and field of view, lens distortion."""
+"""Ceiling camera rigs: placement, intrinsics from resolution and field of view, lens distortion.
+
+Owns the camera side of the sensor model: building the rig a scenario asks for (a ceiling grid,
+explicit placements or a real calibration file), projecting world points to distorted pixels with
+OpenCV's camera model, and the one conversion from the OpenCV camera frame (x right, y down,
+z forward) to MuJoCo's (looks down -z, y up).
+"""
 
 from __future__ import annotations
 
+import json
+import math
 from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from tracker.types import Camera
+
+# Points closer than this in front of the camera plane count as behind it (their projection blows up).
+_MIN_DEPTH_M = 1e-6
+# Shortest distance a camera may keep from the walls, floor and ceiling of the store.
+_WALL_CLEARANCE_M = 0.0
+# When a camera looks (almost) straight down, "up" in its image points along world +y.
+_STRAIGHT_DOWN_COS = 0.999
+_REPO_ROOT = Path(__file__).resolve().parent.parent
+
+
+@dataclass(frozen=True)
+class CameraPlacement:
+    """[[cameras.placements]]: one camera at an explicit position, looking at a point.
+
+    Attributes:
+        name: camera name; empty gives "cam{index:02d}".
+        position_m: (x, y, z) of the camera centre in the world frame.
+        look_at_m: (x, y, z) the optical axis passes through; must lie below the camera.
+        roll_deg: rotation of the image about the optical axis.
+    """
+
+    position_m: tuple[float, float, float] = (0.0, 0.0, 3.0)
+    look_at_m: tuple[float, float, float] = (1.0, 1.0, 0.0)
+    name: str = ""
+    roll_deg: float = 0.0
+
+    def __post_init__(self):
+        direction = np.subtract(self.look_at_m, self.position_m)
+        norm = float(np.linalg.norm(direction))
+        if norm == 0:
+            raise ValueError(f"placements.look_at_m: {self.look_at_m} equals position_m; it must differ")
+        if direction[2] / norm > -0.05:
+            raise ValueError(
+                f"placements.look_at_m: {self.look_at_m} is not below position_m {self.position_m}; "
+                "ceiling cameras must look down (look_at z < position z)"
+            )
 
 
 @dataclass(frozen=True)
 class CameraRigConfig:
-    """[cameras]: where the cameras hang and what lenses they have."""
+    """[cameras]: where the cameras hang and what lenses they have.
+
+    Without `placements` or `calibration`, a `rows` x `cols` grid hangs `ceiling_gap_m` below the
+    ceiling, inset `margin_m` from the walls; each camera looks at a point `aim_height_m` above the
+    floor, pulled from below itself toward the store centre by `aim_inward` (0 looks straight down,
+    1 at the centre), so that it tilts toward its part of the floor and the views overlap.
+
+    Attributes:
+        rows, cols: grid size (along y and x).
+        width_px, height_px: image size.
+        hfov_deg: horizontal field of view of the undistorted pinhole, in (0, 180).
+        k1, k2, p1, p2, k3: OpenCV lens distortion.
+        margin_m: inset of the outer grid cameras from the walls.
+        ceiling_gap_m: distance of the cameras below the ceiling.
+        aim_height_m: height of the aim points above the floor.
+        aim_inward: fraction in [0, 1] of the way from below the camera to the store centre.
+        position_jitter_m: std of a random displacement of each grid camera (x and y).
+        placements: explicit cameras; when given they replace the grid.
+        calibration: path of a real calibration file (the Panoptic dome format); replaces the grid.
+            Relative paths are tried from the working directory, then from the project root.
+        calibration_kind: camera type to take from the calibration file ("hd" for Panoptic).
+        calibration_origin_m: where the calibration's world origin lies in the store frame.
+    """
 
     rows: int = 3
     cols: int = 4
     width_px: int = 1280
     height_px: int = 720
     hfov_deg: float = 90.0
+    k1: float = -0.05
+    k2: float = 0.01
+    p1: float = 0.0
+    p2: float = 0.0
+    k3: float = 0.0
+    margin_m: float = 0.3
+    ceiling_gap_m: float = 0.1
+    aim_height_m: float = 1.0
+    aim_inward: float = 0.5
+    position_jitter_m: float = 0.0
+    placements: tuple[CameraPlacement, ...] = ()
+    calibration: str = ""
+    calibration_kind: str = "hd"
+    calibration_origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self):
-        if self.rows * self.cols < 1:
-            raise ValueError(f"rows x cols: {self.rows} x {self.cols} gives no cameras; need at least 1")
+        if not self.placements and not self.calibration and (self.rows < 1 or self.cols < 1):
+            raise ValueError(
+                f"rows x cols: {self.rows} x {self.cols} gives no cameras; need rows >= 1 and cols >= 1 "
+                "(or placements, or a calibration file)"
+            )
         if not 0 < self.hfov_deg < 180:
-            raise ValueError(f"hfov_deg: {self.hfov_deg} must be in (0, 180)")
+            raise ValueError(f"hfov_deg: {self.hfov_deg} must be in (0, 180) degrees, exclusive")
+        if self.width_px < 1 or self.height_px < 1:
+            raise ValueError(f"width_px x height_px: {self.width_px} x {self.height_px} must both be >= 1")
+        for name in ("k1", "k2", "p1", "p2", "k3"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name}: {getattr(self, name)} must be a finite number")
+        for name in ("margin_m", "ceiling_gap_m", "aim_height_m", "position_jitter_m"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name}: {getattr(self, name)} must be >= 0")
+        if not 0 <= self.aim_inward <= 1:
+            raise ValueError(f"aim_inward: {self.aim_inward} must be in [0, 1]")
+        names = [p.name for p in self.placements if p.name]
+        if len(set(names)) != len(names):
+            raise ValueError(f"placements.name: names {names} must be unique")
+
+    @property
+    def dist(self) -> np.ndarray:
+        """(5,) OpenCV distortion (k1, k2, p1, p2, k3)."""
+        return np.array([self.k1, self.k2, self.p1, self.p2, self.k3])
+
+
+def intrinsics(width_px: int, height_px: int, hfov_deg: float) -> np.ndarray:
+    """(3, 3) K of a pinhole with square pixels and the principal point at the image centre.
+
+    Pixel centres sit at integer coordinates (OpenCV), so the centre of a W-pixel row is (W - 1) / 2.
+    """
+    f = 0.5 * width_px / math.tan(math.radians(hfov_deg) / 2)
+    return np.array([[f, 0.0, (width_px - 1) / 2], [0.0, f, (height_px - 1) / 2], [0.0, 0.0, 1.0]])
+
+
+def look_at(position_m, target_m, roll_rad: float = 0.0) -> np.ndarray:
+    """(3, 3) R_cam_from_world of an OpenCV camera at `position_m` whose optical axis passes `target_m`.
+
+    Image "down" is the world's down projected onto the image plane; a camera looking straight down
+    has image "up" along world +y.
+    """
+    forward = np.asarray(target_m, dtype=np.float64) - np.asarray(position_m, dtype=np.float64)
+    forward /= np.linalg.norm(forward)
+    down = np.array([0.0, 0.0, -1.0])
+    if abs(forward @ down) > _STRAIGHT_DOWN_COS:
+        down = np.array([0.0, -1.0, 0.0])
+    x = np.cross(down, forward)
+    x /= np.linalg.norm(x)
+    y = np.cross(forward, x)
+    c, s = math.cos(roll_rad), math.sin(roll_rad)
+    x, y = c * x + s * y, -s * x + c * y
+    return np.stack([x, y, forward])
+
+
+def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
+    """The cameras a scenario asks for: explicit placements, a calibration file, or a ceiling grid.
+
+    Args:
+        scenario: a `sim.scenario.Scenario`.
+        rng: the "cameras" generator (used for `position_jitter_m`).
+
+    Raises:
+        ScenarioError: a camera lies outside the store, or the calibration file cannot be used.
+    """
+    from sim.scenario import ScenarioError  # the scenario module imports this one
+
+    config: CameraRigConfig = scenario.cameras
+    store = scenario.store
+    K = intrinsics(config.width_px, config.height_px, config.hfov_deg)
+    if config.calibration:
+        path = Path(config.calibration)
+        if not path.is_absolute() and not path.exists():
+            path = _REPO_ROOT / path
+        try:
+            cameras = load_panoptic(path, config.calibration_kind, origin_m=config.calibration_origin_m)
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise ScenarioError(f"cameras.calibration: cannot use {config.calibration!r}: {e}") from None
+        key = "cameras.calibration"
+    elif config.placements:
+        cameras = []
+        for i, p in enumerate(config.placements):
+            R = look_at(p.position_m, p.look_at_m, math.radians(p.roll_deg))
+            cameras.append(
+                Camera(p.name or f"cam{i:02d}", K, config.dist, R, -R @ np.asarray(p.position_m, float),
+                       config.width_px, config.height_px)
+            )
+        key = "cameras.placements"
+    else:
+        cameras = _grid(config, store, K, rng)
+        key = "cameras.rows/cols"
+    for i, cam in enumerate(cameras):
+        c = cam.center_world
+        inside = (
+            -_WALL_CLEARANCE_M <= c[0] <= store.width_m + _WALL_CLEARANCE_M
+            and -_WALL_CLEARANCE_M <= c[1] <= store.depth_m + _WALL_CLEARANCE_M
+            and 0 <= c[2] <= store.ceiling_m
+        )
+        if not inside:
+            where = f"{key}[{i}]" if key != "cameras.rows/cols" else key
+            raise ScenarioError(
+                f"{where}: camera {cam.name} at ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) m is outside the store "
+                f"[0, {store.width_m}] x [0, {store.depth_m}] x [0, {store.ceiling_m}] m"
+            )
+    return cameras
+
+
+def _grid(config: CameraRigConfig, store, K: np.ndarray, rng: np.random.Generator) -> list[Camera]:
+    """A rows x cols ceiling grid, each camera tilted toward its part of the floor."""
+
+    def axis(n: int, length: float) -> np.ndarray:
+        if n == 1:
+            return np.array([length / 2])
+        return np.linspace(min(config.margin_m, length / 2), max(length - config.margin_m, length / 2), n)
+
+    xs, ys = axis(config.cols, store.width_m), axis(config.rows, store.depth_m)
+    z = max(store.ceiling_m - config.ceiling_gap_m, 0.0)
+    centre = np.array([store.width_m / 2, store.depth_m / 2])
+    cameras = []
+    for r, y in enumerate(ys):
+        for c, x in enumerate(xs):
+            xy = np.array([x, y])
+            if config.position_jitter_m > 0:
+                xy = xy + rng.normal(0.0, config.position_jitter_m, 2)
+                xy = np.clip(xy, 0.0, [store.width_m, store.depth_m])
+            aim_xy = xy + config.aim_inward * (centre - xy)
+            position = np.array([xy[0], xy[1], z])
+            aim = np.array([aim_xy[0], aim_xy[1], min(config.aim_height_m, z - 0.5)])
+            R = look_at(position, aim)
+            cameras.append(
+                Camera(f"cam{r * config.cols + c:02d}", K, config.dist, R, -R @ position, config.width_px,
+                       config.height_px)
+            )
+    return cameras
+
+
+def _distort(xn: np.ndarray, yn: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """OpenCV's radial-tangential distortion of normalised image coordinates."""
+    k1, k2, p1, p2, k3 = dist
+    r2 = xn * xn + yn * yn
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+    yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+    return xd, yd
+
+
+def project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Projects world points to distorted pixels with OpenCV's camera model.
+
+    Args:
+        camera: the camera.
+        points_world: (..., 3) points in the world frame, metres.
+
+    Returns:
+        (..., 2) distorted pixel coordinates (NaN for points not in front of the camera) and
+        (...,) bool mask of the points in front of the camera.
+    """
+    points = np.asarray(points_world, dtype=np.float64)
+    if points.shape[-1:] != (3,):
+        raise ValueError(f"points_world: expected shape (..., 3), got {points.shape}")
+    cam = points @ camera.R_cam_from_world.T + camera.t_cam_from_world
+    z = cam[..., 2]
+    in_front = z > _MIN_DEPTH_M
+    with np.errstate(divide="ignore", invalid="ignore"):
+        safe_z = np.where(in_front, z, np.nan)
+        xd, yd = _distort(cam[..., 0] / safe_z, cam[..., 1] / safe_z, camera.dist)
+    K = camera.K
+    px = np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
+    return px, in_front
+
+
+def monotonic_radius(dist: np.ndarray) -> float:
+    """Largest undistorted normalised radius up to which the radial distortion keeps growing.
+
+    Beyond it a strong barrel lens folds far-away points back into the image, so projections there
+    are not where a real lens would put them.
+    """
+    k1, k2, _, _, k3 = dist
+    r = np.linspace(0.0, 10.0, 20001)
+    r2 = r * r
+    derivative = 1 + 3 * k1 * r2 + 5 * k2 * r2 * r2 + 7 * k3 * r2 * r2 * r2
+    bad = np.nonzero(derivative <= 0)[0]
+    return float(r[bad[0] - 1]) if bad.size else math.inf
+
+
+def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distorted pixels and whether each point is in front of the camera and inside its image.
+
+    Args:
+        camera: the camera.
+        points_world: (..., 3) world points, metres.
+
+    Returns:
+        (..., 2) distorted pixels (NaN behind the camera) and (...,) bool visible-in-image mask.
+    """
+    px, in_front = project(camera, points_world)
+    cam = np.asarray(points_world, dtype=np.float64) @ camera.R_cam_from_world.T + camera.t_cam_from_world
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.hypot(cam[..., 0], cam[..., 1]) / np.where(in_front, cam[..., 2], np.nan)
+    inside = (
+        in_front
+        & (r <= monotonic_radius(camera.dist))
+        & (px[..., 0] >= -0.5) & (px[..., 0] <= camera.width_px - 0.5)
+        & (px[..., 1] >= -0.5) & (px[..., 1] <= camera.height_px - 0.5)
+    )
+    return px, inside
+
+
+def mujoco_camera_pose(camera: Camera) -> tuple[np.ndarray, np.ndarray, float]:
+    """The MuJoCo camera that sees what `camera` sees (without distortion).
+
+    The one place that converts the OpenCV camera frame (x right, y down, z forward) to MuJoCo's
+    (x right, y up, looking down -z): the MuJoCo axes are (x, -y, -z) of the OpenCV camera.
+
+    Returns:
+        pos (3,) camera centre in the world, quat (4,) world-from-camera rotation (w, x, y, z) for
+        `<camera quat=...>` / `MjvCamera`-free rendering, and fovy_deg, the vertical field of view
+        of the pinhole with focal length K[1, 1].
+    """
+    world_from_cv = camera.R_cam_from_world.T
+    world_from_mj = world_from_cv @ np.diag([1.0, -1.0, -1.0])
+    quat = _mat_to_quat(world_from_mj)
+    fovy_deg = math.degrees(2 * math.atan(0.5 * camera.height_px / camera.K[1, 1]))
+    return camera.center_world, quat, fovy_deg
+
+
+def _mat_to_quat(R: np.ndarray) -> np.ndarray:
+    """(4,) unit quaternion (w, x, y, z) of a (3, 3) rotation matrix, w >= 0."""
+    m = R
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2 * math.sqrt(1 + trace)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2 * math.sqrt(1 + m[0, 0] - m[1, 1] - m[2, 2])
+        q = [(m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s]
+    elif m[1, 1] > m[2, 2]:
+        s = 2 * math.sqrt(1 + m[1, 1] - m[0, 0] - m[2, 2])
+        q = [(m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s]
+    else:
+        s = 2 * math.sqrt(1 + m[2, 2] - m[0, 0] - m[1, 1])
+        q = [(m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s]
+    q = np.array(q)
+    q /= np.linalg.norm(q)
+    return q if q[0] >= 0 else -q
+
+
+# Panoptic's world has y pointing down; ours has z up: (x, y, z)_ours = (x, z, -y)_panoptic.
+_Z_UP_FROM_PANOPTIC = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+_CM = 0.01
+
+
+def load_panoptic(path, kind: str = "hd", *, origin_m=(0.0, 0.0, 0.0), z_up: bool = True) -> list[Camera]:
+    """Cameras of a CMU Panoptic calibration file (`x = K (R X + t)` then distortion, X in cm).
+
+    Args:
+        path: the calibration JSON.
+        kind: camera type to keep ("hd": the 31 1920x1080 cameras, "vga", "kinect-color").
+        origin_m: where Panoptic's origin lies in our world frame, metres.
+        z_up: convert Panoptic's y-down world to ours (z up); False keeps Panoptic's axes (in metres).
+
+    Raises:
+        ValueError: no camera of that kind in the file.
+    """
+    with open(path, encoding="utf-8") as f:
+        calibration = json.load(f)
+    world_from_pan = _Z_UP_FROM_PANOPTIC if z_up else np.eye(3)
+    origin = np.asarray(origin_m, dtype=np.float64)
+    cameras = []
+    for entry in calibration["cameras"]:
+        if entry["type"] != kind:
+            continue
+        R_pan = np.asarray(entry["R"], dtype=np.float64)
+        t_m = np.asarray(entry["t"], dtype=np.float64).ravel() * _CM
+        # X_pan = world_from_pan.T (X - origin)  =>  R_cam = R_pan world_from_pan.T, t = t - R_cam origin.
+        R = R_pan @ world_from_pan.T
+        R = _orthonormalise(R)
+        width, height = entry["resolution"]
+        cameras.append(Camera(f"{kind}_{entry['name']}", np.asarray(entry["K"]), np.asarray(entry["distCoef"]),
+                              R, t_m - R @ origin, int(width), int(height)))
+    if not cameras:
+        kinds = sorted({e["type"] for e in calibration["cameras"]})
+        raise ValueError(f"{path}: no cameras of type {kind!r} (types in file: {kinds})")
+    return cameras
+
+
+def _orthonormalise(R: np.ndarray) -> np.ndarray:
+    """Nearest rotation matrix (calibration files store rotations to about 1e-9)."""
+    u, _, vt = np.linalg.svd(R)
+    return u @ vt

@@ -1,16 +1,142 @@
-"""Per-camera clocks: nominal rate, phase, jitter, drops, stamp offset and delivery delay."""
+"""Per-camera clocks: nominal rate, phase, jitter, drops, stamp offset and delivery delay.
+
+Camera c ticks at `phase_c + k / fps`. Its true capture time is the tick plus Gaussian jitter; the
+stamp it writes is the capture time plus its own constant clock offset plus a small per-frame stamp
+noise; the frame reaches the tracker after a Gamma-distributed delivery delay. Frames drop
+independently and in bursts (a burst starts with some probability and lasts a geometric number of
+frames).
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
 
 
 @dataclass(frozen=True)
 class ClockConfig:
-    """[clock]: how each camera's frames are timed."""
+    """[clock]: how each camera's frames are timed.
+
+    Attributes:
+        fps: nominal frame rate, > 0.
+        random_phase: each camera starts at a uniform random phase within one period (else all at 0).
+        jitter_std_s: std of the true capture time around the nominal tick, < a quarter period.
+        offset_std_s: std of each camera's constant offset between true time and its stamps.
+        stamp_noise_std_s: std of per-frame noise on the written stamp.
+        drop_prob: probability in [0, 1] that a frame is dropped on its own.
+        burst_prob: probability in [0, 1] that a burst of drops starts at a frame.
+        burst_mean_frames: mean length of a burst of drops (geometric), >= 1.
+        delay_mean_s: mean delivery delay, >= 0.
+        delay_std_s: std of the delivery delay (Gamma distributed; 0 gives a constant delay).
+    """
 
     fps: float = 10.0
+    random_phase: bool = True
+    jitter_std_s: float = 0.002
+    offset_std_s: float = 0.002
+    stamp_noise_std_s: float = 0.0005
+    drop_prob: float = 0.01
+    burst_prob: float = 0.002
+    burst_mean_frames: float = 5.0
+    delay_mean_s: float = 0.05
+    delay_std_s: float = 0.02
 
     def __post_init__(self):
-        if not self.fps > 0:
-            raise ValueError(f"fps: {self.fps} must be > 0")
+        if not (self.fps > 0 and math.isfinite(self.fps)):
+            raise ValueError(f"fps: {self.fps} must be a finite number > 0 (frames per second)")
+        for name in ("jitter_std_s", "offset_std_s", "stamp_noise_std_s", "delay_mean_s", "delay_std_s"):
+            value = getattr(self, name)
+            if not (value >= 0 and math.isfinite(value)):
+                raise ValueError(f"{name}: {value} must be a finite number >= 0 (seconds)")
+        if self.jitter_std_s > 0.25 / self.fps:
+            raise ValueError(
+                f"jitter_std_s: {self.jitter_std_s} must be <= a quarter period "
+                f"({0.25 / self.fps:g} s at {self.fps} fps)"
+            )
+        for name in ("drop_prob", "burst_prob"):
+            value = getattr(self, name)
+            if not 0 <= value <= 1:
+                raise ValueError(f"{name}: {value} must be in [0, 1]")
+        if not self.burst_mean_frames >= 1:
+            raise ValueError(f"burst_mean_frames: {self.burst_mean_frames} must be >= 1")
+        if self.delay_std_s > 0 and self.delay_mean_s == 0:
+            raise ValueError(f"delay_mean_s: 0 must be > 0 when delay_std_s ({self.delay_std_s}) is > 0")
+
+    @property
+    def period_s(self) -> float:
+        return 1.0 / self.fps
+
+
+@dataclass(frozen=True)
+class Capture:
+    """One frame a camera really took and delivered.
+
+    Attributes:
+        camera_index: index of the camera in the rig.
+        frame_index: tick number k of that camera (gaps where frames dropped).
+        capture_s: true capture time (jittered), seconds since the scenario start.
+        stamp_s: the time the camera wrote on the frame (its clock).
+        delivery_s: when the frame reaches the tracker (capture + delay).
+    """
+
+    camera_index: int
+    frame_index: int
+    capture_s: float
+    stamp_s: float
+    delivery_s: float
+
+
+def delays(config: ClockConfig, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n,) delivery delays: Gamma with mean `delay_mean_s` and std `delay_std_s`."""
+    if config.delay_std_s == 0:
+        return np.full(n, config.delay_mean_s)
+    shape = (config.delay_mean_s / config.delay_std_s) ** 2
+    return rng.gamma(shape, config.delay_std_s**2 / config.delay_mean_s, n)
+
+
+def drop_mask(config: ClockConfig, n: int, rng: np.random.Generator) -> np.ndarray:
+    """(n,) bool, frames dropped independently (drop_prob) or in bursts (burst_prob, burst_mean_frames)."""
+    dropped = rng.random(n) < config.drop_prob
+    starts = np.nonzero(rng.random(n) < config.burst_prob)[0]
+    lengths = rng.geometric(1.0 / config.burst_mean_frames, starts.size)
+    for start, length in zip(starts, lengths):
+        dropped[start : start + length] = True
+    return dropped
+
+
+def schedule(camera_names, config: ClockConfig, duration_s: float, rng: np.random.Generator) -> list[Capture]:
+    """Every frame each camera takes in [0, duration_s), dropped frames removed.
+
+    Args:
+        camera_names: names of the rig's cameras (their number sets the schedule; names are unused).
+        config: the clock model.
+        duration_s: simulated duration, seconds.
+        rng: the "clock" generator. Each camera draws from its own child stream, so adding a camera
+            does not change the others' clocks.
+
+    Returns:
+        captures sorted by true capture time (ties by camera index).
+    """
+    if not duration_s >= 0:
+        raise ValueError(f"duration_s: {duration_s} must be >= 0")
+    seeds = rng.integers(0, 2**63 - 1, size=len(camera_names))
+    captures = []
+    period = config.period_s
+    for c, seed in enumerate(seeds):
+        cam_rng = np.random.default_rng(int(seed))
+        phase = cam_rng.uniform(0.0, period) if config.random_phase else 0.0
+        offset = cam_rng.normal(0.0, config.offset_std_s) if config.offset_std_s > 0 else 0.0
+        n = max(int(math.ceil((duration_s - phase) / period)), 0) + 1
+        ticks = phase + np.arange(n) * period
+        capture = ticks + (cam_rng.normal(0.0, config.jitter_std_s, n) if config.jitter_std_s > 0 else 0.0)
+        stamp = capture + offset + (cam_rng.normal(0.0, config.stamp_noise_std_s, n)
+                                    if config.stamp_noise_std_s > 0 else 0.0)
+        delivery = capture + delays(config, n, cam_rng)
+        keep = ~drop_mask(config, n, cam_rng) & (capture >= 0) & (capture < duration_s)
+        captures.extend(
+            Capture(c, int(k), float(capture[k]), float(stamp[k]), float(delivery[k])) for k in np.nonzero(keep)[0]
+        )
+    captures.sort(key=lambda cap: (cap.capture_s, cap.camera_index))
+    return captures

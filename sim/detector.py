@@ -1,19 +1,477 @@
-"""The synthetic 2D detector: projection, visibility, occlusion, noise, misses and false positives."""
+"""The synthetic 2D detector: projection, visibility, occlusion, noise, misses and false positives.
+
+One call of `Detector.detect` turns the true 3D poses at a camera's capture time into the frame a
+bottom-up 2D pose detector (OpenPose-like) would deliver, plus the truth behind every row:
+
+1. project every keypoint with the camera's lens model; joints behind the camera or outside the
+   image are not detectable;
+2. cast one ray per remaining keypoint from the camera centre (`mujoco.mj_multiRay`, one batch per
+   frame): the first surface it meets tells whether the joint is visible, occluded (a shelf, a wall,
+   another person) or self-occluded (another limb of the same person);
+3. miss whole people (more often the more they are occluded), drop occluded joints, add noise
+   scaled by the person's size in the image (heavy tailed, larger on occluded joints), gross errors,
+   left/right swaps and fragments, then add duplicates and phantom skeletons.
+
+Every effect has its own knob in [detector]; a knob left unset takes the value of the profile.
+"""
 
 from __future__ import annotations
 
+import dataclasses
 import enum
+import math
 from dataclasses import dataclass
+
+import numpy as np
+
+from sim.cameras import in_image
+from sim.types import CameraFrame, DetectionEffect, DetectionTruth, PoseTruth
+from tracker.types import COCO17, Camera, Frame, Skeleton
 
 
 class DetectorProfile(enum.Enum):
+    """Preset error models: `ideal` (exact joints, no misses), `typical` (OpenPose on Shelf), `harsh`."""
+
     IDEAL = "ideal"
     TYPICAL = "typical"
     HARSH = "harsh"
 
 
 @dataclass(frozen=True)
+class DetectorParams:
+    """The effective error model (a profile with the scenario's knobs applied).
+
+    Attributes:
+        noise_frac: per-axis std of the joint noise core, as a fraction of the person's size in the image.
+        noise_tail_dof: degrees of freedom of the Student-t noise (smaller: heavier tails; inf: Gaussian).
+        occluded_noise_scale: noise multiplier on occluded joints.
+        self_occluded_noise_scale: noise multiplier on self-occluded joints.
+        gross_error_prob: per-joint probability of a jump of 0.2-0.5 of the person's size.
+        miss_prob: probability of missing a fully visible person.
+        miss_occlusion_gain: extra miss probability per unit occluded share of the person's joints.
+        min_visible_joints: people with fewer visible (unoccluded, in-image) joints are never detected.
+        occluded_drop_prob: probability that an occluded joint is not reported.
+        self_occluded_drop_prob: probability that a self-occluded joint is not reported.
+        joint_drop_prob: probability that a visible joint is not reported.
+        fragment_prob: probability that a detection keeps only one body part (fewer than 6 joints).
+        swap_prob: probability that a detection has its left and right joints swapped.
+        duplicate_prob: probability that a detection comes with a second, partial copy.
+        phantom_rate: mean number of phantom skeletons per frame (Poisson).
+        score_visible: mean score of a visible joint.
+        score_occluded: mean score of an occluded joint.
+        score_std: std of the joint scores.
+    """
+
+    noise_frac: float
+    noise_tail_dof: float
+    occluded_noise_scale: float
+    self_occluded_noise_scale: float
+    gross_error_prob: float
+    miss_prob: float
+    miss_occlusion_gain: float
+    min_visible_joints: int
+    occluded_drop_prob: float
+    self_occluded_drop_prob: float
+    joint_drop_prob: float
+    fragment_prob: float
+    swap_prob: float
+    duplicate_prob: float
+    phantom_rate: float
+    score_visible: float
+    score_occluded: float
+    score_std: float
+
+
+PROFILES: dict[DetectorProfile, DetectorParams] = {
+    DetectorProfile.IDEAL: DetectorParams(
+        noise_frac=0.0, noise_tail_dof=math.inf, occluded_noise_scale=1.0, self_occluded_noise_scale=1.0,
+        gross_error_prob=0.0, miss_prob=0.0, miss_occlusion_gain=0.0, min_visible_joints=1,
+        occluded_drop_prob=0.0, self_occluded_drop_prob=0.0, joint_drop_prob=0.0, fragment_prob=0.0,
+        swap_prob=0.0, duplicate_prob=0.0, phantom_rate=0.0, score_visible=1.0, score_occluded=1.0, score_std=0.0,
+    ),
+    # Calibrated against OpenPose on Shelf (../shared/data/README.md); see docs/sensor-model.md.
+    DetectorProfile.TYPICAL: DetectorParams(
+        noise_frac=0.011, noise_tail_dof=3.0, occluded_noise_scale=2.0, self_occluded_noise_scale=1.3,
+        gross_error_prob=0.002, miss_prob=0.02, miss_occlusion_gain=0.15, min_visible_joints=4,
+        occluded_drop_prob=0.5, self_occluded_drop_prob=0.1, joint_drop_prob=0.02, fragment_prob=0.04,
+        swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.02, score_visible=0.8, score_occluded=0.45,
+        score_std=0.12,
+    ),
+    DetectorProfile.HARSH: DetectorParams(
+        noise_frac=0.02, noise_tail_dof=2.5, occluded_noise_scale=2.5, self_occluded_noise_scale=1.5,
+        gross_error_prob=0.01, miss_prob=0.06, miss_occlusion_gain=0.4, min_visible_joints=5,
+        occluded_drop_prob=0.6, self_occluded_drop_prob=0.2, joint_drop_prob=0.05, fragment_prob=0.1,
+        swap_prob=0.02, duplicate_prob=0.05, phantom_rate=0.2, score_visible=0.7, score_occluded=0.35,
+        score_std=0.15,
+    ),
+}
+
+_PROBABILITIES = (
+    "gross_error_prob", "miss_prob", "occluded_drop_prob", "self_occluded_drop_prob", "joint_drop_prob",
+    "fragment_prob", "swap_prob", "duplicate_prob", "score_visible", "score_occluded",
+)
+_NON_NEGATIVE = ("noise_frac", "miss_occlusion_gain", "phantom_rate", "score_std")
+
+
+@dataclass(frozen=True)
 class DetectorConfig:
-    """[detector]: the error model of the 2D pose detector."""
+    """[detector]: the error model of the 2D pose detector.
+
+    `profile` picks the preset; every other key, when given, replaces that one parameter of the
+    profile (see `DetectorParams` for their meaning). Rays that end within `self_hit_margin_m` of the
+    keypoint on the keypoint's own body count as reaching it.
+    """
 
     profile: DetectorProfile = DetectorProfile.TYPICAL
+    noise_frac: float | None = None
+    noise_tail_dof: float | None = None
+    occluded_noise_scale: float | None = None
+    self_occluded_noise_scale: float | None = None
+    gross_error_prob: float | None = None
+    miss_prob: float | None = None
+    miss_occlusion_gain: float | None = None
+    min_visible_joints: int | None = None
+    occluded_drop_prob: float | None = None
+    self_occluded_drop_prob: float | None = None
+    joint_drop_prob: float | None = None
+    fragment_prob: float | None = None
+    swap_prob: float | None = None
+    duplicate_prob: float | None = None
+    phantom_rate: float | None = None
+    score_visible: float | None = None
+    score_occluded: float | None = None
+    score_std: float | None = None
+    self_hit_margin_m: float = 0.2
+    occlusion: bool = True
+
+    def __post_init__(self):
+        for name in _PROBABILITIES:
+            value = getattr(self, name)
+            if value is not None and not 0 <= value <= 1:
+                raise ValueError(f"{name}: {value} must be in [0, 1]")
+        for name in _NON_NEGATIVE:
+            value = getattr(self, name)
+            if value is not None and not (value >= 0 and math.isfinite(value)):
+                raise ValueError(f"{name}: {value} must be a finite number >= 0")
+        for name in ("occluded_noise_scale", "self_occluded_noise_scale"):
+            value = getattr(self, name)
+            if value is not None and not (value >= 1 and math.isfinite(value)):
+                raise ValueError(f"{name}: {value} must be a finite number >= 1")
+        if self.noise_tail_dof is not None and not self.noise_tail_dof > 2:
+            raise ValueError(f"noise_tail_dof: {self.noise_tail_dof} must be > 2 (a large value gives Gaussian noise)")
+        if self.min_visible_joints is not None and self.min_visible_joints < 1:
+            raise ValueError(f"min_visible_joints: {self.min_visible_joints} must be >= 1")
+        if not self.self_hit_margin_m >= 0:
+            raise ValueError(f"self_hit_margin_m: {self.self_hit_margin_m} must be >= 0")
+
+    def params(self) -> DetectorParams:
+        """The profile's parameters with every knob that was set applied."""
+        names = [f.name for f in dataclasses.fields(DetectorParams)]
+        overrides = {name: getattr(self, name) for name in names if getattr(self, name) is not None}
+        return dataclasses.replace(PROFILES[self.profile], **overrides)
+
+
+# Per-joint noise multipliers (COCO-17): wrists worst, knees and ankles best, as OpenPose on Shelf.
+_JOINT_NOISE_COCO17 = np.array([0.8, 0.8, 0.8, 0.9, 0.9, 1.0, 1.0, 1.2, 1.2, 1.6, 1.6, 1.1, 1.1, 0.85, 0.85, 0.9, 0.9])
+# Body parts a fragment may keep (COCO-17 indices), each fewer than 6 joints.
+_FRAGMENTS_COCO17 = (
+    (0, 1, 2, 3, 4), (5, 7, 9), (6, 8, 10), (5, 6, 7, 8), (11, 13, 15), (12, 14, 16), (11, 12, 13, 14),
+    (0, 5, 6), (13, 14, 15, 16),
+)
+_GROSS_MIN_FRAC, _GROSS_MAX_FRAC = 0.2, 0.5
+_DUPLICATE_OFFSET_FRAC = 0.05
+_MIN_SCORE = 0.05
+# A canonical standing COCO-17 person 1.7 m tall facing +x (body frame, metres), used for phantoms.
+_TEMPLATE_COCO17 = np.array([
+    [0.08, 0.0, 1.62], [0.07, 0.03, 1.66], [0.07, -0.03, 1.66], [0.0, 0.07, 1.64], [0.0, -0.07, 1.64],
+    [0.0, 0.19, 1.42], [0.0, -0.19, 1.42], [0.0, 0.23, 1.13], [0.0, -0.23, 1.13], [0.05, 0.24, 0.86],
+    [0.05, -0.24, 0.86], [0.0, 0.1, 0.92], [0.0, -0.1, 0.92], [0.02, 0.1, 0.5], [0.02, -0.1, 0.5],
+    [0.0, 0.1, 0.08], [0.0, -0.1, 0.08],
+])
+
+
+def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
+    """The person's size in the image: the larger side of the bounding box of its true joints.
+
+    Args:
+        keypoints_px: (..., J, 2) true pixel positions, NaN where unknown.
+
+    Returns:
+        (...,) size in pixels (NaN when no joint is known).
+    """
+    with np.errstate(invalid="ignore"), _all_nan_ok():
+        extent = np.nanmax(keypoints_px, axis=-2) - np.nanmin(keypoints_px, axis=-2)
+    return np.max(extent, axis=-1)
+
+
+class _all_nan_ok:
+    """Silences numpy's all-NaN-slice warnings inside a block."""
+
+    def __enter__(self):
+        import warnings
+
+        self._catch = warnings.catch_warnings()
+        self._catch.__enter__()
+        warnings.simplefilter("ignore", RuntimeWarning)
+
+    def __exit__(self, *exc):
+        return self._catch.__exit__(*exc)
+
+
+def left_right_permutation(skeleton: Skeleton) -> np.ndarray:
+    """(J,) joint order that swaps every left_* joint with its right_* partner."""
+    order = np.arange(skeleton.num_joints)
+    for i, name in enumerate(skeleton.joints):
+        for a, b in (("left_", "right_"), ("right_", "left_")):
+            if name.startswith(a) and b + name[len(a):] in skeleton.joints:
+                order[i] = skeleton.index(b + name[len(a):])
+    return order
+
+
+def cast_visibility(model, data, origin: np.ndarray, points: np.ndarray, point_person: np.ndarray,
+                    point_body: np.ndarray, geom_person: np.ndarray, self_hit_margin_m: float):
+    """Occlusion of keypoints seen from one point, one `mj_multiRay` batch.
+
+    Args:
+        model, data: the MuJoCo model and data holding the bodies at the capture time.
+        origin: (3,) camera centre, metres.
+        points: (N, 3) keypoints, metres.
+        point_person: (N,) person id of each keypoint.
+        point_body: (N,) MuJoCo body id each keypoint hangs on.
+        geom_person: (ngeom,) person id of each geom, -1 for the store.
+        self_hit_margin_m: hits on the keypoint's own body this close to the keypoint count as reaching it.
+
+    Returns:
+        (N,) bool occluded (first hit: store or another person) and (N,) bool self-occluded (first
+        hit: another body of the same person, or its own body far from the keypoint).
+    """
+    import mujoco
+
+    n = points.shape[0]
+    occluded = np.zeros(n, dtype=bool)
+    self_occluded = np.zeros(n, dtype=bool)
+    if n == 0:
+        return occluded, self_occluded
+    vec = points - origin
+    length = np.linalg.norm(vec, axis=1)
+    unit = vec / length[:, None]
+    geomid = np.full(n, -1, dtype=np.int32)
+    dist = np.full(n, -1.0)
+    mujoco.mj_multiRay(model, data, origin.astype(np.float64), np.ascontiguousarray(unit).ravel(), None, 1, -1,
+                       geomid, dist, None, n, float(length.max()) + 1.0)
+    hit = (geomid >= 0) & (dist >= 0) & (dist < length)
+    hit_person = np.where(hit, geom_person[np.maximum(geomid, 0)], -2)
+    hit_body = np.where(hit, model.geom_bodyid[np.maximum(geomid, 0)], -2)
+    same_person = hit & (hit_person == point_person)
+    own_near = same_person & (hit_body == point_body) & (length - dist <= self_hit_margin_m)
+    occluded = hit & ~same_person
+    self_occluded = same_person & ~own_near
+    return occluded, self_occluded
+
+
+class Detector:
+    """A synthetic 2D pose detector for a rig of cameras.
+
+    Args:
+        config: the [detector] section.
+        cameras: the rig.
+        rng: the "detector" generator.
+        skeleton: the keypoint layout of the poses (COCO-17).
+    """
+
+    def __init__(self, config: DetectorConfig, cameras: list[Camera], rng: np.random.Generator,
+                 skeleton: Skeleton = COCO17):
+        self.config = config
+        self.params = config.params()
+        self.cameras = list(cameras)
+        self.skeleton = skeleton
+        self._rng = rng
+        self._swap = left_right_permutation(skeleton)
+        coco = skeleton.name == COCO17.name
+        self._joint_noise = _JOINT_NOISE_COCO17 if coco else np.ones(skeleton.num_joints)
+        self._fragments = _FRAGMENTS_COCO17 if coco else tuple(
+            tuple(range(s, min(s + 4, skeleton.num_joints))) for s in range(0, skeleton.num_joints, 4)
+        )
+        self._template = _TEMPLATE_COCO17 if coco else None
+        # Per camera: joints in the image, occluded, self-occluded (all person views, detected or not).
+        self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
+
+    def visibility(self, camera_index: int, world, poses: PoseTruth):
+        """Projection and occlusion of everybody's joints in one camera.
+
+        Args:
+            camera_index: which camera.
+            world: a `sim.world.World` advanced to the poses' time (or None to skip ray casting).
+            poses: the true poses, (P, J, 3).
+
+        Returns:
+            px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J).
+        """
+        camera = self.cameras[camera_index]
+        P, J = poses.poses.shape[:2]
+        px, in_img = in_image(camera, poses.poses)
+        occluded = np.zeros((P, J), dtype=bool)
+        self_occluded = np.zeros((P, J), dtype=bool)
+        if world is not None and self.config.occlusion and in_img.any():
+            p_idx, j_idx = np.nonzero(in_img)
+            ids = np.asarray(poses.person_ids)[p_idx]
+            bodies = _keypoint_bodies(world, np.asarray(poses.person_ids), J)[p_idx, j_idx]
+            occ, self_occ = cast_visibility(
+                world.model, world.data, camera.center_world, poses.poses[p_idx, j_idx], ids, bodies,
+                self._geom_person(world), self.config.self_hit_margin_m,
+            )
+            occluded[p_idx, j_idx] = occ
+            self_occluded[p_idx, j_idx] = self_occ
+        self.visibility_counts[camera_index] += (in_img.sum(), occluded.sum(), self_occluded.sum())
+        return px, in_img, occluded, self_occluded
+
+    def _geom_person(self, world) -> np.ndarray:
+        cached = getattr(self, "_geom_person_cache", None)
+        if cached is None or cached[0] is not world:
+            cached = (world, np.asarray(world.geom_person_ids()))
+            self._geom_person_cache = cached
+        return cached[1]
+
+    def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
+               delivery_s: float) -> CameraFrame:
+        """The frame camera `camera_index` delivers for a capture, with the truth behind each row.
+
+        Args:
+            camera_index: which camera.
+            world: the `sim.world.World`, advanced to `capture_s` (its MuJoCo data is used for rays),
+                or None to skip occlusion.
+            poses: everybody's true pose at `capture_s`.
+            capture_s, stamp_s, delivery_s: true capture time, the camera's stamp, delivery time.
+        """
+        rng = self._rng
+        p = self.params
+        camera = self.cameras[camera_index]
+        J = self.skeleton.num_joints
+        person_ids = np.asarray(poses.person_ids, dtype=np.int64)
+        px, in_img, occluded, self_occluded = self.visibility(camera_index, world, poses)
+        visible = in_img & ~occluded
+        size = person_size_px(np.where(in_img[..., None], px, np.nan))
+        rows = []  # (person id, keypoints, scores, true px, in_img, occluded, self_occluded, effects)
+        for i, pid in enumerate(person_ids):
+            n_in = int(in_img[i].sum())
+            if n_in == 0 or visible[i].sum() < p.min_visible_joints:
+                continue
+            occluded_share = occluded[i].sum() / n_in
+            if rng.random() < min(1.0, p.miss_prob + p.miss_occlusion_gain * occluded_share):
+                continue
+            kp, scores, effects = self._noisy_joints(px[i], in_img[i], occluded[i], self_occluded[i], size[i])
+            if kp is None:
+                continue
+            truth = (pid, kp, scores, px[i], in_img[i], occluded[i], self_occluded[i], effects)
+            rows.append(truth)
+            if rng.random() < p.duplicate_prob:
+                rows.append(self._duplicate(truth, size[i]))
+        for _ in range(rng.poisson(p.phantom_rate) if p.phantom_rate > 0 else 0):
+            phantom = self._phantom(camera)
+            if phantom is not None:
+                rows.append(phantom)
+        order = rng.permutation(len(rows))
+        rows = [rows[k] for k in order]
+        D = len(rows)
+        frame = Frame(
+            camera.name, float(stamp_s),
+            np.stack([r[1] for r in rows]) if D else np.zeros((0, J, 2)),
+            np.stack([r[2] for r in rows]) if D else np.zeros((0, J)),
+        )
+        truth = DetectionTruth(
+            capture_s=float(capture_s), delivery_s=float(delivery_s),
+            person_ids=np.array([r[0] for r in rows], dtype=np.int64),
+            keypoints_px=np.stack([r[3] for r in rows]) if D else np.zeros((0, J, 2)),
+            in_image=np.stack([r[4] for r in rows]) if D else np.zeros((0, J), dtype=bool),
+            occluded=np.stack([r[5] for r in rows]) if D else np.zeros((0, J), dtype=bool),
+            self_occluded=np.stack([r[6] for r in rows]) if D else np.zeros((0, J), dtype=bool),
+            effects=np.array([int(r[7]) for r in rows], dtype=np.int64),
+        )
+        return CameraFrame(frame, truth, poses)
+
+    def _noisy_joints(self, px, in_img, occluded, self_occluded, size):
+        """One detected person's reported joints (J, 2), scores (J,) and effect flags; None if nothing is left."""
+        rng = self._rng
+        p = self.params
+        J = px.shape[0]
+        effects = DetectionEffect.NONE
+        drop_prob = np.where(occluded, p.occluded_drop_prob,
+                             np.where(self_occluded, p.self_occluded_drop_prob, p.joint_drop_prob))
+        reported = in_img & (rng.random(J) >= drop_prob)
+        if rng.random() < p.fragment_prob:
+            part = self._fragments[rng.integers(len(self._fragments))]
+            keep = np.zeros(J, dtype=bool)
+            keep[list(part)] = True
+            if (reported & keep).any():
+                reported &= keep
+                effects |= DetectionEffect.FRAGMENT
+        if not reported.any():
+            return None, None, effects
+        # Heavy-tailed noise: a Student-t vector, its scale relative to the person's image size.
+        scale = p.noise_frac * size * self._joint_noise
+        scale = scale * np.where(occluded, p.occluded_noise_scale,
+                                 np.where(self_occluded, p.self_occluded_noise_scale, 1.0))
+        z = rng.standard_normal((J, 2))
+        if math.isfinite(p.noise_tail_dof):
+            z *= np.sqrt(p.noise_tail_dof / rng.chisquare(p.noise_tail_dof, J))[:, None]
+        kp = px + scale[:, None] * z
+        gross = reported & (rng.random(J) < p.gross_error_prob)
+        if gross.any():
+            angle = rng.uniform(0, 2 * np.pi, J)
+            jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC, J) * size
+            kp[gross] += (jump[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1))[gross]
+            effects |= DetectionEffect.GROSS_ERROR
+        mean_score = np.where(occluded, p.score_occluded, p.score_visible)
+        scores = np.clip(mean_score + p.score_std * rng.standard_normal(J), _MIN_SCORE, 1.0)
+        if rng.random() < p.swap_prob:
+            kp, scores, reported = kp[self._swap], scores[self._swap], reported[self._swap]
+            effects |= DetectionEffect.LEFT_RIGHT_SWAP
+        kp[~reported] = np.nan
+        scores[~reported] = 0.0
+        return kp, scores, effects
+
+    def _duplicate(self, truth, size):
+        """A second, partial detection of the same person, slightly shifted and less confident."""
+        rng = self._rng
+        pid, kp, scores, *rest, effects = truth
+        J = kp.shape[0]
+        keep = ~np.isnan(kp[:, 0]) & (rng.random(J) < 0.6)
+        dup = kp + _DUPLICATE_OFFSET_FRAC * size * rng.standard_normal((1, 2))
+        dup[~keep] = np.nan
+        dup_scores = np.where(keep, scores * 0.6, 0.0)
+        return (pid, dup, dup_scores, *rest, effects | DetectionEffect.DUPLICATE)
+
+    def _phantom(self, camera: Camera):
+        """A false-positive skeleton: a person template standing somewhere on the floor in view."""
+        rng = self._rng
+        p = self.params
+        J = self.skeleton.num_joints
+        if self._template is None:
+            return None
+        # Pick a pixel, follow its ray to the floor and stand the template there.
+        pixel = np.array([rng.uniform(0, camera.width_px), rng.uniform(0, camera.height_px), 1.0])
+        ray = camera.R_cam_from_world.T @ np.linalg.solve(camera.K, pixel)
+        centre = camera.center_world
+        if ray[2] >= -1e-6:
+            return None
+        foot = centre - ray * (centre[2] / ray[2])
+        yaw = rng.uniform(0, 2 * np.pi)
+        rot = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        points = self._template * rng.uniform(0.85, 1.1) @ rot.T + foot
+        px, inside = in_image(camera, points)
+        keep = inside & (rng.random(J) < 0.7)
+        if keep.sum() < 3:
+            return None
+        kp = np.where(keep[:, None], px + 0.03 * person_size_px(px) * rng.standard_normal((J, 2)), np.nan)
+        scores = np.where(keep, np.clip(0.35 + p.score_std * rng.standard_normal(J), _MIN_SCORE, 1.0), 0.0)
+        nan = np.full((J, 2), np.nan)
+        false = np.zeros(J, dtype=bool)
+        return (-1, kp, scores, nan, false, false, false, DetectionEffect.PHANTOM)
+
+
+def _keypoint_bodies(world, person_ids: np.ndarray, J: int) -> np.ndarray:
+    """(P, J) MuJoCo body id of each keypoint of the people in `person_ids`."""
+    table = np.asarray(world.keypoint_body_ids())
+    if table.ndim == 2 and table.shape[1] == J:
+        return table[person_ids]
+    raise ValueError(f"World.keypoint_body_ids(): expected (people, {J}), got {table.shape}")

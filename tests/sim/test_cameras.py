@@ -1,0 +1,154 @@
+"""Camera rigs and projection: agreement with OpenCV, rig geometry, calibration files, bad input."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from sim import scenario as scenario_mod
+from sim.cameras import (
+    CameraPlacement,
+    build_rig,
+    in_image,
+    load_panoptic,
+    look_at,
+    mujoco_camera_pose,
+    project,
+)
+from tracker.types import Camera
+
+PANOPTIC = Path(__file__).resolve().parents[3] / "shared/data/panoptic/160906_band1/calibration_160906_band1.json"
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(7)
+
+
+def _scenario(**cameras):
+    base = scenario_mod.Scenario(name="t")
+    return dataclasses.replace(base, cameras=dataclasses.replace(base.cameras, **cameras))
+
+
+def test_projection_agrees_with_cv2_project_points(rng):
+    camera = Camera("c", [[900, 0, 640], [0, 880, 350], [0, 0, 1]], [-0.2, 0.08, 0.001, -0.002, -0.01],
+                    look_at([0.5, 0.2, 3.0], [2.0, 1.5, 0.5]), [0.1, -0.2, 3.0], 1280, 720)
+    points = camera.center_world + rng.normal(0, 0.5, (200, 3)) + 3.0 * camera.R_cam_from_world[2]
+    ours, in_front = project(camera, points)
+    rvec, _ = cv2.Rodrigues(camera.R_cam_from_world)
+    theirs, _ = cv2.projectPoints(points, rvec, camera.t_cam_from_world, camera.K, camera.dist)
+    assert in_front.all()
+    np.testing.assert_allclose(ours, theirs[:, 0], atol=1e-6)  # px
+
+
+def test_projection_keeps_leading_shape_and_flags_points_behind(rng):
+    camera = build_rig(_scenario(rows=1, cols=1), rng)[0]
+    points = np.stack([camera.center_world + [0.1, 0.1, -2.0], camera.center_world + [0.0, 0.0, 1.0]])
+    px, in_front = project(camera, points.reshape(1, 2, 3))
+    assert px.shape == (1, 2, 2) and in_front.tolist() == [[True, False]]
+    assert np.isnan(px[0, 1]).all()
+
+
+def test_grid_cameras_hang_below_ceiling_inside_store_and_look_down(rng):
+    scenario = _scenario(rows=2, cols=3)
+    cams = build_rig(scenario, rng)
+    assert [c.name for c in cams] == [f"cam{i:02d}" for i in range(6)]
+    store = scenario.store
+    for cam in cams:
+        c = cam.center_world
+        assert 0 <= c[0] <= store.width_m and 0 <= c[1] <= store.depth_m
+        np.testing.assert_allclose(c[2], store.ceiling_m - scenario.cameras.ceiling_gap_m, atol=1e-9)  # m
+        forward = cam.R_cam_from_world[2]
+        assert forward[2] < -0.3
+        # Tilted toward the store centre: the optical axis points inward.
+        to_centre = np.array([store.width_m / 2, store.depth_m / 2]) - c[:2]
+        assert forward[:2] @ to_centre >= 0
+        # The centre of the floor is in every camera's image.
+        _, inside = in_image(cam, np.array([store.width_m / 2, store.depth_m / 2, 1.0]))
+        assert inside
+
+
+def test_intrinsics_follow_resolution_and_fov(rng):
+    cam = build_rig(_scenario(rows=1, cols=1, width_px=640, height_px=480, hfov_deg=90.0), rng)[0]
+    np.testing.assert_allclose(cam.K, [[320, 0, 319.5], [0, 320, 239.5], [0, 0, 1]])
+
+
+def test_explicit_placements_replace_the_grid(rng):
+    placements = (CameraPlacement((0.5, 0.5, 2.8), (2.0, 1.5, 1.0), name="door"),
+                  CameraPlacement((3.5, 2.5, 2.8), (2.0, 1.5, 0.0)))
+    cams = build_rig(_scenario(placements=placements), rng)
+    assert [c.name for c in cams] == ["door", "cam01"]
+    np.testing.assert_allclose(cams[0].center_world, [0.5, 0.5, 2.8], atol=1e-12)  # m
+    px, _ = project(cams[0], np.array([2.0, 1.5, 1.0]))
+    np.testing.assert_allclose(px, cams[0].K[:2, 2], atol=1e-9)  # px: the aim point is the image centre
+
+
+def test_camera_outside_store_is_a_scenario_error(rng):
+    placements = (CameraPlacement((9.0, 0.5, 2.8), (2.0, 1.5, 1.0)),)
+    with pytest.raises(scenario_mod.ScenarioError, match=r"cameras.placements\[0\].*outside the store"):
+        build_rig(_scenario(placements=placements), rng)
+
+
+@pytest.mark.parametrize(
+    ("text", "key"),
+    [
+        ("[cameras]\nrows = 0\n", "rows x cols"),
+        ("[cameras]\nhfov_deg = 0\n", "hfov_deg"),
+        ("[cameras]\nhfov_deg = 180\n", "hfov_deg"),
+        ("[[cameras.placements]]\nposition_m = [1.0, 1.0, 2.5]\nlook_at_m = [1.0, 1.0, 3.0]\n", "look_at_m"),
+        ("[clock]\nfps = -10.0\n", "fps"),
+        ("[clock]\ndrop_prob = 1.5\n", "drop_prob"),
+        ("[detector]\nmiss_prob = 2.0\n", "miss_prob"),
+    ],
+)
+def test_bad_sensor_keys_are_one_line_scenario_errors(tmp_path, text, key):
+    path = tmp_path / "bad.toml"
+    path.write_text(text)
+    with pytest.raises(scenario_mod.ScenarioError) as err:
+        scenario_mod.load(path)
+    message = str(err.value)
+    assert key in message and "\n" not in message and str(path) in message
+
+
+def test_panoptic_hd_cameras_reproject_their_own_calibration():
+    cams = load_panoptic(PANOPTIC, "hd", z_up=False)
+    assert len(cams) == 31 and all((c.width_px, c.height_px) == (1920, 1080) for c in cams)
+    # Panoptic's own model in centimetres, through OpenCV, matches ours in metres.
+    import json
+
+    entry = next(e for e in json.loads(PANOPTIC.read_text())["cameras"] if e["type"] == "hd")
+    point_cm = np.array([[10.0, -120.0, 30.0]])
+    rvec, _ = cv2.Rodrigues(np.array(entry["R"]))
+    theirs, _ = cv2.projectPoints(point_cm, rvec, np.array(entry["t"]), np.array(entry["K"]),
+                                  np.array(entry["distCoef"]))
+    ours, _ = project(cams[0], point_cm * 0.01)
+    np.testing.assert_allclose(ours, theirs[:, 0], atol=1e-3)  # px
+
+
+def test_panoptic_z_up_keeps_the_images_and_puts_cameras_above_the_floor():
+    y_down = load_panoptic(PANOPTIC, "hd", z_up=False)
+    z_up = load_panoptic(PANOPTIC, "hd", origin_m=(5.0, 5.0, 0.0))
+    point_pan = np.array([0.1, -1.2, 0.3])
+    point_ours = np.array([0.1, 0.3, 1.2]) + [5.0, 5.0, 0.0]
+    for a, b in zip(y_down, z_up):
+        np.testing.assert_allclose(project(a, point_pan)[0], project(b, point_ours)[0], atol=1e-6)  # px
+    assert min(c.center_world[2] for c in z_up) > -0.5
+
+
+def test_mujoco_pose_axes_are_opencv_axes_flipped(rng):
+    cam = build_rig(_scenario(rows=1, cols=2), rng)[1]
+    import mujoco
+
+    pos, quat, fovy = mujoco_camera_pose(cam)
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, quat)
+    world_from_mj = mat.reshape(3, 3)
+    np.testing.assert_allclose(pos, cam.center_world)
+    # MuJoCo looks down its -z: that is the OpenCV forward axis; its y is OpenCV's -y.
+    np.testing.assert_allclose(-world_from_mj[:, 2], cam.R_cam_from_world[2], atol=1e-12)
+    np.testing.assert_allclose(-world_from_mj[:, 1], cam.R_cam_from_world[1], atol=1e-12)
+    np.testing.assert_allclose(fovy, np.degrees(2 * np.arctan(360 / cam.K[1, 1])))
