@@ -152,3 +152,46 @@ def test_mujoco_pose_axes_are_opencv_axes_flipped(rng):
     np.testing.assert_allclose(-world_from_mj[:, 2], cam.R_cam_from_world[2], atol=1e-12)
     np.testing.assert_allclose(-world_from_mj[:, 1], cam.R_cam_from_world[1], atol=1e-12)
     np.testing.assert_allclose(fovy, np.degrees(2 * np.arctan(360 / cam.K[1, 1])))
+
+
+def _render_marker(camera: Camera, marker_m: np.ndarray, radius_m: float) -> np.ndarray:
+    """(2,) centroid in pixels of a small sphere rendered by MuJoCo through `mujoco_camera_pose`."""
+    import os
+
+    os.environ["MUJOCO_GL"] = "osmesa"  # offscreen rendering without a display (needs libosmesa6, PyOpenGL)
+    import mujoco
+
+    pos, quat, fovy = mujoco_camera_pose(camera)
+    xml = f"""
+    <mujoco>
+      <visual><global offwidth="{camera.width_px}" offheight="{camera.height_px}"/>
+        <headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/></visual>
+      <worldbody>
+        <geom type="sphere" size="{radius_m}" pos="{' '.join(map(str, marker_m))}" rgba="1 0 0 1"
+              material="glow"/>
+        <camera name="c" pos="{' '.join(map(str, pos))}" quat="{' '.join(map(str, quat))}" fovy="{fovy}"/>
+      </worldbody>
+      <asset><material name="glow" emission="1" rgba="1 0 0 1"/></asset>
+    </mujoco>"""
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    with mujoco.Renderer(model, camera.height_px, camera.width_px) as renderer:
+        renderer.update_scene(data, camera="c")
+        image = renderer.render().astype(np.float64)
+    weight = image[..., 0] / 255.0
+    rows, cols = np.mgrid[: camera.height_px, : camera.width_px]
+    return np.array([(weight * cols).sum(), (weight * rows).sum()]) / weight.sum()
+
+
+def test_projection_agrees_with_mujoco_renderer(rng):
+    # A tilted ceiling camera without lens distortion (MuJoCo renders a pinhole).
+    scenario = _scenario(rows=2, cols=2, width_px=320, height_px=240, hfov_deg=80.0, k1=0.0, k2=0.0)
+    camera = build_rig(scenario, rng)[3]
+    store = scenario.store
+    markers = [np.array([store.width_m / 2, store.depth_m / 2, 1.0]), np.array([1.2, 1.0, 0.4]),
+               np.array([3.2, 0.7, 1.6])]
+    for marker in markers:
+        expected, inside = in_image(camera, marker)
+        assert inside
+        np.testing.assert_allclose(_render_marker(camera, marker, 0.03), expected, atol=1.0)  # px
