@@ -1,0 +1,336 @@
+"""Foxglove messages for people to look at: the store, camera frusta and calibrations, skeletons, 2D detections.
+
+Every function returns a message of one of the exact Foxglove protobuf schemas
+(`foxglove_schemas_protobuf`), so a recording opens in Foxglove with the store in the 3D panel. This
+module knows nothing of MCAP; `crossview.recording` writes what it builds. Times are integer
+nanoseconds (the recording converts seconds in one place); poses are metres in the world frame (z up).
+"""
+
+from __future__ import annotations
+
+import colorsys
+import math
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.Color_pb2 import Color
+from foxglove_schemas_protobuf.CubePrimitive_pb2 import CubePrimitive
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+from foxglove_schemas_protobuf.Point2_pb2 import Point2
+from foxglove_schemas_protobuf.Point3_pb2 import Point3
+from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+from foxglove_schemas_protobuf.Pose_pb2 import Pose
+from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
+from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
+from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletion
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+from foxglove_schemas_protobuf.SpherePrimitive_pb2 import SpherePrimitive
+from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
+from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
+from google.protobuf import descriptor_pb2
+from google.protobuf.descriptor import Descriptor
+from google.protobuf.timestamp_pb2 import Timestamp
+
+from sim.types import Box, BoxKind, CameraFrame, PoseTruth
+from tracker.types import Camera, Skeleton, TrackerOutput
+
+WORLD_FRAME = "world"
+FRUSTUM_DEPTH_M = 0.6  # how far the drawn frustum reaches along the optical axis
+TRUTH_LINE_M = 0.02  # bone thickness of ground-truth skeletons
+TRACK_LINE_M = 0.04  # bone thickness of tracker skeletons, thicker so that both stay visible
+JOINT_SPHERE_M = 0.05
+DETECTION_LINE_PX = 2.0
+
+BOX_COLORS = {
+    BoxKind.FLOOR: (0.55, 0.55, 0.55, 1.0),
+    BoxKind.WALL: (0.80, 0.80, 0.78, 0.25),
+    BoxKind.SHELF: (0.62, 0.45, 0.30, 0.85),
+    BoxKind.CHECKOUT: (0.25, 0.45, 0.75, 0.85),
+    BoxKind.ENTRANCE: (0.20, 0.75, 0.30, 0.40),
+    BoxKind.EXIT: (0.85, 0.25, 0.25, 0.40),
+}
+CAMERA_COLOR = (1.0, 0.85, 0.1, 1.0)
+FALSE_POSITIVE_COLOR = (0.6, 0.6, 0.6, 1.0)
+
+
+def camera_frame_id(camera_name: str) -> str:
+    """The Foxglove frame id of a camera's optical frame (OpenCV axes: x right, y down, z forward)."""
+    return f"camera_{camera_name}"
+
+
+def timestamp(t_ns: int) -> Timestamp:
+    """A protobuf Timestamp of `t_ns` nanoseconds since the scenario start."""
+    seconds, nanos = divmod(int(t_ns), 1_000_000_000)
+    return Timestamp(seconds=seconds, nanos=nanos)
+
+
+def color(rgba: Sequence[float]) -> Color:
+    r, g, b, a = rgba
+    return Color(r=r, g=g, b=b, a=a)
+
+
+def id_color(identity: int, *, saturation: float, value: float, alpha: float = 1.0, offset: float = 0.0) -> Color:
+    """A stable colour per integer identity: hues spaced by the golden ratio so neighbours differ."""
+    hue = (offset + 0.618033988749895 * int(identity)) % 1.0
+    r, g, b = colorsys.hsv_to_rgb(hue, saturation, value)
+    return Color(r=r, g=g, b=b, a=alpha)
+
+
+def truth_color(person_id: int) -> Color:
+    """Ground truth: pale, half transparent."""
+    return id_color(person_id, saturation=0.35, value=1.0, alpha=0.6)
+
+
+def track_color(target_id: int) -> Color:
+    """Tracker output: saturated and opaque, on a shifted hue wheel so it does not mimic the truth."""
+    return id_color(target_id, saturation=0.95, value=0.9, offset=0.31)
+
+
+def _quaternion_from_matrix(R: np.ndarray) -> Quaternion:
+    """Unit quaternion (x, y, z, w) of the (3, 3) rotation R."""
+    m = np.asarray(R, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    return Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+
+
+def _point(p) -> Point3:
+    return Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+
+
+def _box_entity(index: int, box: Box, t_ns: int) -> SceneEntity:
+    half = 0.5 * box.yaw_rad
+    cube = CubePrimitive(
+        pose=Pose(
+            position=Vector3(x=box.center_m[0], y=box.center_m[1], z=box.center_m[2]),
+            orientation=Quaternion(x=0.0, y=0.0, z=math.sin(half), w=math.cos(half)),
+        ),
+        size=Vector3(x=box.size_m[0], y=box.size_m[1], z=box.size_m[2]),
+        color=color(BOX_COLORS[box.kind]),
+    )
+    return SceneEntity(
+        timestamp=timestamp(t_ns), frame_id=WORLD_FRAME, id=f"box/{index:03d}/{box.kind.value}", cubes=[cube]
+    )
+
+
+def _frustum_entity(camera: Camera, t_ns: int) -> SceneEntity:
+    """Lines from the optical centre to the image corners at FRUSTUM_DEPTH_M, in the camera's own frame."""
+    K_inv = np.linalg.inv(camera.K)
+    w, h = camera.width_px, camera.height_px
+    corners = [K_inv @ np.array([u, v, 1.0]) * FRUSTUM_DEPTH_M for u, v in ((0, 0), (w, 0), (w, h), (0, h))]
+    origin = Point3(x=0.0, y=0.0, z=0.0)
+    points = []
+    for i, c in enumerate(corners):
+        points += [origin, _point(c), _point(c), _point(corners[(i + 1) % 4])]
+    line = LinePrimitive(
+        type=LinePrimitive.LINE_LIST,
+        pose=Pose(orientation=Quaternion(w=1.0)),
+        thickness=2.0,
+        scale_invariant=True,
+        points=points,
+        color=color(CAMERA_COLOR),
+    )
+    label = TextPrimitive(
+        pose=Pose(orientation=Quaternion(w=1.0)),
+        billboard=True,
+        font_size=14.0,
+        scale_invariant=True,
+        color=color(CAMERA_COLOR),
+        text=camera.name,
+    )
+    return SceneEntity(
+        timestamp=timestamp(t_ns),
+        frame_id=camera_frame_id(camera.name),
+        id=f"camera/{camera.name}",
+        lines=[line],
+        texts=[label],
+    )
+
+
+def store_scene(boxes: Iterable[Box], cameras: Sequence[Camera], t_ns: int = 0) -> SceneUpdate:
+    """The static store: one cube per box (floor, walls, shelves, ...) and one frustum per camera."""
+    entities = [_box_entity(i, box, t_ns) for i, box in enumerate(boxes)]
+    entities += [_frustum_entity(camera, t_ns) for camera in cameras]
+    return SceneUpdate(entities=entities)
+
+
+def frame_transforms(cameras: Sequence[Camera], t_ns: int = 0) -> FrameTransforms:
+    """world -> camera optical frame for every camera: the camera centre and R_world_from_cam = Rᵀ."""
+    transforms = []
+    for camera in cameras:
+        center = camera.center_world
+        transforms.append(
+            FrameTransform(
+                timestamp=timestamp(t_ns),
+                parent_frame_id=WORLD_FRAME,
+                child_frame_id=camera_frame_id(camera.name),
+                translation=Vector3(x=float(center[0]), y=float(center[1]), z=float(center[2])),
+                rotation=_quaternion_from_matrix(camera.R_cam_from_world.T),
+            )
+        )
+    return FrameTransforms(transforms=transforms)
+
+
+def camera_calibration(camera: Camera, t_ns: int = 0) -> CameraCalibration:
+    """The camera's intrinsics in ROS/Foxglove form: plumb_bob D = (k1, k2, p1, p2, k3), P = [K | 0]."""
+    P = np.hstack([camera.K, np.zeros((3, 1))])
+    return CameraCalibration(
+        timestamp=timestamp(t_ns),
+        frame_id=camera_frame_id(camera.name),
+        width=int(camera.width_px),
+        height=int(camera.height_px),
+        distortion_model="plumb_bob",
+        D=camera.dist.tolist(),
+        K=camera.K.ravel().tolist(),
+        R=np.eye(3).ravel().tolist(),
+        P=P.ravel().tolist(),
+    )
+
+
+def _skeleton_lines(pose: np.ndarray, skeleton: Skeleton) -> list[Point3]:
+    """LINE_LIST points of the bones whose both ends are known. pose: (J, 3) metres."""
+    points = []
+    for a, b in skeleton.bones:
+        if np.all(np.isfinite(pose[a])) and np.all(np.isfinite(pose[b])):
+            points += [_point(pose[a]), _point(pose[b])]
+    return points
+
+
+def _skeleton_entity(
+    entity_id: str, pose: np.ndarray, skeleton: Skeleton, t_ns: int, rgba: Color, thickness_m: float, label: str
+) -> SceneEntity:
+    known = pose[np.all(np.isfinite(pose), axis=1)]
+    entity = SceneEntity(timestamp=timestamp(t_ns), frame_id=WORLD_FRAME, id=entity_id)
+    entity.lines.append(
+        LinePrimitive(
+            type=LinePrimitive.LINE_LIST,
+            pose=Pose(orientation=Quaternion(w=1.0)),
+            thickness=thickness_m,
+            points=_skeleton_lines(pose, skeleton),
+            color=rgba,
+        )
+    )
+    if len(known):
+        top = known[np.argmax(known[:, 2])]
+        entity.texts.append(
+            TextPrimitive(
+                pose=Pose(position=Vector3(x=float(top[0]), y=float(top[1]), z=float(top[2]) + 0.25),
+                          orientation=Quaternion(w=1.0)),
+                billboard=True,
+                font_size=12.0,
+                scale_invariant=True,
+                color=rgba,
+                text=label,
+            )
+        )
+        head = known[0]
+        entity.spheres.append(
+            SpherePrimitive(
+                pose=Pose(position=Vector3(x=float(head[0]), y=float(head[1]), z=float(head[2])),
+                          orientation=Quaternion(w=1.0)),
+                size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
+                color=rgba,
+            )
+        )
+    return entity
+
+
+def _replace_all(t_ns: int, entities: list[SceneEntity]) -> SceneUpdate:
+    """A SceneUpdate that first deletes everything older, so people who left disappear."""
+    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL)
+    return SceneUpdate(deletions=[deletion], entities=entities)
+
+
+def truth_skeletons(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
+    """Everybody's true skeleton at one instant, pale, labelled with the person id."""
+    entities = [
+        _skeleton_entity(f"person/{pid}", pose, skeleton, t_ns, truth_color(pid), TRUTH_LINE_M, f"p{pid}")
+        for pid, pose in zip(np.asarray(truth.person_ids).tolist(), truth.poses)
+    ]
+    return _replace_all(t_ns, entities)
+
+
+def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
+    """The tracker's targets after one update, each in its own saturated colour, labelled with its id."""
+    entities = [
+        _skeleton_entity(
+            f"target/{target.id}", np.asarray(target.pose), skeleton, t_ns, track_color(target.id), TRACK_LINE_M,
+            f"T{target.id}",
+        )
+        for target in output.targets
+    ]
+    return _replace_all(t_ns, entities)
+
+
+def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> ImageAnnotations:
+    """One camera frame's 2D detections: keypoints and bones in pixels, coloured by the true person
+    behind each detection (grey for false positives)."""
+    frame, truth = camera_frame.frame, camera_frame.truth
+    stamp = timestamp(t_ns)
+    points = []
+    for d in range(frame.num_detections):
+        kp = frame.keypoints_px[d]
+        pid = int(truth.person_ids[d]) if d < len(truth.person_ids) else -1
+        rgba = truth_color(pid) if pid >= 0 else color(FALSE_POSITIVE_COLOR)
+        rgba.a = 1.0
+        known = np.all(np.isfinite(kp), axis=1)
+        bones = [
+            Point2(x=float(kp[i, 0]), y=float(kp[i, 1]))
+            for a, b in skeleton.bones
+            if known[a] and known[b]
+            for i in (a, b)
+        ]
+        if bones:
+            points.append(
+                PointsAnnotation(
+                    timestamp=stamp, type=PointsAnnotation.LINE_LIST, points=bones, outline_color=rgba,
+                    thickness=DETECTION_LINE_PX,
+                )
+            )
+        joints = [Point2(x=float(p[0]), y=float(p[1])) for p in kp[known]]
+        if joints:
+            points.append(
+                PointsAnnotation(
+                    timestamp=stamp, type=PointsAnnotation.POINTS, points=joints, outline_color=rgba,
+                    fill_color=rgba, thickness=2 * DETECTION_LINE_PX,
+                )
+            )
+    return ImageAnnotations(points=points)
+
+
+def file_descriptor_set(descriptor: Descriptor) -> bytes:
+    """The serialized FileDescriptorSet of a message type and its imports, dependencies first.
+
+    This is the MCAP `protobuf` schema encoding; the order is fixed (depth-first over imports) so the
+    same software writes the same bytes.
+    """
+    fds = descriptor_pb2.FileDescriptorSet()
+    seen: set[str] = set()
+
+    def add(file_descriptor) -> None:
+        if file_descriptor.name in seen:
+            return
+        seen.add(file_descriptor.name)
+        for dependency in file_descriptor.dependencies:
+            add(dependency)
+        proto = descriptor_pb2.FileDescriptorProto()
+        file_descriptor.CopyToProto(proto)
+        fds.file.append(proto)
+
+    add(descriptor.file)
+    return fds.SerializeToString(deterministic=True)

@@ -1,0 +1,421 @@
+"""Recording and tracks files: exact round trips, identical bytes, atomic writes, independent reading, bad files."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+from crossview import recording
+from crossview.recording import (
+    FORMAT_VERSION,
+    RecordingError,
+    RecordingHeader,
+    RecordingWriter,
+    TracksHeader,
+    TracksWriter,
+    open_recording,
+    open_tracks,
+)
+from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
+from tracker.types import COCO17, Camera, Frame, Target, TargetState, TrackerOutput
+
+SCENARIO_TEXT = 'description = "synthetic"\n[crowd]\npeople = 3\n'
+
+
+def make_cameras(num_cameras: int, rng: np.random.Generator, width_m: float = 8.0) -> list[Camera]:
+    """Ceiling cameras looking straight down, spread along x, each with a random yaw."""
+    cameras = []
+    for c in range(num_cameras):
+        yaw = rng.uniform(-np.pi, np.pi)
+        Rz = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        R = np.diag([1.0, -1.0, -1.0]) @ Rz  # optical axis along -z (down)
+        center = np.array([width_m * (c + 0.5) / num_cameras, rng.uniform(1, 3), 3.0])
+        K = np.array([[640.0 + rng.normal(), 0, 640.0], [0, 640.0, 360.0], [0, 0, 1]])
+        cameras.append(Camera(f"cam{c:02d}", K, rng.normal(0, 0.01, 5), R, -R @ center, 1280, 720))
+    return cameras
+
+
+BOXES = (
+    Box(BoxKind.FLOOR, (4.0, 2.0, -0.05), (8.0, 4.0, 0.1)),
+    Box(BoxKind.SHELF, (2.0, 1.0, 0.9), (2.0, 0.5, 1.8), 0.3),
+    Box(BoxKind.CHECKOUT, (6.5, 3.5, 0.5), (1.0, 0.6, 1.0)),
+)
+
+
+def make_events(cameras: list[Camera], num_people: int, duration_s: float, rng: np.random.Generator, *,
+                fps: float = 10.0, truth_hz: float = 100.0, num_joints: int = 17):
+    """A stream shaped like the simulator's: 100 Hz truth and jittered, delayed camera frames, in log-time order."""
+    J = num_joints
+    ids = np.arange(num_people, dtype=np.int64) + 1
+
+    def poses_at(t_s: float) -> np.ndarray:
+        base = np.stack([np.array([1.0 + i + 0.5 * t_s, 2.0, 0.0]) for i in range(num_people)]).reshape(-1, 1, 3)
+        return base + rng.normal(0, 0.3, (num_people, J, 3)) + np.array([0, 0, 1.0])
+
+    events = []
+    for k in range(int(duration_s * truth_hz)):
+        t = k / truth_hz
+        events.append((t, 0, PoseTruth(t_s=t, person_ids=ids.copy(), poses=poses_at(t))))
+    for cam_index, camera in enumerate(cameras):
+        phase = rng.uniform(0, 1 / fps)
+        for k in range(int(duration_s * fps)):
+            capture = phase + k / fps + rng.normal(0, 0.002)
+            if capture < 0:
+                continue
+            delivery = capture + 0.03 + rng.uniform(0, 0.02)
+            D = int(rng.integers(0, num_people + 2))
+            kp = rng.uniform(0, 1280, (D, J, 2))
+            missing = rng.random((D, J)) < 0.2
+            kp[missing] = np.nan
+            scores = np.where(missing, 0.0, rng.random((D, J)))
+            pids = rng.choice(np.append(ids, -1), D).astype(np.int64)
+            true_kp = kp + rng.normal(0, 2, kp.shape)
+            true_kp[pids < 0] = np.nan
+            if D:
+                kp[0, 0] = -0.0  # signed zero must survive
+            frame = Frame(camera=camera.name, stamp_s=capture + rng.normal(0, 0.001) - 0.0005, keypoints_px=kp,
+                          scores=scores)
+            truth = DetectionTruth(
+                capture_s=capture, delivery_s=delivery, person_ids=pids, keypoints_px=true_kp,
+                in_image=rng.random((D, J)) < 0.9, occluded=rng.random((D, J)) < 0.2,
+                self_occluded=rng.random((D, J)) < 0.1, effects=rng.integers(0, 32, D).astype(np.int64),
+            )
+            at_capture = PoseTruth(t_s=capture, person_ids=ids.copy(), poses=poses_at(capture))
+            events.append((delivery, 1 + cam_index, CameraFrame(frame, truth, at_capture)))
+    events.sort(key=lambda e: (recording.to_ns(e[0]), e[1]))
+    return [e for _, _, e in events]
+
+
+def make_header(**overrides) -> RecordingHeader:
+    fields = dict(scenario_name="synthetic", scenario_text=SCENARIO_TEXT, scenario_digest="ab" * 32, seed=7,
+                  duration_s=1.0, skeleton_name="coco17", software_version="9.9.9", format_version=FORMAT_VERSION)
+    return RecordingHeader(**(fields | overrides))
+
+
+@pytest.fixture
+def world():
+    rng = np.random.default_rng(5)
+    cameras = make_cameras(3, rng)
+    events = make_events(cameras, 3, 1.0, rng)
+    return cameras, events
+
+
+def write_recording(path: Path, cameras, events, header=None, chunk_size: int = recording.CHUNK_SIZE) -> Path:
+    with RecordingWriter(path, header or make_header(), cameras, BOXES, chunk_size=chunk_size) as writer:
+        for event in events:
+            writer.write(event)
+    return path
+
+
+def assert_same_arrays(a, b):
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.dtype == b.dtype and a.shape == b.shape
+    # Bit-for-bit: compare the raw bytes (NaN and -0.0 included).
+    assert a.tobytes() == b.tobytes()
+
+
+def assert_same_pose_truth(a: PoseTruth, b: PoseTruth):
+    assert a.t_s == b.t_s
+    assert_same_arrays(np.asarray(a.person_ids, dtype=np.int64), b.person_ids)
+    assert_same_arrays(np.asarray(a.poses, dtype=np.float64), b.poses)
+
+
+def assert_same_event(a, b):
+    assert type(a) is type(b)
+    if isinstance(a, PoseTruth):
+        assert_same_pose_truth(a, b)
+        return
+    assert a.frame.camera == b.frame.camera and a.frame.stamp_s == b.frame.stamp_s
+    assert_same_arrays(a.frame.keypoints_px, b.frame.keypoints_px)
+    assert_same_arrays(a.frame.scores, b.frame.scores)
+    for name in ("person_ids", "keypoints_px", "in_image", "occluded", "self_occluded", "effects"):
+        assert_same_arrays(getattr(a.truth, name), getattr(b.truth, name))
+    assert a.truth.capture_s == b.truth.capture_s and a.truth.delivery_s == b.truth.delivery_s
+    assert_same_pose_truth(a.poses_at_capture, b.poses_at_capture)
+
+
+def test_recording_round_trip_is_bit_exact(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events)
+    rec = open_recording(path)
+    # Header, cameras and boxes come back as written.
+    assert rec.header == make_header()
+    assert rec.boxes == BOXES
+    assert [c.name for c in rec.cameras] == [c.name for c in cameras]
+    for a, b in zip(cameras, rec.cameras):
+        for name in ("K", "dist", "R_cam_from_world", "t_cam_from_world"):
+            assert_same_arrays(getattr(a, name), getattr(b, name))
+        assert (a.width_px, a.height_px) == (b.width_px, b.height_px)
+    # Every event, in the written order, bit for bit.
+    read = list(rec.events())
+    assert len(read) == len(events)
+    for a, b in zip(events, read):
+        assert_same_event(a, b)
+    # The filtered streams are the two halves of it.
+    assert len(list(rec.truth())) == sum(isinstance(e, PoseTruth) for e in events)
+    frames = list(rec.frames())
+    assert [f.truth.delivery_s for f in frames] == [e.truth.delivery_s for e in events if isinstance(e, CameraFrame)]
+
+
+def test_same_inputs_give_identical_bytes(tmp_path, world):
+    cameras, events = world
+    a = write_recording(tmp_path / "a.mcap", cameras, events)
+    b = write_recording(tmp_path / "b.mcap", cameras, events)
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_empty_detections_and_empty_store_round_trip(tmp_path):
+    rng = np.random.default_rng(1)
+    cameras = make_cameras(1, rng)
+    J = COCO17.num_joints
+    frame = Frame("cam00", 0.1, np.zeros((0, J, 2)), np.zeros((0, J)))
+    truth = DetectionTruth(0.1, 0.12, np.zeros(0, np.int64), np.zeros((0, J, 2)), np.zeros((0, J), bool),
+                           np.zeros((0, J), bool), np.zeros((0, J), bool), np.zeros(0, np.int64))
+    nobody = PoseTruth(0.1, np.zeros(0, np.int64), np.zeros((0, J, 3)))
+    events = [PoseTruth(0.0, np.zeros(0, np.int64), np.zeros((0, J, 3))), CameraFrame(frame, truth, nobody)]
+    path = tmp_path / "empty.mcap"
+    with RecordingWriter(path, make_header(), cameras, ()) as writer:
+        for e in events:
+            writer.write(e)
+    read = list(open_recording(path).events())
+    for a, b in zip(events, read, strict=True):
+        assert_same_event(a, b)
+
+
+def test_events_out_of_log_time_order_are_refused(tmp_path, world):
+    cameras, events = world
+    with pytest.raises(ValueError, match="log-time order"), \
+            RecordingWriter(tmp_path / "r.mcap", make_header(), cameras, BOXES) as writer:
+        writer.write(events[5])
+        writer.write(events[0])
+    assert not (tmp_path / "r.mcap").exists()
+
+
+def test_interrupted_write_leaves_no_file(tmp_path, world):
+    cameras, events = world
+    path = tmp_path / "rec.mcap"
+    # A Ctrl-C in the middle of writing.
+    with pytest.raises(KeyboardInterrupt), RecordingWriter(path, make_header(), cameras, BOXES) as writer:
+        for i, event in enumerate(events):
+            writer.write(event)
+            if i == 50:
+                raise KeyboardInterrupt
+    # Nothing under the final name, and no temporary file left behind.
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_interrupted_write_keeps_an_existing_file(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events[:10])
+    before = path.read_bytes()
+    with pytest.raises(RuntimeError), RecordingWriter(path, make_header(), cameras, BOXES) as writer:
+        writer.write(events[0])
+        raise RuntimeError("crash")
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rec.mcap"]
+
+
+def _protobuf_classes():
+    from foxglove_schemas_protobuf import (
+        CameraCalibration_pb2,
+        FrameTransforms_pb2,
+        ImageAnnotations_pb2,
+        SceneUpdate_pb2,
+    )
+
+    return {
+        "foxglove.SceneUpdate": SceneUpdate_pb2.SceneUpdate,
+        "foxglove.FrameTransforms": FrameTransforms_pb2.FrameTransforms,
+        "foxglove.CameraCalibration": CameraCalibration_pb2.CameraCalibration,
+        "foxglove.ImageAnnotations": ImageAnnotations_pb2.ImageAnnotations,
+    }
+
+
+def read_independently(path: Path) -> dict[str, tuple[str, int]]:
+    """Every message through the mcap package's own reader with CRC checks, decoded with its declared
+    schema: Foxglove protobuf through foxglove_schemas_protobuf, the project's protobuf through
+    mcap_protobuf's decoder (classes built from the schema stored in the file), JSON through json.loads.
+    Returns topic -> (schema name, message count)."""
+    foxglove_classes = _protobuf_classes()
+    decoder_factory = DecoderFactory()
+    seen: dict[str, tuple[str, int]] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if channel.message_encoding == "protobuf":
+                assert schema.encoding == "protobuf"
+                decoded = decoder_factory.decoder_for("protobuf", schema)(message.data)
+                assert decoded.DESCRIPTOR.full_name == schema.name
+                if schema.name.startswith("foxglove."):
+                    foxglove_classes[schema.name].FromString(message.data)
+            else:
+                assert channel.message_encoding == "json" and schema.encoding == "jsonschema"
+                json.loads(message.data)
+                json.loads(schema.data)
+            name, n = seen.get(channel.topic, (schema.name, 0))
+            seen[channel.topic] = (name, n + 1)
+    return seen
+
+
+def test_independent_reader_decodes_every_message_with_its_schema(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events)
+    seen = read_independently(path)
+    # The Foxglove channels carry exactly the Foxglove schema names.
+    assert seen["/tf"][0] == "foxglove.FrameTransforms"
+    assert seen["/store/scene"][0] == "foxglove.SceneUpdate"
+    assert seen["/truth/skeletons"][0] == "foxglove.SceneUpdate"
+    for camera in cameras:
+        assert seen[f"/cameras/{camera.name}/calibration"] == ("foxglove.CameraCalibration", 1)
+        assert seen[f"/cameras/{camera.name}/detections"][0] == "foxglove.ImageAnnotations"
+        assert seen[f"/cameras/{camera.name}/frame"][0] == "crossview.CameraFrame"
+    assert seen["/truth/poses"] == ("crossview.PoseTruth", sum(isinstance(e, PoseTruth) for e in events))
+    assert seen["/crossview/header"] == ("crossview.RecordingHeader", 1)
+
+
+def test_log_times_are_nanoseconds_of_truth_and_delivery_times(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events)
+    expected = [round(e.t_s * 1e9) if isinstance(e, PoseTruth) else round(e.truth.delivery_s * 1e9) for e in events]
+    with open(path, "rb") as f:
+        got = [m.log_time for _, c, m in make_reader(f).iter_messages(log_time_order=False)
+               if c.topic == "/truth/poses" or c.topic.endswith("/frame")]
+    assert got == expected
+    assert got == sorted(got)
+
+
+def make_tracks_header(**overrides) -> TracksHeader:
+    fields = dict(scenario_name="synthetic", scenario_digest="ab" * 32, seed=7, method="crossview", preset="store",
+                  config={"alpha_2d_px": 25.0, "lambda_t": 5.0, "mode": "paper", "nested": {"x": [1, 2.5]}},
+                  skeleton_name="coco17", software_version="9.9.9", format_version=FORMAT_VERSION)
+    return TracksHeader(**(fields | overrides))
+
+
+def make_outputs(rng: np.random.Generator, n: int) -> list[TrackerOutput]:
+    outputs = []
+    for k in range(n):
+        targets = []
+        for tid in range(int(rng.integers(0, 4))):
+            pose = rng.normal(0, 1, (17, 3))
+            pose[rng.random(17) < 0.1] = np.nan
+            targets.append(Target(id=tid + 1, pose=pose, stamp_s=k * 0.05, state=TargetState.CONFIRMED))
+        outputs.append(TrackerOutput(stamp_s=k * 0.05 - 0.001, camera=f"cam{k % 3:02d}", targets=targets,
+                                     detection_target_ids=rng.integers(-1, 4, int(rng.integers(0, 5)))))
+    return outputs
+
+
+def test_tracks_round_trip_with_summary(tmp_path):
+    rng = np.random.default_rng(3)
+    cameras = make_cameras(3, rng)
+    outputs = make_outputs(rng, 40)
+    path = tmp_path / "tracks.mcap"
+    with TracksWriter(path, make_tracks_header(), cameras) as writer:
+        for output in outputs:
+            writer.write(output)
+        writer.finish({"tracker_s": 0.125, "updates": 40, "num_cameras": 3})
+    tracks = open_tracks(path)
+    assert tracks.header == make_tracks_header()
+    assert tracks.summary["tracker_s"] == 0.125 and tracks.summary["updates"] == 40
+    read = list(tracks.outputs())
+    assert len(read) == len(outputs)
+    for a, b in zip(outputs, read):
+        assert a.stamp_s == b.stamp_s and a.camera == b.camera
+        assert_same_arrays(np.asarray(a.detection_target_ids, dtype=np.int64), b.detection_target_ids)
+        assert [t.id for t in a.targets] == [t.id for t in b.targets]
+        for ta, tb in zip(a.targets, b.targets):
+            assert ta.state is tb.state and ta.stamp_s == tb.stamp_s
+            assert_same_arrays(ta.pose, tb.pose)
+    # The tracker's skeletons are Foxglove SceneUpdates, readable independently.
+    seen = read_independently(path)
+    assert seen["/tracker/skeletons"][0] == "foxglove.SceneUpdate"
+    assert seen["/tracker/outputs"] == ("crossview.TrackerOutput", 40)
+
+
+# Bad files ------------------------------------------------------------------------------------------
+
+
+def test_not_mcap_is_a_clear_error(tmp_path):
+    path = tmp_path / "notes.mcap"
+    path.write_text("hello, I am not a recording\n")
+    with pytest.raises(RecordingError, match=r"notes\.mcap: not an MCAP file"):
+        open_recording(path)
+    with pytest.raises(RecordingError, match="not an MCAP file"):
+        recording.info(path)
+
+
+def test_missing_file_is_a_clear_error(tmp_path):
+    with pytest.raises(RecordingError, match="cannot read"):
+        open_recording(tmp_path / "nope.mcap")
+
+
+def test_truncated_file_is_an_error_unless_allowed(tmp_path, world):
+    cameras, events = world
+    # Small chunks, so that a cut file still holds whole chunks before the cut.
+    path = write_recording(tmp_path / "rec.mcap", cameras, events, chunk_size=32 * 1024)
+    data = path.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: int(len(data) * 0.7)])
+    with pytest.raises(RecordingError, match=r"cut\.mcap: truncated"):
+        open_recording(cut)
+    # allow_truncated recovers a prefix of the events, each one exact.
+    prefix = list(open_recording(cut, allow_truncated=True).events())
+    assert 0 < len(prefix) < len(events)
+    for a, b in zip(events, prefix):
+        assert_same_event(a, b)
+    described = recording.info(cut, allow_truncated=True)
+    assert described["truncated"] and described["kind"] == "recording"
+    assert "TRUNCATED" in recording.format_info(described)
+
+
+def test_corrupt_chunk_fails_the_crc_check(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events)
+    data = bytearray(path.read_bytes())
+    # Flip bytes in the middle of the data section (inside a compressed chunk).
+    middle = len(data) // 3
+    data[middle: middle + 16] = bytes(b ^ 0xFF for b in data[middle: middle + 16])
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(RecordingError, match=r"bad\.mcap: corrupt"):
+        rec = open_recording(bad)
+        list(rec.events())
+
+
+def test_newer_format_version_is_refused(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "new.mcap", cameras, events[:5], make_header(format_version=FORMAT_VERSION + 1))
+    with pytest.raises(RecordingError, match=rf"format version {FORMAT_VERSION + 1} is newer"):
+        open_recording(path)
+
+
+def test_wrong_kind_is_refused_both_ways(tmp_path, world):
+    cameras, events = world
+    rec_path = write_recording(tmp_path / "rec.mcap", cameras, events[:5])
+    tracks_path = tmp_path / "tracks.mcap"
+    with TracksWriter(tracks_path, make_tracks_header(), cameras) as writer:
+        writer.finish({})
+    with pytest.raises(RecordingError, match=r"tracks\.mcap: this is a tracks file, but a recording"):
+        open_recording(tracks_path)
+    with pytest.raises(RecordingError, match=r"rec\.mcap: this is a recording file, but a tracks file"):
+        open_tracks(rec_path)
+
+
+def test_info_describes_a_recording(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events)
+    d = recording.info(path)
+    assert d["kind"] == "recording" and d["seed"] == 7 and d["scenario_name"] == "synthetic"
+    assert d["format_version"] == FORMAT_VERSION
+    assert d["cameras"] == [c.name for c in cameras]
+    assert d["people"] == 3
+    assert d["size_bytes"] == os.path.getsize(path)
+    assert d["messages"]["/truth/poses"] == 100
+    assert d["end_s"] == pytest.approx(max(e.truth.delivery_s for e in events if isinstance(e, CameraFrame)))
+    text = recording.format_info(d)
+    assert "synthetic" in text and "seed 7" in text and "/truth/poses" in text
