@@ -1,0 +1,108 @@
+"""Association accuracy (the paper's Figure 4) and per-camera 2D scores of projected tracks (Table 5)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from crossview.scoring import score
+from crossview.scoring.association import association_accuracy, box_iou, pose_boxes, project_points
+from sim.types import CameraFrame, DetectionTruth, PoseTruth
+from tracker.types import Camera, Frame, Target, TrackerOutput
+
+
+def _camera(name="top", center=(0.0, 0.0, 4.0), dist=(0.0, 0.0, 0.0, 0.0, 0.0)):
+    """A camera looking straight down from `center` (OpenCV frame: z down the world's -z)."""
+    R = np.diag([1.0, -1.0, -1.0])
+    K = np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]])
+    return Camera(name, K, np.array(dist), R, -R @ np.asarray(center), 640, 480)
+
+
+def _camera_frame(camera, stamp, person_ids):
+    d = len(person_ids)
+    frame = Frame(camera, stamp, np.zeros((d, 17, 2)), np.ones((d, 17)))
+    truth = DetectionTruth(
+        capture_s=stamp, delivery_s=stamp, person_ids=np.asarray(person_ids, dtype=np.int64),
+        keypoints_px=np.zeros((d, 17, 2)), in_image=np.ones((d, 17), bool), occluded=np.zeros((d, 17), bool),
+        self_occluded=np.zeros((d, 17), bool), effects=np.zeros(d, dtype=np.int64),
+    )
+    return CameraFrame(frame, truth, PoseTruth(stamp, np.zeros(0, dtype=np.int64), np.zeros((0, 17, 3))))
+
+
+def _output(camera, stamp, assigned, targets=()):
+    return TrackerOutput(stamp, camera, list(targets), np.asarray(assigned, dtype=np.int64))
+
+
+def test_association_accuracy_by_hand():
+    frames, outputs = [], []
+    # Camera A: person 1 goes to target 10 three times; person 2 to 30, 30, then unassigned.
+    for k, (a1, a2) in enumerate([(10, 30), (10, 30), (10, -1)]):
+        frames.append(_camera_frame("A", 0.1 * k, [1, 2]))
+        outputs.append(_output("A", 0.1 * k, [a1, a2]))
+    # Camera B: person 1 to 20 once (wrong: 10 carries person 1), person 2 to 30, a false positive to 10.
+    frames.append(_camera_frame("B", 0.05, [1, 2, -1]))
+    outputs.append(_output("B", 0.05, [20, 30, 10]))
+    # A frame the tracker never processed is left out.
+    frames.append(_camera_frame("B", 0.15, [1]))
+    s = association_accuracy(frames, outputs)
+    assert s.per_camera == {"A": pytest.approx(5 / 6), "B": pytest.approx(1 / 2)}
+    assert s.overall == pytest.approx(6 / 8)
+    assert s.true_detections == {"A": 6, "B": 2}
+    assert s.false_positive_assigned == 1.0 and s.frames_without_output == 1
+
+
+def test_detection_count_mismatch_means_another_recording():
+    with pytest.raises(ValueError, match="do not belong to this recording"):
+        association_accuracy([_camera_frame("A", 0.0, [1, 2])], [_output("A", 0.0, [5])])
+
+
+def test_projection_agrees_with_opencv_from_world_coordinates():
+    cam = _camera(dist=(-0.2, 0.05, 0.001, -0.001, 0.0))
+    pts = np.random.default_rng(5).uniform([-1.5, -1.0, 0.0], [1.5, 1.0, 1.8], (50, 3))
+    rvec, _ = cv2.Rodrigues(cam.R_cam_from_world)
+    ref, _ = cv2.projectPoints(pts, rvec, cam.t_cam_from_world, cam.K, cam.dist)
+    np.testing.assert_allclose(project_points(cam, pts), ref.reshape(-1, 2), atol=1e-9)  # px
+    # Behind the camera: NaN.
+    assert np.isnan(project_points(cam, np.array([[0.0, 0.0, 5.0]]))).all()
+
+
+def test_box_iou_by_hand():
+    a = np.array([[0.0, 0.0, 2.0, 2.0]])
+    b = np.array([[1.0, 1.0, 3.0, 3.0], [5.0, 5.0, 6.0, 6.0]])
+    np.testing.assert_allclose(box_iou(a, b), [[1 / 7, 0.0]])
+
+
+def test_box_mostly_outside_the_image_does_not_count():
+    cam = _camera()
+    pose = np.zeros((17, 3))
+    pose[:, 0] = np.linspace(-0.2, 0.2, 17)
+    pose[:, 1] = np.linspace(-0.1, 0.1, 17)
+    pose[:, 2] = np.linspace(0.0, 1.7, 17)
+    # Seen from 4 m above, the second pose lies mostly beyond the right edge of the image.
+    boxes, visible = pose_boxes(cam, np.stack([pose, pose + [3.3, 0, 0]]))
+    assert visible.tolist() == [True, False]
+
+
+def _walker(pid, t):
+    pose = np.zeros((17, 3))
+    pose[:, 0] = np.linspace(-0.25, 0.25, 17) + (pid - 1.5) * 1.5 + 0.1 * t
+    pose[:, 1] = np.linspace(-0.1, 0.1, 17)
+    pose[:, 2] = np.linspace(0.1, 1.7, 17)
+    return pose
+
+
+def test_projected_truth_tracks_score_perfectly_in_2d_and_a_swap_is_one_switch_each():
+    cam = _camera()
+    times = np.arange(0, 2.001, 0.01)
+    truth = [PoseTruth(t, np.array([1, 2]), np.stack([_walker(1, t), _walker(2, t)])) for t in times]
+    stamps = np.arange(0, 2.001, 0.1)
+    good = [_output("top", t, [], [Target(10, _walker(1, t), t), Target(20, _walker(2, t), t)]) for t in stamps]
+    r = score(truth, good, cameras=[cam])
+    s = r.camera_2d["top"]
+    assert (s.mota, s.idf1, s.false_positives, s.false_negatives, s.id_switches) == (1.0, 1.0, 0, 0, 0)
+    assert s.num_frames == len(stamps) and s.num_truth == 2 * len(stamps)
+    # Swap identities at 1 s: one switch per person in the camera's 2D view too.
+    swapped = []
+    for t in stamps:
+        a, b = (10, 20) if t < 1 else (20, 10)
+        swapped.append(_output("top", t, [], [Target(a, _walker(1, t), t), Target(b, _walker(2, t), t)]))
+    assert score(truth, swapped, cameras=[cam]).camera_2d["top"].id_switches == 2

@@ -1,0 +1,124 @@
+"""score() end to end: truth fed back as tracks, swapped identities, NaN joints, empty and foreign tracks."""
+
+import json
+
+import numpy as np
+import pytest
+
+from crossview.scoring import JSON_KEYS, ScoringError, TruthTimeline, score
+from sim.types import PoseTruth
+from tracker.types import Target, TrackerOutput
+
+TEMPLATE = np.random.default_rng(3).normal(0.0, 0.25, (17, 3)) + [0.0, 0.0, 1.0]
+VELOCITY = {1: np.array([0.8, 0.1, 0.0]), 2: np.array([-0.5, 0.6, 0.0])}  # m/s, straight lines
+START = {1: np.array([0.0, 0.0, 0.0]), 2: np.array([4.0, 0.0, 0.0])}
+DURATION_S = 10.0
+
+
+def _pose(pid, t):
+    """COCO-17 pose of person pid at time t: constant velocity, so linear interpolation is exact."""
+    return TEMPLATE + START[pid] + VELOCITY[pid] * t
+
+
+def _truth(rate_hz=100.0):
+    times = np.arange(int(DURATION_S * rate_hz) + 1) / rate_hz
+    return [PoseTruth(t, np.array([1, 2]), np.stack([_pose(1, t), _pose(2, t)])) for t in times]
+
+
+def _outputs(rate_hz=25.0, ids=lambda t: (10, 20), modify=lambda pose: pose):
+    """Tracks that are the truth at their stamps, from one camera at rate_hz (ids may change with t)."""
+    outs = []
+    for k in range(int(DURATION_S * rate_hz) + 1):
+        t = k / rate_hz
+        a, b = ids(t)
+        targets = [Target(a, modify(_pose(1, t)), t), Target(b, modify(_pose(2, t)), t)]
+        outs.append(TrackerOutput(t, "cam0", targets, np.zeros(0, dtype=np.int64)))
+    return outs
+
+
+def test_truth_interpolates_linearly_and_drops_people_absent_at_a_neighbour():
+    truth = [
+        PoseTruth(0.0, np.array([1, 2]), np.stack([np.zeros((17, 3)), np.ones((17, 3))])),
+        PoseTruth(0.01, np.array([2]), np.full((1, 17, 3), 2.0)),
+    ]
+    ids, poses = TruthTimeline(truth).at(0.0025)
+    assert ids.tolist() == [2]
+    np.testing.assert_allclose(poses[0], 1.25)
+    assert TruthTimeline(truth).at(0.0)[0].tolist() == [1, 2]
+    assert len(TruthTimeline(truth).at(0.5)[0]) == 0  # beyond the recording: nobody
+
+
+def test_truth_fed_back_as_tracks_scores_perfectly():
+    r = score(_truth(), _outputs())
+    assert r.eval_instants == 101 and r.truth_person_instants == 202
+    assert r.pcp == 1.0 and r.pck_50mm == 1.0
+    assert r.mpjpe_mm == pytest.approx(0.0, abs=1e-9)  # mm
+    assert r.idf1 == 1.0 and r.mota == 1.0 and r.id_switches == 0
+    assert r.hota == pytest.approx(1.0, abs=1e-12)
+
+
+def test_swapping_two_identities_lowers_idf1_by_the_share_after_the_swap():
+    # Targets 10 and 20 trade persons at 3 s: 30 ticks before (0.0 .. 2.9 s), 71 from 3.0 s to 10.0 s.
+    r = score(_truth(), _outputs(ids=lambda t: (10, 20) if t < 3.0 else (20, 10)))
+    # Best identity map keeps the longer part of each person: IDF1 = 71 / 101.
+    assert r.idf1 == pytest.approx(71 / 101, abs=1e-12)
+    assert r.id_switches == 2
+    assert r.mota == pytest.approx(1 - 2 / 202, abs=1e-12)
+    assert r.pcp == 1.0  # pose metrics ignore identities
+    # Halfway (5 s): 50 ticks before, 51 after.
+    assert score(_truth(), _outputs(ids=lambda t: (10, 20) if t < 5.0 else (20, 10))).idf1 == pytest.approx(51 / 101)
+
+
+def test_nan_joint_counts_wrong_for_pcp_and_pck_and_is_left_out_of_mpjpe():
+    def drop_left_wrist(pose):
+        pose = pose.copy()
+        pose[9] = np.nan
+        return pose
+
+    r = score(_truth(), _outputs(modify=drop_left_wrist))
+    # One of ten bones (left lower arm) is wrong at every instant; one of 17 joints is never within reach.
+    assert r.pcp == pytest.approx(0.9)
+    assert r.pcp_per_group["lower_arms"] == pytest.approx(0.5)
+    assert r.pck_100mm == pytest.approx(16 / 17)
+    assert r.mpjpe_mm == pytest.approx(0.0, abs=1e-9)
+    assert r.nan_joints == 202
+    assert r.idf1 == 1.0  # the root (hips) is intact
+
+
+def test_empty_tracks_give_documented_scores():
+    r = score(_truth(), [])
+    assert (r.pcp, r.mota, r.idf1, r.hota, r.id_switches, r.false_negatives) == (0.0, 0.0, 0.0, 0.0, 0, 202)
+    assert r.mpjpe_mm is None and r.association_accuracy is None
+    assert "MOTA" in r.table()
+
+
+def test_json_has_the_architecture_keys_first_and_no_nan():
+    r = score(_truth(), [])
+    d = r.to_json(scenario="store", seed=1, num_cameras=4, num_people=2, duration_s=DURATION_S,
+                  tracker_fps=None, camera_frames_per_s=None)
+    assert tuple(d)[: len(JSON_KEYS)] == JSON_KEYS
+    assert d["mpjpe_mm"] is None and d["pcp"] == 0.0 and d["tracker_fps"] is None
+    json.dumps(d, allow_nan=False)
+    for key in ("pcp", "pck_100mm", "idf1", "hota"):
+        assert 0.0 <= d[key] <= 1.0
+
+
+def test_tracks_of_another_recording_are_refused():
+    foreign = [TrackerOutput(500.0, "cam0", [], np.zeros(0, dtype=np.int64))]
+    with pytest.raises(ScoringError, match="another recording"):
+        score(_truth(), foreign)
+
+
+def test_tracks_in_another_joint_layout_are_refused():
+    bad = [TrackerOutput(0.0, "cam0", [Target(1, np.zeros((14, 3)), 0.0)], np.zeros(0, dtype=np.int64))]
+    with pytest.raises(ScoringError, match="COCO-17"):
+        score(_truth(), bad)
+
+
+def test_stale_outputs_stop_counting_after_a_second():
+    # The tracker reports only during the first 2 s: ticks after 3.0 s see no output at all.
+    outs = [o for o in _outputs() if o.stamp_s <= 2.0]
+    r = score(_truth(), outs)
+    # Ticks 0.0 .. 3.0 s (31) compare with an output no older than 1 s; the other 70 ticks are all misses.
+    assert r.false_negatives == 2 * 70
+    assert r.mota == pytest.approx(31 / 101, abs=1e-12)
