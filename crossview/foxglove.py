@@ -204,11 +204,14 @@ def camera_calibration(camera: Camera, t_ns: int = 0) -> CameraCalibration:
 
 def _skeleton_lines(pose: np.ndarray, skeleton: Skeleton) -> list[Point3]:
     """LINE_LIST points of the bones whose both ends are known. pose: (J, 3) metres."""
-    points = []
-    for a, b in skeleton.bones:
-        if np.all(np.isfinite(pose[a])) and np.all(np.isfinite(pose[b])):
-            points += [_point(pose[a]), _point(pose[b])]
-    return points
+    known = np.isfinite(pose).all(axis=1).tolist()
+    xyz = pose.tolist()
+    return [
+        Point3(x=xyz[i][0], y=xyz[i][1], z=xyz[i][2])
+        for a, b in skeleton.bones
+        if known[a] and known[b]
+        for i in (a, b)
+    ]
 
 
 def _skeleton_entity(
@@ -283,18 +286,14 @@ def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) 
     frame, truth = camera_frame.frame, camera_frame.truth
     stamp = timestamp(t_ns)
     points = []
-    for d in range(frame.num_detections):
-        kp = frame.keypoints_px[d]
-        pid = int(truth.person_ids[d]) if d < len(truth.person_ids) else -1
+    known_all = np.isfinite(frame.keypoints_px).all(axis=2).tolist()  # (D, J)
+    person_ids = np.asarray(truth.person_ids).tolist()
+    for d, kp in enumerate(frame.keypoints_px.tolist()):
+        known = known_all[d]
+        pid = person_ids[d] if d < len(person_ids) else -1
         rgba = truth_color(pid) if pid >= 0 else color(FALSE_POSITIVE_COLOR)
         rgba.a = 1.0
-        known = np.all(np.isfinite(kp), axis=1)
-        bones = [
-            Point2(x=float(kp[i, 0]), y=float(kp[i, 1]))
-            for a, b in skeleton.bones
-            if known[a] and known[b]
-            for i in (a, b)
-        ]
+        bones = [Point2(x=kp[i][0], y=kp[i][1]) for a, b in skeleton.bones if known[a] and known[b] for i in (a, b)]
         if bones:
             points.append(
                 PointsAnnotation(
@@ -302,7 +301,7 @@ def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) 
                     thickness=DETECTION_LINE_PX,
                 )
             )
-        joints = [Point2(x=float(p[0]), y=float(p[1])) for p in kp[known]]
+        joints = [Point2(x=p[0], y=p[1]) for p, ok in zip(kp, known) if ok]
         if joints:
             points.append(
                 PointsAnnotation(

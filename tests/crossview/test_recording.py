@@ -48,9 +48,11 @@ BOXES = (
 )
 
 
-def make_events(cameras: list[Camera], num_people: int, duration_s: float, rng: np.random.Generator, *,
-                fps: float = 10.0, truth_hz: float = 100.0, num_joints: int = 17):
-    """A stream shaped like the simulator's: 100 Hz truth and jittered, delayed camera frames, in log-time order."""
+def synthetic_stream(cameras: list[Camera], num_people: int, duration_s: float, rng: np.random.Generator, *,
+                     fps: float = 10.0, truth_hz: float = 100.0, num_joints: int = 17):
+    """Events shaped like the simulator's, in log-time order and generated lazily (constant memory):
+    truth at `truth_hz`, and per camera jittered, delayed frames of up to num_people + 1 detections
+    with missing joints, false positives and signed zeros."""
     J = num_joints
     ids = np.arange(num_people, dtype=np.int64) + 1
 
@@ -58,38 +60,42 @@ def make_events(cameras: list[Camera], num_people: int, duration_s: float, rng: 
         base = np.stack([np.array([1.0 + i + 0.5 * t_s, 2.0, 0.0]) for i in range(num_people)]).reshape(-1, 1, 3)
         return base + rng.normal(0, 0.3, (num_people, J, 3)) + np.array([0, 0, 1.0])
 
-    events = []
-    for k in range(int(duration_s * truth_hz)):
-        t = k / truth_hz
-        events.append((t, 0, PoseTruth(t_s=t, person_ids=ids.copy(), poses=poses_at(t))))
-    for cam_index, camera in enumerate(cameras):
-        phase = rng.uniform(0, 1 / fps)
-        for k in range(int(duration_s * fps)):
-            capture = phase + k / fps + rng.normal(0, 0.002)
-            if capture < 0:
-                continue
-            delivery = capture + 0.03 + rng.uniform(0, 0.02)
-            D = int(rng.integers(0, num_people + 2))
-            kp = rng.uniform(0, 1280, (D, J, 2))
-            missing = rng.random((D, J)) < 0.2
-            kp[missing] = np.nan
-            scores = np.where(missing, 0.0, rng.random((D, J)))
-            pids = rng.choice(np.append(ids, -1), D).astype(np.int64)
-            true_kp = kp + rng.normal(0, 2, kp.shape)
-            true_kp[pids < 0] = np.nan
-            if D:
-                kp[0, 0] = -0.0  # signed zero must survive
-            frame = Frame(camera=camera.name, stamp_s=capture + rng.normal(0, 0.001) - 0.0005, keypoints_px=kp,
-                          scores=scores)
-            truth = DetectionTruth(
-                capture_s=capture, delivery_s=delivery, person_ids=pids, keypoints_px=true_kp,
-                in_image=rng.random((D, J)) < 0.9, occluded=rng.random((D, J)) < 0.2,
-                self_occluded=rng.random((D, J)) < 0.1, effects=rng.integers(0, 32, D).astype(np.int64),
-            )
-            at_capture = PoseTruth(t_s=capture, person_ids=ids.copy(), poses=poses_at(capture))
-            events.append((delivery, 1 + cam_index, CameraFrame(frame, truth, at_capture)))
-    events.sort(key=lambda e: (recording.to_ns(e[0]), e[1]))
-    return [e for _, _, e in events]
+    def camera_frame(camera: Camera, capture: float, delivery: float) -> CameraFrame:
+        D = int(rng.integers(0, num_people + 2))
+        kp = rng.uniform(0, 1280, (D, J, 2))
+        missing = rng.random((D, J)) < 0.2
+        kp[missing] = np.nan
+        scores = np.where(missing, 0.0, rng.random((D, J)))
+        pids = rng.choice(np.append(ids, -1), D).astype(np.int64)
+        true_kp = kp + rng.normal(0, 2, kp.shape)
+        true_kp[pids < 0] = np.nan
+        if D:
+            kp[0, 0] = -0.0  # signed zero must survive
+        frame = Frame(camera=camera.name, stamp_s=capture + rng.normal(0, 0.001) - 0.0005, keypoints_px=kp,
+                      scores=scores)
+        truth = DetectionTruth(
+            capture_s=capture, delivery_s=delivery, person_ids=pids, keypoints_px=true_kp,
+            in_image=rng.random((D, J)) < 0.9, occluded=rng.random((D, J)) < 0.2,
+            self_occluded=rng.random((D, J)) < 0.1, effects=rng.integers(0, 32, D).astype(np.int64),
+        )
+        return CameraFrame(frame, truth, PoseTruth(t_s=capture, person_ids=ids.copy(), poses=poses_at(capture)))
+
+    # The timing of everything is drawn first (small); the contents are drawn as they are yielded.
+    schedule = [(k / truth_hz, 0, None, k / truth_hz) for k in range(int(duration_s * truth_hz))]
+    for index, camera in enumerate(cameras):
+        captures = rng.uniform(0, 1 / fps) + np.arange(int(duration_s * fps)) / fps + rng.normal(0, 0.002)
+        deliveries = captures + 0.03 + rng.uniform(0, 0.02, captures.shape)
+        schedule += [(d, 1 + index, camera, c) for c, d in zip(captures.tolist(), deliveries.tolist()) if c >= 0]
+    schedule.sort(key=lambda e: (recording.to_ns(e[0]), e[1]))
+    for log_s, _, camera, t_s in schedule:
+        if camera is None:
+            yield PoseTruth(t_s=t_s, person_ids=ids.copy(), poses=poses_at(t_s))
+        else:
+            yield camera_frame(camera, t_s, log_s)
+
+
+def make_events(cameras: list[Camera], num_people: int, duration_s: float, rng: np.random.Generator, **kwargs):
+    return list(synthetic_stream(cameras, num_people, duration_s, rng, **kwargs))
 
 
 def make_header(**overrides) -> RecordingHeader:
