@@ -350,7 +350,7 @@ class Detector:
         person_ids = np.asarray(poses.person_ids, dtype=np.int64)
         px, in_img, occluded, self_occluded = self.visibility(camera_index, world, poses)
         visible = in_img & ~occluded
-        size = person_size_px(np.where(in_img[..., None], px, np.nan))
+        size = person_size_px(px)
         rows = []  # (person id, keypoints, scores, true px, in_img, occluded, self_occluded, effects)
         for i, pid in enumerate(person_ids):
             n_in = int(in_img[i].sum())

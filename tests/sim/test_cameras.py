@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+import os
+import subprocess
+import sys
 from pathlib import Path
 
 import cv2
@@ -118,8 +122,6 @@ def test_panoptic_hd_cameras_reproject_their_own_calibration():
     cams = load_panoptic(PANOPTIC, "hd", z_up=False)
     assert len(cams) == 31 and all((c.width_px, c.height_px) == (1920, 1080) for c in cams)
     # Panoptic's own model in centimetres, through OpenCV, matches ours in metres.
-    import json
-
     entry = next(e for e in json.loads(PANOPTIC.read_text())["cameras"] if e["type"] == "hd")
     point_cm = np.array([[10.0, -120.0, 30.0]])
     rvec, _ = cv2.Rodrigues(np.array(entry["R"]))
@@ -154,34 +156,48 @@ def test_mujoco_pose_axes_are_opencv_axes_flipped(rng):
     np.testing.assert_allclose(fovy, np.degrees(2 * np.arctan(360 / cam.K[1, 1])))
 
 
+_RENDER_SCRIPT = """
+import json, sys
+import numpy as np
+import mujoco
+
+spec = json.loads(sys.argv[1])
+width, height = spec["width"], spec["height"]
+xml = f\"\"\"
+<mujoco>
+  <visual><global offwidth="{width}" offheight="{height}"/>
+    <headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/></visual>
+  <asset><material name="glow" emission="1" rgba="1 0 0 1"/></asset>
+  <worldbody>
+    <geom type="sphere" size="{spec['radius']}" pos="{spec['marker']}" material="glow"/>
+    <camera name="c" pos="{spec['pos']}" quat="{spec['quat']}" fovy="{spec['fovy']}"/>
+  </worldbody>
+</mujoco>\"\"\"
+model = mujoco.MjModel.from_xml_string(xml)
+data = mujoco.MjData(model)
+mujoco.mj_forward(model, data)
+with mujoco.Renderer(model, height, width) as renderer:
+    renderer.update_scene(data, camera="c")
+    weight = renderer.render()[..., 0].astype(np.float64) / 255.0
+rows, cols = np.mgrid[:height, :width]
+print(json.dumps([(weight * cols).sum() / weight.sum(), (weight * rows).sum() / weight.sum()]))
+"""
+
+
 def _render_marker(camera: Camera, marker_m: np.ndarray, radius_m: float) -> np.ndarray:
-    """(2,) centroid in pixels of a small sphere rendered by MuJoCo through `mujoco_camera_pose`."""
-    import os
+    """(2,) centroid in pixels of a small glowing sphere rendered by MuJoCo through `mujoco_camera_pose`.
 
-    os.environ["MUJOCO_GL"] = "osmesa"  # offscreen rendering without a display (needs libosmesa6, PyOpenGL)
-    import mujoco
-
+    Runs in a fresh interpreter with MUJOCO_GL=osmesa (offscreen, needs libosmesa6 and PyOpenGL):
+    MuJoCo picks its GL backend once, when it is first imported.
+    """
     pos, quat, fovy = mujoco_camera_pose(camera)
-    xml = f"""
-    <mujoco>
-      <visual><global offwidth="{camera.width_px}" offheight="{camera.height_px}"/>
-        <headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/></visual>
-      <worldbody>
-        <geom type="sphere" size="{radius_m}" pos="{' '.join(map(str, marker_m))}" rgba="1 0 0 1"
-              material="glow"/>
-        <camera name="c" pos="{' '.join(map(str, pos))}" quat="{' '.join(map(str, quat))}" fovy="{fovy}"/>
-      </worldbody>
-      <asset><material name="glow" emission="1" rgba="1 0 0 1"/></asset>
-    </mujoco>"""
-    model = mujoco.MjModel.from_xml_string(xml)
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    with mujoco.Renderer(model, camera.height_px, camera.width_px) as renderer:
-        renderer.update_scene(data, camera="c")
-        image = renderer.render().astype(np.float64)
-    weight = image[..., 0] / 255.0
-    rows, cols = np.mgrid[: camera.height_px, : camera.width_px]
-    return np.array([(weight * cols).sum(), (weight * rows).sum()]) / weight.sum()
+    spec = {"width": camera.width_px, "height": camera.height_px, "radius": radius_m, "fovy": fovy,
+            "marker": " ".join(map(repr, map(float, marker_m))), "pos": " ".join(map(repr, map(float, pos))),
+            "quat": " ".join(map(repr, map(float, quat)))}
+    env = {**os.environ, "MUJOCO_GL": "osmesa", "PYOPENGL_PLATFORM": "osmesa"}
+    out = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT, json.dumps(spec)], env=env, check=True,
+                         capture_output=True, text=True)
+    return np.array(json.loads(out.stdout))
 
 
 def test_projection_agrees_with_mujoco_renderer(rng):

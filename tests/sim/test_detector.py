@@ -1,0 +1,231 @@
+"""The synthetic detector: visibility by ray casting, and every error effect following its knob."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.cameras import CameraPlacement, CameraRigConfig, build_rig, in_image
+from sim.detector import _TEMPLATE_COCO17, Detector, DetectorConfig, DetectorProfile, person_size_px
+from sim.scenario import Scenario
+from sim.store import StoreConfig
+from sim.types import DetectionEffect, PoseTruth
+from tracker.types import COCO17
+
+# Bodies of the stand-in person (COCO-17 keypoint -> body): head, torso, arms, legs.
+_PARTS = {"head": (0, 1, 2, 3, 4), "larm": (5, 7, 9), "rarm": (6, 8, 10), "lleg": (11, 13, 15),
+          "rleg": (12, 14, 16)}
+
+
+def _v(a) -> str:
+    return " ".join(map(str, a))
+
+
+def _cap(pose, a, b, r=0.06) -> str:
+    return f'<geom type="capsule" size="{r}" fromto="{_v(pose[a])} {_v(pose[b])}"/>'
+
+
+class BoxWorld:
+    """A MuJoCo stand-in for sim.world.World: a shelf and capsule people at the template's joints."""
+
+    def __init__(self, people_xy, shelf=((2.0, 1.5, 0.75), (0.25, 1.0, 0.75))):
+        import mujoco
+
+        self.poses = np.stack([_TEMPLATE_COCO17 + [x, y, 0.0] for x, y in people_xy])
+        bodies = []
+        for p, pose in enumerate(self.poses):
+            torso_a, torso_b = (pose[11] + pose[12]) / 2, (pose[5] + pose[6]) / 2
+            bodies.append(f"""
+              <body name="p{p}_head"><geom type="sphere" size="0.11" pos="{_v(pose[0] - [0.06, 0, 0])}"/></body>
+              <body name="p{p}_torso"><geom type="capsule" size="0.14" fromto="{_v(torso_a)} {_v(torso_b)}"/></body>
+              <body name="p{p}_larm">{_cap(pose, 5, 7)}{_cap(pose, 7, 9)}</body>
+              <body name="p{p}_rarm">{_cap(pose, 6, 8)}{_cap(pose, 8, 10)}</body>
+              <body name="p{p}_lleg">{_cap(pose, 11, 13, 0.08)}{_cap(pose, 13, 15)}</body>
+              <body name="p{p}_rleg">{_cap(pose, 12, 14, 0.08)}{_cap(pose, 14, 16)}</body>""")
+        (cx, cy, cz), (hx, hy, hz) = shelf
+        xml = f"""<mujoco><worldbody>
+            <geom name="shelf" type="box" pos="{cx} {cy} {cz}" size="{hx} {hy} {hz}"/>
+            {''.join(bodies)}</worldbody></mujoco>"""
+        self.model = mujoco.MjModel.from_xml_string(xml)
+        self.data = mujoco.MjData(self.model)
+        mujoco.mj_forward(self.model, self.data)
+        self.people = len(people_xy)
+
+    def geom_person_ids(self):
+        names = [self.model.body(self.model.geom_bodyid[g]).name for g in range(self.model.ngeom)]
+        return np.array([int(n[1:n.index("_")]) if n.startswith("p") else -1 for n in names])
+
+    def keypoint_body_ids(self):
+        table = np.zeros((self.people, 17), dtype=np.int64)
+        for p in range(self.people):
+            for part, joints in _PARTS.items():
+                table[p, list(joints)] = self.model.body(f"p{p}_{part}").id
+        return table
+
+    def truth(self, t=0.0):
+        return PoseTruth(t, np.arange(self.people), self.poses.copy())
+
+
+def _cameras(*placements):
+    scenario = Scenario(name="t", store=StoreConfig(width_m=6.0, depth_m=4.0),
+                        cameras=CameraRigConfig(placements=placements, k1=0.0, k2=0.0))
+    return build_rig(scenario, np.random.default_rng(0))
+
+
+def test_person_behind_a_shelf_has_its_hidden_joints_flagged():
+    # A person just behind a 1.5 m shelf, seen over the shelf from a camera on the other side.
+    world = BoxWorld([(2.6, 1.5)])
+    cams = _cameras(CameraPlacement((0.3, 1.5, 2.8), (2.6, 1.5, 0.9)))
+    detector = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
+    frame = detector.detect(0, world, world.truth(), 0.0, 0.0, 0.05)
+    truth = frame.truth
+    assert truth.person_ids.tolist() == [0]
+    occluded = truth.occluded[0]
+    legs = [COCO17.index(n) for n in ("left_knee", "right_knee", "left_ankle", "right_ankle")]
+    head = [COCO17.index(n) for n in ("nose", "left_eye", "right_eye")]
+    assert occluded[legs].all() and not occluded[head].any()
+    assert truth.in_image[0].all()
+    # The ideal detector reports exactly the visible joints, occluded ones too (drop prob 0).
+    np.testing.assert_allclose(frame.frame.keypoints_px[0], truth.keypoints_px[0], atol=1e-9)  # px
+    # Without the shelf nothing is occluded.
+    open_world = BoxWorld([(2.6, 1.5)], shelf=((9.0, 9.0, 0.1), (0.1, 0.1, 0.1)))
+    assert not Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1)).detect(
+        0, open_world, open_world.truth(), 0.0, 0.0, 0.05).truth.occluded.any()
+
+
+def test_limbs_behind_the_body_are_self_occluded_and_other_people_occlude():
+    # Camera low on the person's left (+y) side: the right arm is behind the torso.
+    world = BoxWorld([(3.0, 1.5), (3.0, 2.5)], shelf=((9.0, 9.0, 0.1), (0.1, 0.1, 0.1)))
+    cams = _cameras(CameraPlacement((3.0, 0.0, 1.6), (3.0, 1.5, 1.0)),
+                    CameraPlacement((3.0, 3.9, 1.6), (3.0, 2.5, 1.0)))
+    detector = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
+    _, in_img, occluded, self_occluded = detector.visibility(0, world, world.truth())
+    left_wrist, right_wrist = COCO17.index("left_wrist"), COCO17.index("right_wrist")
+    # Camera 0 looks from -y: person 0's left (+y) wrist hides behind its torso, its right wrist is seen.
+    assert self_occluded[0, left_wrist] and not occluded[0, left_wrist]
+    assert not self_occluded[0, right_wrist] and not occluded[0, right_wrist]
+    # Person 1 stands behind person 0 in camera 0: its hidden joints are occluded, not self-occluded.
+    assert occluded[1].any() and not self_occluded[1][occluded[1]].any()
+    # Visibility counts accumulate per camera.
+    assert detector.visibility_counts[0].tolist() == [in_img.sum(), occluded.sum(), self_occluded.sum()]
+
+
+def _open_scene(people=4):
+    xy = [(1.0 + 0.8 * i, 1.5 + 0.3 * (i % 2)) for i in range(people)]
+    world = BoxWorld(xy, shelf=((9.0, 9.0, 0.1), (0.1, 0.1, 0.1)))
+    cams = _cameras(CameraPlacement((0.2, 0.2, 2.9), (2.0, 1.5, 1.0)))
+    return world, cams
+
+
+def _frames(config, n=300, world_rays=False, seed=2):
+    world, cams = _open_scene()
+    detector = Detector(config, cams, np.random.default_rng(seed))
+    return [detector.detect(0, world if world_rays else None, world.truth(k * 0.1), k * 0.1, k * 0.1, k * 0.1)
+            for k in range(n)]
+
+
+def test_ideal_profile_reports_every_person_exactly():
+    frames = _frames(DetectorConfig(profile=DetectorProfile.IDEAL), n=5)
+    for f in frames:
+        assert sorted(f.truth.person_ids.tolist()) == [0, 1, 2, 3]
+        assert (f.truth.effects == 0).all()
+        ok = f.truth.in_image
+        np.testing.assert_allclose(f.frame.keypoints_px[ok], f.truth.keypoints_px[ok], atol=1e-9)  # px
+        assert np.isnan(f.frame.keypoints_px[~ok]).all() and (f.frame.scores[~ok] == 0).all()
+        assert (f.frame.scores[ok] == 1).all()
+
+
+def _only(**knobs):
+    """The ideal detector with one effect turned on."""
+    return DetectorConfig(profile=DetectorProfile.IDEAL, **knobs)
+
+
+def test_noise_scales_with_the_person_size_and_its_knob():
+    def median_norm_error(noise_frac):
+        frames = _frames(_only(noise_frac=noise_frac, noise_tail_dof=1e9), n=100)
+        errs = []
+        for f in frames:
+            size = person_size_px(f.truth.keypoints_px)
+            errs.append((np.linalg.norm(f.frame.keypoints_px - f.truth.keypoints_px, axis=-1) / size[:, None]).ravel())
+        e = np.concatenate(errs)
+        return np.nanmedian(e)
+
+    # Gaussian per-axis std s (times the per-joint factor ~1): the 2D error's median is s * sqrt(2 ln 2).
+    assert median_norm_error(0.01) == pytest.approx(0.01 * np.sqrt(2 * np.log(2)), rel=0.15)
+    assert median_norm_error(0.02) / median_norm_error(0.01) == pytest.approx(2.0, rel=0.1)
+
+
+@pytest.mark.parametrize(
+    ("knob", "effect"),
+    [("fragment_prob", DetectionEffect.FRAGMENT), ("swap_prob", DetectionEffect.LEFT_RIGHT_SWAP),
+     ("duplicate_prob", DetectionEffect.DUPLICATE)],
+)
+def test_each_detection_effect_follows_its_probability(knob, effect):
+    frames = _frames(_only(**{knob: 0.3}), n=200)
+    effects = np.concatenate([f.truth.effects for f in frames])
+    flagged = (effects & effect) != 0
+    real = np.concatenate([f.truth.person_ids for f in frames]) >= 0
+    if effect == DetectionEffect.DUPLICATE:
+        # Each of the 800 person views brings a duplicate with probability 0.3.
+        assert flagged.sum() / 800 == pytest.approx(0.3, abs=0.05)
+    else:
+        assert flagged[real].mean() == pytest.approx(0.3, abs=0.05)
+
+
+def test_fragments_keep_fewer_than_six_joints_and_swaps_swap_sides():
+    for f in _frames(_only(fragment_prob=1.0), n=20):
+        assert ((~np.isnan(f.frame.keypoints_px[..., 0])).sum(axis=1) < 6).all()
+    for f in _frames(_only(swap_prob=1.0), n=5):
+        lw, rw = COCO17.index("left_wrist"), COCO17.index("right_wrist")
+        ok = f.truth.in_image[:, lw] & f.truth.in_image[:, rw]
+        np.testing.assert_allclose(f.frame.keypoints_px[ok, lw], f.truth.keypoints_px[ok, rw], atol=1e-9)  # px
+
+
+def test_phantoms_are_poisson_with_the_configured_rate_and_have_no_person():
+    frames = _frames(_only(phantom_rate=0.5), n=400)
+    phantoms = [int((f.truth.person_ids < 0).sum()) for f in frames]
+    # Some phantoms land mostly outside the image and are dropped; most stay.
+    assert 0.35 <= np.mean(phantoms) <= 0.5
+    f = next(f for f, n in zip(frames, phantoms) if n)
+    row = np.nonzero(f.truth.person_ids < 0)[0][0]
+    assert f.truth.effects[row] == DetectionEffect.PHANTOM and np.isnan(f.truth.keypoints_px[row]).all()
+
+
+def test_misses_grow_with_occlusion():
+    world = BoxWorld([(2.6, 1.5)])
+    cams = _cameras(CameraPlacement((0.3, 1.5, 2.8), (2.6, 1.5, 0.9)))
+    config = _only(miss_prob=0.1, miss_occlusion_gain=0.8)
+    detector = Detector(config, cams, np.random.default_rng(3))
+    hidden = np.mean([len(detector.detect(0, world, world.truth(), 0, 0, 0).truth.person_ids) == 0
+                      for _ in range(400)])
+    open_world = BoxWorld([(2.6, 1.5)], shelf=((9.0, 9.0, 0.1), (0.1, 0.1, 0.1)))
+    seen = np.mean([len(detector.detect(0, open_world, open_world.truth(), 0, 0, 0).truth.person_ids) == 0
+                    for _ in range(400)])
+    assert seen == pytest.approx(0.1, abs=0.04)
+    assert hidden > seen + 0.15
+
+
+def test_detections_are_deterministic_for_a_seed():
+    a = _frames(DetectorConfig(profile=DetectorProfile.HARSH), n=20, seed=5)
+    b = _frames(DetectorConfig(profile=DetectorProfile.HARSH), n=20, seed=5)
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x.frame.keypoints_px, y.frame.keypoints_px)
+        np.testing.assert_array_equal(x.truth.effects, y.truth.effects)
+
+
+def test_knobs_override_the_profile_and_bad_knobs_name_the_key():
+    assert DetectorConfig(profile=DetectorProfile.TYPICAL, swap_prob=0.5).params().swap_prob == 0.5
+    assert DetectorConfig(profile=DetectorProfile.IDEAL).params().noise_frac == 0.0
+    with pytest.raises(ValueError, match="miss_prob"):
+        DetectorConfig(miss_prob=1.5)
+    with pytest.raises(ValueError, match="noise_tail_dof"):
+        DetectorConfig(noise_tail_dof=1.0)
+
+
+def test_in_image_joints_of_far_away_people_are_not_reported():
+    world, cams = _open_scene()
+    truth = world.truth()
+    far = PoseTruth(0.0, np.array([7]), truth.poses[:1] + [0.0, -40.0, 0.0])
+    _, inside = in_image(cams[0], far.poses)
+    detector = Detector(DetectorConfig(), cams, np.random.default_rng(0))
+    assert not inside.any() and detector.detect(0, None, far, 0, 0, 0).truth.person_ids.size == 0
