@@ -1,0 +1,97 @@
+"""End-to-end behaviour of the streaming Tracker on synthetic walkers (no simulator)."""
+
+import numpy as np
+import pytest
+
+from tests.tracker.synthetic import store_like
+from tracker.baseline import BaselineTracker
+from tracker.config import TrackerConfig, Triangulation
+from tracker.tracker import Tracker
+from tracker.types import Frame, TargetState
+
+# The synthetic rig is 1280x720 with f = 700 px: walkers move ~250 px/s, so α2D is set for that resolution
+# (Table S2's 70 px/s belongs to the paper's Store images; the paper scales α2D with resolution).
+CONFIG = TrackerConfig.preset("store").replace(alpha_2d_px_per_s=400.0)
+
+
+@pytest.fixture(scope="module")
+def layout1():
+    return store_like("layout1", 4.0, seed=0)
+
+
+def _run(tracker, frames):
+    outputs = []
+    for frame in frames:
+        tracker.update(frame)
+        outputs.append(tracker.last_output)
+    return outputs
+
+
+def _errors(outputs, walkers, after_s):
+    """Per output target: (id, index of nearest true person, mean joint error m), after `after_s`."""
+    rows = []
+    for out in outputs:
+        if out.stamp_s < after_s:
+            continue
+        truth = walkers.poses(out.stamp_s)
+        for target in out.targets:
+            err = np.nanmean(np.linalg.norm(truth - target.pose, axis=-1), axis=1)
+            rows.append((target.id, int(np.argmin(err)), float(np.min(err))))
+    return rows
+
+
+@pytest.mark.parametrize("method", list(Triangulation))
+def test_tracks_every_walker_with_one_identity_each(layout1, method):
+    cams, walkers, frames, _ = layout1
+    outputs = _run(Tracker(cams, CONFIG.replace(triangulation=method)), frames)
+    rows = _errors(outputs, walkers, after_s=1.0)
+    # Each of the 4 people is tracked by exactly one id, and each id follows one person.
+    person_of = {}
+    for target_id, person, _ in rows:
+        person_of.setdefault(target_id, set()).add(person)
+    assert all(len(p) == 1 for p in person_of.values())
+    assert sorted(p.pop() for p in person_of.values()) == [0, 1, 2, 3]
+    assert np.mean([e for *_, e in rows]) < 0.08  # m
+    # The last output holds every person, with no NaN joints, all confirmed.
+    last = outputs[-1]
+    assert len(last.targets) == 4
+    assert all(np.all(np.isfinite(t.pose)) and t.state is TargetState.CONFIRMED for t in last.targets)
+
+
+def test_detection_ids_point_to_reported_targets(layout1):
+    cams, _, frames, _ = layout1
+    tracker = Tracker(cams, CONFIG)
+    outputs = _run(tracker, frames)
+    late = [o for o in outputs if o.stamp_s > 2.0]
+    assert all(o.detection_target_ids.shape == (f.num_detections,) for o, f in zip(outputs, frames))
+    assigned = np.concatenate([o.detection_target_ids for o in late])
+    assert np.mean(assigned >= 0) > 0.95
+    confirmed = {t.id for o in late for t in o.targets}
+    assert set(assigned[assigned >= 0]) <= confirmed
+
+
+def test_baseline_has_the_same_api(layout1):
+    cams, walkers, frames, _ = layout1
+    outputs = _run(BaselineTracker(cams, CONFIG), frames[:150])
+    rows = _errors(outputs, walkers, after_s=0.5)
+    assert rows and np.median([e for *_, e in rows]) < 0.1  # m
+    assert all(o.detection_target_ids.shape == (f.num_detections,) for o, f in zip(outputs, frames))
+
+
+def test_bad_frames_are_dropped_without_crashing(layout1):
+    cams, _, frames, _ = layout1
+    tracker = Tracker(cams, CONFIG)
+    _run(tracker, frames[:200])
+    J = 17
+    bad = [
+        Frame("no_such_camera", 20.0, np.zeros((1, J, 2)), np.ones((1, J))),
+        Frame(cams[0].name, 0.0, np.zeros((1, J, 2)), np.ones((1, J))),  # older than processed
+        Frame(cams[0].name, float("nan"), np.zeros((1, J, 2)), np.ones((1, J))),
+        Frame(cams[1].name, 30.0, np.zeros((0, J, 2)), np.zeros((0, J))),
+        Frame(cams[2].name, 30.01, np.full((2, J, 2), np.inf), np.full((2, J), 2.0)),
+        Frame(cams[3].name, 30.02, np.full((2, J, 2), 100.0), np.zeros((2, J))),
+    ]
+    for frame in bad:
+        targets = tracker.update(frame)
+        assert tracker.last_output.detection_target_ids.shape == (frame.num_detections,)
+        assert all(np.all(np.isfinite(t.pose)) for t in targets)

@@ -1,0 +1,140 @@
+"""Geometric affinities: target-to-detection (eq. 1-5) and detection-to-detection across views (eq. S1-S2).
+
+All functions are pure and vectorised; matrices are (T, D) with targets as rows and detections as columns.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def affinity_2d(
+    prev_px: np.ndarray,
+    prev_stamp_s: np.ndarray,
+    det_px: np.ndarray,
+    stamp_s: float,
+    w_2d: float,
+    alpha_2d_px_per_s: float,
+    lambda_a_per_s: float,
+) -> np.ndarray:
+    """Eq. (2): per-joint 2D affinity within one camera.
+
+    A2D = w2D (1 - ||x_t - x_t''|| / (α2D (t - t''))) e^(-λa (t - t''))
+
+    Args:
+        prev_px: (T, J, 2) each target's last matched joints in this camera, undistorted pixels (NaN: none).
+        prev_stamp_s: (T, J) their stamps t'', s.
+        det_px: (D, J, 2) the new detections' joints, undistorted pixels (NaN: missing or below threshold).
+        stamp_s: the new frame's stamp t, s.
+
+    Returns:
+        (T, D, J) affinities, NaN where either joint is missing.
+    """
+    # t > t'' for frames of one camera; a repeated stamp is treated as one microsecond apart.
+    dt = np.maximum(stamp_s - prev_stamp_s, 1e-6)[:, None, :]
+    dist = np.linalg.norm(det_px[None, :, :, :] - prev_px[:, None, :, :], axis=-1)
+    return w_2d * (1.0 - dist / (alpha_2d_px_per_s * dt)) * np.exp(-lambda_a_per_s * dt)
+
+
+def predict_positions(
+    positions: np.ndarray, velocities: np.ndarray, joint_stamp_s: np.ndarray, stamp_s: float, max_predict_s: float
+) -> np.ndarray:
+    """Eq. (5): linear motion X̂_t = X_t' + V_t' (t - t'), the horizon clipped to [0, max_predict_s].
+
+    Args:
+        positions: (..., J, 3) last estimated joints X_t', metres.
+        velocities: (..., J, 3) joint velocities V_t', m/s.
+        joint_stamp_s: (..., J) last update times t', s.
+        stamp_s: the time t to predict to, s.
+
+    Returns:
+        (..., J, 3) predicted joints, metres.
+    """
+    dt = np.clip(stamp_s - joint_stamp_s, 0.0, max_predict_s)
+    return positions + velocities * dt[..., None]
+
+
+def affinity_3d(
+    predicted: np.ndarray,
+    joint_stamp_s: np.ndarray,
+    center: np.ndarray,
+    det_rays: np.ndarray,
+    stamp_s: float,
+    w_3d: float,
+    alpha_3d_m: float,
+    lambda_a_per_s: float,
+) -> np.ndarray:
+    """Eq. (3)-(4): per-joint 3D affinity between predicted joints and back-projected detection rays.
+
+    A3D = w3D (1 - d_l(X̂_t, X_t(μ)) / α3D) e^(-λa (t - t'))
+
+    Args:
+        predicted: (T, J, 3) joints predicted to time t by eq. (5), metres (NaN: unknown).
+        joint_stamp_s: (T, J) last update times t', s.
+        center: (3,) camera centre X_c, metres.
+        det_rays: (D, J, 3) unit ray directions through the detected joints (eq. 3).
+        stamp_s: t, s.
+
+    Returns:
+        (T, D, J) affinities, NaN where either side is missing.
+    """
+    rel = predicted - center  # (T, J, 3)
+    # |rel × d| = sqrt(|rel|² - (rel·d)²) for unit d: the point-to-line distance d_l of eq. (4).
+    along = np.einsum("tjk,djk->tdj", rel, det_rays)
+    sq = np.einsum("tjk,tjk->tj", rel, rel)[:, None, :] - along * along
+    dist = np.sqrt(np.maximum(sq, 0.0))
+    dt = np.maximum(stamp_s - joint_stamp_s, 0.0)[:, None, :]
+    return w_3d * (1.0 - dist / alpha_3d_m) * np.exp(-lambda_a_per_s * dt)
+
+
+def combine(a2d: np.ndarray | None, a3d: np.ndarray, normalize: bool) -> np.ndarray:
+    """Eq. (1): sums the per-joint terms over joints; missing terms count zero.
+
+    Args:
+        a2d: (T, D, J) 2D terms or None (no target has a previous point in this camera).
+        a3d: (T, D, J) 3D terms.
+        normalize: divide by the number of joints with a 3D term (see TrackerConfig.normalize_affinity).
+
+    Returns:
+        (T, D) affinity matrix; a pair with no joint in common gets 0 (never matched).
+    """
+    total = np.nansum(a3d, axis=-1)
+    if a2d is not None:
+        total = total + np.nansum(a2d, axis=-1)
+    if normalize:
+        count = np.sum(np.isfinite(a3d), axis=-1)
+        total = np.where(count > 0, total / np.maximum(count, 1), 0.0)
+    return total
+
+
+def epipolar_affinity(
+    points_a: np.ndarray, points_b: np.ndarray, F_ab: np.ndarray, alpha_px: float, min_common_joints: int
+) -> np.ndarray:
+    """Eq. (S1)-(S2): epipolar affinity between the detections of two cameras, averaged over shared joints.
+
+    Ae = 1 - (d_l(x_a, l_a) + d_l(x_b, l_b)) / (2 α), with l_b = F x_a and l_a = F^T x_b.
+
+    Args:
+        points_a: (Da, J, 2) undistorted pixels in camera a (NaN: missing).
+        points_b: (Db, J, 2) undistorted pixels in camera b.
+        F_ab: (3, 3) fundamental matrix with x_b^T F x_a = 0.
+        alpha_px: threshold α, pixels.
+        min_common_joints: pairs sharing fewer joints get -inf.
+
+    Returns:
+        (Da, Db) affinities.
+    """
+    ha = np.concatenate([points_a, np.ones(points_a.shape[:-1] + (1,))], axis=-1)
+    hb = np.concatenate([points_b, np.ones(points_b.shape[:-1] + (1,))], axis=-1)
+    lines_b = ha @ F_ab.T  # (Da, J, 3): l_b = F x_a
+    lines_a = hb @ F_ab  # (Db, J, 3): l_a = F^T x_b
+    # Distance of x_b to l_b and of x_a to l_a for every pair: |l·x| / ||l[:2]||.
+    num_b = np.abs(np.einsum("ajk,bjk->abj", lines_b, hb))
+    d_b = num_b / np.hypot(lines_b[..., 0], lines_b[..., 1])[:, None, :]
+    num_a = np.abs(np.einsum("bjk,ajk->abj", lines_a, ha))
+    d_a = num_a / np.hypot(lines_a[..., 0], lines_a[..., 1])[None, :, :]
+    per_joint = 1.0 - (d_a + d_b) / (2.0 * alpha_px)
+    common = np.sum(np.isfinite(per_joint), axis=-1)
+    with np.errstate(invalid="ignore"):
+        mean = np.nansum(per_joint, axis=-1) / np.maximum(common, 1)
+    return np.where(common >= min_common_joints, mean, -np.inf)

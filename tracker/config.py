@@ -1,0 +1,210 @@
+"""Every tunable parameter of the cross-view tracker, its units and valid range, and the Table S2 presets."""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+
+class Triangulation(enum.Enum):
+    """How a target's joints are re-estimated from the latest point of each camera.
+
+    PAPER: eq. (6)-(11), every camera's latest point constrains X(t), weighted by e^(-λt (t - t_i)).
+    VELOCITY: beyond the paper: an older point constrains X(t) - V (t - t_i), V the target's joint
+        velocity, so stale points of unsynchronised cameras are moved forward instead of only down-weighted.
+    """
+
+    PAPER = "paper"
+    VELOCITY = "velocity"
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Parameters of `tracker.Tracker` (Chen et al., CVPR 2020). Defaults are the Shelf row of Table S2.
+
+    Affinity, eq. (1)-(5):
+        w_2d: weight of the 2D term (eq. 2), unitless; the paper fixes 0.4.
+        w_3d: weight of the 3D term (eq. 4), unitless; the paper fixes 0.6.
+        alpha_2d_px_per_s: 2D velocity threshold α2D, pixels per second (eq. 2).
+        alpha_3d_m: point-to-ray distance threshold α3D, metres (eq. 4).
+        lambda_a_per_s: time penalty rate λa of the affinity, 1/s (eq. 2, 4).
+        score_threshold: joints with a detector score below this are ignored everywhere, [0, 1].
+        normalize_affinity: False sums eq. (1) over joints as the paper writes it; True divides the sum by the
+            number of joints compared (a detection with few joints then counts as much as a full one).
+        velocity_window_s: history span for the linear least-squares joint velocity of eq. (5), s.
+        velocity_history: number of past joint positions kept per target for that fit.
+        max_speed_m_per_s: joint speeds above this are clipped (a guard against a bad fit), m/s.
+        max_predict_s: a joint is predicted forward (eq. 5) at most this long past its last update, s.
+    Triangulation, eq. (6)-(11):
+        lambda_t_per_s: time penalty rate λt of eq. (11), 1/s.
+        triangulation: PAPER (eq. 6-11) or VELOCITY (stale points moved forward with the joint velocity).
+        max_observation_age_s: a camera's last point older than this is left out of eq. (6), s.
+        min_views: least number of cameras a joint needs to be triangulated (the paper: 2).
+    Initialisation (supplement, eq. S1-S5):
+        alpha_epipolar_px: epipolar distance threshold of eq. (S2), pixels (the paper uses α2D's number).
+        init_window_s: unmatched detections older than this (before the newest stamp) are not clustered, s.
+        init_min_joints: least number of confident joints a detection needs to take part in initialisation.
+        init_min_common_joints: least number of joints two detections must share to get an affinity (S2).
+        milp_max_nodes: graph-partitioning components up to this many detections are solved exactly with
+            scipy.optimize.milp (eq. S3-S5); larger ones use the greedy merge (see tracker.initialization).
+        init_max_reprojection_px: median reprojection error a new target may have, pixels.
+        init_min_joints_3d: least number of triangulated joints a new target needs.
+        init_max_bone_m: longest bone a new target may have, metres.
+        init_min_top_m / init_max_top_m: range of the highest joint's height above the floor (z = 0), metres.
+        init_min_bottom_m: lowest allowed joint height, metres (negative: below the floor).
+        init_min_separation_m: a new target closer than this (mean joint distance) to an existing one is a
+            duplicate and is dropped, metres.
+    Lifecycle (seconds, see tracker.lifecycle):
+        confirm_min_updates: matched detections (including the initial views) before a target is confirmed.
+        confirm_min_age_s: least time between a target's birth and its confirmation, s.
+        tentative_timeout_s: a tentative target not updated for this long is removed, s.
+        lost_after_s: a confirmed target not updated for this long becomes lost (no longer output), s.
+        remove_after_s: a lost target not updated for this long (since its last update) is removed, s.
+    Input:
+        max_lateness_s: a frame stamped more than this before the newest processed stamp is dropped, s.
+    """
+
+    w_2d: float = 0.4
+    w_3d: float = 0.6
+    alpha_2d_px_per_s: float = 60.0
+    alpha_3d_m: float = 0.15
+    lambda_a_per_s: float = 5.0
+    score_threshold: float = 0.2
+    normalize_affinity: bool = False
+    velocity_window_s: float = 0.3
+    velocity_history: int = 12
+    max_speed_m_per_s: float = 6.0
+    max_predict_s: float = 0.5
+    lambda_t_per_s: float = 10.0
+    triangulation: Triangulation = Triangulation.PAPER
+    max_observation_age_s: float = 1.0
+    min_views: int = 2
+    alpha_epipolar_px: float = 60.0
+    init_window_s: float = 0.1
+    init_min_joints: int = 5
+    init_min_common_joints: int = 3
+    milp_max_nodes: int = 14
+    init_max_reprojection_px: float = 30.0
+    init_min_joints_3d: int = 6
+    init_max_bone_m: float = 1.0
+    init_min_top_m: float = 0.4
+    init_max_top_m: float = 2.6
+    init_min_bottom_m: float = -0.5
+    init_min_separation_m: float = 0.3
+    confirm_min_updates: int = 3
+    confirm_min_age_s: float = 0.0
+    tentative_timeout_s: float = 0.5
+    lost_after_s: float = 0.5
+    remove_after_s: float = 3.0
+    max_lateness_s: float = 0.5
+
+    def __post_init__(self):
+        if isinstance(self.triangulation, str):
+            object.__setattr__(self, "triangulation", _enum_value("triangulation", Triangulation, self.triangulation))
+        if not isinstance(self.triangulation, Triangulation):
+            raise ValueError(f"TrackerConfig.triangulation: {self.triangulation!r} is not one of "
+                             f"{[m.value for m in Triangulation]}")
+        nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "lambda_t_per_s", "max_predict_s", "init_window_s",
+                  "confirm_min_age_s", "max_lateness_s")
+        positive = ("alpha_2d_px_per_s", "alpha_3d_m", "velocity_window_s", "max_speed_m_per_s",
+                    "max_observation_age_s", "alpha_epipolar_px", "init_max_reprojection_px", "init_max_bone_m",
+                    "tentative_timeout_s", "lost_after_s", "remove_after_s")
+        for name in nonneg + positive:
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+                raise ValueError(f"TrackerConfig.{name}: {value!r} is not a number")
+            if name in positive and not value > 0:
+                raise ValueError(f"TrackerConfig.{name}: {value} must be > 0")
+            if name in nonneg and not value >= 0:
+                raise ValueError(f"TrackerConfig.{name}: {value} must be >= 0")
+        for name in ("init_min_top_m", "init_max_top_m", "init_min_bottom_m", "init_min_separation_m"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
+                raise ValueError(f"TrackerConfig.{name}: {value!r} is not a number")
+        if not 0.0 <= self.score_threshold <= 1.0:
+            raise ValueError(f"TrackerConfig.score_threshold: {self.score_threshold} must be in [0, 1]")
+        ints = {"velocity_history": 2, "min_views": 2, "init_min_joints": 1, "init_min_common_joints": 1,
+                "milp_max_nodes": 2, "init_min_joints_3d": 1, "confirm_min_updates": 1}
+        for name, low in ints.items():
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"TrackerConfig.{name}: {value!r} must be an integer >= {low}")
+        if not isinstance(self.normalize_affinity, bool):
+            raise ValueError(f"TrackerConfig.normalize_affinity: {self.normalize_affinity!r} must be true or false")
+        if self.init_min_top_m >= self.init_max_top_m:
+            raise ValueError(f"TrackerConfig.init_min_top_m: {self.init_min_top_m} must be below "
+                             f"init_max_top_m {self.init_max_top_m}")
+        if self.lost_after_s > self.remove_after_s:
+            raise ValueError(f"TrackerConfig.lost_after_s: {self.lost_after_s} must not exceed "
+                             f"remove_after_s {self.remove_after_s}")
+
+    @classmethod
+    def preset(cls, name: str) -> TrackerConfig:
+        """The parameters of Table S2 for a dataset: "campus", "shelf" or "store" (both store layouts)."""
+        if name not in PRESETS:
+            raise ValueError(f"unknown tracker preset {name!r}; valid presets: {', '.join(sorted(PRESETS))}")
+        return cls(**PRESETS[name])
+
+    @classmethod
+    def from_toml(cls, path, base: str | None = None) -> TrackerConfig:
+        """Reads a TOML file of `field = value` lines (top level, or under a `[tracker]` table).
+
+        Args:
+            path: the file.
+            base: a preset the file's values override; None starts from the defaults.
+
+        Raises:
+            ValueError: unreadable file, unknown key (named with the file), or a value out of range.
+        """
+        path = Path(path)
+        try:
+            with path.open("rb") as f:
+                data = tomllib.load(f)
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise ValueError(f"{path}: cannot read tracker config: {exc}") from exc
+        if set(data) == {"tracker"} and isinstance(data["tracker"], dict):
+            data = data["tracker"]
+        if "preset" in data:
+            if base is not None and base != data["preset"]:
+                raise ValueError(f"{path}: key 'preset' = {data['preset']!r} conflicts with base preset {base!r}")
+            base = data.pop("preset")
+        names = {f.name for f in dataclasses.fields(cls)}
+        for key in data:
+            if key not in names:
+                raise ValueError(f"{path}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}")
+        values = dict(PRESETS[base]) if base is not None else {}
+        if base is not None and base not in PRESETS:
+            raise ValueError(f"{path}: unknown base preset {base!r}; valid presets: {', '.join(sorted(PRESETS))}")
+        values.update(data)
+        try:
+            return cls(**values)
+        except ValueError as exc:
+            raise ValueError(f"{path}: {exc}") from exc
+
+    def replace(self, **changes) -> TrackerConfig:
+        """A copy with some fields changed (validated)."""
+        return dataclasses.replace(self, **changes)
+
+
+def _enum_value(name: str, enum_type, value: str):
+    try:
+        return enum_type(value)
+    except ValueError:
+        raise ValueError(f"TrackerConfig.{name}: {value!r} is not one of {[m.value for m in enum_type]}") from None
+
+
+# Table S2 of the supplement: α2D (px/s), α3D (m), λa, λt per dataset; w2D = 0.4, w3D = 0.6 everywhere.
+# The epipolar threshold of eq. (S2) takes α2D's number in pixels, as the supplement writes it.
+# Campus and Shelf run at 25 fps, the Store at 10 fps: the windows below scale with the frame period.
+PRESETS: dict[str, dict] = {
+    "campus": dict(alpha_2d_px_per_s=25.0, alpha_3d_m=0.10, lambda_a_per_s=5.0, lambda_t_per_s=10.0,
+                   alpha_epipolar_px=25.0, init_window_s=0.05, init_max_reprojection_px=15.0),
+    "shelf": dict(alpha_2d_px_per_s=60.0, alpha_3d_m=0.15, lambda_a_per_s=5.0, lambda_t_per_s=10.0,
+                  alpha_epipolar_px=60.0, init_window_s=0.05),
+    "store": dict(alpha_2d_px_per_s=70.0, alpha_3d_m=0.25, lambda_a_per_s=3.0, lambda_t_per_s=5.0,
+                  alpha_epipolar_px=70.0, init_window_s=0.12, velocity_window_s=0.4,
+                  triangulation=Triangulation.VELOCITY),
+}

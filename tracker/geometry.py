@@ -1,0 +1,139 @@
+"""Camera geometry for the tracker: undistortion, projection, back-projected rays and epipolar lines.
+
+Shapes: C cameras, J joints, D detections, N points; coordinates on the last axis, float64, NaN missing.
+Pixels here are *undistorted* pixels of the pinhole model P = K [R | t] unless a name says `distorted`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from tracker.types import Camera
+
+
+def undistort_points(camera: Camera, points_px: np.ndarray) -> np.ndarray:
+    """Maps distorted pixels to the pixels of the undistorted pinhole model (cv2.undistortPoints with P=K).
+
+    Args:
+        camera: the camera that took the points.
+        points_px: (..., 2) distorted pixel coordinates; non-finite entries stay NaN.
+
+    Returns:
+        (..., 2) undistorted pixel coordinates, NaN where the input was not finite.
+    """
+    points = np.asarray(points_px, dtype=np.float64)
+    out = np.full(points.shape, np.nan)
+    finite = np.all(np.isfinite(points), axis=-1)
+    if not finite.any():
+        return out
+    if not np.any(camera.dist):
+        out[finite] = points[finite]
+        return out
+    flat = np.ascontiguousarray(points[finite].reshape(-1, 1, 2))
+    und = cv2.undistortPoints(flat, camera.K, camera.dist, P=camera.K)
+    out[finite] = und.reshape(-1, 2)
+    return out
+
+
+def distort_points(camera: Camera, points_px: np.ndarray) -> np.ndarray:
+    """Inverse of `undistort_points`: maps undistorted pinhole pixels (..., 2) to distorted pixels (..., 2)."""
+    points = np.asarray(points_px, dtype=np.float64)
+    out = np.full(points.shape, np.nan)
+    finite = np.all(np.isfinite(points), axis=-1)
+    if not finite.any():
+        return out
+    if not np.any(camera.dist):
+        out[finite] = points[finite]
+        return out
+    normalised = (points[finite] - camera.K[:2, 2]) @ np.linalg.inv(camera.K[:2, :2]).T
+    rays = np.concatenate([normalised, np.ones((normalised.shape[0], 1))], axis=1)
+    projected, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
+    out[finite] = projected.reshape(-1, 2)
+    return out
+
+
+def project(P: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Eq. (7): pinhole projection of world points.
+
+    Args:
+        P: (3, 4) projection matrix, or (C, 3, 4) for several cameras.
+        X: (..., 3) world points, metres.
+
+    Returns:
+        (..., 2) undistorted pixels for one camera, or (C, ..., 2) for several; NaN behind the camera.
+    """
+    P = np.asarray(P, dtype=np.float64)
+    X = np.asarray(X, dtype=np.float64)
+    Xh = np.concatenate([X, np.ones(X.shape[:-1] + (1,))], axis=-1)
+    if P.ndim == 2:
+        x = Xh @ P.T
+    else:
+        x = np.einsum("cij,...j->c...i", P, Xh)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        uv = x[..., :2] / x[..., 2:3]
+    uv[x[..., 2] <= 0] = np.nan
+    return uv
+
+
+def project_distorted(camera: Camera, X: np.ndarray) -> np.ndarray:
+    """Projects world points (..., 3) to distorted pixels (..., 2) with OpenCV's lens model; NaN behind the camera."""
+    X = np.asarray(X, dtype=np.float64)
+    cam = X @ camera.R_cam_from_world.T + camera.t_cam_from_world
+    out = np.full(X.shape[:-1] + (2,), np.nan)
+    ok = np.all(np.isfinite(cam), axis=-1) & (cam[..., 2] > 0)
+    if ok.any():
+        pts, _ = cv2.projectPoints(cam[ok].reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
+        out[ok] = pts.reshape(-1, 2)
+    return out
+
+
+def ray_directions(camera: Camera, points_px: np.ndarray) -> np.ndarray:
+    """Eq. (3): unit world directions of the rays from the camera centre through undistorted pixels.
+
+    The ray P⁺x̃ + μX̃_c of eq. (3) is the line through the centre X_c with direction R^T K^-1 x̃.
+
+    Args:
+        camera: the camera.
+        points_px: (..., 2) undistorted pixels.
+
+    Returns:
+        (..., 3) unit directions in the world frame (NaN where the pixel is NaN).
+    """
+    points = np.asarray(points_px, dtype=np.float64)
+    xh = np.concatenate([points, np.ones(points.shape[:-1] + (1,))], axis=-1)
+    M = camera.R_cam_from_world.T @ np.linalg.inv(camera.K)
+    d = xh @ M.T
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def point_to_ray_distance(X: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """d_l of eq. (4): distance from points X (..., 3) to lines through `origin` (3,) with unit `direction` (..., 3)."""
+    return np.linalg.norm(np.cross(X - origin, direction), axis=-1)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """(3, 3) cross-product matrix [v]_x."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def fundamental_matrix(cam_a: Camera, cam_b: Camera) -> np.ndarray:
+    """(3, 3) fundamental matrix F with x_b^T F x_a = 0 (undistorted pixels), so that l_b = F x_a (eq. S1)."""
+    R = cam_b.R_cam_from_world @ cam_a.R_cam_from_world.T
+    t = cam_b.t_cam_from_world - R @ cam_a.t_cam_from_world
+    E = skew(t) @ R
+    F = np.linalg.inv(cam_b.K).T @ E @ np.linalg.inv(cam_a.K)
+    return F / np.linalg.norm(F)
+
+
+def point_line_distance_px(points_px: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """Distance in pixels between points (..., 2) and homogeneous lines (..., 3) (a x + b y + c = 0)."""
+    num = np.abs(lines[..., 0] * points_px[..., 0] + lines[..., 1] * points_px[..., 1] + lines[..., 2])
+    return num / np.hypot(lines[..., 0], lines[..., 1])
+
+
+def stack_projections(cameras: Sequence[Camera]) -> np.ndarray:
+    """(C, 3, 4) projection matrices of the cameras."""
+    return np.stack([c.P for c in cameras])

@@ -1,0 +1,179 @@
+"""Target initialisation (supplement): cross-view clustering of unmatched detections by epipolar affinity
+(eq. S1-S2) and graph partitioning with cycle consistency (eq. S3-S5), then a plausibility check.
+
+Graph partitioning. The objective of eq. (S3) never gains from joining two groups of detections that share
+no positive affinity, so the problem splits exactly into the connected components of the positive-affinity
+graph. A component of at most `max_exact_nodes` detections is solved exactly as the binary integer program
+(S3)-(S5) with `scipy.optimize.milp` (HiGHS). A larger component falls back to the greedy merge that
+correlation-clustering solvers use as a start: begin with singletons and repeatedly join the two clusters
+with the largest positive total affinity between them, never joining two detections of one camera (their
+affinity is -inf, Algorithm S1). The greedy result is cycle-consistent by construction but may be suboptimal.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import Bounds, LinearConstraint, milp
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from tracker.triangulation import reprojection_error_px, triangulate_incremental
+from tracker.types import Skeleton
+
+logger = logging.getLogger(__name__)
+
+
+def partition_graph(affinity: np.ndarray, max_exact_nodes: int = 14) -> list[np.ndarray]:
+    """Eq. (S3)-(S5): clusters of nodes maximising the total within-cluster affinity, cycle-consistent.
+
+    Args:
+        affinity: (n, n) symmetric affinity a_ij; -inf forbids i and j in one cluster (same camera).
+        max_exact_nodes: components up to this size are solved exactly (milp), larger ones greedily.
+
+    Returns:
+        Clusters as sorted int arrays of node indices, singletons included, covering every node once.
+    """
+    a = np.asarray(affinity, dtype=np.float64)
+    n = a.shape[0]
+    if n == 0:
+        return []
+    positive = np.where(np.isfinite(a) & (a > 0), 1, 0)
+    np.fill_diagonal(positive, 0)
+    count, labels = connected_components(positive, directed=False)
+    clusters: list[np.ndarray] = []
+    for comp in range(count):
+        nodes = np.flatnonzero(labels == comp)
+        if nodes.size == 1:
+            clusters.append(nodes)
+            continue
+        sub = a[np.ix_(nodes, nodes)]
+        parts = None
+        if nodes.size <= max_exact_nodes:
+            parts = _partition_milp(sub)
+        if parts is None:
+            parts = _partition_greedy(sub)
+        clusters.extend(nodes[p] for p in parts)
+    return clusters
+
+
+def _partition_milp(a: np.ndarray) -> list[np.ndarray] | None:
+    """Exact (S3)-(S5) on one component; None if the solver does not report an optimum."""
+    n = a.shape[0]
+    iu, ju = np.triu_indices(n, 1)
+    index = -np.ones((n, n), dtype=np.int64)
+    index[iu, ju] = np.arange(iu.size)
+    index[ju, iu] = index[iu, ju]
+    weights = a[iu, ju]
+    forbidden = ~np.isfinite(weights)
+    # (S3): maximise Σ a_ij y_ij  ->  minimise -Σ a_ij y_ij; forbidden pairs are fixed to 0 by their bound.
+    cost = -np.where(forbidden, 0.0, weights)
+    upper = np.where(forbidden, 0.0, 1.0)
+    # (S5): y_ij + y_jk - y_ik <= 1 for every triple, in all three rotations.
+    i, j, k = np.array(list(itertools.combinations(range(n), 3)), dtype=np.int64).reshape(-1, 3).T
+    rows, cols, vals = [], [], []
+    for r, (p, q, s) in enumerate([(i, j, k), (j, k, i), (k, i, j)]):
+        base = r * i.size + np.arange(i.size)
+        rows += [base, base, base]
+        cols += [index[p, q], index[q, s], index[p, s]]
+        vals += [np.ones(i.size), np.ones(i.size), -np.ones(i.size)]
+    constraints = []
+    if i.size:
+        A = coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(3 * i.size, iu.size)).tocsr()
+        constraints.append(LinearConstraint(A, -np.inf, 1.0))
+    result = milp(cost, constraints=constraints, integrality=np.ones(iu.size), bounds=Bounds(0.0, upper))
+    if result.status != 0 or result.x is None:
+        logger.warning("graph partitioning: milp did not solve a %d-node component (%s); using greedy",
+                       n, result.message)
+        return None
+    y = result.x > 0.5
+    adjacency = coo_matrix((np.ones(int(y.sum())), (iu[y], ju[y])), shape=(n, n))
+    count, labels = connected_components(adjacency, directed=False)
+    return [np.flatnonzero(labels == c) for c in range(count)]
+
+
+def _partition_greedy(a: np.ndarray) -> list[np.ndarray]:
+    """Greedy agglomeration: join the pair of clusters with the largest positive total affinity."""
+    clusters = [[i] for i in range(a.shape[0])]
+    while True:
+        best, pair = 0.0, None
+        for x in range(len(clusters)):
+            for y in range(x + 1, len(clusters)):
+                total = a[np.ix_(clusters[x], clusters[y])].sum()
+                if np.isfinite(total) and total > best:
+                    best, pair = total, (x, y)
+        if pair is None:
+            return [np.asarray(sorted(c)) for c in clusters]
+        x, y = pair
+        clusters[x] = clusters[x] + clusters[y]
+        del clusters[y]
+
+
+@dataclass(frozen=True)
+class PlausibilityLimits:
+    """Limits a new target must meet (see TrackerConfig.init_*)."""
+
+    max_reprojection_px: float
+    min_joints_3d: int
+    max_bone_m: float
+    min_top_m: float
+    max_top_m: float
+    min_bottom_m: float
+
+
+def reconstruct(
+    P: np.ndarray, points_px: np.ndarray, stamps_s: np.ndarray, stamp_s: float, lambda_t_per_s: float,
+    min_views: int = 2,
+) -> np.ndarray:
+    """3D reconstruction of a new target from a cluster (Algorithm 1): the eq. (10)-(11) DLT per joint.
+
+    Args:
+        P: (C, 3, 4) projection matrices of the cluster's cameras.
+        points_px: (C, J, 2) undistorted joints of the cluster's detections, NaN missing.
+        stamps_s: (C,) their frame stamps, s.
+        stamp_s: the time of the estimate, s.
+
+    Returns:
+        (J, 3) pose, metres, NaN for joints seen in fewer than `min_views` views.
+    """
+    pts = np.swapaxes(points_px, 0, 1)  # (J, C, 2)
+    stamps = np.broadcast_to(stamps_s, pts.shape[:2])
+    return triangulate_incremental(P, pts, stamps, stamp_s, lambda_t_per_s, None, min_views)
+
+
+def check_plausible(
+    pose: np.ndarray, P: np.ndarray, points_px: np.ndarray, skeleton: Skeleton, limits: PlausibilityLimits
+) -> str | None:
+    """Plausibility of a new target: reprojection error, bone lengths and height above the floor (z = 0).
+
+    Args:
+        pose: (J, 3) triangulated joints, metres.
+        P: (C, 3, 4) projection matrices of the views it came from.
+        points_px: (C, J, 2) those views' undistorted joints.
+
+    Returns:
+        None when plausible, else the reason it is not.
+    """
+    known = np.all(np.isfinite(pose), axis=-1)
+    if known.sum() < limits.min_joints_3d:
+        return f"only {int(known.sum())} joints triangulated"
+    err = reprojection_error_px(P, pose, np.swapaxes(points_px, 0, 1))  # (J, C)
+    median = float(np.nanmedian(err)) if np.any(np.isfinite(err)) else np.inf
+    if median > limits.max_reprojection_px:
+        return f"median reprojection error {median:.1f} px"
+    bones = np.asarray(skeleton.bones, dtype=np.int64)
+    if bones.size:
+        lengths = np.linalg.norm(pose[bones[:, 0]] - pose[bones[:, 1]], axis=-1)
+        longest = float(np.nanmax(lengths)) if np.any(np.isfinite(lengths)) else 0.0
+        if longest > limits.max_bone_m:
+            return f"bone of {longest:.2f} m"
+    z = pose[known, 2]
+    if not limits.min_top_m <= z.max() <= limits.max_top_m:
+        return f"top joint at {z.max():.2f} m"
+    if z.min() < limits.min_bottom_m:
+        return f"lowest joint at {z.min():.2f} m"
+    return None

@@ -1,0 +1,377 @@
+"""The cross-view tracker of Chen et al. (CVPR 2020), Algorithm 1: the one stateful class of the package.
+
+Frames arrive one camera at a time in delivery order. For each frame: undistort, match the detections to the
+targets in 3-space (eq. 1-5, Hungarian), update the matched targets by incremental triangulation (eq. 6-11),
+and cluster the unmatched detections of the latest frame of each camera into new targets (eq. S1-S5).
+
+Target state lives in arrays (T targets, C cameras, J joints, H history slots), not in per-target objects.
+
+Input policy (bad input never raises; it is dropped or cleaned with a logged warning):
+- a frame from an unknown camera, with a non-finite stamp, stamped at or before an earlier frame of the same
+  camera, or stamped more than `max_lateness_s` before the newest stamp processed is dropped (warning); the
+  output is then the targets predicted to the frame's stamp and every detection is -1;
+- a frame stamped earlier than the newest stamp (within `max_lateness_s`) is processed at its own stamp;
+  negative time differences are clipped to zero in the time weights;
+- NaN or infinite coordinates, and NaN scores, make that joint missing; scores are clipped to [0, 1];
+  joints scored below `score_threshold` are ignored; an empty frame only advances the lifecycle.
+A frame whose joint count differs from the skeleton's is a programming error: ValueError.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+
+import numpy as np
+
+from tracker import affinity as aff
+from tracker import lifecycle
+from tracker.association import associate
+from tracker.config import TrackerConfig, Triangulation
+from tracker.geometry import fundamental_matrix, ray_directions, undistort_points
+from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
+from tracker.triangulation import triangulate_incremental
+from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
+
+logger = logging.getLogger(__name__)
+
+_MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
+_DEFAULT_CONFIG = TrackerConfig()
+
+
+class _Targets:
+    """Array storage of all live targets (rows), grown on demand and compacted on removal."""
+
+    def __init__(self, num_cameras: int, num_joints: int, history: int):
+        C, J, H = num_cameras, num_joints, history
+        self.ids = np.zeros(0, dtype=np.int64)
+        self.state = np.zeros(0, dtype=np.int8)
+        self.born_s = np.zeros(0)
+        self.last_update_s = np.zeros(0)
+        self.num_updates = np.zeros(0, dtype=np.int64)
+        self.pos = np.zeros((0, J, 3))  # X_t' per joint, NaN never triangulated
+        self.joint_s = np.zeros((0, J))  # t' per joint (-inf never)
+        self.vel = np.zeros((0, J, 3))  # V_t' per joint (eq. 5)
+        self.obs_px = np.zeros((0, C, J, 2))  # last matched undistorted joint per camera (eq. 2, 6)
+        self.obs_s = np.zeros((0, C, J))  # its stamp, NaN none
+        self.hist_pos = np.zeros((0, H, J, 3))  # ring buffer of past joint estimates for the velocity fit
+        self.hist_s = np.zeros((0, H, J))
+        self.hist_next = np.zeros(0, dtype=np.int64)
+
+    def __len__(self) -> int:
+        return self.ids.size
+
+    _FIELDS = ("ids", "state", "born_s", "last_update_s", "num_updates", "pos", "joint_s", "vel", "obs_px",
+               "obs_s", "hist_pos", "hist_s", "hist_next")
+
+    def keep(self, mask: np.ndarray) -> None:
+        for name in self._FIELDS:
+            setattr(self, name, getattr(self, name)[mask])
+
+    def append(self, **rows) -> None:
+        for name in self._FIELDS:
+            setattr(self, name, np.concatenate([getattr(self, name), rows[name]]))
+
+
+class Tracker:
+    """Cross-view multi-person 3D pose tracker (Chen et al., CVPR 2020).
+
+    Args:
+        cameras: the calibrated cameras (unique names).
+        config: parameters (TrackerConfig.preset("campus"|"shelf"|"store") for Table S2).
+        skeleton: the joint layout of the frames (COCO17, CAMPUS14, ...).
+
+    Attributes:
+        last_output: the TrackerOutput of the latest `update`.
+    """
+
+    def __init__(self, cameras: Sequence[Camera], config: TrackerConfig = _DEFAULT_CONFIG,
+                 skeleton: Skeleton = COCO17):
+        names = [c.name for c in cameras]
+        if len(set(names)) != len(names):
+            raise ValueError(f"Tracker: camera names must be unique, got {names}")
+        self.cameras = list(cameras)
+        self.config = config
+        self.skeleton = skeleton
+        self._index = {name: i for i, name in enumerate(names)}
+        C, J = len(self.cameras), skeleton.num_joints
+        self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))
+        self._centers = np.stack([c.center_world for c in self.cameras]) if C else np.zeros((0, 3))
+        self._F = {(a, b): fundamental_matrix(self.cameras[a], self.cameras[b])
+                   for a in range(C) for b in range(C) if a != b}
+        self._targets = _Targets(C, J, config.velocity_history)
+        self._next_id = 0
+        self._camera_last_s = np.full(C, -np.inf)
+        self._newest_s = -np.inf
+        # Unmatched detections of the latest frame of each camera (Algorithm 1's D_u).
+        self._pool_px: list[np.ndarray] = [np.zeros((0, J, 2)) for _ in range(C)]
+        self._pool_s = np.full(C, -np.inf)
+        self._pool_frame_index: list[np.ndarray] = [np.zeros(0, dtype=np.int64) for _ in range(C)]
+        self._limits = PlausibilityLimits(
+            max_reprojection_px=config.init_max_reprojection_px, min_joints_3d=config.init_min_joints_3d,
+            max_bone_m=config.init_max_bone_m, min_top_m=config.init_min_top_m, max_top_m=config.init_max_top_m,
+            min_bottom_m=config.init_min_bottom_m)
+        self.last_output = TrackerOutput(stamp_s=0.0, camera="", targets=[],
+                                         detection_target_ids=np.zeros(0, dtype=np.int64))
+
+    # ------------------------------------------------------------------ public API
+
+    def update(self, frame: Frame) -> list[Target]:
+        """Processes one camera frame (Algorithm 1) and returns the confirmed targets at `frame.stamp_s`.
+
+        Args:
+            frame: detections of one camera, distorted pixels (D, J, 2), scores (D, J).
+
+        Returns:
+            Confirmed targets with poses (J, 3) predicted to the frame's stamp; a joint is NaN only if it
+            was never triangulated.
+        """
+        D = frame.keypoints_px.shape[0]
+        J = self.skeleton.num_joints
+        if D and frame.keypoints_px.shape[1] != J:
+            raise ValueError(f"Frame {frame.camera}@{frame.stamp_s}: {frame.keypoints_px.shape[1]} joints, "
+                             f"the tracker's skeleton {self.skeleton.name} has {J}")
+        assigned = np.full(D, -1, dtype=np.int64)
+        t = float(frame.stamp_s)
+        reason = self._reject_reason(frame, t)
+        if reason is not None:
+            logger.warning("dropping frame %s@%s: %s", frame.camera, frame.stamp_s, reason)
+            out_t = t if np.isfinite(t) else max(self._newest_s, 0.0)
+            return self._emit(out_t, frame.camera, assigned)
+        c = self._index[frame.camera]
+        self._camera_last_s[c] = t
+        self._newest_s = max(self._newest_s, t)
+        self._advance_lifecycle(t)
+        if D == 0:
+            self._set_pool(c, np.zeros((0, J, 2)), np.zeros(0, dtype=np.int64), t)
+            return self._emit(t, frame.camera, assigned)
+
+        det_px = self._clean(frame, c)  # (D, J, 2) undistorted, NaN for unusable joints
+        matched_rows, matched_cols = self._associate(c, det_px, t)
+        if matched_rows.size:
+            self._update_targets(c, matched_rows, det_px[matched_cols], t)
+            assigned[matched_cols] = self._targets.ids[matched_rows]
+        unmatched = np.setdiff1d(np.arange(D), matched_cols)
+        enough = np.sum(np.isfinite(det_px[unmatched, :, 0]), axis=1) >= self.config.init_min_joints
+        unmatched = unmatched[enough]
+        self._set_pool(c, det_px[unmatched], unmatched, t)
+        if unmatched.size:
+            for new_id, frame_index in self._initialize(c, t):
+                assigned[frame_index] = new_id
+        return self._emit(t, frame.camera, assigned)
+
+    # ------------------------------------------------------------------ steps
+
+    def _reject_reason(self, frame: Frame, t: float) -> str | None:
+        if frame.camera not in self._index:
+            return f"unknown camera (known: {', '.join(self._index)})"
+        if not np.isfinite(t):
+            return "non-finite stamp"
+        c = self._index[frame.camera]
+        if t <= self._camera_last_s[c]:
+            return f"stamp not after this camera's previous frame ({self._camera_last_s[c]})"
+        if t < self._newest_s - self.config.max_lateness_s:
+            return f"more than max_lateness_s={self.config.max_lateness_s} s older than stamp {self._newest_s}"
+        return None
+
+    def _clean(self, frame: Frame, c: int) -> np.ndarray:
+        """(D, J, 2) undistorted pixels with NaN where the joint is missing, non-finite or below threshold."""
+        scores = np.clip(np.nan_to_num(frame.scores, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+        kp = frame.keypoints_px
+        ok = np.all(np.isfinite(kp), axis=-1) & (scores >= self.config.score_threshold) & (scores > 0)
+        kp = np.where(ok[..., None], kp, np.nan)
+        return undistort_points(self.cameras[c], kp)
+
+    def _advance_lifecycle(self, t: float) -> None:
+        tg = self._targets
+        if not len(tg):
+            return
+        tg.state = lifecycle.on_time(tg.state, tg.last_update_s, t, self.config).astype(np.int8)
+        removed = tg.state == lifecycle.REMOVED
+        if removed.any():
+            tg.keep(~removed)
+
+    def _associate(self, c: int, det_px: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. (1)-(5) affinity of every (target, detection) pair, then the Hungarian algorithm."""
+        tg, cfg = self._targets, self.config
+        if not len(tg):
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        rays = ray_directions(self.cameras[c], det_px)  # (D, J, 3), eq. (3)
+        predicted = aff.predict_positions(tg.pos, tg.vel, tg.joint_s, t, cfg.max_predict_s)  # eq. (5)
+        a3d = aff.affinity_3d(predicted, tg.joint_s, self._centers[c], rays, t, cfg.w_3d, cfg.alpha_3d_m,
+                              cfg.lambda_a_per_s)  # eq. (4)
+        prev_s = tg.obs_s[:, c]
+        a2d = None
+        if np.any(np.isfinite(prev_s)):
+            a2d = aff.affinity_2d(tg.obs_px[:, c], prev_s, det_px, t, cfg.w_2d, cfg.alpha_2d_px_per_s,
+                                  cfg.lambda_a_per_s)  # eq. (2)
+        matrix = aff.combine(a2d, a3d, cfg.normalize_affinity)  # eq. (1), (T, D)
+        return associate(matrix)
+
+    def _update_targets(self, c: int, rows: np.ndarray, det_px: np.ndarray, t: float) -> None:
+        """Incremental 3D reconstruction (eq. 6-11) of the matched targets, then velocity and lifecycle."""
+        tg, cfg = self._targets, self.config
+        seen = np.isfinite(det_px[..., 0])  # (M, J)
+        obs_px = tg.obs_px[rows]
+        obs_s = tg.obs_s[rows]
+        obs_px[:, c] = np.where(seen[..., None], det_px, obs_px[:, c])
+        obs_s[:, c] = np.where(seen, t, obs_s[:, c])
+        tg.obs_px[rows] = obs_px
+        tg.obs_s[rows] = obs_s
+        # Eq. (6): the new point plus the last point of every other camera, not older than the age limit.
+        fresh = np.isfinite(obs_s) & (t - obs_s <= cfg.max_observation_age_s)
+        pts = np.where(fresh[..., None], obs_px, np.nan).transpose(0, 2, 1, 3)  # (M, J, C, 2)
+        stamps = np.where(fresh, obs_s, t).transpose(0, 2, 1)  # (M, J, C)
+        X = triangulate_incremental(self._P, pts, stamps, t, cfg.lambda_t_per_s, None, cfg.min_views)
+        update = seen & np.all(np.isfinite(X), axis=-1)  # (M, J)
+        samples = X  # the velocity fit always uses eq. (10)-(11) estimates
+        if cfg.triangulation is Triangulation.VELOCITY:
+            # The compensated estimate is not fed back into the velocity fit: a velocity error would move
+            # the stale points, whose shifted estimate would grow the velocity error (a positive loop).
+            Xv = triangulate_incremental(self._P, pts, stamps, t, cfg.lambda_t_per_s, tg.vel[rows], cfg.min_views)
+            X = np.where(np.isfinite(Xv), Xv, X)
+        pos = tg.pos[rows]
+        pos[update] = X[update]
+        joint_s = tg.joint_s[rows]
+        joint_s[update] = t
+        tg.pos[rows] = pos
+        tg.joint_s[rows] = joint_s
+        self._update_velocity(rows, samples, update, t)
+        tg.last_update_s[rows] = t
+        tg.num_updates[rows] += 1
+        tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, cfg)
+
+    def _update_velocity(self, rows: np.ndarray, samples: np.ndarray, update: np.ndarray, t: float) -> None:
+        """Eq. (5)'s V: linear least squares of joint position on time over the recent history.
+
+        Args:
+            rows: (M,) matched targets; samples: (M, J, 3) their new joint estimates; update: (M, J) which are new.
+        """
+        tg, cfg = self._targets, self.config
+        slot = tg.hist_next[rows]
+        hp = tg.hist_pos[rows]
+        hs = tg.hist_s[rows]
+        m = np.arange(rows.size)
+        hp[m, slot] = np.where(update[..., None], samples, np.nan)
+        hs[m, slot] = np.where(update, t, np.nan)
+        tg.hist_pos[rows] = hp
+        tg.hist_s[rows] = hs
+        tg.hist_next[rows] = (slot + 1) % cfg.velocity_history
+        use = np.isfinite(hs) & (t - hs <= cfg.velocity_window_s)  # (M, H, J)
+        n = use.sum(axis=1)  # (M, J)
+        ts = np.where(use, hs, 0.0)
+        tmean = ts.sum(axis=1) / np.maximum(n, 1)
+        dt = np.where(use, hs - tmean[:, None, :], 0.0)  # (M, H, J)
+        xs = np.where(use[..., None], hp, 0.0)
+        xmean = xs.sum(axis=1) / np.maximum(n, 1)[..., None]
+        dx = np.where(use[..., None], hp - xmean[:, None], 0.0)
+        sxx = np.sum(dt * dt, axis=1)  # (M, J)
+        sxy = np.sum(dt[..., None] * dx, axis=1)  # (M, J, 3)
+        span = np.where(use, hs, -np.inf).max(axis=1) - np.where(use, hs, np.inf).min(axis=1)
+        ok = (n >= 2) & (span >= _MIN_VELOCITY_SPAN_S) & (sxx > 0)
+        v = np.where(ok[..., None], sxy / np.where(sxx > 0, sxx, 1.0)[..., None], 0.0)
+        speed = np.linalg.norm(v, axis=-1, keepdims=True)
+        v = np.where(speed > cfg.max_speed_m_per_s, v * cfg.max_speed_m_per_s / np.maximum(speed, 1e-12), v)
+        vel = tg.vel[rows]
+        vel[update] = v[update]
+        tg.vel[rows] = vel
+
+    def _set_pool(self, c: int, px: np.ndarray, frame_index: np.ndarray, t: float) -> None:
+        self._pool_px[c] = px
+        self._pool_frame_index[c] = frame_index
+        self._pool_s[c] = t
+
+    def _initialize(self, c: int, t: float) -> list[tuple[int, np.ndarray]]:
+        """Supplement: epipolar affinity (S2) among the pooled detections, partitioning (S3-S5), new targets.
+
+        Returns:
+            (new target id, indices of the current frame's detections in its cluster) per new target.
+        """
+        cfg = self.config
+        cams = [k for k in range(len(self.cameras))
+                if self._pool_px[k].shape[0] and abs(t - self._pool_s[k]) <= cfg.init_window_s]
+        if len(cams) < 2 or c not in cams:
+            return []
+        node_cam = np.concatenate([np.full(self._pool_px[k].shape[0], k) for k in cams])
+        node_pos = np.concatenate([np.arange(self._pool_px[k].shape[0]) for k in cams])
+        n = node_cam.size
+        A = np.full((n, n), -np.inf)
+        offsets = np.concatenate([[0], np.cumsum([self._pool_px[k].shape[0] for k in cams])])
+        for ia, ka in enumerate(cams):
+            for ib in range(ia + 1, len(cams)):
+                kb = cams[ib]
+                block = aff.epipolar_affinity(self._pool_px[ka], self._pool_px[kb], self._F[(ka, kb)],
+                                              cfg.alpha_epipolar_px, cfg.init_min_common_joints)
+                A[offsets[ia]:offsets[ia + 1], offsets[ib]:offsets[ib + 1]] = block
+                A[offsets[ib]:offsets[ib + 1], offsets[ia]:offsets[ia + 1]] = block.T
+        created: list[tuple[int, np.ndarray]] = []
+        used: dict[int, list[int]] = {}
+        for cluster in partition_graph(A, cfg.milp_max_nodes):
+            if cluster.size < cfg.min_views:
+                continue
+            ks, ds = node_cam[cluster], node_pos[cluster]
+            pts = np.stack([self._pool_px[k][d] for k, d in zip(ks, ds)])  # (V, J, 2)
+            stamps = self._pool_s[ks]
+            pose = reconstruct(self._P[ks], pts, stamps, t, cfg.lambda_t_per_s, cfg.min_views)
+            why = check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits)
+            if why is None and self._duplicates_existing(pose, t):
+                why = "duplicate of an existing target"
+            if why is not None:
+                logger.debug("initialisation: cluster of %d views rejected: %s", cluster.size, why)
+                continue
+            new_id = self._create_target(ks, pts, stamps, pose, t)
+            for k, d in zip(ks, ds):
+                used.setdefault(int(k), []).append(int(d))
+            created.append((new_id, self._pool_frame_index[c][ds[ks == c]]))
+        for k, gone in used.items():
+            keep = np.setdiff1d(np.arange(self._pool_px[k].shape[0]), gone)
+            self._pool_px[k] = self._pool_px[k][keep]
+            self._pool_frame_index[k] = self._pool_frame_index[k][keep]
+        return created
+
+    def _duplicates_existing(self, pose: np.ndarray, t: float) -> bool:
+        tg, cfg = self._targets, self.config
+        if not len(tg):
+            return False
+        predicted = aff.predict_positions(tg.pos, tg.vel, tg.joint_s, t, cfg.max_predict_s)
+        dist = np.linalg.norm(predicted - pose, axis=-1)  # (T, J)
+        with np.errstate(invalid="ignore"):
+            counts = np.sum(np.isfinite(dist), axis=1)
+            mean = np.nansum(dist, axis=1) / np.maximum(counts, 1)
+        return bool(np.any((counts >= 3) & (mean < cfg.init_min_separation_m)))
+
+    def _create_target(self, ks: np.ndarray, pts: np.ndarray, stamps: np.ndarray, pose: np.ndarray,
+                       t: float) -> int:
+        C, J, H = len(self.cameras), self.skeleton.num_joints, self.config.velocity_history
+        obs_px = np.full((1, C, J, 2), np.nan)
+        obs_s = np.full((1, C, J), np.nan)
+        obs_px[0, ks] = pts
+        obs_s[0, ks] = np.where(np.isfinite(pts[..., 0]), stamps[:, None], np.nan)
+        known = np.all(np.isfinite(pose), axis=-1)
+        hist_pos = np.full((1, H, J, 3), np.nan)
+        hist_s = np.full((1, H, J), np.nan)
+        hist_pos[0, 0] = pose
+        hist_s[0, 0] = np.where(known, t, np.nan)
+        new_id = self._next_id
+        self._next_id += 1
+        self._targets.append(
+            ids=np.array([new_id]), state=np.array([lifecycle.TENTATIVE], dtype=np.int8), born_s=np.array([t]),
+            last_update_s=np.array([t]), num_updates=np.array([ks.size]), pos=pose[None],
+            joint_s=np.where(known, t, -np.inf)[None], vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s,
+            hist_pos=hist_pos, hist_s=hist_s, hist_next=np.array([1]))
+        tg = self._targets
+        tg.state[-1:] = lifecycle.on_match(tg.state[-1:], tg.born_s[-1:], tg.num_updates[-1:], t, self.config)
+        return new_id
+
+    def _emit(self, t: float, camera: str, assigned: np.ndarray) -> list[Target]:
+        tg, cfg = self._targets, self.config
+        confirmed = np.flatnonzero(tg.state == lifecycle.CONFIRMED)
+        targets = []
+        if confirmed.size:
+            poses = aff.predict_positions(tg.pos[confirmed], tg.vel[confirmed], tg.joint_s[confirmed], t,
+                                          cfg.max_predict_s)
+            for row, pose in zip(confirmed, poses):
+                targets.append(Target(id=int(tg.ids[row]), pose=pose, stamp_s=t,
+                                      state=lifecycle.to_state(tg.state[row])))
+        self.last_output = TrackerOutput(stamp_s=t, camera=camera, targets=targets, detection_target_ids=assigned)
+        return targets
