@@ -103,7 +103,7 @@ def association_accuracy(camera_frames: Iterable[CameraFrame], outputs: Sequence
             total[camera] += 1
             correct[camera] += t >= 0 and carrier.get(p) == t
     scores = AssociationScores(frames_without_output=missing)
-    for camera in sorted(total):
+    for camera in total:  # order of first appearance
         scores.true_detections[camera] = total[camera]
         scores.per_camera[camera] = correct[camera] / total[camera] if total[camera] else None
     n = sum(total.values())
@@ -157,17 +157,15 @@ def pose_boxes(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarra
     poses = np.asarray(poses, dtype=np.float64)
     n, j = poses.shape[:2]
     px = project_points(camera, poses.reshape(-1, 3)).reshape(n, j, 2)
-    boxes = np.full((n, 4), np.nan)
-    visible = np.zeros(n, dtype=bool)
-    for i in range(n):
-        ok = np.isfinite(px[i]).all(axis=1)
-        if ok.sum() < 2:
-            continue
-        lo, hi = px[i][ok].min(axis=0), px[i][ok].max(axis=0)
-        boxes[i] = (*lo, *hi)
-        area = np.prod(hi - lo)
-        clipped = np.prod(np.clip(np.minimum(hi, (camera.width_px, camera.height_px)) - np.maximum(lo, 0), 0, None))
-        visible[i] = area > 0 and clipped >= MIN_VISIBLE_FRACTION * area
+    ok = np.isfinite(px).all(axis=-1, keepdims=True)  # (N, J, 1)
+    lo = np.where(ok, px, np.inf).min(axis=1)
+    hi = np.where(ok, px, -np.inf).max(axis=1)
+    enough = ok[..., 0].sum(axis=1) >= 2
+    boxes = np.where(enough[:, None], np.hstack([lo, hi]), np.nan)
+    size = np.prod(hi - lo, axis=1)
+    inside = np.prod(np.clip(np.minimum(hi, (camera.width_px, camera.height_px)) - np.maximum(lo, 0), 0, None), axis=1)
+    with np.errstate(invalid="ignore"):
+        visible = enough & (size > 0) & (inside >= MIN_VISIBLE_FRACTION * size)
     return boxes, visible
 
 
@@ -227,7 +225,7 @@ def projected_2d_scores(
         accs[camera.name].update(np.asarray(ids)[t_vis].tolist(), h_ids[h_vis].tolist(), dist)
         frames[camera.name] += 1
     result = {}
-    for name in sorted(by_name):
+    for name in by_name:  # the cameras' own order
         s = identity_scores(accs[name])
         result[name] = Camera2DScores(s.mota, s.idf1, s.false_positives, s.false_negatives, s.id_switches,
                                       s.num_truth, frames[name])

@@ -159,7 +159,7 @@ class ScoreReport:
             rows.insert(2, ("  PCP by bone group", ", ".join(f"{k} {pct(v)}" for k, v in self.pcp_per_group.items())))
         width = max(len(r[0]) for r in rows) + 2
         lines = [f"{name:<{width}}{value}" for name, value in rows]
-        cams = sorted(set(self.association_accuracy_per_camera) | set(self.camera_2d))
+        cams = list(dict.fromkeys([*self.camera_2d, *self.association_accuracy_per_camera]))
         if cams:
             lines.append("")
             header = f"{'Camera':<12}{'Assoc.':>9}{'MOTA':>9}{'IDF1':>9}{'FP':>7}{'FN':>7}{'IDS':>6}"
