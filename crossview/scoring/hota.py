@@ -1,9 +1,10 @@
 """HOTA (Luiten et al., IJCV 2021) with a ground-plane similarity, as in the AI City Challenge MTMC track.
 
 Similarity of a true person and a target is S = max(0, 1 - d / zero_distance) with d the ground-plane
-distance of their body roots (TrackEval's `_calculate_euclidean_similarity`, used for 3D locations in
-MOT15-3D and the AI City Challenge multi-camera people tracking). With the default zero distance of 2 m,
-the middle localisation threshold alpha = 0.5 is the 1 m gate of the CLEAR-MOT metrics.
+distance of their body roots: TrackEval's `_calculate_euclidean_similarity`, the similarity that the
+AI City Challenge multi-camera people tracking evaluates 3D locations with. Its zero distance is an
+argument; the default here is TrackEval's own default of 2 m (the MOT15-3D convention), under which the
+middle localisation threshold alpha = 0.5 is the 1 m gate of the CLEAR-MOT metrics.
 
 For each alpha in 0.05, 0.10, ..., 0.95:
     matching per instant: Hungarian on the score A_global(g, h) * S(g, h) (A_global: the alignment of the
