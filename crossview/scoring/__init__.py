@@ -63,8 +63,8 @@ class TruthTimeline:
 
     def _sample(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         s = self.samples[i]
-        return np.asarray(s.person_ids, dtype=np.int64), np.asarray(s.poses, dtype=np.float64).reshape(
-            len(s.person_ids), -1, 3)
+        ids = np.asarray(s.person_ids, dtype=np.int64).reshape(-1)
+        return ids, np.asarray(s.poses, dtype=np.float64).reshape(len(ids), self.num_joints, 3)
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(ids (P,), poses (P, J, 3)) of the people present at time t."""

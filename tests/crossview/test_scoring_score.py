@@ -122,3 +122,14 @@ def test_stale_outputs_stop_counting_after_a_second():
     # Ticks 0.0 .. 3.0 s (31) compare with an output no older than 1 s; the other 70 ticks are all misses.
     assert r.false_negatives == 2 * 70
     assert r.mota == pytest.approx(31 / 101, abs=1e-12)
+
+
+def test_nobody_in_the_store_leaves_pose_and_mota_undefined_and_targets_are_false_positives():
+    empty_store = [PoseTruth(t, np.zeros(0, dtype=np.int64), np.zeros((0, 17, 3))) for t in np.arange(0, 1, 0.01)]
+    r = score(empty_store, [])
+    assert (r.pcp, r.mota, r.idf1, r.hota) == (None, None, None, None)
+    ghost = [TrackerOutput(0.5, "cam0", [Target(1, np.zeros((17, 3)), 0.5)], np.zeros(0, dtype=np.int64))]
+    r = score(empty_store, ghost)
+    # Ticks 0.5 .. 0.9 s see the ghost: five false positives, IDF1 and HOTA 0, MOTA still undefined.
+    assert (r.false_positives, r.idf1, r.hota, r.mota) == (5, 0.0, 0.0, None)
+    assert score([], []).eval_instants == 0
