@@ -425,3 +425,69 @@ def test_info_describes_a_recording(tmp_path, world):
     assert d["end_s"] == pytest.approx(max(e.truth.delivery_s for e in events if isinstance(e, CameraFrame)))
     text = recording.format_info(d)
     assert "synthetic" in text and "seed 7" in text and "/truth/poses" in text
+
+
+def test_garbage_after_the_magic_and_empty_files_are_clear_errors(tmp_path, world):
+    cameras, events = world
+    data = write_recording(tmp_path / "rec.mcap", cameras, events).read_bytes()
+    rng = np.random.default_rng(9)
+    # The MCAP magic at both ends, random bytes between.
+    garbage = tmp_path / "garbage.mcap"
+    garbage.write_bytes(data[:8] + rng.integers(0, 256, 5000, dtype=np.uint8).tobytes() + data[-8:])
+    with pytest.raises(RecordingError, match=r"garbage\.mcap: (corrupt|no /crossview/header)"):
+        open_recording(garbage)
+    empty = tmp_path / "empty.mcap"
+    empty.write_bytes(b"")
+    with pytest.raises(RecordingError, match=r"empty\.mcap: not an MCAP file"):
+        open_recording(empty)
+    # A plain MCAP file that this project did not write.
+    from mcap.writer import Writer
+
+    foreign = tmp_path / "foreign.mcap"
+    with open(foreign, "wb") as f:
+        writer = Writer(f)
+        writer.start()
+        writer.finish()
+    with pytest.raises(RecordingError, match=r"foreign\.mcap: no /crossview/header message"):
+        open_recording(foreign)
+    with pytest.raises(RecordingError, match=r"foreign\.mcap: an MCAP file, but not a crossview"):
+        recording.info(foreign)
+
+
+def test_info_describes_a_tracks_file_and_its_summary(tmp_path):
+    rng = np.random.default_rng(4)
+    cameras = make_cameras(2, rng)
+    path = tmp_path / "tracks.mcap"
+    with TracksWriter(path, make_tracks_header(), cameras) as writer:
+        for output in make_outputs(rng, 12):
+            writer.write(output)
+        writer.finish({"tracker_s": 0.5, "updates": 12})
+    d = recording.info(path)
+    assert d["kind"] == "tracks" and d["method"] == "crossview" and d["preset"] == "store"
+    assert d["messages"]["/tracker/outputs"] == 12
+    assert d["summary"]["updates"] == 12 and d["summary"]["num_outputs"] == 12
+    assert "tracker_s=0.5" in recording.format_info(d)
+
+
+def test_reading_memory_does_not_grow_with_the_recording(tmp_path):
+    import tracemalloc
+
+    def peak_bytes_reading(duration_s: float) -> tuple[int, int, int]:
+        rng = np.random.default_rng(8)
+        cameras = make_cameras(3, rng)
+        path = tmp_path / f"rec{duration_s}.mcap"
+        with RecordingWriter(path, make_header(), cameras, BOXES, chunk_size=64 * 1024) as writer:
+            for event in synthetic_stream(cameras, 4, duration_s, rng):
+                writer.write(event)
+        rec = open_recording(path)
+        tracemalloc.start()
+        count = sum(1 for _ in rec.events())
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return peak, path.stat().st_size, count
+
+    short_peak, short_size, short_count = peak_bytes_reading(1.0)
+    long_peak, long_size, long_count = peak_bytes_reading(6.0)
+    # Six times the file, about the same memory: one chunk at a time.
+    assert long_size > 5 * short_size and long_count > 5 * short_count
+    assert long_peak < 1.5 * short_peak
