@@ -180,6 +180,8 @@ _FRAGMENTS_COCO17 = (
 )
 _GROSS_MIN_FRAC, _GROSS_MAX_FRAC = 0.2, 0.5
 _DUPLICATE_OFFSET_FRAC = 0.05
+_DUPLICATE_KEEP = 0.6  # share of its joints a duplicate repeats
+_DUPLICATE_SCORE = 0.6  # its scores, relative to the original's
 _MIN_SCORE = 0.05
 # A canonical standing COCO-17 person 1.7 m tall facing +x (body frame, metres), used for phantoms.
 _TEMPLATE_COCO17 = np.array([
@@ -292,6 +294,9 @@ class Detector:
         self._fragments = _FRAGMENTS_COCO17 if coco else tuple(
             tuple(range(s, min(s + 4, skeleton.num_joints))) for s in range(0, skeleton.num_joints, 4)
         )
+        self._fragment_masks = np.zeros((len(self._fragments), skeleton.num_joints), dtype=bool)
+        for i, part in enumerate(self._fragments):
+            self._fragment_masks[i, list(part)] = True
         self._template = _TEMPLATE_COCO17 if coco else None
         # Per camera: joints in the image, occluded, self-occluded (all person views, detected or not).
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
@@ -340,106 +345,90 @@ class Detector:
             camera_index: which camera.
             world: the `sim.world.World`, advanced to `capture_s` (its MuJoCo data is used for rays),
                 or None to skip occlusion.
-            poses: everybody's true pose at `capture_s`.
+            poses: everybody's true pose at `capture_s`, (P, J, 3).
             capture_s, stamp_s, delivery_s: true capture time, the camera's stamp, delivery time.
         """
-        rng = self._rng
-        p = self.params
         camera = self.cameras[camera_index]
-        J = self.skeleton.num_joints
-        person_ids = np.asarray(poses.person_ids, dtype=np.int64)
         px, in_img, occluded, self_occluded = self.visibility(camera_index, world, poses)
-        visible = in_img & ~occluded
-        size = person_size_px(px)
-        rows = []  # (person id, keypoints, scores, true px, in_img, occluded, self_occluded, effects)
-        for i, pid in enumerate(person_ids):
-            n_in = int(in_img[i].sum())
-            if n_in == 0 or visible[i].sum() < p.min_visible_joints:
-                continue
-            occluded_share = occluded[i].sum() / n_in
-            if rng.random() < min(1.0, p.miss_prob + p.miss_occlusion_gain * occluded_share):
-                continue
-            kp, scores, effects = self._noisy_joints(px[i], in_img[i], occluded[i], self_occluded[i], size[i])
-            if kp is None:
-                continue
-            truth = (pid, kp, scores, px[i], in_img[i], occluded[i], self_occluded[i], effects)
-            rows.append(truth)
-            if rng.random() < p.duplicate_prob:
-                rows.append(self._duplicate(truth, size[i]))
-        for _ in range(rng.poisson(p.phantom_rate) if p.phantom_rate > 0 else 0):
-            phantom = self._phantom(camera)
-            if phantom is not None:
-                rows.append(phantom)
-        order = rng.permutation(len(rows))
-        rows = [rows[k] for k in order]
-        D = len(rows)
-        frame = Frame(
-            camera.name, float(stamp_s),
-            np.stack([r[1] for r in rows]) if D else np.zeros((0, J, 2)),
-            np.stack([r[2] for r in rows]) if D else np.zeros((0, J)),
-        )
+        rows = self._detections(np.asarray(poses.person_ids, dtype=np.int64), px, in_img, occluded, self_occluded)
+        phantoms = [self._phantom(camera) for _ in range(self._rng.poisson(self.params.phantom_rate))]
+        phantoms = [ph for ph in phantoms if ph is not None]
+        if phantoms:
+            rows = [np.concatenate([r, np.stack([ph[i] for ph in phantoms])]) for i, r in enumerate(rows)]
+        order = self._rng.permutation(rows[0].shape[0])
+        ids, kp, scores, true_px, img, occ, self_occ, effects = (r[order] for r in rows)
+        frame = Frame(camera.name, float(stamp_s), kp, scores)
         truth = DetectionTruth(
-            capture_s=float(capture_s), delivery_s=float(delivery_s),
-            person_ids=np.array([r[0] for r in rows], dtype=np.int64),
-            keypoints_px=np.stack([r[3] for r in rows]) if D else np.zeros((0, J, 2)),
-            in_image=np.stack([r[4] for r in rows]) if D else np.zeros((0, J), dtype=bool),
-            occluded=np.stack([r[5] for r in rows]) if D else np.zeros((0, J), dtype=bool),
-            self_occluded=np.stack([r[6] for r in rows]) if D else np.zeros((0, J), dtype=bool),
-            effects=np.array([int(r[7]) for r in rows], dtype=np.int64),
+            capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=ids, keypoints_px=true_px,
+            in_image=img, occluded=occ, self_occluded=self_occ, effects=effects,
         )
         return CameraFrame(frame, truth, poses)
 
-    def _noisy_joints(self, px, in_img, occluded, self_occluded, size):
-        """One detected person's reported joints (J, 2), scores (J,) and effect flags; None if nothing is left."""
+    def _detections(self, person_ids, px, in_img, occluded, self_occluded):
+        """The detections of real people, all drawn at once (rows: people detected, then duplicates).
+
+        Returns:
+            ids (D,), keypoints (D, J, 2), scores (D, J), true px (D, J, 2), in_image, occluded,
+            self_occluded (D, J), effects (D,).
+        """
         rng = self._rng
         p = self.params
-        J = px.shape[0]
-        effects = DetectionEffect.NONE
-        drop_prob = np.where(occluded, p.occluded_drop_prob,
-                             np.where(self_occluded, p.self_occluded_drop_prob, p.joint_drop_prob))
-        reported = in_img & (rng.random(J) >= drop_prob)
-        if rng.random() < p.fragment_prob:
-            part = self._fragments[rng.integers(len(self._fragments))]
-            keep = np.zeros(J, dtype=bool)
-            keep[list(part)] = True
-            if (reported & keep).any():
-                reported &= keep
-                effects |= DetectionEffect.FRAGMENT
-        if not reported.any():
-            return None, None, effects
+        P, J = in_img.shape
+        n_in = in_img.sum(axis=1)
+        n_visible = (in_img & ~occluded).sum(axis=1)
+        occluded_share = occluded.sum(axis=1) / np.maximum(n_in, 1)
+        miss = rng.random(P) < p.miss_prob + p.miss_occlusion_gain * occluded_share
+        take = np.nonzero((n_in > 0) & (n_visible >= p.min_visible_joints) & ~miss)[0]
+        D = take.size
+        true_px, img, occ, self_occ = px[take], in_img[take], occluded[take], self_occluded[take]
+        size = person_size_px(true_px)
+        effects = np.zeros(D, dtype=np.int64)
+        drop_prob = np.where(occ, p.occluded_drop_prob, np.where(self_occ, p.self_occluded_drop_prob,
+                                                                  p.joint_drop_prob))
+        reported = img & (rng.random((D, J)) >= drop_prob)
+        # Fragments keep one body part (if it holds a reported joint).
+        fragment = rng.random(D) < p.fragment_prob
+        part = self._fragment_masks[rng.integers(len(self._fragment_masks), size=D)]
+        fragment &= (reported & part).any(axis=1)
+        reported = np.where(fragment[:, None], reported & part, reported)
+        effects |= np.where(fragment, int(DetectionEffect.FRAGMENT), 0)
         # Heavy-tailed noise: a Student-t vector, its scale relative to the person's image size.
-        scale = p.noise_frac * size * self._joint_noise
-        scale = scale * np.where(occluded, p.occluded_noise_scale,
-                                 np.where(self_occluded, p.self_occluded_noise_scale, 1.0))
-        z = rng.standard_normal((J, 2))
+        scale = p.noise_frac * size[:, None] * self._joint_noise
+        scale = scale * np.where(occ, p.occluded_noise_scale, np.where(self_occ, p.self_occluded_noise_scale, 1.0))
+        z = rng.standard_normal((D, J, 2))
         if math.isfinite(p.noise_tail_dof):
-            z *= np.sqrt(p.noise_tail_dof / rng.chisquare(p.noise_tail_dof, J))[:, None]
-        kp = px + scale[:, None] * z
-        gross = reported & (rng.random(J) < p.gross_error_prob)
-        if gross.any():
-            angle = rng.uniform(0, 2 * np.pi, J)
-            jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC, J) * size
-            kp[gross] += (jump[:, None] * np.stack([np.cos(angle), np.sin(angle)], axis=1))[gross]
-            effects |= DetectionEffect.GROSS_ERROR
-        mean_score = np.where(occluded, p.score_occluded, p.score_visible)
-        scores = np.clip(mean_score + p.score_std * rng.standard_normal(J), _MIN_SCORE, 1.0)
-        if rng.random() < p.swap_prob:
-            kp, scores, reported = kp[self._swap], scores[self._swap], reported[self._swap]
-            effects |= DetectionEffect.LEFT_RIGHT_SWAP
+            z *= np.sqrt(p.noise_tail_dof / rng.chisquare(p.noise_tail_dof, (D, J)))[..., None]
+        kp = true_px + scale[..., None] * z
+        gross = reported & (rng.random((D, J)) < p.gross_error_prob)
+        angle = rng.uniform(0, 2 * np.pi, (D, J))
+        jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC, (D, J)) * size[:, None]
+        kp += np.where(gross[..., None], jump[..., None] * np.stack([np.cos(angle), np.sin(angle)], axis=-1), 0.0)
+        effects |= np.where(gross.any(axis=1), int(DetectionEffect.GROSS_ERROR), 0)
+        scores = np.clip(np.where(occ, p.score_occluded, p.score_visible) + p.score_std * rng.standard_normal((D, J)),
+                         _MIN_SCORE, 1.0)
+        swap = rng.random(D) < p.swap_prob
+        kp[swap] = kp[swap][:, self._swap]
+        scores[swap] = scores[swap][:, self._swap]
+        reported[swap] = reported[swap][:, self._swap]
+        effects |= np.where(swap, int(DetectionEffect.LEFT_RIGHT_SWAP), 0)
         kp[~reported] = np.nan
         scores[~reported] = 0.0
-        return kp, scores, effects
-
-    def _duplicate(self, truth, size):
-        """A second, partial detection of the same person, slightly shifted and less confident."""
-        rng = self._rng
-        pid, kp, scores, *rest, effects = truth
-        J = kp.shape[0]
-        keep = ~np.isnan(kp[:, 0]) & (rng.random(J) < 0.6)
-        dup = kp + _DUPLICATE_OFFSET_FRAC * size * rng.standard_normal((1, 2))
-        dup[~keep] = np.nan
-        dup_scores = np.where(keep, scores * 0.6, 0.0)
-        return (pid, dup, dup_scores, *rest, effects | DetectionEffect.DUPLICATE)
+        keep = reported.any(axis=1)
+        rows = [person_ids[take], kp, scores, true_px, img, occ, self_occ, effects]
+        rows = [r[keep] for r in rows]
+        # Duplicates: a second, partial, shifted and less confident copy of a detection.
+        dup = rng.random(keep.sum()) < p.duplicate_prob
+        dup_keep = rng.random((keep.sum(), J)) < _DUPLICATE_KEEP
+        shift = _DUPLICATE_OFFSET_FRAC * size[keep][:, None] * rng.standard_normal((keep.sum(), 2))
+        if dup.any():
+            d_kp = rows[1][dup] + shift[dup][:, None, :]
+            d_keep = dup_keep[dup] & ~np.isnan(d_kp[..., 0])
+            d_kp[~d_keep] = np.nan
+            d_scores = np.where(d_keep, rows[2][dup] * _DUPLICATE_SCORE, 0.0)
+            dups = [rows[0][dup], d_kp, d_scores, *(r[dup] for r in rows[3:7]),
+                    rows[7][dup] | int(DetectionEffect.DUPLICATE)]
+            rows = [np.concatenate([r, d]) for r, d in zip(rows, dups)]
+        return rows
 
     def _phantom(self, camera: Camera):
         """A false-positive skeleton: a person template standing somewhere on the floor in view."""
@@ -466,7 +455,7 @@ class Detector:
         scores = np.where(keep, np.clip(0.35 + p.score_std * rng.standard_normal(J), _MIN_SCORE, 1.0), 0.0)
         nan = np.full((J, 2), np.nan)
         false = np.zeros(J, dtype=bool)
-        return (-1, kp, scores, nan, false, false, false, DetectionEffect.PHANTOM)
+        return (-1, kp, scores, nan, false, false, false, int(DetectionEffect.PHANTOM))
 
 
 def _keypoint_bodies(world, person_ids: np.ndarray, J: int) -> np.ndarray:
