@@ -231,7 +231,8 @@ def left_right_permutation(skeleton: Skeleton) -> np.ndarray:
 
 
 def cast_visibility(model, data, origin: np.ndarray, points: np.ndarray, point_person: np.ndarray,
-                    point_body: np.ndarray, geom_person: np.ndarray, self_hit_margin_m: float):
+                    point_bodies: np.ndarray, geom_person: np.ndarray, geom_body: np.ndarray,
+                    self_hit_margin_m: float):
     """Occlusion of keypoints seen from one point, one `mj_multiRay` batch.
 
     Args:
@@ -239,36 +240,34 @@ def cast_visibility(model, data, origin: np.ndarray, points: np.ndarray, point_p
         origin: (3,) camera centre, metres.
         points: (N, 3) keypoints, metres.
         point_person: (N,) person id of each keypoint.
-        point_body: (N,) MuJoCo body id each keypoint hangs on.
+        point_bodies: (N, 2) the body each keypoint hangs on and its parent body (a joint keypoint sits
+            inside both segments' geoms), in the numbering of `geom_body`.
         geom_person: (ngeom,) person id of each geom, -1 for the store.
-        self_hit_margin_m: hits on the keypoint's own body this close to the keypoint count as reaching it.
+        geom_body: (ngeom,) body of each geom within its person.
+        self_hit_margin_m: hits on the keypoint's own segments this close to the keypoint count as reaching it.
 
     Returns:
         (N,) bool occluded (first hit: store or another person) and (N,) bool self-occluded (first
-        hit: another body of the same person, or its own body far from the keypoint).
+        hit: another limb of the same person, or its own segments far from the keypoint).
     """
     import mujoco
 
     n = points.shape[0]
-    occluded = np.zeros(n, dtype=bool)
-    self_occluded = np.zeros(n, dtype=bool)
     if n == 0:
-        return occluded, self_occluded
+        return np.zeros(0, dtype=bool), np.zeros(0, dtype=bool)
     vec = points - origin
-    length = np.linalg.norm(vec, axis=1)
+    length = np.sqrt(np.einsum("ij,ij->i", vec, vec))
     unit = vec / length[:, None]
-    geomid = np.full(n, -1, dtype=np.int32)
-    dist = np.full(n, -1.0)
-    mujoco.mj_multiRay(model, data, origin.astype(np.float64), np.ascontiguousarray(unit).ravel(), None, 1, -1,
-                       geomid, dist, None, n, float(length.max()) + 1.0)
+    geomid = np.empty(n, dtype=np.int32)
+    dist = np.empty(n)
+    mujoco.mj_multiRay(model, data, np.asarray(origin, dtype=np.float64), unit.ravel(), None, 1, -1,
+                       geomid, dist, None, n, float(length.max()))
     hit = (geomid >= 0) & (dist >= 0) & (dist < length)
-    hit_person = np.where(hit, geom_person[np.maximum(geomid, 0)], -2)
-    hit_body = np.where(hit, model.geom_bodyid[np.maximum(geomid, 0)], -2)
-    same_person = hit & (hit_person == point_person)
-    own_near = same_person & (hit_body == point_body) & (length - dist <= self_hit_margin_m)
-    occluded = hit & ~same_person
-    self_occluded = same_person & ~own_near
-    return occluded, self_occluded
+    g = np.maximum(geomid, 0)
+    same_person = hit & (geom_person[g] == point_person)
+    hit_body = geom_body[g][:, None]
+    own_near = same_person & (hit_body == point_bodies).any(axis=1) & (length - dist <= self_hit_margin_m)
+    return hit & ~same_person, same_person & ~own_near
 
 
 class Detector:
@@ -320,22 +319,33 @@ class Detector:
         if world is not None and self.config.occlusion and in_img.any():
             p_idx, j_idx = np.nonzero(in_img)
             ids = np.asarray(poses.person_ids)[p_idx]
-            bodies = _keypoint_bodies(world, np.asarray(poses.person_ids), J)[p_idx, j_idx]
             occ, self_occ = cast_visibility(
-                world.model, world.data, camera.center_world, poses.poses[p_idx, j_idx], ids, bodies,
-                self._geom_person(world), self.config.self_hit_margin_m,
+                world.model, world.data, camera.center_world, poses.poses[p_idx, j_idx], ids,
+                self._keypoint_bodies(world)[j_idx], np.asarray(world.geom_person_ids()),
+                self._geom_bodies(world), self.config.self_hit_margin_m,
             )
             occluded[p_idx, j_idx] = occ
             self_occluded[p_idx, j_idx] = self_occ
         self.visibility_counts[camera_index] += (in_img.sum(), occluded.sum(), self_occluded.sum())
         return px, in_img, occluded, self_occluded
 
-    def _geom_person(self, world) -> np.ndarray:
-        cached = getattr(self, "_geom_person_cache", None)
-        if cached is None or cached[0] is not world:
-            cached = (world, np.asarray(world.geom_person_ids()))
-            self._geom_person_cache = cached
-        return cached[1]
+    def _keypoint_bodies(self, world) -> np.ndarray:
+        """(J, 2) body of each keypoint and its parent body, in the numbering of `world.geom_body_ids()`."""
+        if getattr(self, "_kp_bodies_of", None) is not world:
+            bodies = np.asarray(world.keypoint_body_ids(), dtype=np.int64)
+            if bodies.shape != (self.skeleton.num_joints,):
+                raise ValueError(f"World.keypoint_body_ids(): expected ({self.skeleton.num_joints},), "
+                                 f"got {bodies.shape}")
+            parents = getattr(world, "keypoint_parent_body_ids", None)
+            parents = np.asarray(parents(), dtype=np.int64) if parents is not None else _parent_bodies(bodies)
+            self._kp_bodies = np.stack([bodies, parents], axis=1)
+            self._geom_body_table = np.asarray(world.geom_body_ids(), dtype=np.int64)
+            self._kp_bodies_of = world
+        return self._kp_bodies
+
+    def _geom_bodies(self, world) -> np.ndarray:
+        self._keypoint_bodies(world)
+        return self._geom_body_table
 
     def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
                delivery_s: float) -> CameraFrame:
@@ -458,9 +468,20 @@ class Detector:
         return (-1, kp, scores, nan, false, false, false, int(DetectionEffect.PHANTOM))
 
 
-def _keypoint_bodies(world, person_ids: np.ndarray, J: int) -> np.ndarray:
-    """(P, J) MuJoCo body id of each keypoint of the people in `person_ids`."""
-    table = np.asarray(world.keypoint_body_ids())
-    if table.ndim == 2 and table.shape[1] == J:
-        return table[person_ids]
-    raise ValueError(f"World.keypoint_body_ids(): expected (people, {J}), got {table.shape}")
+def _parent_bodies(bodies: np.ndarray) -> np.ndarray:
+    """(J,) parent segment of each keypoint's body for `sim.humanoid`'s numbering (the body itself otherwise)."""
+    from sim import humanoid
+
+    table = getattr(humanoid, "KEYPOINT_PARENT_BODY", None)
+    if table is not None and np.array_equal(bodies, humanoid.KEYPOINT_BODY):
+        return np.asarray(table, dtype=np.int64)
+    if np.array_equal(bodies, getattr(humanoid, "KEYPOINT_BODY", None)):
+        # A joint keypoint sits at its segment's proximal end, inside the parent segment too.
+        B = humanoid.B
+        parent = {B["head"]: B["neck"], B["left_upper_arm"]: B["torso"], B["right_upper_arm"]: B["torso"],
+                  B["left_forearm"]: B["left_upper_arm"], B["right_forearm"]: B["right_upper_arm"],
+                  B["left_hand"]: B["left_forearm"], B["right_hand"]: B["right_forearm"],
+                  B["left_thigh"]: B["pelvis"], B["right_thigh"]: B["pelvis"], B["left_shin"]: B["left_thigh"],
+                  B["right_shin"]: B["right_thigh"], B["left_foot"]: B["left_shin"], B["right_foot"]: B["right_shin"]}
+        return np.array([parent.get(int(b), int(b)) for b in bodies], dtype=np.int64)
+    return bodies.copy()

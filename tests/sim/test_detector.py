@@ -55,11 +55,15 @@ class BoxWorld:
         names = [self.model.body(self.model.geom_bodyid[g]).name for g in range(self.model.ngeom)]
         return np.array([int(n[1:n.index("_")]) if n.startswith("p") else -1 for n in names])
 
+    def geom_body_ids(self):
+        names = [self.model.body(self.model.geom_bodyid[g]).name for g in range(self.model.ngeom)]
+        parts = list(_PARTS) + ["torso"]
+        return np.array([parts.index(n[n.index("_") + 1:]) if n.startswith("p") else -1 for n in names])
+
     def keypoint_body_ids(self):
-        table = np.zeros((self.people, 17), dtype=np.int64)
-        for p in range(self.people):
-            for part, joints in _PARTS.items():
-                table[p, list(joints)] = self.model.body(f"p{p}_{part}").id
+        table = np.zeros(17, dtype=np.int64)
+        for i, joints in enumerate(_PARTS.values()):
+            table[list(joints)] = i
         return table
 
     def truth(self, t=0.0):
