@@ -1,29 +1,466 @@
-"""Store layouts: floor, walls, shelf rows, entrance, exit and checkout, built as MuJoCo geometry."""
+"""Store layouts: floor, walls, shelf rows, entrance, exit and checkout, built as MuJoCo geometry.
+
+`StoreConfig` is the `[store]` section of a scenario. `StoreGeometry` checks it against itself (shelves
+inside the floor and apart, doors on a wall and not blocked) and holds what the crowd needs: the
+obstacle rectangles, the doors, and a navigation grid with distance fields to named goals.
+"""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+import numpy as np
+import scipy.ndimage
+import scipy.sparse
+import scipy.sparse.csgraph
+
+from sim.types import Box, BoxKind
+
+# Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast distance fields.
+GRID_CELL_M = 0.1
+# Thickness of the walls and of the floor slab (the floor's top face is z = 0).
+WALL_THICKNESS_M = 0.1
+FLOOR_THICKNESS_M = 0.1
+# Height of the floor markings of the doors (too thin to hide a keypoint).
+DOOR_MAT_HEIGHT_M = 0.005
+# How far outside the wall people appear before walking in, and vanish after walking out.
+OUTSIDE_DOOR_M = 0.5
+# Distance from the wall of the point just inside a door where paths start and end.
+INSIDE_DOOR_M = 0.8
 
 
 @dataclass(frozen=True)
 class ShelfConfig:
-    """One shelf unit: its footprint centre, full size and yaw."""
+    """One shelf unit: its footprint centre, full size (x, y, height) before the yaw, and the yaw."""
 
     center_m: tuple[float, float] = (0.0, 0.0)
     size_m: tuple[float, float, float] = (2.0, 0.5, 1.8)
     yaw_deg: float = 0.0
 
+    def __post_init__(self):
+        if not all(s > 0 for s in self.size_m):
+            raise ValueError(f"size_m: {self.size_m} must all be > 0")
+        if not -360.0 <= self.yaw_deg <= 360.0:
+            raise ValueError(f"yaw_deg: {self.yaw_deg} must be in [-360, 360]")
+
 
 @dataclass(frozen=True)
 class StoreConfig:
-    """[store]: the floor rectangle [0, width] x [0, depth], ceiling height and fixtures."""
+    """[store]: the floor rectangle [0, width] x [0, depth], ceiling height and fixtures.
+
+    Attributes:
+        width_m, depth_m: floor extents along world x and y.
+        ceiling_m: ceiling height; cameras hang below it.
+        wall_height_m: height of the walls around the floor (at most the ceiling).
+        shelves: shelf units ([[store.shelves]] tables).
+        entrance_m, exit_m: (x, y) centre of each door on a wall; None puts them on the x = 0 wall at a
+            quarter and three quarters of the depth.
+        door_width_m: clear width of both doors.
+        checkout_m: (x, y) centre of the checkout counter, None for a store without one.
+        checkout_size_m: (x, y, height) of the checkout counter.
+    """
 
     width_m: float = 4.0
     depth_m: float = 3.0
     ceiling_m: float = 3.0
+    wall_height_m: float = 2.2
     shelves: tuple[ShelfConfig, ...] = ()
+    entrance_m: tuple[float, float] | None = None
+    exit_m: tuple[float, float] | None = None
+    door_width_m: float = 1.0
+    checkout_m: tuple[float, float] | None = None
+    checkout_size_m: tuple[float, float, float] = (1.4, 0.6, 0.9)
 
     def __post_init__(self):
         for name in ("width_m", "depth_m", "ceiling_m"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name}: {getattr(self, name)} must be > 0")
+        for name in ("width_m", "depth_m"):
+            if not 2.0 <= getattr(self, name) <= 500.0:
+                raise ValueError(f"{name}: {getattr(self, name)} must be in [2, 500] m")
+        if not 2.0 <= self.ceiling_m <= 20.0:
+            raise ValueError(f"ceiling_m: {self.ceiling_m} must be in [2, 20] m (people are up to 1.95 m tall)")
+        if not 0.5 <= self.wall_height_m <= self.ceiling_m:
+            raise ValueError(f"wall_height_m: {self.wall_height_m} must be in [0.5, ceiling_m = {self.ceiling_m}]")
+        if not 0.7 <= self.door_width_m <= 5.0:
+            raise ValueError(f"door_width_m: {self.door_width_m} must be in [0.7, 5] m")
+        if not all(s > 0 for s in self.checkout_size_m):
+            raise ValueError(f"checkout_size_m: {self.checkout_size_m} must all be > 0")
+        for i, shelf in enumerate(self.shelves):
+            if shelf.size_m[2] > self.ceiling_m:
+                raise ValueError(f"shelves[{i}].size_m: height {shelf.size_m[2]} is above ceiling_m = {self.ceiling_m}")
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A yawed rectangle people keep clear of (a shelf or the checkout counter).
+
+    Attributes:
+        key: the scenario key it comes from, for error messages.
+        center: (2,) footprint centre, metres.
+        half: (2,) half extents along the rectangle's own axes.
+        yaw: rotation about z, radians.
+        height: top of the box above the floor.
+    """
+
+    key: str
+    center: np.ndarray
+    half: np.ndarray
+    yaw: float
+    height: float
+
+    def corners(self) -> np.ndarray:
+        """(4, 2) footprint corners, counter-clockwise."""
+        c, s = math.cos(self.yaw), math.sin(self.yaw)
+        R = np.array([[c, -s], [s, c]])
+        local = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * self.half
+        return self.center + local @ R.T
+
+
+@dataclass(frozen=True)
+class Door:
+    """An entrance or an exit: a gap in a wall.
+
+    Attributes:
+        key: scenario key.
+        center: (2,) door centre on the wall line.
+        inward: (2,) unit normal pointing into the store.
+        width: clear width.
+    """
+
+    key: str
+    center: np.ndarray
+    inward: np.ndarray
+    width: float
+
+    @property
+    def inside(self) -> np.ndarray:
+        """(2,) where paths through this door start or end inside the store."""
+        return self.center + INSIDE_DOOR_M * self.inward
+
+    @property
+    def outside(self) -> np.ndarray:
+        """(2,) where people appear or vanish, just outside the wall."""
+        return self.center - OUTSIDE_DOOR_M * self.inward
+
+
+def _error(name: str, message: str):
+    from sim.scenario import ScenarioError  # deferred: sim.scenario imports this module
+
+    return ScenarioError(f"{name}: {message}")
+
+
+def rect_distance(points: np.ndarray, center: np.ndarray, half: np.ndarray, yaw: float) -> np.ndarray:
+    """Distance from points to a yawed rectangle (0 inside).
+
+    Args:
+        points: (..., 2) points, metres.
+        center, half, yaw: the rectangle.
+
+    Returns:
+        (...,) distances, metres.
+    """
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = points - center
+    local = np.stack([d[..., 0] * c + d[..., 1] * s, -d[..., 0] * s + d[..., 1] * c], axis=-1)
+    outside = np.maximum(np.abs(local) - half, 0.0)
+    return np.hypot(outside[..., 0], outside[..., 1])
+
+
+def _rects_overlap(a: Obstacle, b: Obstacle) -> bool:
+    """Separating-axis test of two yawed rectangles (touching counts as apart)."""
+    ca, cb = a.corners(), b.corners()
+    for rect in (a, b):
+        for yaw in (rect.yaw, rect.yaw + math.pi / 2):
+            axis = np.array([math.cos(yaw), math.sin(yaw)])
+            pa, pb = ca @ axis, cb @ axis
+            if pa.max() <= pb.min() + 1e-9 or pb.max() <= pa.min() + 1e-9:
+                return False
+    return True
+
+
+class StoreGeometry:
+    """The checked layout of a store and its navigation grid.
+
+    Attributes:
+        config: the `[store]` section.
+        obstacles: shelves then the checkout counter.
+        entrance, exit: the doors.
+        free: (nx, ny) bool navigation grid, True where a pelvis may plan to be.
+        boxes: every box of the store for drawing and recording.
+    """
+
+    def __init__(self, config: StoreConfig, nav_clearance_m: float = 0.45, wall_clearance_m: float = 0.35,
+                 name: str = "store"):
+        """Builds and checks the layout.
+
+        Args:
+            config: the `[store]` section.
+            nav_clearance_m: distance planned paths keep from shelf faces.
+            wall_clearance_m: distance planned paths keep from walls.
+            name: scenario name for error messages.
+
+        Raises:
+            ScenarioError: shelves outside the floor or overlapping, a door off the walls or blocked.
+        """
+        self.config = config
+        self.name = name
+        W, D = config.width_m, config.depth_m
+        obstacles = []
+        for i, shelf in enumerate(config.shelves):
+            obstacles.append(Obstacle(f"store.shelves[{i}]", np.array(shelf.center_m, float),
+                                      np.array(shelf.size_m[:2], float) / 2, math.radians(shelf.yaw_deg),
+                                      shelf.size_m[2]))
+        if config.checkout_m is not None:
+            obstacles.append(Obstacle("store.checkout_m", np.array(config.checkout_m, float),
+                                      np.array(config.checkout_size_m[:2], float) / 2, 0.0, config.checkout_size_m[2]))
+        self.obstacles = tuple(obstacles)
+        for i, ob in enumerate(self.obstacles):
+            corners = ob.corners()
+            if corners.min() < -1e-9 or corners[:, 0].max() > W + 1e-9 or corners[:, 1].max() > D + 1e-9:
+                raise self._err(ob.key, f"footprint {np.round(corners, 2).tolist()} extends outside the floor "
+                                        f"[0, {W}] x [0, {D}] m")
+            for other in self.obstacles[:i]:
+                if _rects_overlap(ob, other):
+                    raise self._err(ob.key, f"overlaps {other.key}")
+        self.entrance = self._door("store.entrance_m", config.entrance_m, (0.0, 0.25 * D))
+        self.exit = self._door("store.exit_m", config.exit_m, (0.0, 0.75 * D))
+        gap = np.linalg.norm(self.entrance.center - self.exit.center)
+        if gap < config.door_width_m:
+            raise self._err("store.exit_m", f"door at {tuple(self.exit.center)} overlaps store.entrance_m (centres "
+                                            f"{gap:.2f} m apart, need >= door_width_m = {config.door_width_m})")
+        self.nav_clearance_m = nav_clearance_m
+        self.wall_clearance_m = wall_clearance_m
+        self._build_grid()
+        for door in (self.entrance, self.exit):
+            if not self.free[self.cell_of(door.inside)]:
+                blocker = self._nearest_obstacle(door.inside)
+                raise self._err(door.key, f"door at {tuple(np.round(door.center, 2))} is blocked by {blocker} "
+                                          f"(keep {INSIDE_DOOR_M + nav_clearance_m:.2f} m in front of a door clear)")
+        if self.distance_field(self.exit.inside)[self.flat_index(self.entrance.inside)] == np.inf:
+            raise self._err("store.exit_m", "cannot be reached from store.entrance_m around the shelves")
+        self.boxes = self._boxes()
+
+    def _err(self, key: str, message: str):
+        return _error(f"{self.name}: {key}", message)
+
+    def _nearest_obstacle(self, point: np.ndarray) -> str:
+        if not self.obstacles:
+            return "the walls"
+        d = [rect_distance(point, o.center, o.half, o.yaw) for o in self.obstacles]
+        return self.obstacles[int(np.argmin(d))].key
+
+    def _door(self, key: str, value, default) -> Door:
+        W, D = self.config.width_m, self.config.depth_m
+        p = np.array(default if value is None else value, dtype=float)
+        half = self.config.door_width_m / 2
+        walls = [  # (distance to the wall line, along-wall coordinate, wall length, inward normal)
+            (abs(p[0]), p[1], D, (1.0, 0.0)),
+            (abs(p[0] - W), p[1], D, (-1.0, 0.0)),
+            (abs(p[1]), p[0], W, (0.0, 1.0)),
+            (abs(p[1] - D), p[0], W, (0.0, -1.0)),
+        ]
+        dist, along, length, inward = min(walls, key=lambda w: w[0])
+        if dist > 0.05:
+            raise self._err(key, f"{tuple(p)} is not on a wall of the [0, {W}] x [0, {D}] m floor "
+                                 "(one coordinate must be 0 or the floor's width/depth)")
+        if not half + 0.2 <= along <= length - half - 0.2:
+            raise self._err(key, f"{tuple(p)}: a door {self.config.door_width_m} m wide must keep 0.2 m from the "
+                                 f"corners (along-wall coordinate in [{half + 0.2:.2f}, {length - half - 0.2:.2f}])")
+        inward = np.array(inward)
+        center = p + dist * inward * (1 if np.dot(p - np.array([W / 2, D / 2]), inward) < 0 else -1)
+        door = Door(key, center, inward, self.config.door_width_m)
+        for ob in self.obstacles:
+            mouth = door.center + np.outer(np.linspace(0.0, INSIDE_DOOR_M, 9), inward)
+            if np.any(rect_distance(mouth, ob.center, ob.half, ob.yaw) < 0.3):
+                raise self._err(key, f"door at {tuple(np.round(center, 2))} lies inside or against {ob.key}")
+        return door
+
+    # -- navigation grid -------------------------------------------------------------------------
+
+    def _build_grid(self):
+        W, D = self.config.width_m, self.config.depth_m
+        self.nx, self.ny = int(math.ceil(W / GRID_CELL_M)), int(math.ceil(D / GRID_CELL_M))
+        xs = (np.arange(self.nx) + 0.5) * GRID_CELL_M
+        ys = (np.arange(self.ny) + 0.5) * GRID_CELL_M
+        self.cell_centers = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)  # (nx, ny, 2)
+        P = self.cell_centers
+        c = self.wall_clearance_m
+        free = (P[..., 0] >= c) & (P[..., 0] <= W - c) & (P[..., 1] >= c) & (P[..., 1] <= D - c)
+        self.shelf_distance = np.full(P.shape[:2], np.inf)
+        for ob in self.obstacles:
+            self.shelf_distance = np.minimum(self.shelf_distance, rect_distance(P, ob.center, ob.half, ob.yaw))
+        free &= self.shelf_distance >= self.nav_clearance_m
+        # Doors: let the approach corridor through the wall clearance.
+        for door in (self.entrance, self.exit):
+            rel = P - door.center
+            along = np.abs(rel @ np.array([-door.inward[1], door.inward[0]]))
+            depth = rel @ door.inward
+            free |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= INSIDE_DOOR_M + 0.1) & (
+                self.shelf_distance >= self.nav_clearance_m)
+        self.free = free
+        # 8-connected grid graph over free cells, edge weights = metres.
+        idx = np.arange(self.nx * self.ny).reshape(self.nx, self.ny)
+        rows, cols, w = [], [], []
+        for dx, dy in ((1, 0), (0, 1), (1, 1), (1, -1)):
+            sa = (slice(0, self.nx - dx), slice(max(0, -dy), self.ny - max(0, dy)))
+            sb = (slice(dx, self.nx), slice(max(0, dy), self.ny - max(0, -dy)))
+            a, b, ia, ib = free[sa], free[sb], idx[sa], idx[sb]
+            both = a & b
+            rows.append(ia[both])
+            cols.append(ib[both])
+            w.append(np.full(int(both.sum()), GRID_CELL_M * math.hypot(dx, dy)))
+        n = self.nx * self.ny
+        self.graph = scipy.sparse.csr_matrix(
+            (np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        self._fields: dict[int, np.ndarray] = {}
+        self.free_area_m2 = float(free.sum()) * GRID_CELL_M**2
+        # Distance from every cell to the nearest blocked cell: used to smooth paths away from corners.
+        self.clearance = scipy.ndimage.distance_transform_edt(free) * GRID_CELL_M
+
+    def cell_of(self, point) -> tuple[int, int]:
+        """Grid cell (i, j) containing a point (clamped to the grid)."""
+        i = min(max(int(point[0] / GRID_CELL_M), 0), self.nx - 1)
+        j = min(max(int(point[1] / GRID_CELL_M), 0), self.ny - 1)
+        return i, j
+
+    def flat_index(self, point) -> int:
+        i, j = self.cell_of(point)
+        return i * self.ny + j
+
+    def nearest_free(self, point) -> np.ndarray:
+        """(2,) centre of the free cell nearest to a point."""
+        i, j = self.cell_of(point)
+        if self.free[i, j]:
+            return self.cell_centers[i, j].copy()
+        fi, fj = np.nonzero(self.free)
+        k = int(np.argmin((fi - i) ** 2 + (fj - j) ** 2))
+        return self.cell_centers[fi[k], fj[k]].copy()
+
+    def distance_field(self, goal) -> np.ndarray:
+        """(nx * ny,) path length from every cell to the goal's cell (inf where unreachable); cached."""
+        key = self.flat_index(goal)
+        field = self._fields.get(key)
+        if field is None:
+            field = scipy.sparse.csgraph.dijkstra(self.graph, directed=False, indices=key)
+            self._fields[key] = field
+        return field
+
+    def line_free(self, a: np.ndarray, b: np.ndarray) -> bool:
+        """Whether the straight segment a-b stays on free cells."""
+        n = max(2, int(np.linalg.norm(b - a) / (GRID_CELL_M * 0.5)) + 1)
+        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+        i = np.clip((pts[:, 0] / GRID_CELL_M).astype(int), 0, self.nx - 1)
+        j = np.clip((pts[:, 1] / GRID_CELL_M).astype(int), 0, self.ny - 1)
+        return bool(self.free[i, j].all())
+
+    def plan(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
+        """A path from start to goal around the obstacles: grid shortest path, then string-pulled.
+
+        The grid search is Dijkstra from the goal (cached per goal, so many people heading to the same
+        shelf share it), walked downhill from the start; the smoothing keeps only the waypoints needed
+        for straight segments that stay on free cells.
+
+        Returns:
+            waypoints (each (2,)), ending at the goal; empty if the goal is unreachable.
+        """
+        field = self.distance_field(goal)
+        i, j = self.cell_of(start)
+        if not self.free[i, j] or field[i * self.ny + j] == np.inf:
+            s = self.nearest_free(start)
+            i, j = self.cell_of(s)
+        if field[i * self.ny + j] == np.inf:
+            return []
+        cells = [(i, j)]
+        goal_key = self.flat_index(goal)
+        for _ in range(self.nx * self.ny):
+            if i * self.ny + j == goal_key:
+                break
+            best, best_d = None, field[i * self.ny + j]
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    a, b = i + di, j + dj
+                    if (di or dj) and 0 <= a < self.nx and 0 <= b < self.ny:
+                        d = field[a * self.ny + b]
+                        if d < best_d - 1e-12:
+                            best, best_d = (a, b), d
+            if best is None:
+                break
+            i, j = best
+            cells.append(best)
+        pts = [self.cell_centers[c] for c in cells]
+        # String pulling: from each kept point, jump to the farthest point still in straight view.
+        out = [np.asarray(start, float)]
+        k = 0
+        while k < len(pts) - 1:
+            nxt = k + 1
+            for m in range(len(pts) - 1, k + 1, -1):
+                if self.line_free(out[-1], pts[m]):
+                    nxt = m
+                    break
+            out.append(pts[nxt])
+            k = nxt
+        out.append(np.asarray(goal, float))
+        return out[1:]
+
+    # -- boxes -----------------------------------------------------------------------------------
+
+    def _boxes(self) -> tuple[Box, ...]:
+        cfg = self.config
+        W, D, H, T = cfg.width_m, cfg.depth_m, cfg.wall_height_m, WALL_THICKNESS_M
+        boxes = [Box(BoxKind.FLOOR, (W / 2, D / 2, -FLOOR_THICKNESS_M / 2), (W + 2 * T, D + 2 * T, FLOOR_THICKNESS_M))]
+        # Each wall as segments between the door gaps.
+        walls = [  # (start point, direction, length, outward offset)
+            (np.array([0.0, 0.0]), np.array([1.0, 0.0]), W, np.array([0.0, -T / 2])),
+            (np.array([0.0, D]), np.array([1.0, 0.0]), W, np.array([0.0, T / 2])),
+            (np.array([0.0, 0.0]), np.array([0.0, 1.0]), D, np.array([-T / 2, 0.0])),
+            (np.array([W, 0.0]), np.array([0.0, 1.0]), D, np.array([T / 2, 0.0])),
+        ]
+        for start, direction, length, offset in walls:
+            gaps = []
+            for door in (self.entrance, self.exit):
+                rel = door.center - start
+                if abs(rel @ np.array([-direction[1], direction[0]])) < 1e-6:
+                    a = rel @ direction
+                    gaps.append((a - door.width / 2, a + door.width / 2))
+            edges = [-T] + [g for gap in sorted(gaps) for g in gap] + [length + T]
+            for a, b in zip(edges[0::2], edges[1::2]):
+                if b - a > 1e-6:
+                    mid = start + direction * (a + b) / 2 + offset
+                    size = (b - a, T) if direction[0] else (T, b - a)
+                    boxes.append(Box(BoxKind.WALL, (mid[0], mid[1], H / 2), (size[0], size[1], H)))
+        for door, kind in ((self.entrance, BoxKind.ENTRANCE), (self.exit, BoxKind.EXIT)):
+            c = door.center + door.inward * (INSIDE_DOOR_M / 2)
+            along = door.width if door.inward[1] else INSIDE_DOOR_M
+            across = INSIDE_DOOR_M if door.inward[1] else door.width
+            boxes.append(Box(kind, (c[0], c[1], DOOR_MAT_HEIGHT_M / 2), (along, across, DOOR_MAT_HEIGHT_M)))
+        for ob in self.obstacles:
+            kind = BoxKind.CHECKOUT if ob.key == "store.checkout_m" else BoxKind.SHELF
+            boxes.append(Box(kind, (ob.center[0], ob.center[1], ob.height / 2),
+                             (2 * ob.half[0], 2 * ob.half[1], ob.height), ob.yaw))
+        return tuple(boxes)
+
+    def browse_spots(self, standoff_m: float = 0.5) -> list[tuple[np.ndarray, float, int]]:
+        """Places to stand in front of a shelf: (pelvis position (2,), heading toward the shelf, shelf index).
+
+        One spot per metre along each long face that is reachable, standing `standoff_m` from the face.
+        """
+        spots = []
+        for k, ob in enumerate(self.obstacles):
+            if ob.key == "store.checkout_m":
+                continue
+            c, s = math.cos(ob.yaw), math.sin(ob.yaw)
+            ax, ay = np.array([c, s]), np.array([-s, c])
+            for axis, other, h_along, h_across in ((ax, ay, ob.half[0], ob.half[1]), (ay, ax, ob.half[1], ob.half[0])):
+                n = max(1, int(2 * h_along // 1.0))
+                for side in (-1.0, 1.0):
+                    normal = other * side
+                    for u in (np.arange(n) + 0.5) / n * 2 - 1:
+                        p = ob.center + axis * u * h_along + normal * (h_across + standoff_m)
+                        i, j = self.cell_of(p)
+                        if 0 <= p[0] <= self.config.width_m and 0 <= p[1] <= self.config.depth_m:
+                            near = self.cell_centers[i, j]
+                            if self.free[i, j] and np.linalg.norm(near - p) < 0.2:
+                                spots.append((p, math.atan2(-normal[1], -normal[0]), k))
+        return spots

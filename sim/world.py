@@ -1,0 +1,396 @@
+"""The store world in MuJoCo: store geometry plus one kinematic humanoid per body slot, posed over time.
+
+The model holds the store's boxes and `crowd.people` humanoids (slots). A slot is reused when its
+person leaves and a newcomer arrives: the slot's bodies are rescaled to the newcomer's height (every
+length of `sim.humanoid` is proportional to height) and it gets a new, never reused person id. The
+world is kinematic: `advance` sets qpos from the crowd's motion and runs `mj_kinematics`, which is
+all `mj_ray` needs to see the bodies where they are.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from sim import humanoid as hm
+from sim.crowd import FULL_LIFT_STRIDE_M, STANCE_FRACTION, STEP_S, SWING_LIFT_M, Activity, Crowd
+from sim.crowd import validate as validate_crowd
+from sim.store import StoreGeometry
+from sim.types import Box, BoxKind, PoseTruth
+from tracker.types import COCO17, Skeleton
+
+# Where the bodies of empty slots wait: far below the floor slab, where no camera ray can reach.
+PARK_Z_M = -50.0
+# Standing sway: amplitude and frequency of the slow weight shift of someone standing.
+SWAY_M = 0.015
+SWAY_HZ = 0.25
+# Knee flex of a standing person, as a fraction of the straight-leg hip height.
+STAND_HIP_FRACTION = 0.985
+# Lowest the pelvis goes in walking, as a fraction of the straight-leg hip height.
+LOWEST_HIP_FRACTION = 0.94
+
+
+@dataclass(frozen=True)
+class _Snapshot:
+    """The crowd at one step, packed for interpolation."""
+
+    time_s: float
+    person_id: np.ndarray  # (S,)
+    values: np.ndarray  # (S, F) see `_pack`
+
+
+def _pack(crowd: Crowd) -> _Snapshot:
+    speed = np.hypot(crowd.vel[:, 0], crowd.vel[:, 1])
+    values = np.column_stack([
+        crowd.pos,  # 0, 1
+        crowd.heading,  # 2
+        crowd.phase,  # 3
+        crowd.stride,  # 4
+        crowd.feet.reshape(-1, 4),  # 5..8: left xy, right xy
+        crowd.swing_len,  # 9, 10
+        crowd.reach,  # 11
+        crowd.reach_height,  # 12
+        crowd.reach_side,  # 13
+        speed,  # 14
+    ])
+    return _Snapshot(crowd.time_s, crowd.person_id.copy(), values)
+
+
+class World:
+    """The store, its people and their bodies in MuJoCo.
+
+    Attributes:
+        model, data: the MuJoCo model (store geoms then one humanoid per slot) and its data.
+        boxes: the store's boxes (floor, walls, entrance, exit, shelves, checkout) for drawing and recording.
+        skeleton: `tracker.types.COCO17`; keypoints come from the humanoids' sites in this order.
+        store: the checked layout and its navigation grid.
+        crowd: the people's motion.
+    """
+
+    def __init__(self, scenario, rng: np.random.Generator):
+        """Builds the world of a scenario.
+
+        Args:
+            scenario: a `sim.scenario.Scenario`.
+            rng: the crowd's generator (`sim.rng.child_rng(seed, "crowd")`); all randomness comes from it.
+
+        Raises:
+            ScenarioError: the layout or the crowd cannot work (overlapping shelves, a blocked door, more
+                people than the floor holds, ...), naming the scenario key.
+        """
+        self.scenario = scenario
+        self.store = StoreGeometry(scenario.store, name=scenario.name)
+        validate_crowd(scenario.crowd, self.store, scenario.name)
+        self.boxes: tuple[Box, ...] = self.store.boxes
+        self.skeleton: Skeleton = COCO17
+        self.slots = S = scenario.crowd.people
+        self.model = mujoco.MjModel.from_xml_string(self._xml())
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._nq = hm.NQ
+        root_adr = [m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"p{k}_root")] for k in range(S)]
+        if root_adr != [k * hm.NQ for k in range(S)] or m.nq != S * hm.NQ:
+            raise RuntimeError("humanoid qpos layout is not slot-contiguous")
+        self._kp_sites = np.array([[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"p{k}_{n}")
+                                    for n in hm.KEYPOINT_NAMES] for k in range(S)], dtype=np.int64).reshape(S, 17)
+        body_names = [m.body(b).name for b in range(m.nbody)]
+        self._body_slot = np.full(m.nbody, -1, dtype=np.int64)
+        self._body_local = np.full(m.nbody, -1, dtype=np.int64)
+        for b, name in enumerate(body_names):
+            if name.startswith("p") and "_" in name:
+                slot, local = name[1:].split("_", 1)
+                self._body_slot[b] = int(slot)
+                self._body_local[b] = hm.B[local]
+        self._geom_slot = self._body_slot[m.geom_bodyid]
+        self._geom_local = self._body_local[m.geom_bodyid]
+        self._site_slot = self._body_slot[m.site_bodyid]
+        self._ref = {name: getattr(m, name).copy() for name in
+                     ("body_pos", "geom_pos", "geom_size", "geom_rbound", "geom_aabb", "site_pos", "site_size")}
+        self._slot_height = np.full(S, hm.REFERENCE_HEIGHT_M)
+        self._heights: dict[int, float] = {}
+        self.crowd = Crowd(scenario.crowd, self.store, rng)
+        self._present = np.zeros(S, bool)
+        self._person_ids = np.full(S, -1, dtype=np.int64)
+        self._last_t = -math.inf
+        self._sync_slots()
+        self._prev = self._cur = _pack(self.crowd)
+        lo, hi = hm.HINGE_RANGES[:, 0], hm.HINGE_RANGES[:, 1]
+        self._lo, self._hi = lo, hi
+        self.timing_s = 0.0
+
+    # -- model -------------------------------------------------------------------------------------
+
+    def _xml(self) -> str:
+        geoms = []
+        rgba = {BoxKind.FLOOR: ".55 .55 .5 1", BoxKind.WALL: ".8 .8 .75 1", BoxKind.SHELF: ".45 .3 .2 1",
+                BoxKind.CHECKOUT: ".3 .4 .6 1", BoxKind.ENTRANCE: ".2 .7 .2 1", BoxKind.EXIT: ".7 .2 .2 1"}
+        for i, box in enumerate(self.boxes):
+            half = " ".join(f"{s / 2:.6g}" for s in box.size_m)
+            pos = " ".join(f"{c:.6g}" for c in box.center_m)
+            geoms.append(f'<geom name="{box.kind.value}{i}" type="box" pos="{pos}" size="{half}" '
+                         f'euler="0 0 {box.yaw_rad:.9g}" rgba="{rgba[box.kind]}"/>')
+        people = "".join(hm.humanoid_xml(f"p{k}_") for k in range(self.slots))
+        return (
+            '<mujoco model="store"><compiler angle="radian"/>'
+            '<option><flag contact="disable" gravity="disable"/></option>'
+            '<default><geom contype="0" conaffinity="0" density="1000"/><site group="4"/></default>'
+            f'<worldbody>{"".join(geoms)}{people}</worldbody></mujoco>'
+        )
+
+    def _resize(self, slot: int, height_m: float):
+        """Rescales a slot's bodies, geoms and sites to a body height (all proportional to it)."""
+        m = self.model
+        scale = height_m / hm.REFERENCE_HEIGHT_M
+        bodies = self._body_slot == slot
+        geoms = self._geom_slot == slot
+        sites = self._site_slot == slot
+        m.body_pos[bodies] = self._ref["body_pos"][bodies] * scale
+        for name, mask in (("geom_pos", geoms), ("geom_size", geoms), ("geom_rbound", geoms), ("geom_aabb", geoms),
+                           ("site_pos", sites), ("site_size", sites)):
+            getattr(m, name)[mask] = self._ref[name][mask] * scale
+        self._slot_height[slot] = height_m
+
+    def _sync_slots(self):
+        """Rescales slots whose person changed in the latest crowd step."""
+        for s in np.nonzero(self.crowd.person_id != self._person_ids)[0]:
+            pid = int(self.crowd.person_id[s])
+            if pid >= 0:
+                h = float(self.crowd.height[s])
+                self._heights[pid] = h
+                if h != self._slot_height[s]:
+                    self._resize(int(s), h)
+        self._person_ids = self.crowd.person_id.copy()
+
+    # -- public ------------------------------------------------------------------------------------
+
+    def advance(self, t_s: float) -> PoseTruth:
+        """Poses everybody for true time t_s and returns the keypoints of the people present.
+
+        Args:
+            t_s: true time, seconds since the scenario start; never less than in the previous call.
+
+        Returns:
+            PoseTruth with person_ids (P,) ascending and poses (P, 17, 3) metres (COCO-17 keypoint sites).
+
+        Raises:
+            ValueError: t_s is earlier than the previous call's or negative.
+        """
+        if not t_s >= max(self._last_t, 0.0):
+            raise ValueError(f"t_s: {t_s} must be >= 0 and >= the previous call's {self._last_t}")
+        self._last_t = t_s
+        crowd = self.crowd
+        while crowd.time_s < t_s:
+            self._prev = self._cur
+            crowd.step()
+            self._sync_slots()
+            self._cur = _pack(crowd)
+        prev, cur = self._prev, self._cur
+        if cur.time_s <= t_s or prev is cur:
+            values, present = cur.values, cur.person_id >= 0
+        else:
+            a = (t_s - prev.time_s) / STEP_S
+            values = prev.values + (cur.values - prev.values) * a
+            present = (cur.person_id >= 0) & (prev.person_id == cur.person_id)
+        qpos = self._qpos(values, t_s, cur.person_id)
+        qpos[~present, 2] = PARK_Z_M
+        self.data.qpos[:] = qpos.ravel()
+        mujoco.mj_kinematics(self.model, self.data)
+        self._present = present
+        order = np.nonzero(present)[0]
+        order = order[np.argsort(cur.person_id[order], kind="stable")]
+        poses = self.data.site_xpos[self._kp_sites[order]]
+        return PoseTruth(t_s=float(t_s), person_ids=cur.person_id[order].copy(), poses=poses)
+
+    def geom_person_ids(self) -> np.ndarray:
+        """(ngeom,) int64: the person each geom's body belongs to now; -1 for store geoms and parked bodies."""
+        slot = self._geom_slot
+        ids = np.where(self._present, self._person_ids, -1)
+        return np.where(slot >= 0, ids[np.maximum(slot, 0)], -1).astype(np.int64)
+
+    def geom_body_ids(self) -> np.ndarray:
+        """(ngeom,) int64: index in `sim.humanoid.BODIES` of each geom's body, -1 for store geoms.
+
+        With `geom_person_ids` this says which limb of whom a ray hit, in the numbering of `keypoint_body_ids`.
+        """
+        return self._geom_local.copy()
+
+    def keypoint_body_ids(self) -> np.ndarray:
+        """(17,) int64: index in `sim.humanoid.BODIES` (0 pelvis, 1 torso, 2 neck, 3 head, 4-6 left upper arm,
+        forearm, hand, 7-9 right, 10-12 left thigh, shin, foot, 13-15 right) of the body each COCO keypoint
+        site hangs on: face points on the head, a shoulder on its upper arm, an elbow on its forearm, a
+        wrist on its hand, a hip on its thigh, a knee on its shin, an ankle on its foot. The joint keypoints
+        sit at the joint centre, so they may also lie inside the parent segment's geom (the shoulder in the
+        torso's ellipsoid, the hip in the pelvis capsule, the knee in the thigh capsule, and so on);
+        `sim.humanoid.KEYPOINT_PARENT_BODY` gives that parent.
+        """
+        return hm.KEYPOINT_BODY.copy()
+
+    def height_m(self, person_id: int) -> float:
+        """Body height of a person who has appeared so far. Raises KeyError for an unknown id."""
+        return self._heights[int(person_id)]
+
+    def activities(self) -> dict[int, Activity]:
+        """What each person present at the last `advance` is doing."""
+        acts = self.crowd.activities()
+        return {int(self._person_ids[s]): Activity(int(acts[s])) for s in np.nonzero(self._present)[0]}
+
+    # -- posing ------------------------------------------------------------------------------------
+
+    def _qpos(self, v: np.ndarray, t: float, person_id: np.ndarray) -> np.ndarray:
+        """(S, NQ) joint positions from interpolated crowd values (S, F) at time t."""
+        S = self.slots
+        H = self._slot_height
+        q = np.zeros((S, hm.NQ))
+        pos, heading, phase = v[:, 0:2], v[:, 2], v[:, 3]
+        feet = v[:, 5:9].reshape(S, 2, 2)
+        swing_len = v[:, 9:11]
+        reach, reach_h, reach_side, speed = v[:, 11], v[:, 12], v[:, 13], v[:, 14]
+        c, s = np.cos(heading), np.sin(heading)
+        left = np.stack([-s, c], axis=-1)
+        walk = np.clip(speed / 0.6, 0.0, 1.0)
+        stand = 1.0 - walk
+        two_pi_phase = 2 * math.pi * phase
+        # Pelvis over the stance foot while walking, slow weight shift while standing.
+        sway = (0.02 * walk * np.sin(two_pi_phase)
+                + SWAY_M * stand * np.sin(2 * math.pi * SWAY_HZ * t + 2.4 * person_id))
+        pelvis_xy = pos + left * sway[:, None]
+        hw = hm.HIP_HALF_WIDTH * H
+        hips = pelvis_xy[:, None, :] + left[:, None, :] * (hw[:, None] * np.array([1.0, -1.0]))[..., None]
+        # Foot height: lifted in swing, in proportion to how far the foot travels.
+        p = (phase[:, None] + np.array([0.0, 0.5])) % 1.0
+        progress = np.clip((p - STANCE_FRACTION) / (1 - STANCE_FRACTION), 0.0, 1.0)
+        lift = SWING_LIFT_M * np.minimum(1.0, swing_len / FULL_LIFT_STRIDE_M) * np.sin(math.pi * progress)
+        ankle_h = hm.ANKLE_HEIGHT * H
+        ankle_z = ankle_h[:, None] + lift
+        rel = feet - hips  # (S, 2, 2) world xy
+        horiz2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
+        thigh, shin = hm.THIGH * H, hm.SHIN * H
+        reach_len = (thigh + shin) * hm.MAX_LEG_STRETCH * 0.995
+        z_leg = ankle_z + np.sqrt(np.maximum(reach_len[:, None] ** 2 - horiz2, 0.0))
+        # The pelvis drops to keep a far foot in reach, but only so far (below that the foot slides).
+        z = np.clip(z_leg.min(axis=1), hm.HIP_HEIGHT * H * LOWEST_HIP_FRACTION, hm.HIP_HEIGHT * H * STAND_HIP_FRACTION)
+        q[:, 0:2] = pelvis_xy
+        q[:, 2] = z
+        q[:, 3] = np.cos(heading / 2)
+        q[:, 6] = np.sin(heading / 2)
+        h = q[:, 7:]
+        # Legs: ankle target in the pelvis frame, two-link inverse kinematics.
+        dx = rel[..., 0] * c[:, None] + rel[..., 1] * s[:, None]
+        dy = -rel[..., 0] * s[:, None] + rel[..., 1] * c[:, None]
+        dz = ankle_z - z[:, None]
+        d = np.stack([dx, dy, dz], axis=-1)
+        for leg, (side, sign) in enumerate((("left", 1.0), ("right", -1.0))):
+            abd, flex, knee = hm.leg_ik(d[:, leg], thigh, shin, sign)
+            h[:, hm.J[f"{side}_hip_abd"]] = abd
+            h[:, hm.J[f"{side}_hip_flex"]] = flex
+            h[:, hm.J[f"{side}_knee"]] = knee
+            # Foot flat on the floor, toes down a little in swing.
+            h[:, hm.J[f"{side}_ankle"]] = flex - knee + 0.25 * np.sin(math.pi * progress[:, leg]) * (lift[:, leg] > 0)
+        # Trunk: slight forward lean with speed, counter-rotation with the stride, bend for low shelves.
+        low = np.clip((0.8 - reach_h) / 0.45, 0.0, 1.0) * reach
+        h[:, hm.J["spine_flex"]] = 0.06 * speed + 0.55 * low
+        h[:, hm.J["spine_twist"]] = -0.08 * walk * np.cos(two_pi_phase)
+        h[:, hm.J["spine_lateral"]] = 0.03 * walk * np.sin(two_pi_phase)
+        h[:, hm.J["neck_flex"]] = 0.12 + 0.35 * low - 0.06 * speed
+        look = 0.5 * stand * (1.0 - np.minimum(reach * 4, 1.0)) * np.sin(2 * math.pi * 0.11 * t + 1.7 * person_id)
+        h[:, hm.J["neck_twist"]] = look
+        # Arms: swing opposite to the legs when walking; one arm reaches to the shelf when browsing.
+        swing = 0.4 * np.minimum(speed / 1.3, 1.2) * np.cos(two_pi_phase)
+        shoulder_z = z + (hm.LUMBAR_ABOVE_HIP + hm.SHOULDER_ABOVE_LUMBAR) * H * np.cos(0.55 * low)
+        arm_len = (hm.UPPER_ARM + hm.FOREARM + 0.05) * H
+        reach_flex = np.arccos(np.clip((shoulder_z - reach_h) / arm_len, -1.0, 1.0))
+        for side, sign in (("left", 1.0), ("right", -1.0)):
+            r = reach * (reach_side == sign)
+            base = -sign * swing
+            h[:, hm.J[f"{side}_shoulder_flex"]] = (1 - r) * base + r * reach_flex
+            h[:, hm.J[f"{side}_shoulder_abd"]] = 0.07 + 0.08 * r
+            h[:, hm.J[f"{side}_elbow"]] = (1 - r) * (0.25 + 0.25 * np.maximum(base, 0.0)) + r * 0.12
+            h[:, hm.J[f"{side}_wrist"]] = 0.1 + 0.25 * r
+        np.clip(h, self._lo, self._hi, out=h)
+        return q
+
+
+def measure(scenario, seed: int | None = None, minutes: float = 10.0, rate_hz: float = 100.0) -> dict:
+    """Figures of the issue for one scenario: clearances, gait, activity shares, arrivals and speed.
+
+    Simulates `minutes` of the crowd, posing everybody at `rate_hz`. Returns a flat dict (see keys).
+    """
+    from sim.rng import child_rng
+    from sim.store import rect_distance
+
+    seed = scenario.seed if seed is None else seed
+    world = World(scenario, child_rng(seed, "crowd"))
+    n = int(round(minutes * 60 * rate_hz))
+    obstacles = world.store.obstacles
+    min_pair = math.inf
+    min_shelf = math.inf
+    act_counts = np.zeros(len(Activity))
+    speeds = []
+    stance_speed_sum = 0.0
+    stance_count = 0
+    prev_ankles: dict[int, np.ndarray] = {}
+    la, ra = COCO17.index("left_ankle"), COCO17.index("right_ankle")
+    lh, rh = COCO17.index("left_hip"), COCO17.index("right_hip")
+    t0 = time.perf_counter()
+    pose_time = 0.0
+    for k in range(n + 1):
+        t = k / rate_hz
+        p0 = time.perf_counter()
+        truth = world.advance(t)
+        pose_time += time.perf_counter() - p0
+        if not len(truth.person_ids):
+            continue
+        pelvis = (truth.poses[:, lh, :2] + truth.poses[:, rh, :2]) / 2
+        if len(pelvis) > 1:
+            dd = np.linalg.norm(pelvis[:, None] - pelvis[None], axis=-1)
+            np.fill_diagonal(dd, np.inf)
+            min_pair = min(min_pair, float(dd.min()))
+        for ob in obstacles:
+            min_shelf = min(min_shelf, float(rect_distance(pelvis, ob.center, ob.half, ob.yaw).min()))
+        acts = world.activities()
+        for a in acts.values():
+            act_counts[a] += 1
+        for i, pid in enumerate(truth.person_ids):
+            pid = int(pid)
+            ankles = truth.poses[i, [la, ra]]
+            if pid in prev_ankles:
+                v = np.linalg.norm(ankles[:, :2] - prev_ankles[pid][:, :2], axis=1) * rate_hz
+                rest = hm.ANKLE_HEIGHT * world.height_m(pid)
+                grounded = (ankles[:, 2] < rest + 0.01) & (prev_ankles[pid][:, 2] < rest + 0.01)
+                stance_speed_sum += float(v[grounded].sum())
+                stance_count += int(grounded.sum())
+            prev_ankles[pid] = ankles
+        if k % int(rate_hz) == 0:
+            crowd = world.crowd
+            for s in np.nonzero(world._present)[0]:
+                if crowd.agents[s].activity == Activity.WALK:
+                    speeds.append(float(np.hypot(*crowd.vel[s])))
+    wall = time.perf_counter() - t0
+    sim_s = n / rate_hz
+    speeds = np.array(speeds) if speeds else np.zeros(1)
+    share = act_counts / max(act_counts.sum(), 1)
+    return {
+        "scenario": scenario.name,
+        "simulated_s": sim_s,
+        "people": scenario.crowd.people,
+        "min_pelvis_distance_m": min_pair,
+        "min_pelvis_shelf_distance_m": min_shelf if obstacles else None,
+        "mean_stance_foot_speed_m_s": stance_speed_sum / max(stance_count, 1),
+        "share_walk": float(share[Activity.WALK]),
+        "share_stand": float(share[Activity.STAND]),
+        "share_browse": float(share[Activity.BROWSE]),
+        "share_checkout": float(share[Activity.CHECKOUT]),
+        "arrivals": world.crowd.arrivals,
+        "departures": world.crowd.departures,
+        "walk_speed_p10_m_s": float(np.percentile(speeds, 10)),
+        "walk_speed_median_m_s": float(np.median(speeds)),
+        "walk_speed_p90_m_s": float(np.percentile(speeds, 90)),
+        "pose_rate_hz": rate_hz,
+        "realtime_factor": sim_s / wall,
+        "realtime_factor_posing_only": sim_s / max(wall - (wall - pose_time), 1e-9),
+        "advance_mean_ms": pose_time / (n + 1) * 1e3,
+    }
