@@ -20,7 +20,6 @@ from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
-from foxglove_schemas_protobuf.Point2_pb2 import Point2
 from foxglove_schemas_protobuf.Point3_pb2 import Point3
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.Pose_pb2 import Pose
@@ -202,16 +201,54 @@ def camera_calibration(camera: Camera, t_ns: int = 0) -> CameraCalibration:
     )
 
 
-def _skeleton_lines(pose: np.ndarray, skeleton: Skeleton) -> list[Point3]:
-    """LINE_LIST points of the bones whose both ends are known. pose: (J, 3) metres."""
-    known = np.isfinite(pose).all(axis=1).tolist()
-    xyz = pose.tolist()
-    return [
-        Point3(x=xyz[i][0], y=xyz[i][1], z=xyz[i][2])
-        for a, b in skeleton.bones
-        if known[a] and known[b]
-        for i in (a, b)
-    ]
+# Repeated Point2/Point3 fields are written straight in protobuf wire format with numpy: building one
+# Python message per point was most of the cost of writing a recording. Each element is the field's tag
+# (wire type 2), the length, then x, y (, z) as fixed64 fields 1, 2 (, 3).
+_POINT2_WIRE = np.dtype([("tag", "u1"), ("len", "u1"), ("kx", "u1"), ("x", "<f8"), ("ky", "u1"), ("y", "<f8")])
+_POINT3_WIRE = np.dtype([("tag", "u1"), ("len", "u1"), ("kx", "u1"), ("x", "<f8"), ("ky", "u1"), ("y", "<f8"),
+                         ("kz", "u1"), ("z", "<f8")])
+
+
+def encode_points(field_number: int, points: np.ndarray) -> bytes:
+    """Wire bytes of `repeated foxglove.Point2/Point3 <field_number>` holding `points`, (N, 2) or (N, 3)."""
+    points = np.asarray(points, dtype=np.float64)
+    dims = points.shape[1]
+    out = np.empty(len(points), _POINT2_WIRE if dims == 2 else _POINT3_WIRE)
+    out["tag"] = (field_number << 3) | 2
+    out["len"] = 9 * dims
+    for number, axis in enumerate("xyz"[:dims], start=1):
+        out[f"k{axis}"] = (number << 3) | 1
+        out[axis] = points[:, number - 1]
+    return out.tobytes()
+
+
+def _bone_points(points: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """LINE_LIST endpoints of the bones whose both ends are known: (J, K) -> (2 * bones kept, K)."""
+    bones = np.asarray(skeleton.bones, dtype=np.intp).reshape(-1, 2)
+    known = np.isfinite(points).all(axis=1)
+    kept = bones[known[bones[:, 0]] & known[bones[:, 1]]]
+    return points[kept.ravel()]
+
+
+def _varint(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte, value = value & 0x7F, value >> 7
+        if value:
+            out.append(byte | 0x80)
+        else:
+            out.append(byte)
+            return bytes(out)
+
+
+def _length_delimited(field_number: int, payload: bytes) -> bytes:
+    """Wire bytes of one length-delimited field (an embedded message)."""
+    return _varint((field_number << 3) | 2) + _varint(len(payload)) + payload
+
+
+def _with_points(message, field_number: int, points: np.ndarray):
+    """`message` with its repeated point field `field_number` set to `points` (parsed from wire bytes)."""
+    return type(message).FromString(message.SerializeToString() + encode_points(field_number, points))
 
 
 def _skeleton_entity(
@@ -219,15 +256,11 @@ def _skeleton_entity(
 ) -> SceneEntity:
     known = pose[np.all(np.isfinite(pose), axis=1)]
     entity = SceneEntity(timestamp=timestamp(t_ns), frame_id=WORLD_FRAME, id=entity_id)
-    entity.lines.append(
-        LinePrimitive(
-            type=LinePrimitive.LINE_LIST,
-            pose=Pose(orientation=Quaternion(w=1.0)),
-            thickness=thickness_m,
-            points=_skeleton_lines(pose, skeleton),
-            color=rgba,
-        )
+    line = LinePrimitive(
+        type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)), thickness=thickness_m, color=rgba,
     )
+    entity.lines.append(_with_points(line, LinePrimitive.DESCRIPTOR.fields_by_name["points"].number,
+                                     _bone_points(pose, skeleton)))
     if len(known):
         top = known[np.argmax(known[:, 2])]
         entity.texts.append(
@@ -285,31 +318,36 @@ def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) 
     behind each detection (grey for false positives)."""
     frame, truth = camera_frame.frame, camera_frame.truth
     stamp = timestamp(t_ns)
-    points = []
-    known_all = np.isfinite(frame.keypoints_px).all(axis=2).tolist()  # (D, J)
+    points_field = PointsAnnotation.DESCRIPTOR.fields_by_name["points"].number
+    annotations_field = ImageAnnotations.DESCRIPTOR.fields_by_name["points"].number
+    kp = frame.keypoints_px  # (D, J, 2)
+    bones = np.asarray(skeleton.bones, dtype=np.intp).reshape(-1, 2)
+    known = np.isfinite(kp).all(axis=2)  # (D, J)
+    ends_known = np.repeat(known[:, bones[:, 0]] & known[:, bones[:, 1]], 2, axis=1)  # (D, 2 * bones)
+    # All detections' points encoded at once, then cut per detection (every element has the same size).
+    bone_blob = encode_points(points_field, kp[:, bones.ravel()][ends_known])
+    joint_blob = encode_points(points_field, kp[known])
+    size = _POINT2_WIRE.itemsize
+    bone_end = np.cumsum(ends_known.sum(axis=1)) * size
+    joint_end = np.cumsum(known.sum(axis=1)) * size
     person_ids = np.asarray(truth.person_ids).tolist()
-    for d, kp in enumerate(frame.keypoints_px.tolist()):
-        known = known_all[d]
+    body = bytearray()
+    for d in range(frame.num_detections):
         pid = person_ids[d] if d < len(person_ids) else -1
         rgba = truth_color(pid) if pid >= 0 else color(FALSE_POSITIVE_COLOR)
         rgba.a = 1.0
-        bones = [Point2(x=kp[i][0], y=kp[i][1]) for a, b in skeleton.bones if known[a] and known[b] for i in (a, b)]
-        if bones:
-            points.append(
-                PointsAnnotation(
-                    timestamp=stamp, type=PointsAnnotation.LINE_LIST, points=bones, outline_color=rgba,
-                    thickness=DETECTION_LINE_PX,
-                )
-            )
-        joints = [Point2(x=p[0], y=p[1]) for p, ok in zip(kp, known) if ok]
-        if joints:
-            points.append(
-                PointsAnnotation(
-                    timestamp=stamp, type=PointsAnnotation.POINTS, points=joints, outline_color=rgba,
-                    fill_color=rgba, thickness=2 * DETECTION_LINE_PX,
-                )
-            )
-    return ImageAnnotations(points=points)
+        bone_start = bone_end[d - 1] if d else 0
+        if bone_end[d] > bone_start:
+            line = PointsAnnotation(timestamp=stamp, type=PointsAnnotation.LINE_LIST, outline_color=rgba,
+                                    thickness=DETECTION_LINE_PX)
+            body += _length_delimited(annotations_field, line.SerializeToString() + bone_blob[bone_start:bone_end[d]])
+        joint_start = joint_end[d - 1] if d else 0
+        if joint_end[d] > joint_start:
+            dots = PointsAnnotation(timestamp=stamp, type=PointsAnnotation.POINTS, outline_color=rgba,
+                                    fill_color=rgba, thickness=2 * DETECTION_LINE_PX)
+            body += _length_delimited(annotations_field,
+                                      dots.SerializeToString() + joint_blob[joint_start:joint_end[d]])
+    return ImageAnnotations.FromString(bytes(body))
 
 
 def file_descriptor_set(descriptor: Descriptor) -> bytes:

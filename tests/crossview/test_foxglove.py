@@ -125,6 +125,11 @@ def test_image_annotations_hold_the_detected_pixels():
     joints = [a for a in annotations.points if a.type == a.POINTS]
     assert [len(a.points) for a in joints] == [J, J - 1]
     np.testing.assert_array_equal([[p.x, p.y] for p in joints[1].points], np.delete(kp[1], 3, axis=0))
+    lines = [a for a in annotations.points if a.type == a.LINE_LIST]
+    expected = [kp[1, i] for a, b in COCO17.bones if 3 not in (a, b) for i in (a, b)]
+    np.testing.assert_array_equal([[p.x, p.y] for p in lines[1].points], expected)
+    assert len(lines[0].points) == 2 * len(COCO17.bones)
+    assert annotations.points[0].timestamp.nanos == 130_000_000
     grey = joints[1].outline_color
     assert (grey.r, grey.g, grey.b) == foxglove.FALSE_POSITIVE_COLOR[:3]
 
@@ -163,3 +168,26 @@ def test_layout_is_valid_and_names_channels_the_recording_writes():
             named |= {panel["imageMode"]["calibrationTopic"], *panel["imageMode"]["annotations"]}
     named.add(panels["RawMessages!header"]["topicPath"])
     assert named <= written
+
+
+@pytest.mark.parametrize("dims", [2, 3])
+def test_wire_encoded_points_equal_points_built_by_protobuf(dims):
+    from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+    from foxglove_schemas_protobuf.Point2_pb2 import Point2
+    from foxglove_schemas_protobuf.Point3_pb2 import Point3
+    from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+
+    points = np.random.default_rng(dims).normal(0, 100, (7, dims))
+    points[2] = 0.0  # proto3 leaves zeros out when it builds the message; the parse must agree anyway
+    points[3, 0] = -0.0
+    if dims == 2:
+        reference = PointsAnnotation(thickness=2.0, points=[Point2(x=x, y=y) for x, y in points.tolist()])
+        fast = PointsAnnotation.FromString(PointsAnnotation(thickness=2.0).SerializeToString()
+                                           + foxglove.encode_points(3, points))
+    else:
+        reference = LinePrimitive(thickness=2.0, points=[Point3(x=x, y=y, z=z) for x, y, z in points.tolist()])
+        fast = LinePrimitive.FromString(LinePrimitive(thickness=2.0).SerializeToString()
+                                        + foxglove.encode_points(5, points))
+    assert fast == reference
+    got = np.array([[p.x, p.y] + ([p.z] if dims == 3 else []) for p in fast.points])
+    assert got.tobytes() == points.tobytes()  # bit for bit, -0.0 included
