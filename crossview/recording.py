@@ -399,9 +399,11 @@ class _AtomicMcapWriter:
     def __init__(self, path, kind: str, header_doc: dict, metadata: dict[str, str], chunk_size: int):
         self.path = Path(path)
         self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        self._file = open(self._tmp, "wb")  # noqa: SIM115 -- closed in close()/abort()
+        try:
+            self._file = open(self._tmp, "wb")  # closed in close() or abort()
+        except OSError as e:
+            raise RecordingError(f"{self.path}: cannot write here: {e.strerror or e}") from None
         self._done = False
-        self.summary: dict = {}
         try:
             self._writer = Writer(
                 self._file, chunk_size=chunk_size, compression=COMPRESSION, enable_data_crcs=True,

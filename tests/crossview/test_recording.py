@@ -491,3 +491,9 @@ def test_reading_memory_does_not_grow_with_the_recording(tmp_path):
     # Six times the file, about the same memory: one chunk at a time.
     assert long_size > 5 * short_size and long_count > 5 * short_count
     assert long_peak < 1.5 * short_peak
+
+
+def test_unwritable_destination_is_a_clear_error(tmp_path, world):
+    cameras, _ = world
+    with pytest.raises(RecordingError, match=r"no-such-folder/rec\.mcap: cannot write here"):
+        RecordingWriter(tmp_path / "no-such-folder" / "rec.mcap", make_header(), cameras, BOXES)
