@@ -8,6 +8,7 @@ z forward) to MuJoCo's (looks down -z, y up).
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 from dataclasses import dataclass
@@ -273,6 +274,11 @@ def project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.nd
 
 
 def monotonic_radius(dist: np.ndarray) -> float:
+    return _monotonic_radius(tuple(float(d) for d in dist))
+
+
+@functools.lru_cache(maxsize=256)
+def _monotonic_radius(dist: tuple[float, ...]) -> float:
     """Largest undistorted normalised radius up to which the radial distortion keeps growing.
 
     Beyond it a strong barrel lens folds far-away points back into the image, so projections there

@@ -201,23 +201,12 @@ def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
     Returns:
         (...,) size in pixels (NaN when no joint is known).
     """
-    with np.errstate(invalid="ignore"), _all_nan_ok():
-        extent = np.nanmax(keypoints_px, axis=-2) - np.nanmin(keypoints_px, axis=-2)
-    return np.max(extent, axis=-1)
-
-
-class _all_nan_ok:
-    """Silences numpy's all-NaN-slice warnings inside a block."""
-
-    def __enter__(self):
-        import warnings
-
-        self._catch = warnings.catch_warnings()
-        self._catch.__enter__()
-        warnings.simplefilter("ignore", RuntimeWarning)
-
-    def __exit__(self, *exc):
-        return self._catch.__exit__(*exc)
+    known = ~np.isnan(keypoints_px)
+    high = np.where(known, keypoints_px, -np.inf).max(axis=-2, initial=-np.inf)
+    low = np.where(known, keypoints_px, np.inf).min(axis=-2, initial=np.inf)
+    extent = high - low
+    size = np.max(extent, axis=-1, initial=-np.inf)
+    return np.where(np.isfinite(size), size, np.nan)
 
 
 def left_right_permutation(skeleton: Skeleton) -> np.ndarray:
