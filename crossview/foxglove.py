@@ -9,6 +9,7 @@ nanoseconds (the recording converts seconds in one place); poses are metres in t
 from __future__ import annotations
 
 import colorsys
+import functools
 import math
 from collections.abc import Iterable, Sequence
 
@@ -313,6 +314,17 @@ def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> S
     return _replace_all(t_ns, entities)
 
 
+@functools.lru_cache(maxsize=1024)
+def _detection_styles(person_id: int) -> tuple[bytes, bytes]:
+    """Serialized type, colours and thickness of a detection's bones and joints (-1: false positive)."""
+    rgba = truth_color(person_id) if person_id >= 0 else color(FALSE_POSITIVE_COLOR)
+    rgba.a = 1.0
+    bones = PointsAnnotation(type=PointsAnnotation.LINE_LIST, outline_color=rgba, thickness=DETECTION_LINE_PX)
+    joints = PointsAnnotation(type=PointsAnnotation.POINTS, outline_color=rgba, fill_color=rgba,
+                              thickness=2 * DETECTION_LINE_PX)
+    return bones.SerializeToString(), joints.SerializeToString()
+
+
 def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> ImageAnnotations:
     """One camera frame's 2D detections: keypoints and bones in pixels, coloured by the true person
     behind each detection (grey for false positives)."""
@@ -331,22 +343,20 @@ def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) 
     bone_end = np.cumsum(ends_known.sum(axis=1)) * size
     joint_end = np.cumsum(known.sum(axis=1)) * size
     person_ids = np.asarray(truth.person_ids).tolist()
+    stamp_field = _length_delimited(PointsAnnotation.DESCRIPTOR.fields_by_name["timestamp"].number,
+                                    stamp.SerializeToString())
+    bone_end, joint_end = bone_end.tolist(), joint_end.tolist()
     body = bytearray()
     for d in range(frame.num_detections):
         pid = person_ids[d] if d < len(person_ids) else -1
-        rgba = truth_color(pid) if pid >= 0 else color(FALSE_POSITIVE_COLOR)
-        rgba.a = 1.0
+        bones_style, joints_style = _detection_styles(max(pid, -1))
         bone_start = bone_end[d - 1] if d else 0
         if bone_end[d] > bone_start:
-            line = PointsAnnotation(timestamp=stamp, type=PointsAnnotation.LINE_LIST, outline_color=rgba,
-                                    thickness=DETECTION_LINE_PX)
-            body += _length_delimited(annotations_field, line.SerializeToString() + bone_blob[bone_start:bone_end[d]])
+            body += _length_delimited(annotations_field, stamp_field + bones_style + bone_blob[bone_start:bone_end[d]])
         joint_start = joint_end[d - 1] if d else 0
         if joint_end[d] > joint_start:
-            dots = PointsAnnotation(timestamp=stamp, type=PointsAnnotation.POINTS, outline_color=rgba,
-                                    fill_color=rgba, thickness=2 * DETECTION_LINE_PX)
             body += _length_delimited(annotations_field,
-                                      dots.SerializeToString() + joint_blob[joint_start:joint_end[d]])
+                                      stamp_field + joints_style + joint_blob[joint_start:joint_end[d]])
     return ImageAnnotations.FromString(bytes(body))
 
 
