@@ -977,6 +977,9 @@ def info(path, allow_truncated: bool = False) -> dict:
         "messages": counts,
     }
     if kind == KIND_RECORDING:
+        frames = sum(n for topic, n in counts.items() if topic.startswith("/cameras/") and topic.endswith("/frame"))
+        result["camera_frames"] = frames
+        result["bytes_per_camera_frame"] = stream.size / frames if frames else None
         result["scenario_duration_s"] = doc["duration_s"]
         result["boxes"] = len(doc["boxes"])
     else:
@@ -993,12 +996,13 @@ def format_info(d: dict) -> str:
         f"written by crossview-testbed {d['software_version']}" + ("  [TRUNCATED: readable prefix only]"
                                                                     if d["truncated"] else ""),
         f"  scenario   {d['scenario_name']}  seed {d['seed']}  digest {d['scenario_digest'][:12]}",
-        f"  size       {d['size_bytes']:,} bytes",
+        f"  size       {d['size_bytes']:,} bytes"
+        + (f" ({d['bytes_per_camera_frame']:,.0f} per camera-frame)" if d.get("bytes_per_camera_frame") else ""),
         f"  time       {d['start_s']:.3f} .. {d['end_s']:.3f} s  (duration {d['duration_s']:.3f} s)",
         f"  cameras    {len(d['cameras'])}: {', '.join(d['cameras'])}",
     ]
     if d["kind"] == KIND_RECORDING:
-        lines.append(f"  people     {d['people']}")
+        lines.append(f"  people     {d['people']}, camera-frames {d['camera_frames']:,}")
         lines.append(f"  boxes      {d['boxes']}")
     else:
         lines.append(f"  tracker    {d['method']} (preset {d['preset']}), {d['targets']} target ids")
@@ -1006,8 +1010,16 @@ def format_info(d: dict) -> str:
             lines.append("  summary    " + ", ".join(f"{k}={v}" for k, v in d["summary"].items()))
     lines.append(f"  skeleton   {d['skeleton']}")
     lines.append(f"  messages   {sum(d['messages'].values()):,} on {len(d['messages'])} channels")
-    width = max((len(t) for t in d["messages"]), default=0)
-    lines += [f"    {topic:<{width}}  {n:>9,}" for topic, n in d["messages"].items()]
+    # Per-camera channels are summed over the cameras: /cameras/*/frame and so on.
+    grouped: dict[str, list[int]] = {}
+    for topic, n in d["messages"].items():
+        parts = topic.split("/")
+        key = f"/cameras/*/{parts[3]}" if len(parts) == 4 and parts[1] == "cameras" else topic
+        grouped.setdefault(key, []).append(n)
+    width = max((len(t) for t in grouped), default=0)
+    for topic, ns in grouped.items():
+        per = f"  ({len(ns)} channels)" if "*" in topic else ""
+        lines.append(f"    {topic:<{width}}  {sum(ns):>9,}{per}")
     return "\n".join(lines)
 
 
