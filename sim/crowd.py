@@ -25,13 +25,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
-from sim.store import StoreGeometry, rect_distance
+from sim.store import StoreGeometry
 
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
-STEP_S = 0.05
+STEP_S = 0.1
 # Hard limits the crowd keeps at every step (interpolation between steps loses a few centimetres at most).
 SEPARATION_M = 0.5
-SHELF_CLEARANCE_M = 0.3
+SHELF_CLEARANCE_M = 0.32
 WALL_CLEARANCE_M = 0.3
 # Distance people like to keep when passing each other.
 COMFORT_M = 0.75
@@ -138,12 +138,13 @@ def cadence_steps_s(speed_m_s: np.ndarray, height_m: np.ndarray) -> np.ndarray:
 class _Agent:
     """Per-person bookkeeping that is not numeric state (goals, paths, timers)."""
 
-    __slots__ = ("activity", "path", "goal_kind", "goal", "goal_heading", "until", "depart_at", "reaches",
+    __slots__ = ("activity", "path", "rest", "goal_kind", "goal", "goal_heading", "until", "depart_at", "reaches",
                  "stuck", "leaving", "in_door", "checked_out")
 
     def __init__(self):
         self.activity = Activity.WALK
-        self.path: list[np.ndarray] = []
+        self.path: list[tuple[float, float]] = []
+        self.rest: list[float] = []  # path length after each waypoint
         self.goal_kind = Activity.STAND
         self.goal: np.ndarray | None = None
         self.goal_heading: float | None = None
@@ -330,9 +331,12 @@ class Crowd:
                     goal = self.pos[s].copy()
         start = first[-1] if first else self.pos[s]
         path = store.plan(start, goal)
-        agent.path = (first or []) + path
+        path = (first or []) + path
         if agent.leaving and kind == Activity.WALK:
-            agent.path.append(store.exit.outside)
+            path.append(store.exit.outside)
+        agent.path = [(float(x), float(y)) for x, y in path]
+        seg = [math.hypot(b[0] - a[0], b[1] - a[1]) for a, b in zip(agent.path[:-1], agent.path[1:])]
+        agent.rest = [sum(seg[k:]) for k in range(len(agent.path))]
         agent.goal = np.asarray(goal, float)
         agent.goal_kind = kind
         agent.goal_heading = heading
@@ -345,6 +349,7 @@ class Crowd:
         rng = self.rng
         agent.activity = kind
         agent.path = []
+        agent.rest = []
         if kind == Activity.STAND:
             agent.until = self.time_s + rng.uniform(*cfg.stand_s)
         elif kind in (Activity.BROWSE, Activity.CHECKOUT):
@@ -378,18 +383,20 @@ class Crowd:
                                       if self._pending_arrivals else math.inf)
         active = self.person_id >= 0
         S = self.slots
-        # 2. Wishes.
+        # 2. Wishes: walk the path, or stand and face the goal.
         want = np.zeros((S, 2))
         want_heading = self.heading.copy()
-        for s in np.nonzero(active)[0]:
+        speed_now = np.hypot(self.vel[:, 0], self.vel[:, 1])
+        for s in np.nonzero(active)[0].tolist():
             agent = self.agents[s]
+            px, py = self.pos[s]
             if agent.activity == Activity.WALK:
                 while agent.path:
-                    target = agent.path[0]
-                    d = np.linalg.norm(target - self.pos[s])
-                    last = len(agent.path) == 1
-                    if d < (0.15 if last else 0.35):
+                    tx, ty = agent.path[0]
+                    d = math.hypot(tx - px, ty - py)
+                    if d < (0.15 if len(agent.path) == 1 else 0.35):
                         agent.path.pop(0)
+                        agent.rest.pop(0)
                         continue
                     break
                 if not agent.path:
@@ -399,45 +406,40 @@ class Crowd:
                         continue
                     self._start_activity(s, agent.goal_kind)
                 else:
-                    target = agent.path[0]
-                    delta = target - self.pos[s]
-                    d = float(np.hypot(delta[0], delta[1]))
-                    remaining = d + sum(np.linalg.norm(b - a) for a, b in zip(agent.path[:-1], agent.path[1:]))
-                    speed = min(self.speed_pref[s], 0.35 + 0.8 * remaining)
-                    want[s] = delta / max(d, 1e-9) * speed
-                    agent.stuck = agent.stuck + dt if np.hypot(*self.vel[s]) < 0.15 else 0.0
+                    speed = min(self.speed_pref[s], 0.35 + 0.8 * (d + agent.rest[0]))
+                    want[s] = ((tx - px) / d * speed, (ty - py) / d * speed)
+                    agent.stuck = agent.stuck + dt if speed_now[s] < 0.15 else 0.0
                     if agent.stuck > STUCK_S:
                         self._choose_goal(s)
             if agent.activity != Activity.WALK:
                 if agent.goal_heading is not None:
                     want_heading[s] = agent.goal_heading
                 if t >= agent.until:
-                    if agent.activity == Activity.CHECKOUT:
-                        agent.goal = self.store.exit.inside
                     self._choose_goal(s)
         # 3. Local avoidance against predicted close passes.
         idx = np.nonzero(active)[0]
         if len(idx) > 1:
-            want[idx] += self._avoid(self.pos[idx], want[idx], self.vel[idx])
+            # People standing still hold their place; walkers steer around them.
+            walking = np.array([self.agents[s].activity == Activity.WALK for s in idx.tolist()])
+            w = want[idx] + self._avoid(self.pos[idx], want[idx], self.vel[idx]) * walking[:, None]
             cap = self.speed_pref[idx] * 1.1
-            norm = np.hypot(want[idx, 0], want[idx, 1])
-            want[idx] *= np.minimum(1.0, cap / np.maximum(norm, 1e-9))[:, None]
+            norm = np.hypot(w[:, 0], w[:, 1])
+            want[idx] = w * np.minimum(1.0, cap / np.maximum(norm, 1e-9))[:, None]
         # 4. Integration with bounded acceleration.
         dv = want - self.vel
         dvn = np.hypot(dv[:, 0], dv[:, 1])
         dv *= np.minimum(1.0, MAX_ACCEL_M_S2 * dt / np.maximum(dvn, 1e-9))[:, None]
-        old = self.pos.copy()
-        new = self.pos + (self.vel + dv) * dt
+        old = self.pos
+        new = old + (self.vel + dv) * dt
         new[~active] = old[~active]
         # 5. Hard constraints.
         new = self._constrain(new, old, active)
         self.vel = (new - old) / dt
         self.pos = new
         speed = np.hypot(self.vel[:, 0], self.vel[:, 1])
-        moving = speed > 0.3
-        want_heading = np.where(moving, np.arctan2(self.vel[:, 1], self.vel[:, 0]), want_heading)
+        want_heading = np.where(speed > 0.3, np.arctan2(self.vel[:, 1], self.vel[:, 0]), want_heading)
         turn = (want_heading - self.heading + math.pi) % (2 * math.pi) - math.pi
-        turn = np.clip(turn, -MAX_TURN_RAD_S * dt, MAX_TURN_RAD_S * dt)
+        turn = np.minimum(np.maximum(turn, -MAX_TURN_RAD_S * dt), MAX_TURN_RAD_S * dt)
         self.heading = self.heading + turn
         self.omega = turn / dt
         # 6. Gait.
@@ -446,86 +448,89 @@ class Crowd:
 
     def _avoid(self, pos: np.ndarray, want: np.ndarray, vel: np.ndarray) -> np.ndarray:
         """(n, 2) velocity corrections that steer each person off predicted close passes."""
-        r = pos[None, :, :] - pos[:, None, :]  # (i, j): j relative to i
-        w = want[:, None, :] - vel[None, :, :]  # i's wish relative to j's motion
-        ww = np.einsum("ijk,ijk->ij", w, w)
-        tau = np.clip(np.einsum("ijk,ijk->ij", r, w) / np.maximum(ww, 1e-9), 0.0, 2.5)
-        miss = r - w * tau[..., None]
-        md = np.hypot(miss[..., 0], miss[..., 1])
+        rx = pos[None, :, 0] - pos[:, None, 0]  # (i, j): j relative to i
+        ry = pos[None, :, 1] - pos[:, None, 1]
+        wx = want[:, None, 0] - vel[None, :, 0]  # i's wish relative to j's motion
+        wy = want[:, None, 1] - vel[None, :, 1]
+        ww = np.maximum(wx * wx + wy * wy, 1e-9)
+        tau = np.minimum(np.maximum((rx * wx + ry * wy) / ww, 0.0), 2.5)
+        mx, my = rx - wx * tau, ry - wy * tau
+        md = np.sqrt(mx * mx + my * my)
+        d = np.sqrt(rx * rx + ry * ry)
         n = len(pos)
-        np.fill_diagonal(md, np.inf)
+        md.flat[:: n + 1] = np.inf
+        d.flat[:: n + 1] = np.inf
         # Steer away from the point of closest approach, harder when it is close and soon.
-        urgency = np.clip((COMFORT_M - md) / COMFORT_M, 0.0, 1.0) / (0.5 + tau)
-        # Head-on: miss vector ~0, pass on the right.
-        right = np.stack([w[..., 1], -w[..., 0]], axis=-1) / np.sqrt(np.maximum(ww, 1e-9))[..., None]
-        away = np.where((md < 0.05)[..., None], -right, miss / np.maximum(md, 1e-9)[..., None])
-        corr = -(away * urgency[..., None]).sum(axis=1) * 0.9
+        urgency = np.maximum(COMFORT_M - md, 0.0) / (COMFORT_M * (0.5 + tau))
+        # Head-on (miss vector ~0): pass on the right.
+        head_on = md < 0.05
+        inv = np.where(head_on, 1.0 / np.sqrt(ww), 1.0 / np.maximum(md, 1e-9))
+        ax = np.where(head_on, -wy, mx) * inv * urgency
+        ay = np.where(head_on, wx, my) * inv * urgency
         # Short-range push so that nobody leans on a neighbour.
-        d = np.hypot(r[..., 0], r[..., 1])
-        np.fill_diagonal(d, np.inf)
-        push = np.clip((COMFORT_M - d) / (COMFORT_M - SEPARATION_M), 0.0, 1.5)
-        corr -= (r / np.maximum(d, 1e-9)[..., None] * push[..., None]).sum(axis=1) * 0.4
-        del n
-        return corr
+        push = np.minimum(np.maximum(COMFORT_M - d, 0.0) / (COMFORT_M - SEPARATION_M), 1.5) / d
+        cx = -0.9 * ax.sum(axis=1) - 0.4 * (rx * push).sum(axis=1)
+        cy = -0.9 * ay.sum(axis=1) - 0.4 * (ry * push).sum(axis=1)
+        return np.stack([cx, cy], axis=-1)
 
-    def _wall_bounds(self, s: int) -> tuple[np.ndarray, np.ndarray]:
-        """(2,) lower and upper bound of slot s's pelvis position (doors open the wall for people passing)."""
+    def _wall_bounds(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, 2) lower and upper bounds of the pelvis positions of slots idx (doors open the wall)."""
         W, D = self.store.config.width_m, self.store.config.depth_m
-        lo = np.array([WALL_CLEARANCE_M, WALL_CLEARANCE_M])
-        hi = np.array([W - WALL_CLEARANCE_M, D - WALL_CLEARANCE_M])
-        agent = self.agents[s]
-        if agent.in_door or agent.leaving:
+        lo = np.full((len(idx), 2), WALL_CLEARANCE_M)
+        hi = np.tile([W - WALL_CLEARANCE_M, D - WALL_CLEARANCE_M], (len(idx), 1))
+        for k, s in enumerate(idx.tolist()):
+            agent = self.agents[s]
+            if not (agent.in_door or agent.leaving):
+                continue
             for door in (self.store.entrance, self.store.exit):
                 rel = self.pos[s] - door.center
                 n = door.inward
-                tangent = np.array([-n[1], n[0]])
-                along = rel @ tangent
+                along = rel[0] * -n[1] + rel[1] * n[0]
                 if abs(along) <= door.width / 2 - WALL_CLEARANCE_M + 1e-9 and rel @ n < 1.0:
                     axis = 0 if n[0] else 1
-                    reach = 1.2
                     if n[axis] > 0:
-                        lo[axis] = -reach
+                        lo[k, axis] = -1.2
                     else:
-                        hi[axis] = hi[axis] + WALL_CLEARANCE_M + reach
+                        hi[k, axis] += WALL_CLEARANCE_M + 1.2
+            if agent.in_door and (self.pos[s] - self.store.entrance.center) @ self.store.entrance.inward > 0.6:
+                agent.in_door = False
         return lo, hi
+
+    def _violations(self, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """(n,) whether each of the points (n, 2) breaks a hard constraint."""
+        bad = self.store.obstacle_distance(q) < SHELF_CLEARANCE_M
+        bad |= np.any((q < lo - 1e-9) | (q > hi + 1e-9), axis=1)
+        rx = q[None, :, 0] - q[:, None, 0]
+        ry = q[None, :, 1] - q[:, None, 1]
+        d2 = rx * rx + ry * ry
+        d2.flat[:: len(q) + 1] = np.inf
+        return bad | np.any(d2 < SEPARATION_M**2, axis=1)
 
     def _constrain(self, new: np.ndarray, old: np.ndarray, active: np.ndarray) -> np.ndarray:
         """Projects the step onto the hard constraints; anyone still in violation keeps `old`."""
         idx = np.nonzero(active)[0]
         if not len(idx):
             return new
-        lo = np.empty((len(idx), 2))
-        hi = np.empty((len(idx), 2))
-        for k, s in enumerate(idx):
-            lo[k], hi[k] = self._wall_bounds(s)
-        p = new[idx].copy()
-        obstacles = self.store.obstacles
-        for _ in range(3):
-            # Pairs.
-            r = p[None, :, :] - p[:, None, :]
-            d = np.hypot(r[..., 0], r[..., 1])
-            np.fill_diagonal(d, np.inf)
-            overlap = np.clip(SEPARATION_M + 0.01 - d, 0.0, None)
-            if overlap.any():
-                p -= (r / np.maximum(d, 1e-9)[..., None] * overlap[..., None] * 0.5).sum(axis=1)
-            # Shelves: push out along the rectangle's outward normal.
-            for ob in obstacles:
-                p = _push_out(p, ob.center, ob.half, ob.yaw, SHELF_CLEARANCE_M + 0.01)
-            p = np.clip(p, lo, hi)
+        lo, hi = self._wall_bounds(idx)
+        p = new[idx]
+        if self._violations(p, lo, hi).any():
+            for _ in range(3):
+                rx = p[None, :, 0] - p[:, None, 0]
+                ry = p[None, :, 1] - p[:, None, 1]
+                d = np.sqrt(rx * rx + ry * ry)
+                d.flat[:: len(p) + 1] = np.inf
+                f = np.maximum(SEPARATION_M + 0.01 - d, 0.0) * 0.5 / np.maximum(d, 1e-9)
+                if f.any():
+                    p = p - np.stack([(rx * f).sum(axis=1), (ry * f).sum(axis=1)], axis=-1)
+                near = self.store.obstacle_distance(p) < SHELF_CLEARANCE_M + 0.01
+                if near.any():
+                    p[near] = self.store.push_out(p[near], SHELF_CLEARANCE_M + 0.01)
+                p = np.minimum(np.maximum(p, lo), hi)
         out = new.copy()
         out[idx] = p
-        # Final check: any remaining violation reverts that person's step (old positions were valid).
+        # Any remaining violation reverts that person's step (old positions were valid).
         while True:
-            q = out[idx]
-            bad = np.zeros(len(idx), bool)
-            for ob in obstacles:
-                bad |= rect_distance(q, ob.center, ob.half, ob.yaw) < SHELF_CLEARANCE_M
-            bad |= np.any((q < lo - 1e-9) | (q > hi + 1e-9), axis=1)
-            r = q[None, :, :] - q[:, None, :]
-            d = np.hypot(r[..., 0], r[..., 1])
-            np.fill_diagonal(d, np.inf)
-            bad |= np.any(d < SEPARATION_M, axis=1)
-            bad &= np.any(out[idx] != old[idx], axis=1)
+            bad = self._violations(out[idx], lo, hi) & np.any(out[idx] != old[idx], axis=1)
             if not bad.any():
                 return out
             out[idx[bad]] = old[idx[bad]]
@@ -540,33 +545,32 @@ class Crowd:
         old_phase = self.phase
         self.phase = np.where(active, self.phase + rate * dt, self.phase)
         c, s = np.cos(self.heading), np.sin(self.heading)
-        fwd = np.stack([c, s], axis=-1)
-        left = np.stack([-s, c], axis=-1)
-        hw = HIP_HALF_WIDTH * self.height
-        for leg, (offset, side) in enumerate(((0.0, 1.0), (0.5, -1.0))):
-            p_old = (old_phase + offset) % 1.0
-            p_new = (self.phase + offset) % 1.0
-            wrapped = np.floor(self.phase + offset) > np.floor(old_phase + offset)
-            lifted = (p_old < STANCE_FRACTION) & (p_new >= STANCE_FRACTION)
-            # Where the foot lands: ahead by half the stance travel, at the body's predicted position.
-            t_left = (1.0 - p_new) / rate
-            landing = (self.pos + self.vel * t_left[:, None] + fwd * (self.stride * STANCE_FRACTION / 2)[:, None]
-                       + left * (side * hw)[:, None])
-            lift_now = lifted & active
-            self.liftoff[lift_now, leg] = self.feet[lift_now, leg]
-            swing = (p_new >= STANCE_FRACTION) & active
-            progress = (p_new - STANCE_FRACTION) / (1.0 - STANCE_FRACTION)
-            # Touchdown this step: lock the foot where the swing was heading, shifted by the stance already done.
-            touch = wrapped & active
-            landed = (self.pos + fwd * (self.stride * (STANCE_FRACTION / 2 - p_new))[:, None]
-                      + left * (side * hw)[:, None])
-            start = self.liftoff[:, leg]
-            ease = progress**3 * (progress * (progress * 6 - 15) + 10)
-            swing_xy = start + (landing - start) * ease[:, None]
-            self.swing_len[swing, leg] = np.hypot(*(landing[swing] - start[swing]).T)
-            self.feet[swing, leg] = swing_xy[swing]
-            self.feet[touch, leg] = np.where(
-                (self.swing_len[touch, leg] > 1e-3)[:, None], landed[touch], self.feet[touch, leg])
+        offsets = np.array([0.0, 0.5])
+        sides = np.array([1.0, -1.0])
+        p_old = (old_phase[:, None] + offsets) % 1.0  # (S, 2) per leg
+        p_new = (self.phase[:, None] + offsets) % 1.0
+        wrapped = (np.floor(self.phase[:, None] + offsets) > np.floor(old_phase[:, None] + offsets)) & active[:, None]
+        lifted = (p_old < STANCE_FRACTION) & (p_new >= STANCE_FRACTION) & active[:, None]
+        swing = (p_new >= STANCE_FRACTION) & active[:, None]
+        lateral = (HIP_HALF_WIDTH * self.height)[:, None] * sides  # (S, 2)
+        # Where a swinging foot lands: ahead by half the stance travel, at the body's predicted position.
+        ahead = (self.stride * STANCE_FRACTION / 2)[:, None]
+        t_left = (1.0 - p_new) / rate[:, None]
+        lx = self.pos[:, None, 0] + self.vel[:, None, 0] * t_left + c[:, None] * ahead - s[:, None] * lateral
+        ly = self.pos[:, None, 1] + self.vel[:, None, 1] * t_left + s[:, None] * ahead + c[:, None] * lateral
+        landing = np.stack([lx, ly], axis=-1)  # (S, 2, 2)
+        self.liftoff[lifted] = self.feet[lifted]
+        u = (p_new - STANCE_FRACTION) / (1.0 - STANCE_FRACTION)
+        ease = u**3 * (u * (u * 6 - 15) + 10)
+        span = landing - self.liftoff
+        self.swing_len = np.where(swing, np.hypot(span[..., 0], span[..., 1]), self.swing_len)
+        self.feet = np.where(swing[..., None], self.liftoff + span * ease[..., None], self.feet)
+        # Touchdown this step: lock the foot where the swing was heading, less the stance already done.
+        back = self.stride[:, None] * (STANCE_FRACTION / 2 - p_new)
+        tx = self.pos[:, None, 0] + c[:, None] * back - s[:, None] * lateral
+        ty = self.pos[:, None, 1] + s[:, None] * back + c[:, None] * lateral
+        touch = wrapped & (self.swing_len > 1e-3)
+        self.feet = np.where(touch[..., None], np.stack([tx, ty], axis=-1), self.feet)
 
     def _arms(self, active: np.ndarray):
         """Browsing reaches and where people look."""
@@ -587,30 +591,3 @@ class Crowd:
     def activities(self) -> np.ndarray:
         """(S,) `Activity` of each slot (WALK for empty slots)."""
         return np.array([a.activity for a in self.agents], dtype=np.int64)
-
-
-def _push_out(p: np.ndarray, center: np.ndarray, half: np.ndarray, yaw: float, clearance: float) -> np.ndarray:
-    """Moves points (n, 2) out of a yawed rectangle grown by `clearance`, along the nearest face normal."""
-    c, s = math.cos(yaw), math.sin(yaw)
-    d = p - center
-    lx = d[:, 0] * c + d[:, 1] * s
-    ly = -d[:, 0] * s + d[:, 1] * c
-    qx = np.clip(lx, -half[0], half[0])
-    qy = np.clip(ly, -half[1], half[1])
-    ox, oy = lx - qx, ly - qy
-    dist = np.hypot(ox, oy)
-    inside_box = dist < 1e-12
-    if not (np.any(dist < clearance)):
-        return p
-    # Outside the core rectangle but within the clearance: push radially from the nearest point.
-    scale = np.where(dist > 1e-12, clearance / np.maximum(dist, 1e-12), 1.0)
-    nx = np.where(dist < clearance, qx + ox * scale, lx)
-    ny = np.where(dist < clearance, qy + oy * scale, ly)
-    # Inside the core rectangle: leave through the nearest face.
-    if inside_box.any():
-        gx = half[0] - np.abs(lx)
-        gy = half[1] - np.abs(ly)
-        use_x = gx < gy
-        nx = np.where(inside_box & use_x, np.sign(lx + 1e-12) * (half[0] + clearance), nx)
-        ny = np.where(inside_box & ~use_x, np.sign(ly + 1e-12) * (half[1] + clearance), ny)
-    return center + np.stack([nx * c - ny * s, nx * s + ny * c], axis=-1)

@@ -216,6 +216,11 @@ class StoreGeometry:
             obstacles.append(Obstacle("store.checkout_m", np.array(config.checkout_m, float),
                                       np.array(config.checkout_size_m[:2], float) / 2, 0.0, config.checkout_size_m[2]))
         self.obstacles = tuple(obstacles)
+        # The same rectangles as arrays, for vectorised distance and push-out.
+        self._ob_center = np.array([o.center for o in obstacles]).reshape(-1, 2)
+        self._ob_half = np.array([o.half for o in obstacles]).reshape(-1, 2)
+        self._ob_cos = np.cos([o.yaw for o in obstacles])
+        self._ob_sin = np.sin([o.yaw for o in obstacles])
         for i, ob in enumerate(self.obstacles):
             corners = ob.corners()
             if corners.min() < -1e-9 or corners[:, 0].max() > W + 1e-9 or corners[:, 1].max() > D + 1e-9:
@@ -277,6 +282,44 @@ class StoreGeometry:
                 raise self._err(key, f"door at {tuple(np.round(center, 2))} lies inside or against {ob.key}")
         return door
 
+    def _local(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(n, O) coordinates of points in every obstacle's own frame."""
+        d = points[:, None, :] - self._ob_center[None]
+        c, s = self._ob_cos, self._ob_sin
+        return d[..., 0] * c + d[..., 1] * s, -d[..., 0] * s + d[..., 1] * c
+
+    def obstacle_distance(self, points: np.ndarray) -> np.ndarray:
+        """(n,) distance from each point (n, 2) to the nearest shelf or counter footprint (inf without any)."""
+        if not self.obstacles:
+            return np.full(len(points), np.inf)
+        lx, ly = self._local(points)
+        ox = np.maximum(np.abs(lx) - self._ob_half[:, 0], 0.0)
+        oy = np.maximum(np.abs(ly) - self._ob_half[:, 1], 0.0)
+        return np.sqrt(ox * ox + oy * oy).min(axis=1)
+
+    def push_out(self, points: np.ndarray, clearance_m: float) -> np.ndarray:
+        """(n, 2) points moved the shortest way out of every footprint grown by `clearance_m`."""
+        if not self.obstacles:
+            return points
+        lx, ly = self._local(points)
+        hx, hy = self._ob_half[:, 0], self._ob_half[:, 1]
+        qx, qy = np.clip(lx, -hx, hx), np.clip(ly, -hy, hy)
+        ox, oy = lx - qx, ly - qy
+        dist = np.sqrt(ox * ox + oy * oy)
+        hit = dist < clearance_m
+        if not hit.any():
+            return points
+        # Outside the core rectangle: radially from its nearest point; inside: through the nearest face.
+        scale = clearance_m / np.maximum(dist, 1e-12)
+        nx, ny = qx + ox * scale, qy + oy * scale
+        core = dist < 1e-12
+        use_x = (hx - np.abs(lx)) < (hy - np.abs(ly))
+        nx = np.where(core & use_x, np.where(lx >= 0, hx + clearance_m, -hx - clearance_m), np.where(core, lx, nx))
+        ny = np.where(core & ~use_x, np.where(ly >= 0, hy + clearance_m, -hy - clearance_m), np.where(core, ly, ny))
+        dx, dy = np.where(hit, nx - lx, 0.0), np.where(hit, ny - ly, 0.0)
+        c, s = self._ob_cos, self._ob_sin
+        return points + np.stack([(dx * c - dy * s).sum(axis=1), (dx * s + dy * c).sum(axis=1)], axis=-1)
+
     # -- navigation grid -------------------------------------------------------------------------
 
     def _build_grid(self):
@@ -300,6 +343,7 @@ class StoreGeometry:
             free |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= INSIDE_DOOR_M + 0.1) & (
                 self.shelf_distance >= self.nav_clearance_m)
         self.free = free
+        self._ramp = np.arange(4096, dtype=float)
         # 8-connected grid graph over free cells, edge weights = metres.
         idx = np.arange(self.nx * self.ny).reshape(self.nx, self.ny)
         rows, cols, w = [], [], []
@@ -347,12 +391,16 @@ class StoreGeometry:
             self._fields[key] = field
         return field
 
-    def line_free(self, a: np.ndarray, b: np.ndarray) -> bool:
-        """Whether the straight segment a-b stays on free cells."""
-        n = max(2, int(np.linalg.norm(b - a) / (GRID_CELL_M * 0.5)) + 1)
-        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-        i = np.clip((pts[:, 0] / GRID_CELL_M).astype(int), 0, self.nx - 1)
-        j = np.clip((pts[:, 1] / GRID_CELL_M).astype(int), 0, self.ny - 1)
+    def line_free(self, a, b) -> bool:
+        """Whether the straight segment a-b stays on free cells (sampled every half cell)."""
+        ax, ay = a[0], a[1]
+        dx, dy = b[0] - ax, b[1] - ay
+        n = max(2, int(math.hypot(dx, dy) / (GRID_CELL_M * 0.5)) + 1)
+        u = self._ramp[:n] / (n - 1) if n <= len(self._ramp) else np.linspace(0.0, 1.0, n)
+        i = ((ax + u * dx) * (1 / GRID_CELL_M)).astype(np.int64)
+        j = ((ay + u * dy) * (1 / GRID_CELL_M)).astype(np.int64)
+        if i.min() < 0 or j.min() < 0 or i.max() >= self.nx or j.max() >= self.ny:
+            return False
         return bool(self.free[i, j].all())
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
@@ -390,17 +438,12 @@ class StoreGeometry:
             i, j = best
             cells.append(best)
         pts = [self.cell_centers[c] for c in cells]
-        # String pulling: from each kept point, jump to the farthest point still in straight view.
+        pts.append(np.asarray(goal, float))
+        # String pulling: keep a waypoint only where the straight view from the previous one ends.
         out = [np.asarray(start, float)]
-        k = 0
-        while k < len(pts) - 1:
-            nxt = k + 1
-            for m in range(len(pts) - 1, k + 1, -1):
-                if self.line_free(out[-1], pts[m]):
-                    nxt = m
-                    break
-            out.append(pts[nxt])
-            k = nxt
+        for k in range(1, len(pts)):
+            if not self.line_free(out[-1], pts[k]):
+                out.append(pts[k - 1])
         out.append(np.asarray(goal, float))
         return out[1:]
 

@@ -36,16 +36,23 @@ LOWEST_HIP_FRACTION = 0.94
 
 @dataclass(frozen=True)
 class _Snapshot:
-    """The crowd at one step, packed for interpolation."""
+    """The bodies at one crowd step: who is in each slot and their joint positions.
+
+    Poses between two steps interpolate the joint positions linearly (the heading through the yaw
+    angle, not the quaternion). Every interpolated pose is a body pose: bone lengths are fixed by the
+    model and every hinge angle stays between two in-range values.
+    """
 
     time_s: float
     person_id: np.ndarray  # (S,)
-    values: np.ndarray  # (S, F) see `_pack`
+    qpos: np.ndarray  # (S, NQ)
+    heading: np.ndarray  # (S,) unwrapped yaw
 
 
-def _pack(crowd: Crowd) -> _Snapshot:
+def _pack(crowd: Crowd) -> np.ndarray:
+    """(S, F) the crowd's numbers that the posing reads (column order used by `World._qpos`)."""
     speed = np.hypot(crowd.vel[:, 0], crowd.vel[:, 1])
-    values = np.column_stack([
+    return np.column_stack([
         crowd.pos,  # 0, 1
         crowd.heading,  # 2
         crowd.phase,  # 3
@@ -57,7 +64,6 @@ def _pack(crowd: Crowd) -> _Snapshot:
         crowd.reach_side,  # 13
         speed,  # 14
     ])
-    return _Snapshot(crowd.time_s, crowd.person_id.copy(), values)
 
 
 class World:
@@ -111,15 +117,15 @@ class World:
         self._ref = {name: getattr(m, name).copy() for name in
                      ("body_pos", "geom_pos", "geom_size", "geom_rbound", "geom_aabb", "site_pos", "site_size")}
         self._slot_height = np.full(S, hm.REFERENCE_HEIGHT_M)
+        self._body_constants()
+        self._lo, self._hi = hm.HINGE_RANGES[:, 0].copy(), hm.HINGE_RANGES[:, 1].copy()
         self._heights: dict[int, float] = {}
         self.crowd = Crowd(scenario.crowd, self.store, rng)
         self._present = np.zeros(S, bool)
         self._person_ids = np.full(S, -1, dtype=np.int64)
         self._last_t = -math.inf
         self._sync_slots()
-        self._prev = self._cur = _pack(self.crowd)
-        lo, hi = hm.HINGE_RANGES[:, 0], hm.HINGE_RANGES[:, 1]
-        self._lo, self._hi = lo, hi
+        self._prev = self._cur = self._snapshot()
         self.timing_s = 0.0
 
     # -- model -------------------------------------------------------------------------------------
@@ -163,6 +169,7 @@ class World:
                 self._heights[pid] = h
                 if h != self._slot_height[s]:
                     self._resize(int(s), h)
+                    self._body_constants()
         self._person_ids = self.crowd.person_id.copy()
 
     # -- public ------------------------------------------------------------------------------------
@@ -187,17 +194,20 @@ class World:
             self._prev = self._cur
             crowd.step()
             self._sync_slots()
-            self._cur = _pack(crowd)
+            self._cur = self._snapshot()
         prev, cur = self._prev, self._cur
         if cur.time_s <= t_s or prev is cur:
-            values, present = cur.values, cur.person_id >= 0
+            present = cur.person_id >= 0
+            qpos = cur.qpos.copy()
         else:
             a = (t_s - prev.time_s) / STEP_S
-            values = prev.values + (cur.values - prev.values) * a
             present = (cur.person_id >= 0) & (prev.person_id == cur.person_id)
-        qpos = self._qpos(values, t_s, cur.person_id)
+            qpos = prev.qpos + (cur.qpos - prev.qpos) * a
+            heading = prev.heading + (cur.heading - prev.heading) * a
+            qpos[:, 3] = np.cos(0.5 * heading)
+            qpos[:, 6] = np.sin(0.5 * heading)
         qpos[~present, 2] = PARK_Z_M
-        self.data.qpos[:] = qpos.ravel()
+        self.data.qpos[:] = qpos.reshape(-1)
         mujoco.mj_kinematics(self.model, self.data)
         self._present = present
         order = np.nonzero(present)[0]
@@ -240,78 +250,106 @@ class World:
 
     # -- posing ------------------------------------------------------------------------------------
 
-    def _qpos(self, v: np.ndarray, t: float, person_id: np.ndarray) -> np.ndarray:
-        """(S, NQ) joint positions from interpolated crowd values (S, F) at time t."""
-        S = self.slots
+    def _body_constants(self):
+        """Per-slot lengths the posing needs, (S,) or (S, 2) arrays, from the slots' heights."""
         H = self._slot_height
-        q = np.zeros((S, hm.NQ))
-        pos, heading, phase = v[:, 0:2], v[:, 2], v[:, 3]
-        feet = v[:, 5:9].reshape(S, 2, 2)
-        swing_len = v[:, 9:11]
+        thigh, shin = hm.THIGH * H, hm.SHIN * H
+        self._k = {
+            "thigh": thigh[:, None], "shin": shin[:, None],
+            "r_min": np.abs(thigh - shin)[:, None] + 1e-6,
+            "r_max": ((thigh + shin) * hm.MAX_LEG_STRETCH)[:, None],
+            "reach2": ((thigh + shin) * hm.MAX_LEG_STRETCH * 0.995)[:, None] ** 2,
+            "hw": (hm.HIP_HALF_WIDTH * H)[:, None] * _SIDES,
+            "ankle_h": (hm.ANKLE_HEIGHT * H)[:, None],
+            "z_stand": hm.HIP_HEIGHT * H * STAND_HIP_FRACTION,
+            "z_low": hm.HIP_HEIGHT * H * LOWEST_HIP_FRACTION,
+            "shoulder": (hm.LUMBAR_ABOVE_HIP + hm.SHOULDER_ABOVE_LUMBAR) * H,
+            "arm": (hm.UPPER_ARM + hm.FOREARM + 0.05) * H,
+        }
+
+    def _snapshot(self) -> _Snapshot:
+        crowd = self.crowd
+        v = _pack(crowd)
+        return _Snapshot(crowd.time_s, crowd.person_id.copy(), self._qpos(v, crowd.time_s, crowd.person_id),
+                         v[:, 2].copy())
+
+    def _qpos(self, v: np.ndarray, t: float, person_id: np.ndarray) -> np.ndarray:
+        """(S, NQ) joint positions from the crowd's numbers (S, F) at time t.
+
+        The pelvis follows the crowd's ground point and heading; each ankle goes where the crowd put its
+        foot (lifted in swing) by two-link inverse kinematics; the pelvis drops as far as needed (within
+        limits) to keep both feet in reach; arms swing against the legs or reach to a shelf.
+        """
+        k = self._k
+        q = np.zeros((self.slots, hm.NQ))
+        heading, phase = v[:, 2], v[:, 3]
         reach, reach_h, reach_side, speed = v[:, 11], v[:, 12], v[:, 13], v[:, 14]
         c, s = np.cos(heading), np.sin(heading)
-        left = np.stack([-s, c], axis=-1)
-        walk = np.clip(speed / 0.6, 0.0, 1.0)
+        walk = np.minimum(speed * (1 / 0.6), 1.0)
         stand = 1.0 - walk
-        two_pi_phase = 2 * math.pi * phase
+        ph = (2 * math.pi) * phase
+        sin_ph, cos_ph = np.sin(ph), np.cos(ph)
         # Pelvis over the stance foot while walking, slow weight shift while standing.
-        sway = (0.02 * walk * np.sin(two_pi_phase)
-                + SWAY_M * stand * np.sin(2 * math.pi * SWAY_HZ * t + 2.4 * person_id))
-        pelvis_xy = pos + left * sway[:, None]
-        hw = hm.HIP_HALF_WIDTH * H
-        hips = pelvis_xy[:, None, :] + left[:, None, :] * (hw[:, None] * np.array([1.0, -1.0]))[..., None]
+        sway = 0.02 * walk * sin_ph + SWAY_M * stand * np.sin((2 * math.pi * SWAY_HZ) * t + 2.4 * person_id)
+        px, py = v[:, 0] - s * sway, v[:, 1] + c * sway
+        cc, ss = c[:, None], s[:, None]
+        hx, hy = px[:, None] - ss * k["hw"], py[:, None] + cc * k["hw"]  # (S, 2) hip joints
+        rx, ry = v[:, 5:9:2] - hx, v[:, 6:9:2] - hy  # foot minus hip, world
         # Foot height: lifted in swing, in proportion to how far the foot travels.
-        p = (phase[:, None] + np.array([0.0, 0.5])) % 1.0
-        progress = np.clip((p - STANCE_FRACTION) / (1 - STANCE_FRACTION), 0.0, 1.0)
-        lift = SWING_LIFT_M * np.minimum(1.0, swing_len / FULL_LIFT_STRIDE_M) * np.sin(math.pi * progress)
-        ankle_h = hm.ANKLE_HEIGHT * H
-        ankle_z = ankle_h[:, None] + lift
-        rel = feet - hips  # (S, 2, 2) world xy
-        horiz2 = rel[..., 0] ** 2 + rel[..., 1] ** 2
-        thigh, shin = hm.THIGH * H, hm.SHIN * H
-        reach_len = (thigh + shin) * hm.MAX_LEG_STRETCH * 0.995
-        z_leg = ankle_z + np.sqrt(np.maximum(reach_len[:, None] ** 2 - horiz2, 0.0))
-        # The pelvis drops to keep a far foot in reach, but only so far (below that the foot slides).
-        z = np.clip(z_leg.min(axis=1), hm.HIP_HEIGHT * H * LOWEST_HIP_FRACTION, hm.HIP_HEIGHT * H * STAND_HIP_FRACTION)
-        q[:, 0:2] = pelvis_xy
+        u = np.maximum((phase[:, None] + _LEG_OFFSETS) % 1.0 - STANCE_FRACTION, 0.0) * (1 / (1 - STANCE_FRACTION))
+        sin_u = np.sin(math.pi * u)
+        lift = (SWING_LIFT_M / FULL_LIFT_STRIDE_M) * np.minimum(v[:, 9:11], FULL_LIFT_STRIDE_M) * sin_u
+        az = k["ankle_h"] + lift
+        z_leg = az + np.sqrt(np.maximum(k["reach2"] - rx * rx - ry * ry, 0.0))
+        z = np.minimum(np.maximum(z_leg.min(axis=1), k["z_low"]), k["z_stand"])
+        q[:, 0] = px
+        q[:, 1] = py
         q[:, 2] = z
-        q[:, 3] = np.cos(heading / 2)
-        q[:, 6] = np.sin(heading / 2)
-        h = q[:, 7:]
-        # Legs: ankle target in the pelvis frame, two-link inverse kinematics.
-        dx = rel[..., 0] * c[:, None] + rel[..., 1] * s[:, None]
-        dy = -rel[..., 0] * s[:, None] + rel[..., 1] * c[:, None]
-        dz = ankle_z - z[:, None]
-        d = np.stack([dx, dy, dz], axis=-1)
-        for leg, (side, sign) in enumerate((("left", 1.0), ("right", -1.0))):
-            abd, flex, knee = hm.leg_ik(d[:, leg], thigh, shin, sign)
-            h[:, hm.J[f"{side}_hip_abd"]] = abd
-            h[:, hm.J[f"{side}_hip_flex"]] = flex
-            h[:, hm.J[f"{side}_knee"]] = knee
-            # Foot flat on the floor, toes down a little in swing.
-            h[:, hm.J[f"{side}_ankle"]] = flex - knee + 0.25 * np.sin(math.pi * progress[:, leg]) * (lift[:, leg] > 0)
+        q[:, 3] = np.cos(0.5 * heading)
+        q[:, 6] = np.sin(0.5 * heading)
+        # Legs: ankle target in the pelvis frame, two-link inverse kinematics (both legs at once).
+        dx, dy, dz = rx * cc + ry * ss, ry * cc - rx * ss, az - z[:, None]
+        a, b = k["thigh"], k["shin"]
+        down = np.sqrt(dy * dy + dz * dz)
+        r = np.minimum(np.maximum(np.sqrt(dx * dx + down * down), k["r_min"]), k["r_max"])
+        flex = np.arctan2(dx, down) + np.arccos(np.minimum((a * a + r * r - b * b) / (2 * a * r), 1.0))
+        knee = math.pi - np.arccos(np.maximum((a * a + b * b - r * r) / (2 * a * b), -1.0))
+        q[:, _COL["hip_abd"]] = _SIDES * np.arctan2(dy, -dz)
+        q[:, _COL["hip_flex"]] = flex
+        q[:, _COL["knee"]] = knee
+        # Foot flat on the floor, toes down a little in swing.
+        q[:, _COL["ankle"]] = flex - knee + 0.25 * sin_u * (lift > 0)
         # Trunk: slight forward lean with speed, counter-rotation with the stride, bend for low shelves.
-        low = np.clip((0.8 - reach_h) / 0.45, 0.0, 1.0) * reach
-        h[:, hm.J["spine_flex"]] = 0.06 * speed + 0.55 * low
-        h[:, hm.J["spine_twist"]] = -0.08 * walk * np.cos(two_pi_phase)
-        h[:, hm.J["spine_lateral"]] = 0.03 * walk * np.sin(two_pi_phase)
-        h[:, hm.J["neck_flex"]] = 0.12 + 0.35 * low - 0.06 * speed
-        look = 0.5 * stand * (1.0 - np.minimum(reach * 4, 1.0)) * np.sin(2 * math.pi * 0.11 * t + 1.7 * person_id)
-        h[:, hm.J["neck_twist"]] = look
+        low = np.minimum(np.maximum((0.8 - reach_h) * (1 / 0.45), 0.0), 1.0) * reach
+        q[:, _COL["spine_flex"]] = 0.06 * speed + 0.55 * low
+        q[:, _COL["spine_twist"]] = -0.08 * walk * cos_ph
+        q[:, _COL["spine_lateral"]] = 0.03 * walk * sin_ph
+        q[:, _COL["neck_flex"]] = 0.12 + 0.35 * low - 0.06 * speed
+        q[:, _COL["neck_twist"]] = (0.5 * stand * np.maximum(1.0 - 4 * reach, 0.0)
+                                    * np.sin((2 * math.pi * 0.11) * t + 1.7 * person_id))
         # Arms: swing opposite to the legs when walking; one arm reaches to the shelf when browsing.
-        swing = 0.4 * np.minimum(speed / 1.3, 1.2) * np.cos(two_pi_phase)
-        shoulder_z = z + (hm.LUMBAR_ABOVE_HIP + hm.SHOULDER_ABOVE_LUMBAR) * H * np.cos(0.55 * low)
-        arm_len = (hm.UPPER_ARM + hm.FOREARM + 0.05) * H
-        reach_flex = np.arccos(np.clip((shoulder_z - reach_h) / arm_len, -1.0, 1.0))
-        for side, sign in (("left", 1.0), ("right", -1.0)):
-            r = reach * (reach_side == sign)
-            base = -sign * swing
-            h[:, hm.J[f"{side}_shoulder_flex"]] = (1 - r) * base + r * reach_flex
-            h[:, hm.J[f"{side}_shoulder_abd"]] = 0.07 + 0.08 * r
-            h[:, hm.J[f"{side}_elbow"]] = (1 - r) * (0.25 + 0.25 * np.maximum(base, 0.0)) + r * 0.12
-            h[:, hm.J[f"{side}_wrist"]] = 0.1 + 0.25 * r
-        np.clip(h, self._lo, self._hi, out=h)
+        swing = (-0.4 * np.minimum(speed * (1 / 1.3), 1.2) * cos_ph)[:, None] * _SIDES
+        shoulder_z = z + k["shoulder"] * np.cos(0.55 * low)
+        reach_flex = np.arccos(np.minimum(np.maximum((shoulder_z - reach_h) / k["arm"], -1.0), 1.0))
+        ra = reach[:, None] * (reach_side[:, None] == _SIDES)
+        rest = 1.0 - ra
+        q[:, _COL["shoulder_flex"]] = rest * swing + ra * reach_flex[:, None]
+        q[:, _COL["shoulder_abd"]] = 0.07 + 0.08 * ra
+        q[:, _COL["elbow"]] = rest * (0.25 + 0.25 * np.maximum(swing, 0.0)) + 0.12 * ra
+        q[:, _COL["wrist"]] = 0.1 + 0.25 * ra
+        h = q[:, 7:]
+        np.minimum(np.maximum(h, self._lo, out=h), self._hi, out=h)
         return q
+
+
+_SIDES = np.array([1.0, -1.0])
+_LEG_OFFSETS = np.array([0.0, 0.5])
+# qpos columns of each joint: (2,) left/right pairs for limbs, a scalar for the trunk and head.
+_COL = {
+    **{name: 7 + hm.J[name] for name in ("spine_flex", "spine_lateral", "spine_twist", "neck_flex", "neck_twist")},
+    **{name: np.array([7 + hm.J[f"left_{name}"], 7 + hm.J[f"right_{name}"]])
+       for name in ("hip_abd", "hip_flex", "knee", "ankle", "shoulder_flex", "shoulder_abd", "elbow", "wrist")},
+}
 
 
 def measure(scenario, seed: int | None = None, minutes: float = 10.0, rate_hz: float = 100.0) -> dict:
