@@ -307,8 +307,10 @@ class Crowd:
         heading = None
         if agent.leaving or self.time_s >= agent.depart_at:
             agent.leaving = True
-            if self._checkout_spots and not agent.checked_out:
-                goal, heading = self._checkout_spots[int(rng.integers(len(self._checkout_spots)))]
+            open_tills = [spot for spot in self._checkout_spots if not self._taken(spot[0], s)]
+            if open_tills and not agent.checked_out:
+                # Pay at a free till; with every till busy, leave without queueing (self-checkout).
+                goal, heading = open_tills[int(rng.integers(len(open_tills)))]
                 kind = Activity.CHECKOUT
             else:
                 goal, kind = store.exit.inside, Activity.WALK

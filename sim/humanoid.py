@@ -122,11 +122,13 @@ MAX_LEG_STRETCH = 0.995
 
 
 def _v(*xs: float) -> str:
-    return " ".join(f"{x:.6g}" for x in xs)
+    return " ".join(f"{x:.12g}" for x in xs)
 
 
 def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
     """MJCF `<body>` of one humanoid with a free pelvis, standing at the origin facing +x.
+
+    The enclosing model must use `<compiler angle="radian"/>` (joint ranges are in radians).
 
     Args:
         prefix: prepended to every body, joint, geom and site name (for example "p3_").
@@ -146,7 +148,7 @@ def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
         out = []
         for name, (b, off) in zip(KEYPOINT_NAMES, KEYPOINTS):
             if b == body:
-                out.append(f'<site name="{P}{name}" pos="{_v(*(np.array(off) * s))}" size="{0.01 * s:.4g}"/>')
+                out.append(f'<site name="{P}{name}" pos="{_v(*(np.array(off) * s))}" size="{0.01 * s:.12g}"/>')
         return "".join(out)
 
     def arm(side: str, sign: float) -> str:
@@ -154,10 +156,10 @@ def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
             f'<body name="{P}{side}_upper_arm" '
             f'pos="{_v(0, sign * SHOULDER_HALF_WIDTH * H, SHOULDER_ABOVE_LUMBAR * H)}">'
             + hinge(f"{side}_shoulder_flex") + hinge(f"{side}_shoulder_abd") + hinge(f"{side}_shoulder_rot")
-            + f'<geom type="capsule" fromto="{_v(0, 0, 0, 0, 0, -UPPER_ARM * H)}" size="{0.045 * s:.4g}"/>'
+            + f'<geom type="capsule" fromto="{_v(0, 0, 0, 0, 0, -UPPER_ARM * H)}" size="{0.045 * s:.12g}"/>'
             + sites(f"{side}_upper_arm")
             + f'<body name="{P}{side}_forearm" pos="{_v(0, 0, -UPPER_ARM * H)}">' + hinge(f"{side}_elbow")
-            + f'<geom type="capsule" fromto="{_v(0, 0, 0, 0, 0, -FOREARM * H)}" size="{0.037 * s:.4g}"/>'
+            + f'<geom type="capsule" fromto="{_v(0, 0, 0, 0, 0, -FOREARM * H)}" size="{0.037 * s:.12g}"/>'
             + sites(f"{side}_forearm")
             + f'<body name="{P}{side}_hand" pos="{_v(0, 0, -FOREARM * H)}">' + hinge(f"{side}_wrist")
             + f'<geom type="ellipsoid" pos="{_v(0, 0, -0.08 * s)}" size="{_v(0.045 * s, 0.02 * s, 0.085 * s)}"/>'
@@ -169,10 +171,10 @@ def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
         return (
             f'<body name="{P}{side}_thigh" pos="{_v(0, sign * HIP_HALF_WIDTH * H, 0)}">'
             + hinge(f"{side}_hip_abd") + hinge(f"{side}_hip_flex") + hinge(f"{side}_hip_rot")
-            + f'<geom type="capsule" fromto="{_v(0, 0, -0.03 * s, 0, 0, -THIGH * H)}" size="{0.075 * s:.4g}"/>'
+            + f'<geom type="capsule" fromto="{_v(0, 0, -0.03 * s, 0, 0, -THIGH * H)}" size="{0.075 * s:.12g}"/>'
             + sites(f"{side}_thigh")
             + f'<body name="{P}{side}_shin" pos="{_v(0, 0, -THIGH * H)}">' + hinge(f"{side}_knee")
-            + f'<geom type="capsule" fromto="{_v(0, 0, 0, 0, 0, -SHIN * H)}" size="{0.05 * s:.4g}"/>'
+            + f'<geom type="capsule" fromto="{_v(0, 0, 0, 0, 0, -SHIN * H)}" size="{0.05 * s:.12g}"/>'
             + sites(f"{side}_shin")
             + f'<body name="{P}{side}_foot" pos="{_v(0, 0, -SHIN * H)}">' + hinge(f"{side}_ankle")
             + f'<geom type="ellipsoid" pos="{_v(0.08 * s, 0, -0.035 * s)}" '
@@ -184,12 +186,12 @@ def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
     return (
         f'<body name="{P}pelvis" pos="{_v(0, 0, HIP_HEIGHT * H)}">'
         f'<freejoint name="{P}root"/>'
-        f'<geom type="capsule" fromto="{_v(0, -0.085 * s, 0.03 * s, 0, 0.085 * s, 0.03 * s)}" size="{0.095 * s:.4g}"/>'
+        f'<geom type="capsule" fromto="{_v(0, -0.085 * s, 0.03 * s, 0, 0.085 * s, 0.03 * s)}" size="{0.095 * s:.12g}"/>'
         f'<body name="{P}torso" pos="{_v(0, 0, LUMBAR_ABOVE_HIP * H)}">'
         + hinge("spine_flex") + hinge("spine_lateral") + hinge("spine_twist")
         + f'<geom type="ellipsoid" pos="{_v(0, 0, 0.21 * s)}" size="{_v(0.11 * s, 0.16 * s, 0.23 * s)}"/>'
         + f'<body name="{P}neck" pos="{_v(0, 0, NECK_ABOVE_LUMBAR * H)}">' + hinge("neck_flex") + hinge("neck_twist")
-        + f'<geom type="capsule" fromto="{_v(0, 0, -0.02 * s, 0, 0, NECK_LENGTH * H)}" size="{0.05 * s:.4g}"/>'
+        + f'<geom type="capsule" fromto="{_v(0, 0, -0.02 * s, 0, 0, NECK_LENGTH * H)}" size="{0.05 * s:.12g}"/>'
         + f'<body name="{P}head" pos="{_v(0, 0, NECK_LENGTH * H)}">' + hinge("head_nod") + hinge("head_tilt")
         + f'<geom type="ellipsoid" pos="{_v(0.01 * s, 0, 0.095 * s)}" size="{_v(0.1 * s, 0.078 * s, 0.115 * s)}"/>'
         + sites("head")
@@ -199,6 +201,12 @@ def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
         + leg("left", 1.0) + leg("right", -1.0)
         + "</body>"
     )
+
+
+def standalone_xml(height_m: float = REFERENCE_HEIGHT_M, prefix: str = "p_") -> str:
+    """A complete MJCF model with one humanoid (angles in radians, as `humanoid_xml` assumes)."""
+    return (f'<mujoco><compiler angle="radian"/><default><geom contype="0" conaffinity="0"/></default>'
+            f"<worldbody>{humanoid_xml(prefix, height_m)}</worldbody></mujoco>")
 
 
 def sample_heights(rng: np.random.Generator, n: int, low_m: float, high_m: float) -> np.ndarray:
