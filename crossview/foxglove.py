@@ -275,10 +275,9 @@ def _skeleton_entity(
                 text=label,
             )
         )
-        head = known[0]
-        entity.spheres.append(
+        entity.spheres.append(  # a ball on the highest joint makes a person easy to pick out from above
             SpherePrimitive(
-                pose=Pose(position=Vector3(x=float(head[0]), y=float(head[1]), z=float(head[2])),
+                pose=Pose(position=Vector3(x=float(top[0]), y=float(top[1]), z=float(top[2])),
                           orientation=Quaternion(w=1.0)),
                 size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
                 color=rgba,
