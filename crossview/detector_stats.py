@@ -3,7 +3,9 @@
 The figures mirror how the real detector was measured (../shared/data/README.md): per-joint error
 normalised by the person's size in the image on limb joints, gross errors above 0.2 of that size,
 person-views (at least half of the joints inside the image) with no detection, and fragments
-(fewer than 6 of the 15 BODY25 body joints).
+(fewer than 6 of the 15 BODY25 body joints) among detections of person-views at least half inside the
+image (Shelf's people are in full view; `fragment_rate_all` counts every detection, people cut by the
+image border included).
 """
 
 from __future__ import annotations
@@ -91,7 +93,11 @@ def detector_stats(camera_frames: Iterable[CameraFrame],
         counts["swaps"] += int(((effects & DetectionEffect.LEFT_RIGHT_SWAP) != 0)[real].sum())
         cam["detections"] += len(ids)
         if real.any():
-            counts["fragments"] += int((body25_joint_count(detected[real]) < FRAGMENT_MAX_JOINTS).sum())
+            fragment = body25_joint_count(detected[real]) < FRAGMENT_MAX_JOINTS
+            in_view = truth.in_image[real].mean(axis=1) >= HALF_IN_IMAGE
+            counts["fragments_all"] += int(fragment.sum())
+            counts["fragments"] += int((fragment & in_view).sum())
+            counts["real_in_view"] += int(in_view.sum())
             in_img = truth.in_image[real]
             for name, flags in (("occluded", truth.occluded[real]), ("self_occluded", truth.self_occluded[real])):
                 counts[name] += int((flags & in_img).sum())
@@ -135,7 +141,8 @@ def detector_stats(camera_frames: Iterable[CameraFrame],
         "gross_error_rate": float(np.mean(errors > GROSS_ERROR_FRAC)) if errors.size else None,
         "miss_rate": ratio(counts["missed"], counts["person_views"]) if cameras is not None else None,
         "person_views": counts["person_views"] if cameras is not None else None,
-        "fragment_rate": ratio(counts["fragments"], counts["real"]),
+        "fragment_rate": ratio(counts["fragments"], counts["real_in_view"]),
+        "fragment_rate_all": ratio(counts["fragments_all"], counts["real"]),
         "false_positive_rate": ratio(counts["phantoms"] + counts["duplicates"], counts["detections"]),
         "phantom_rate": ratio(counts["phantoms"], counts["detections"]),
         "duplicate_rate": ratio(counts["duplicates"], counts["detections"]),
@@ -175,6 +182,7 @@ def format_detector_stats(stats: dict) -> str:
         ("gross errors (> 0.2)", "gross_error_rate", True),
         ("missed person-views", "miss_rate", True),
         ("fragments (< 6 of 15 joints)", "fragment_rate", True),
+        ("  of all detections", "fragment_rate_all", True),
         ("false positives", "false_positive_rate", True),
         ("  duplicates", "duplicate_rate", True),
         ("  phantoms", "phantom_rate", True),

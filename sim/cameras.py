@@ -94,7 +94,7 @@ class CameraRigConfig:
     margin_m: float = 0.3
     ceiling_gap_m: float = 0.1
     aim_height_m: float = 1.0
-    aim_inward: float = 0.5
+    aim_inward: float = 0.3
     position_jitter_m: float = 0.0
     placements: tuple[CameraPlacement, ...] = ()
     calibration: str = ""

@@ -91,16 +91,16 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
     ),
     # Calibrated against OpenPose on Shelf (../shared/data/README.md); see docs/sensor-model.md.
     DetectorProfile.TYPICAL: DetectorParams(
-        noise_frac=0.011, noise_tail_dof=3.0, occluded_noise_scale=2.0, self_occluded_noise_scale=1.3,
-        gross_error_prob=0.002, miss_prob=0.02, miss_occlusion_gain=0.15, min_visible_joints=4,
-        occluded_drop_prob=0.5, self_occluded_drop_prob=0.1, joint_drop_prob=0.02, fragment_prob=0.04,
+        noise_frac=0.013, noise_tail_dof=5.0, occluded_noise_scale=1.6, self_occluded_noise_scale=1.3,
+        gross_error_prob=0.001, miss_prob=0.005, miss_occlusion_gain=0.1, min_visible_joints=2,
+        occluded_drop_prob=0.4, self_occluded_drop_prob=0.1, joint_drop_prob=0.02, fragment_prob=0.07,
         swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.02, score_visible=0.8, score_occluded=0.45,
         score_std=0.12,
     ),
     DetectorProfile.HARSH: DetectorParams(
-        noise_frac=0.02, noise_tail_dof=2.5, occluded_noise_scale=2.5, self_occluded_noise_scale=1.5,
-        gross_error_prob=0.01, miss_prob=0.06, miss_occlusion_gain=0.4, min_visible_joints=5,
-        occluded_drop_prob=0.6, self_occluded_drop_prob=0.2, joint_drop_prob=0.05, fragment_prob=0.1,
+        noise_frac=0.022, noise_tail_dof=3.0, occluded_noise_scale=2.5, self_occluded_noise_scale=1.5,
+        gross_error_prob=0.01, miss_prob=0.05, miss_occlusion_gain=0.4, min_visible_joints=4,
+        occluded_drop_prob=0.6, self_occluded_drop_prob=0.2, joint_drop_prob=0.05, fragment_prob=0.15,
         swap_prob=0.02, duplicate_prob=0.05, phantom_rate=0.2, score_visible=0.7, score_occluded=0.35,
         score_std=0.15,
     ),
@@ -347,8 +347,14 @@ class Detector:
             poses: everybody's true pose at `capture_s`, (P, J, 3).
             capture_s, stamp_s, delivery_s: true capture time, the camera's stamp, delivery time.
         """
+        visibility = self.visibility(camera_index, world, poses)
+        return self.detect_visible(camera_index, poses, visibility, capture_s, stamp_s, delivery_s)
+
+    def detect_visible(self, camera_index: int, poses: PoseTruth, visibility, capture_s: float, stamp_s: float,
+                       delivery_s: float) -> CameraFrame:
+        """`detect` from visibility already computed (`Detector.visibility` of the same poses)."""
         camera = self.cameras[camera_index]
-        px, in_img, occluded, self_occluded = self.visibility(camera_index, world, poses)
+        px, in_img, occluded, self_occluded = visibility
         rows = self._detections(np.asarray(poses.person_ids, dtype=np.int64), px, in_img, occluded, self_occluded)
         phantoms = [self._phantom(camera) for _ in range(self._rng.poisson(self.params.phantom_rate))]
         phantoms = [ph for ph in phantoms if ph is not None]

@@ -202,7 +202,7 @@ def _render_marker(camera: Camera, marker_m: np.ndarray, radius_m: float) -> np.
 
 def test_projection_agrees_with_mujoco_renderer(rng):
     # A tilted ceiling camera without lens distortion (MuJoCo renders a pinhole).
-    scenario = _scenario(rows=2, cols=2, width_px=320, height_px=240, hfov_deg=80.0, k1=0.0, k2=0.0)
+    scenario = _scenario(rows=2, cols=2, width_px=320, height_px=240, hfov_deg=80.0, k1=0.0, k2=0.0, aim_inward=0.5)
     camera = build_rig(scenario, rng)[3]
     store = scenario.store
     markers = [np.array([store.width_m / 2, store.depth_m / 2, 1.0]), np.array([1.2, 1.0, 0.4]),
