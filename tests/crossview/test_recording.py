@@ -529,3 +529,23 @@ def test_a_real_simulation_gives_identical_bytes_and_reads_back_exactly(tmp_path
     # And the mcap package's own reader decodes every message with its declared schema.
     seen = read_independently(tmp_path / "a.mcap")
     assert seen["/truth/poses"][1] == sum(isinstance(e, PoseTruth) for e in events)
+
+
+def test_truncated_tracks_file_gives_its_readable_prefix(tmp_path):
+    rng = np.random.default_rng(6)
+    cameras = make_cameras(2, rng)
+    outputs = make_outputs(rng, 300)
+    path = tmp_path / "tracks.mcap"
+    with TracksWriter(path, make_tracks_header(), cameras, chunk_size=16 * 1024) as writer:
+        for output in outputs:
+            writer.write(output)
+        writer.finish({"updates": 300})
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    with pytest.raises(RecordingError, match="truncated"):
+        open_tracks(cut)
+    tracks = open_tracks(cut, allow_truncated=True)
+    assert tracks.summary == {}  # written at the end, so lost with it
+    prefix = list(tracks.outputs())
+    assert 0 < len(prefix) < len(outputs)
+    assert [o.stamp_s for o in prefix] == [o.stamp_s for o in outputs[: len(prefix)]]
