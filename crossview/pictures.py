@@ -1,0 +1,160 @@
+"""Top-down pictures of store layouts: shelves, doors, cameras and people's trajectories, drawn with OpenCV."""
+
+from __future__ import annotations
+
+import colorsys
+import math
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sim.types import Box, BoxKind
+from tracker.types import Camera
+
+# BGR colours of the store's boxes.
+_BOX_BGR = {
+    BoxKind.FLOOR: (235, 235, 235),
+    BoxKind.WALL: (70, 70, 70),
+    BoxKind.SHELF: (60, 105, 160),
+    BoxKind.CHECKOUT: (160, 110, 50),
+    BoxKind.ENTRANCE: (90, 190, 90),
+    BoxKind.EXIT: (80, 80, 210),
+}
+_MARGIN_PX = 30
+_LEGEND_PX = 22
+
+
+def _person_bgr(person_id: int) -> tuple[int, int, int]:
+    """A stable, distinct colour per person (golden-ratio hues)."""
+    r, g, b = colorsys.hsv_to_rgb((person_id * 0.618034) % 1.0, 0.85, 0.8)
+    return int(b * 255), int(g * 255), int(r * 255)
+
+
+def draw_layout(
+    boxes: tuple[Box, ...] | list[Box],
+    cameras: list[Camera] | None = None,
+    trajectories: dict[int, np.ndarray] | None = None,
+    title: str = "",
+    px_per_m: float = 40.0,
+) -> np.ndarray:
+    """Draws a store seen from above (x to the right, y up).
+
+    Args:
+        boxes: the store's boxes (`World.boxes`); the floor box sets the extent.
+        cameras: cameras to mark: a dot at the centre and a line to where the optical axis meets the floor.
+        trajectories: person id -> (N, 2) pelvis positions over time, metres.
+        title: one line printed under the picture.
+        px_per_m: scale.
+
+    Returns:
+        (H, W, 3) uint8 BGR image.
+    """
+    floor = next((b for b in boxes if b.kind == BoxKind.FLOOR), None)
+    if floor is None:
+        raise ValueError("boxes: no FLOOR box to size the picture")
+    x0 = floor.center_m[0] - floor.size_m[0] / 2
+    y0 = floor.center_m[1] - floor.size_m[1] / 2
+    width = int(math.ceil(floor.size_m[0] * px_per_m)) + 2 * _MARGIN_PX
+    height = int(math.ceil(floor.size_m[1] * px_per_m)) + 2 * _MARGIN_PX + _LEGEND_PX
+    image = np.full((height, width, 3), 255, np.uint8)
+    plot_h = height - _LEGEND_PX
+
+    def px(points: np.ndarray) -> np.ndarray:
+        p = np.atleast_2d(np.asarray(points, float))
+        u = _MARGIN_PX + (p[:, 0] - x0) * px_per_m
+        v = plot_h - _MARGIN_PX - (p[:, 1] - y0) * px_per_m
+        return np.round(np.stack([u, v], axis=-1)).astype(np.int32)
+
+    def footprint(box: Box) -> np.ndarray:
+        c, s = math.cos(box.yaw_rad), math.sin(box.yaw_rad)
+        hx, hy = box.size_m[0] / 2, box.size_m[1] / 2
+        local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
+        return np.array(box.center_m[:2]) + local @ np.array([[c, s], [-s, c]])
+
+    order = (BoxKind.FLOOR, BoxKind.ENTRANCE, BoxKind.EXIT, BoxKind.WALL, BoxKind.SHELF, BoxKind.CHECKOUT)
+    for kind in order:
+        for box in boxes:
+            if box.kind == kind:
+                cv2.fillPoly(image, [px(footprint(box))], _BOX_BGR[kind], lineType=cv2.LINE_AA)
+    for pid, xy in sorted((trajectories or {}).items()):
+        xy = np.asarray(xy, float)
+        if len(xy) < 2:
+            continue
+        colour = _person_bgr(pid)
+        cv2.polylines(image, [px(xy)], False, colour, 1, lineType=cv2.LINE_8)  # aliased: PNGs stay small
+        cv2.circle(image, tuple(int(v) for v in px(xy[-1])[0]), 3, colour, -1, lineType=cv2.LINE_AA)
+    for cam in cameras or []:
+        centre = cam.center_world
+        axis = cam.R_cam_from_world[2]  # optical axis in the world frame
+        if axis[2] < -1e-6:
+            ground = centre + axis * (-centre[2] / axis[2])
+            cv2.line(image, tuple(int(v) for v in px(centre)[0]), tuple(int(v) for v in px(ground)[0]),
+                     (40, 40, 40), 1, lineType=cv2.LINE_AA)
+        cv2.circle(image, tuple(int(v) for v in px(centre)[0]), 4, (0, 0, 0), -1, lineType=cv2.LINE_AA)
+    if title:
+        cv2.putText(image, title, (_MARGIN_PX, height - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1,
+                    lineType=cv2.LINE_AA)
+    # Scale bar: 1 m.
+    bar = px(np.array([[x0, y0], [x0 + 1.0, y0]]))
+    bar[:, 1] += _MARGIN_PX // 2
+    cv2.line(image, tuple(int(v) for v in bar[0]), tuple(int(v) for v in bar[1]), (0, 0, 0), 2)
+    cv2.putText(image, "1 m", (int(bar[1, 0]) + 4, int(bar[1, 1]) + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
+                (0, 0, 0), 1, lineType=cv2.LINE_AA)
+    return image
+
+
+def layout_picture(scenario, seconds: float = 60.0, seed: int | None = None, cameras: list[Camera] | None = None,
+                   px_per_m: float = 40.0) -> np.ndarray:
+    """Top-down picture of a scenario: its store, its cameras and `seconds` of everybody's trajectories.
+
+    Args:
+        scenario: a `sim.scenario.Scenario`.
+        seconds: how long to simulate the crowd for the trajectories.
+        seed: the scenario's seed when None.
+        cameras: cameras to draw; None builds the scenario's rig with `sim.cameras.build_rig`.
+        px_per_m: scale.
+
+    Returns:
+        (H, W, 3) uint8 BGR image.
+    """
+    from sim.rng import child_rng
+    from sim.world import World
+
+    seed = scenario.seed if seed is None else seed
+    if cameras is None:
+        from sim.cameras import build_rig
+
+        cameras = build_rig(scenario, child_rng(seed, "cameras"))
+    world = World(scenario, child_rng(seed, "crowd"))
+    paths: dict[int, list[np.ndarray]] = {}
+    lh, rh = world.skeleton.index("left_hip"), world.skeleton.index("right_hip")
+    for k in range(int(seconds * 10) + 1):
+        truth = world.advance(k / 10)
+        pelvis = (truth.poses[:, lh, :2] + truth.poses[:, rh, :2]) / 2
+        for pid, xy in zip(truth.person_ids.tolist(), pelvis):
+            paths.setdefault(pid, []).append(xy)
+    s = scenario.store
+    title = (f"{scenario.name}: {s.width_m:g} x {s.depth_m:g} m, {len(cameras)} cameras, "
+             f"{scenario.crowd.people} people, {seconds:g} s of paths")
+    return draw_layout(world.boxes, cameras, {k: np.array(v) for k, v in paths.items()}, title, px_per_m)
+
+
+def write_layout_pictures(out_dir: str | Path, names: tuple[str, ...] = ("store_layout1", "store_layout2",
+                                                                          "supermarket"),
+                          seconds: float = 60.0) -> list[Path]:
+    """Writes `<name>.png` top-down pictures of shipped scenarios into `out_dir`; returns the paths."""
+    from sim import scenario as sc
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    for name in names:
+        scenario = sc.load(name)
+        scale = 40.0 if scenario.store.width_m <= 10 else 30.0
+        image = layout_picture(scenario, seconds, px_per_m=scale)
+        path = out / f"{name}.png"
+        if not cv2.imwrite(str(path), image, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
+            raise OSError(f"{path}: cannot write PNG")
+        written.append(path)
+    return written
