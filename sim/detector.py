@@ -347,34 +347,60 @@ class Detector:
             poses: everybody's true pose at `capture_s`, (P, J, 3).
             capture_s, stamp_s, delivery_s: true capture time, the camera's stamp, delivery time.
         """
-        visibility = self.visibility(camera_index, world, poses)
-        return self.detect_visible(camera_index, poses, visibility, capture_s, stamp_s, delivery_s)
+        return self.detect_many(world, [(camera_index, poses, capture_s, stamp_s, delivery_s)])[0]
 
-    def detect_visible(self, camera_index: int, poses: PoseTruth, visibility, capture_s: float, stamp_s: float,
-                       delivery_s: float) -> CameraFrame:
-        """`detect` from visibility already computed (`Detector.visibility` of the same poses)."""
-        camera = self.cameras[camera_index]
-        px, in_img, occluded, self_occluded = visibility
-        rows = self._detections(np.asarray(poses.person_ids, dtype=np.int64), px, in_img, occluded, self_occluded)
-        phantoms = [self._phantom(camera) for _ in range(self._rng.poisson(self.params.phantom_rate))]
-        phantoms = [ph for ph in phantoms if ph is not None]
-        if phantoms:
-            rows = [np.concatenate([r, np.stack([ph[i] for ph in phantoms])]) for i, r in enumerate(rows)]
-        order = self._rng.permutation(rows[0].shape[0])
-        ids, kp, scores, true_px, img, occ, self_occ, effects = (r[order] for r in rows)
-        frame = Frame(camera.name, float(stamp_s), kp, scores)
-        truth = DetectionTruth(
-            capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=ids, keypoints_px=true_px,
-            in_image=img, occluded=occ, self_occluded=self_occ, effects=effects,
-        )
-        return CameraFrame(frame, truth, poses)
+    def detect_many(self, world, requests) -> list[CameraFrame]:
+        """`detect` for several captures whose bodies are all in `world`'s data (one truth tick).
 
-    def _detections(self, person_ids, px, in_img, occluded, self_occluded):
+        Args:
+            world: the world (or None to skip occlusion).
+            requests: (camera_index, poses, capture_s, stamp_s, delivery_s) per capture.
+        """
+        visibilities = [self.visibility(r[0], world, r[1]) for r in requests]
+        return self.detect_visible(requests, visibilities)
+
+    def detect_visible(self, requests, visibilities) -> list[CameraFrame]:
+        """`detect_many` from visibility already computed (`Detector.visibility` of the same poses).
+
+        The error draws of all requests are made at once, which is what keeps the per-frame cost low.
+        """
+        if not requests:
+            return []
+        ids = np.concatenate([np.asarray(r[1].person_ids, dtype=np.int64) for r in requests])
+        group = np.concatenate([np.full(len(r[1].person_ids), i) for i, r in enumerate(requests)])
+        px, in_img, occluded, self_occluded = (np.concatenate([v[k] for v in visibilities]) for k in range(4))
+        rows = self._detections(ids, px, in_img, occluded, self_occluded, group)
+        order = np.argsort(rows[-1], kind="stable")
+        rows = [r[order] for r in rows]
+        bounds = np.searchsorted(rows[-1], np.arange(len(requests) + 1))
+        frames = []
+        for i, (camera_index, poses, capture_s, stamp_s, delivery_s) in enumerate(requests):
+            camera = self.cameras[camera_index]
+            mine = [r[bounds[i]:bounds[i + 1]] for r in rows[:-1]]
+            phantoms = [self._phantom(camera) for _ in range(self._rng.poisson(self.params.phantom_rate))]
+            phantoms = [ph for ph in phantoms if ph is not None]
+            if phantoms:
+                mine = [np.concatenate([r, np.stack([ph[k] for ph in phantoms])]) for k, r in enumerate(mine)]
+            shuffle = self._rng.permutation(mine[0].shape[0])
+            d_ids, kp, scores, true_px, img, occ, self_occ, effects = (r[shuffle] for r in mine)
+            frame = Frame(camera.name, float(stamp_s), kp, scores)
+            truth = DetectionTruth(
+                capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=d_ids, keypoints_px=true_px,
+                in_image=img, occluded=occ, self_occluded=self_occ, effects=effects,
+            )
+            frames.append(CameraFrame(frame, truth, poses))
+        return frames
+
+    def _detections(self, person_ids, px, in_img, occluded, self_occluded, group):
         """The detections of real people, all drawn at once (rows: people detected, then duplicates).
+
+        Args:
+            person_ids: (P,) ids; px (P, J, 2); in_img, occluded, self_occluded (P, J); group (P,) the
+                request each row belongs to.
 
         Returns:
             ids (D,), keypoints (D, J, 2), scores (D, J), true px (D, J, 2), in_image, occluded,
-            self_occluded (D, J), effects (D,).
+            self_occluded (D, J), effects (D,), group (D,).
         """
         rng = self._rng
         p = self.params
@@ -419,7 +445,7 @@ class Detector:
         kp[~reported] = np.nan
         scores[~reported] = 0.0
         keep = reported.any(axis=1)
-        rows = [person_ids[take], kp, scores, true_px, img, occ, self_occ, effects]
+        rows = [person_ids[take], kp, scores, true_px, img, occ, self_occ, effects, group[take]]
         rows = [r[keep] for r in rows]
         # Duplicates: a second, partial, shifted and less confident copy of a detection.
         dup = rng.random(keep.sum()) < p.duplicate_prob
@@ -431,7 +457,7 @@ class Detector:
             d_kp[~d_keep] = np.nan
             d_scores = np.where(d_keep, rows[2][dup] * _DUPLICATE_SCORE, 0.0)
             dups = [rows[0][dup], d_kp, d_scores, *(r[dup] for r in rows[3:7]),
-                    rows[7][dup] | int(DetectionEffect.DUPLICATE)]
+                    rows[7][dup] | int(DetectionEffect.DUPLICATE), rows[8][dup]]
             rows = [np.concatenate([r, d]) for r, d in zip(rows, dups)]
         return rows
 

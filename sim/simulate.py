@@ -84,14 +84,15 @@ class Simulation:
             poses = world.advance(t)
             # Captures up to this tick see the poses interpolated between the two ticks (10 ms apart:
             # under a millimetre from the exact pose even for a swinging wrist) and the bodies of this tick.
+            batch = []
             while next_capture < len(captures) and captures[next_capture].capture_s <= t:
                 capture = captures[next_capture]
                 next_capture += 1
                 at_capture = interpolate_poses(previous, poses, capture.capture_s)
-                event = detector.detect(capture.camera_index, world, at_capture, capture.capture_s, capture.stamp_s,
-                                        capture.delivery_s)
-                heapq.heappush(pending, (capture.delivery_s, _FRAME_KIND, capture.camera_index, capture.capture_s,
-                                         next(seq), event))
+                batch.append((capture.camera_index, at_capture, capture.capture_s, capture.stamp_s,
+                              capture.delivery_s))
+            for request, event in zip(batch, detector.detect_many(world, batch)):
+                heapq.heappush(pending, (request[4], _FRAME_KIND, request[0], request[2], next(seq), event))
             heapq.heappush(pending, (t, _TRUTH_KIND, -1, t, next(seq), poses))
             previous = poses
         while pending:
