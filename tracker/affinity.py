@@ -16,10 +16,15 @@ def affinity_2d(
     w_2d: float,
     alpha_2d_px_per_s: float,
     lambda_a_per_s: float,
+    floor_px: float = 0.0,
 ) -> np.ndarray:
     """Eq. (2): per-joint 2D affinity within one camera.
 
-    A2D = w2D (1 - ||x_t - x_t''|| / (α2D (t - t''))) e^(-λa (t - t''))
+    A2D = w2D (1 - ||x_t - x_t''|| / max(α2D (t - t''), floor)) e^(-λa (t - t''))
+
+    With floor = 0 this is the paper's eq. (2). A positive floor (pixels, beyond the paper) keeps the
+    detector's own noise, which does not shrink with t - t'', from making the term negative between
+    close frames.
 
     Args:
         prev_px: (T, J, 2) each target's last matched joints in this camera, undistorted pixels (NaN: none).
@@ -33,7 +38,8 @@ def affinity_2d(
     # t > t'' for frames of one camera; a repeated stamp is treated as one microsecond apart.
     dt = np.maximum(stamp_s - prev_stamp_s, 1e-6)[:, None, :]
     dist = np.linalg.norm(det_px[None, :, :, :] - prev_px[:, None, :, :], axis=-1)
-    return w_2d * (1.0 - dist / (alpha_2d_px_per_s * dt)) * np.exp(-lambda_a_per_s * dt)
+    threshold = np.maximum(alpha_2d_px_per_s * dt, floor_px)
+    return w_2d * (1.0 - dist / threshold) * np.exp(-lambda_a_per_s * dt)
 
 
 def predict_positions(

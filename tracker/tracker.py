@@ -204,7 +204,7 @@ class Tracker:
         a2d = None
         if np.any(np.isfinite(prev_s)):
             a2d = aff.affinity_2d(tg.obs_px[:, c], prev_s, det_px, t, cfg.w_2d, cfg.alpha_2d_px_per_s,
-                                  cfg.lambda_a_per_s)  # eq. (2)
+                                  cfg.lambda_a_per_s, cfg.alpha_2d_floor_px)  # eq. (2)
         matrix = aff.combine(a2d, a3d, cfg.normalize_affinity)  # eq. (1), (T, D)
         return associate(matrix)
 
