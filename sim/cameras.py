@@ -259,31 +259,37 @@ def project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.nd
         (..., 2) distorted pixel coordinates (NaN for points not in front of the camera) and
         (...,) bool mask of the points in front of the camera.
     """
+    px, in_front, _ = _project(camera, points_world)
+    return px, in_front
+
+
+def _project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`project` plus (...,) the undistorted normalised radius of each point (NaN behind)."""
     points = np.asarray(points_world, dtype=np.float64)
     if points.shape[-1:] != (3,):
         raise ValueError(f"points_world: expected shape (..., 3), got {points.shape}")
     cam = points @ camera.R_cam_from_world.T + camera.t_cam_from_world
     z = cam[..., 2]
     in_front = z > _MIN_DEPTH_M
-    with np.errstate(divide="ignore", invalid="ignore"):
-        safe_z = np.where(in_front, z, np.nan)
-        xd, yd = _distort(cam[..., 0] / safe_z, cam[..., 1] / safe_z, camera.dist)
+    inv_z = np.divide(1.0, z, out=np.full(z.shape, np.nan), where=in_front)
+    xn, yn = cam[..., 0] * inv_z, cam[..., 1] * inv_z
+    xd, yd = _distort(xn, yn, camera.dist)
     K = camera.K
     px = np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
-    return px, in_front
+    return px, in_front, np.sqrt(xn * xn + yn * yn)
 
 
 def monotonic_radius(dist: np.ndarray) -> float:
-    return _monotonic_radius(tuple(float(d) for d in dist))
-
-
-@functools.lru_cache(maxsize=256)
-def _monotonic_radius(dist: tuple[float, ...]) -> float:
     """Largest undistorted normalised radius up to which the radial distortion keeps growing.
 
     Beyond it a strong barrel lens folds far-away points back into the image, so projections there
     are not where a real lens would put them.
     """
+    return _monotonic_radius(tuple(float(d) for d in dist))
+
+
+@functools.lru_cache(maxsize=256)
+def _monotonic_radius(dist: tuple[float, ...]) -> float:
     k1, k2, _, _, k3 = dist
     r = np.linspace(0.0, 10.0, 20001)
     r2 = r * r
@@ -302,16 +308,14 @@ def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.n
     Returns:
         (..., 2) distorted pixels (NaN behind the camera) and (...,) bool visible-in-image mask.
     """
-    px, in_front = project(camera, points_world)
-    cam = np.asarray(points_world, dtype=np.float64) @ camera.R_cam_from_world.T + camera.t_cam_from_world
-    with np.errstate(divide="ignore", invalid="ignore"):
-        r = np.hypot(cam[..., 0], cam[..., 1]) / np.where(in_front, cam[..., 2], np.nan)
-    inside = (
-        in_front
-        & (r <= monotonic_radius(camera.dist))
-        & (px[..., 0] >= -0.5) & (px[..., 0] <= camera.width_px - 0.5)
-        & (px[..., 1] >= -0.5) & (px[..., 1] <= camera.height_px - 0.5)
-    )
+    px, in_front, r = _project(camera, points_world)
+    with np.errstate(invalid="ignore"):
+        inside = (
+            in_front
+            & (r <= monotonic_radius(camera.dist))
+            & (px[..., 0] >= -0.5) & (px[..., 0] <= camera.width_px - 0.5)
+            & (px[..., 1] >= -0.5) & (px[..., 1] <= camera.height_px - 0.5)
+        )
     return px, inside
 
 
