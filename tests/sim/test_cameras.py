@@ -211,3 +211,23 @@ def test_projection_agrees_with_mujoco_renderer(rng):
         expected, inside = in_image(camera, marker)
         assert inside
         np.testing.assert_allclose(_render_marker(camera, marker, 0.03), expected, atol=1.0)  # px
+
+
+def test_scenario_can_take_the_panoptic_dome_as_its_rig(rng):
+    from sim.store import StoreConfig
+
+    relative = "../shared/data/panoptic/160906_band1/calibration_160906_band1.json"
+    base = scenario_mod.Scenario(name="dome", store=StoreConfig(width_m=6.0, depth_m=6.0, ceiling_m=3.5))
+    config = dataclasses.replace(base.cameras, calibration=relative, calibration_origin_m=(3.0, 3.0, 0.0))
+    cams = build_rig(dataclasses.replace(base, cameras=config), rng)
+    assert len(cams) == 31 and cams[0].name == "hd_00_00"
+    # The dome's centre, 1 m up, is in most of its cameras' images.
+    seen = [in_image(c, np.array([3.0, 3.0, 1.0]))[1] for c in cams]
+    assert sum(seen) >= 25
+    # A store too small for the dome, or a missing file, is a scenario error naming the key.
+    small = dataclasses.replace(base, store=StoreConfig(width_m=4.0, depth_m=4.0, ceiling_m=3.5), cameras=config)
+    with pytest.raises(scenario_mod.ScenarioError, match=r"cameras.calibration\[\d+\].*outside the store"):
+        build_rig(small, rng)
+    missing = dataclasses.replace(base, cameras=dataclasses.replace(config, calibration="nowhere.json"))
+    with pytest.raises(scenario_mod.ScenarioError, match="cameras.calibration"):
+        build_rig(missing, rng)
