@@ -22,13 +22,13 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from crossview.scoring.association import association_accuracy, projected_2d_scores
+from crossview.scoring.association import SCORED_STATES, association_accuracy, projected_2d_scores
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
 from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
 from crossview.scoring.pose import PoseAccumulator
 from crossview.scoring.report import JSON_KEYS, ScoreReport
 from sim.types import CameraFrame, PoseTruth
-from tracker.types import Camera, TargetState, TrackerOutput
+from tracker.types import Camera, TrackerOutput
 
 __all__ = ["JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TruthTimeline", "score"]
 
@@ -36,7 +36,6 @@ logger = logging.getLogger(__name__)
 
 OUTPUT_MAX_AGE_S = 1.0
 """A tracker output older than this at a grid tick no longer stands for the tracker's belief, seconds."""
-_SCORED_STATES = (TargetState.CONFIRMED, TargetState.LOST)
 
 
 class ScoringError(ValueError):
@@ -93,7 +92,7 @@ class TruthTimeline:
 
 
 def _targets(out: TrackerOutput) -> tuple[np.ndarray, np.ndarray]:
-    targets = [t for t in out.targets if t.state in _SCORED_STATES]
+    targets = [t for t in out.targets if t.state in SCORED_STATES]
     ids = np.array([t.id for t in targets], dtype=np.int64)
     poses = np.zeros((0, 17, 3))
     if targets:

@@ -27,12 +27,14 @@ import numpy as np
 
 from crossview.scoring.identity import identity_scores
 from sim.types import CameraFrame
-from tracker.types import Camera, TrackerOutput
+from tracker.types import Camera, TargetState, TrackerOutput
 
 IOU_THRESHOLD = 0.5
 """Smallest IoU of a projected target box and a true box that counts as a match (MOTChallenge)."""
 MIN_VISIBLE_FRACTION = 0.5
 """Fraction of a projected box that must lie inside the image for the box to count."""
+SCORED_STATES = (TargetState.CONFIRMED, TargetState.LOST)
+"""Target states that are scored (a tracker reports confirmed targets; tentative and removed ones never count)."""
 _MIN_DEPTH_M = 0.1
 _PROJECTION_MARGIN = 0.5  # fraction of the image size outside which undistorted points are not distorted
 
@@ -217,8 +219,9 @@ def projected_2d_scores(
             raise ValueError(f"2D scores: tracker output from camera {out.camera!r}, not among {sorted(by_name)}")
         ids, poses = truth_at(out.stamp_s)
         t_boxes, t_vis = pose_boxes(camera, poses) if len(ids) else (np.zeros((0, 4)), np.zeros(0, bool))
-        h_ids = np.array([t.id for t in out.targets], dtype=np.int64)
-        h_poses = np.array([t.pose for t in out.targets], dtype=np.float64).reshape(len(h_ids), -1, 3)
+        targets = [t for t in out.targets if t.state in SCORED_STATES]
+        h_ids = np.array([t.id for t in targets], dtype=np.int64)
+        h_poses = np.array([t.pose for t in targets], dtype=np.float64) if targets else np.zeros((0, 1, 3))
         h_boxes, h_vis = pose_boxes(camera, h_poses) if len(h_ids) else (np.zeros((0, 4)), np.zeros(0, bool))
         iou = box_iou(t_boxes[t_vis], h_boxes[h_vis])
         dist = np.where(iou >= IOU_THRESHOLD, 1.0 - iou, np.nan)

@@ -106,3 +106,10 @@ def test_projected_truth_tracks_score_perfectly_in_2d_and_a_swap_is_one_switch_e
         a, b = (10, 20) if t < 1 else (20, 10)
         swapped.append(_output("top", t, [], [Target(a, _walker(1, t), t), Target(b, _walker(2, t), t)]))
     assert score(truth, swapped, cameras=[cam]).camera_2d["top"].id_switches == 2
+
+
+def test_output_without_targets_counts_visible_people_as_misses_in_2d():
+    cam = _camera()
+    truth = [PoseTruth(t, np.array([1]), _walker(1, t)[None]) for t in np.arange(0, 1.001, 0.01)]
+    r = score(truth, [_output("top", 0.5, [])], cameras=[cam])
+    assert (r.camera_2d["top"].false_negatives, r.camera_2d["top"].mota) == (1, 0.0)
