@@ -233,3 +233,19 @@ def test_in_image_joints_of_far_away_people_are_not_reported():
     _, inside = in_image(cams[0], far.poses)
     detector = Detector(DetectorConfig(), cams, np.random.default_rng(0))
     assert not inside.any() and detector.detect(0, None, far, 0, 0, 0).truth.person_ids.size == 0
+
+
+def test_profiles_order_from_ideal_to_harsh():
+    def figures(profile):
+        frames = _frames(DetectorConfig(profile=profile), n=150, seed=4)
+        real = [(f.frame.keypoints_px[f.truth.person_ids >= 0], f.truth.keypoints_px[f.truth.person_ids >= 0])
+                for f in frames]
+        errors = np.concatenate([(np.linalg.norm(kp - t, axis=-1) / person_size_px(t)[:, None]).ravel()
+                                 for kp, t in real])
+        detections = sum(len(kp) for kp, _ in real)
+        return np.nanmedian(errors), detections
+
+    ideal, typical, harsh = (figures(p) for p in DetectorProfile)
+    assert ideal[0] == 0 and 0 < typical[0] < harsh[0]
+    # 150 frames x 4 people; harsh misses and drops more.
+    assert ideal[1] == 600 and harsh[1] < typical[1] <= 600 * 1.05
