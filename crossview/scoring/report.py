@@ -67,6 +67,9 @@ class ScoreReport:
     association_accuracy_per_camera: dict[str, float | None] = field(default_factory=dict)
     false_positive_detections_assigned: float | None = None
     camera_2d: dict[str, Camera2DScores] = field(default_factory=dict)
+    # Speed, measured by the caller (the pipeline) and set here for the table.
+    tracker_fps: float | None = None
+    camera_frames_per_s: float | None = None
     # Bookkeeping.
     eval_rate_hz: float = 10.0
     eval_instants: int = 0
@@ -82,10 +85,15 @@ class ScoreReport:
         num_cameras: int | None,
         num_people: int | None,
         duration_s: float | None,
-        tracker_fps: float | None,
-        camera_frames_per_s: float | None,
+        tracker_fps: float | None = None,
+        camera_frames_per_s: float | None = None,
     ) -> dict:
-        """The flat score object: the keys of `JSON_KEYS` first (None for a missing metric), then extras."""
+        """The flat score object: the keys of `JSON_KEYS` first (None for a missing metric), then extras.
+
+        The speed arguments default to the report's own `tracker_fps` and `camera_frames_per_s` fields.
+        """
+        tracker_fps = self.tracker_fps if tracker_fps is None else tracker_fps
+        camera_frames_per_s = self.camera_frames_per_s if camera_frames_per_s is None else camera_frames_per_s
         head = {
             "scenario": scenario,
             "seed": seed,
@@ -155,6 +163,9 @@ class ScoreReport:
             ("  HOTA (DetA, AssA)", f"{pct(self.hota)} ({pct(self.deta)}, {pct(self.assa)})"),
             ("Association accuracy", pct(self.association_accuracy)),
         ]
+        if self.tracker_fps is not None or self.camera_frames_per_s is not None:
+            rows.append(("Speed (FPS all cameras once / camera frames per s)",
+                         f"{num(self.tracker_fps)} / {num(self.camera_frames_per_s, '{:.0f}')}"))
         if self.pcp_per_group:
             rows.insert(2, ("  PCP by bone group", ", ".join(f"{k} {pct(v)}" for k, v in self.pcp_per_group.items())))
         width = max(len(r[0]) for r in rows) + 2

@@ -133,3 +133,13 @@ def test_nobody_in_the_store_leaves_pose_and_mota_undefined_and_targets_are_fals
     # Ticks 0.5 .. 0.9 s see the ghost: five false positives, IDF1 and HOTA 0, MOTA still undefined.
     assert (r.false_positives, r.idf1, r.hota, r.mota) == (5, 0.0, 0.0, None)
     assert score([], []).eval_instants == 0
+
+
+def test_speed_set_on_the_report_reaches_table_and_json():
+    r = score(_truth(), _outputs())
+    r.tracker_fps, r.camera_frames_per_s = 120.0, 1440.0
+    assert "120.0 / 1440" in r.table()
+    d = r.to_json(scenario="s", seed=0, num_cameras=12, num_people=2, duration_s=DURATION_S)
+    assert (d["tracker_fps"], d["camera_frames_per_s"]) == (120.0, 1440.0)
+    d = r.to_json(scenario="s", seed=0, num_cameras=12, num_people=2, duration_s=1.0, tracker_fps=5.0)
+    assert d["tracker_fps"] == 5.0  # an explicit argument wins
