@@ -204,6 +204,11 @@ def score(
 
     if camera_frames is not None:
         a = association_accuracy(camera_frames, outputs)
+        if outputs and a.frames_scored == 0 and a.frames_without_output > 0:
+            raise ScoringError(
+                f"none of the {len(outputs)} tracker outputs has the camera and stamp of one of the recording's "
+                f"{a.frames_without_output} frames; the tracks belong to another recording"
+            )
         report.association_accuracy = a.overall
         report.association_accuracy_per_camera = a.per_camera
         report.false_positive_detections_assigned = a.false_positive_assigned

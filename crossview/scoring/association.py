@@ -53,6 +53,7 @@ class AssociationScores:
         true_detections: camera -> number of true detections scored.
         false_positive_assigned: share of false-positive detections assigned to a target.
         frames_without_output: camera frames for which no tracker output was found.
+        frames_scored: camera frames matched with a tracker output.
     """
 
     overall: float | None = None
@@ -60,6 +61,7 @@ class AssociationScores:
     true_detections: dict[str, int] = field(default_factory=dict)
     false_positive_assigned: float | None = None
     frames_without_output: int = 0
+    frames_scored: int = 0
 
 
 def association_accuracy(camera_frames: Iterable[CameraFrame], outputs: Sequence[TrackerOutput]) -> AssociationScores:
@@ -104,7 +106,7 @@ def association_accuracy(camera_frames: Iterable[CameraFrame], outputs: Sequence
                 continue
             total[camera] += 1
             correct[camera] += t >= 0 and carrier.get(p) == t
-    scores = AssociationScores(frames_without_output=missing)
+    scores = AssociationScores(frames_without_output=missing, frames_scored=len(pairs))
     for camera in total:  # order of first appearance
         scores.true_detections[camera] = total[camera]
         scores.per_camera[camera] = correct[camera] / total[camera] if total[camera] else None

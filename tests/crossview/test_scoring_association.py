@@ -113,3 +113,11 @@ def test_output_without_targets_counts_visible_people_as_misses_in_2d():
     truth = [PoseTruth(t, np.array([1]), _walker(1, t)[None]) for t in np.arange(0, 1.001, 0.01)]
     r = score(truth, [_output("top", 0.5, [])], cameras=[cam])
     assert (r.camera_2d["top"].false_negatives, r.camera_2d["top"].mota) == (1, 0.0)
+
+
+def test_outputs_that_match_no_frame_of_the_recording_are_refused():
+    truth = [PoseTruth(t, np.array([1]), _walker(1, t)[None]) for t in np.arange(0, 1.001, 0.01)]
+    frames = [_camera_frame("top", 0.1 * k, [1]) for k in range(5)]
+    outputs = [_output("top", 0.1 * k + 0.013, [10]) for k in range(5)]
+    with pytest.raises(ValueError, match="another recording"):
+        score(truth, outputs, frames)
