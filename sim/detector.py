@@ -286,16 +286,18 @@ class Detector:
         for i, part in enumerate(self._fragments):
             self._fragment_masks[i, list(part)] = True
         self._template = _TEMPLATE_COCO17 if coco else None
+        self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
         # Per camera: joints in the image, occluded, self-occluded (all person views, detected or not).
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
 
-    def visibility(self, camera_index: int, world, poses: PoseTruth):
+    def visibility(self, camera_index: int, world, poses: PoseTruth, geom_person: np.ndarray | None = None):
         """Projection and occlusion of everybody's joints in one camera.
 
         Args:
             camera_index: which camera.
             world: a `sim.world.World` advanced to the poses' time (or None to skip ray casting).
             poses: the true poses, (P, J, 3).
+            geom_person: `world.geom_person_ids()` when the caller already has it.
 
         Returns:
             px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J).
@@ -308,9 +310,11 @@ class Detector:
         if world is not None and self.config.occlusion and in_img.any():
             p_idx, j_idx = np.nonzero(in_img)
             ids = np.asarray(poses.person_ids)[p_idx]
+            if geom_person is None:
+                geom_person = np.asarray(world.geom_person_ids())
             occ, self_occ = cast_visibility(
-                world.model, world.data, camera.center_world, poses.poses[p_idx, j_idx], ids,
-                self._keypoint_bodies(world)[j_idx], np.asarray(world.geom_person_ids()),
+                world.model, world.data, self._centres[camera_index], poses.poses[p_idx, j_idx], ids,
+                self._keypoint_bodies(world)[j_idx], geom_person,
                 self._geom_bodies(world), self.config.self_hit_margin_m,
             )
             occluded[p_idx, j_idx] = occ
@@ -356,7 +360,8 @@ class Detector:
             world: the world (or None to skip occlusion).
             requests: (camera_index, poses, capture_s, stamp_s, delivery_s) per capture.
         """
-        visibilities = [self.visibility(r[0], world, r[1]) for r in requests]
+        geom_person = np.asarray(world.geom_person_ids()) if world is not None and requests else None
+        visibilities = [self.visibility(r[0], world, r[1], geom_person) for r in requests]
         return self.detect_visible(requests, visibilities)
 
     def detect_visible(self, requests, visibilities) -> list[CameraFrame]:

@@ -33,6 +33,8 @@ class Simulation:
         cameras: the rig, in camera-index order.
         boxes: the store's boxes (floor, walls, shelves, ...).
         skeleton: the keypoint layout of the poses.
+        detector: the `sim.detector.Detector` of the latest `events` pass (its `visibility_counts` give
+            the joints in the image, occluded and self-occluded per camera, over every person-view).
     """
 
     def __init__(self, scenario, seed: int | None = None):
@@ -46,6 +48,7 @@ class Simulation:
         self.boxes = tuple(self.world.boxes)
         self.skeleton = self.world.skeleton
         self._used = False
+        self.detector: Detector | None = None
 
     def events(self, duration_s: float | None = None) -> Iterator[PoseTruth | CameraFrame]:
         """Everything a recording holds, in log-time order.
