@@ -45,17 +45,22 @@ def solve_weighted(rows: np.ndarray, weights: np.ndarray, min_views: int = 2) ->
     return X
 
 
-def triangulate(P: np.ndarray, points_px: np.ndarray, min_views: int = 2) -> np.ndarray:
-    """Standard DLT with unit weights (eq. 8-9).
+def triangulate(P: np.ndarray, points_px: np.ndarray, min_views: int = 2, normalize_rows: bool = True) -> np.ndarray:
+    """Standard DLT (eq. 8-9), all points taken at one instant.
 
     Args:
         P: (C, 3, 4) projection matrices.
         points_px: (..., C, 2) undistorted pixels of the same point(s) in each camera, NaN missing.
+        min_views: least number of views.
+        normalize_rows: divide each row by its norm (eq. 11 without the time term); False: unit weights.
 
     Returns:
         (..., 3) world points, metres (NaN with fewer than `min_views` views).
     """
     rows = dlt_rows(P, points_px)
+    if normalize_rows:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rows = rows / np.linalg.norm(rows, axis=-1, keepdims=True)
     return solve_weighted(rows, np.ones(rows.shape[:-2]), min_views)
 
 

@@ -1,0 +1,78 @@
+"""Affinity terms with hand-computed values: eq. (1), (2), (4), (5), (S2)."""
+
+import numpy as np
+import pytest
+
+from tests.tracker.synthetic import look_at_camera
+from tracker.affinity import affinity_2d, affinity_3d, combine, epipolar_affinity, predict_positions
+from tracker.geometry import fundamental_matrix, project
+
+
+def test_2d_affinity_by_hand():
+    # Eq. (2): moved 5 px in 1 s with α2D = 10 px/s: 0.4 (1 - 5/10) e^(-0.5 · 1).
+    a = affinity_2d(np.zeros((1, 1, 2)), np.zeros((1, 1)), np.array([[[3.0, 4.0]]]), 1.0, 0.4, 10.0, 0.5)
+    assert a.shape == (1, 1, 1)
+    assert a[0, 0, 0] == pytest.approx(0.4 * 0.5 * np.exp(-0.5))
+
+
+def test_2d_affinity_is_negative_beyond_the_velocity_threshold_and_floor_limits_it():
+    prev, stamp, det = np.zeros((1, 1, 2)), np.zeros((1, 1)), np.array([[[0.0, 6.0]]])
+    # 6 px in 0.2 s at α2D = 10 px/s: threshold 2 px -> 0.4 (1 - 3) = -0.8.
+    assert affinity_2d(prev, stamp, det, 0.2, 0.4, 10.0, 0.0)[0, 0, 0] == pytest.approx(-0.8)
+    # A 12 px floor on the threshold: 0.4 (1 - 6/12) = 0.2.
+    assert affinity_2d(prev, stamp, det, 0.2, 0.4, 10.0, 0.0, floor_px=12.0)[0, 0, 0] == pytest.approx(0.2)
+
+
+def test_prediction_is_linear_motion_with_a_clipped_horizon():
+    # Eq. (5): X + V (t - t'), horizon clipped to max_predict_s.
+    X, V = np.array([[1.0, 2.0, 0.0]]), np.array([[1.0, 0.0, -1.0]])
+    np.testing.assert_allclose(predict_positions(X, V, np.array([1.0]), 1.5, 2.0), [[1.5, 2.0, -0.5]])
+    np.testing.assert_allclose(predict_positions(X, V, np.array([1.0]), 9.0, 0.25), [[1.25, 2.0, -0.25]])
+
+
+def test_3d_affinity_by_hand():
+    # Eq. (4): the predicted joint is 0.05 m from the ray along z; α3D = 0.1 m: 0.6 (1 - 0.5) e^(-2 · 0.5).
+    predicted = np.array([[[0.05, 0.0, 2.0]]])
+    rays = np.array([[[0.0, 0.0, 1.0]]])
+    a = affinity_3d(predicted, np.array([[0.5]]), np.zeros(3), rays, 1.0, 0.6, 0.1, 2.0)
+    assert a[0, 0, 0] == pytest.approx(0.6 * 0.5 * np.exp(-1.0))
+
+
+def test_3d_affinity_shapes_are_targets_by_detections_by_joints():
+    rng = np.random.default_rng(0)
+    T, D, J = 3, 4, 5
+    rays = rng.normal(size=(D, J, 3))
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    a = affinity_3d(rng.normal(size=(T, J, 3)), np.zeros((T, J)), np.zeros(3), rays, 0.0, 0.6, 0.2, 3.0)
+    assert a.shape == (T, D, J)
+    # Against a direct loop with the cross-product distance.
+    t, d, j = 2, 1, 3
+    X = rng.normal(size=(T, J, 3))
+    a = affinity_3d(X, np.zeros((T, J)), np.zeros(3), rays, 0.0, 0.6, 0.2, 3.0)
+    dist = np.linalg.norm(np.cross(X[t, j], rays[d, j]))
+    assert a[t, d, j] == pytest.approx(0.6 * (1 - dist / 0.2))
+
+
+def test_combine_sums_over_joints_and_ignores_missing():
+    # Eq. (1): Σ_k A2D + A3D; a missing term counts zero.
+    a3d = np.array([[[0.5, np.nan, 0.25]]])
+    a2d = np.array([[[0.1, 0.2, np.nan]]])
+    assert combine(a2d, a3d, normalize=False)[0, 0] == pytest.approx(1.05)
+    assert combine(None, a3d, normalize=True)[0, 0] == pytest.approx(0.375)
+
+
+def test_epipolar_affinity_by_hand_on_a_rectified_pair():
+    # Two cameras side by side looking along y: epipolar lines are image rows, so a point shifted δ px
+    # vertically is δ px from its line in both images, and (S2) gives 1 - 2δ / (2α).
+    a = look_at_camera("a", [0.0, 0.0, 1.0], [0.0, 5.0, 1.0])
+    b = look_at_camera("b", [1.0, 0.0, 1.0], [1.0, 5.0, 1.0])
+    X = np.array([[0.3, 4.0, 1.2], [0.6, 5.0, 0.7], [0.1, 3.0, 1.5]])
+    xa, xb = project(a.P, X)[None], project(b.P, X)[None]
+    F = fundamental_matrix(a, b)
+    assert epipolar_affinity(xa, xb, F, 20.0, 1)[0, 0] == pytest.approx(1.0)
+    shifted = xb + np.array([0.0, 5.0])
+    assert epipolar_affinity(xa, shifted, F, 20.0, 1)[0, 0] == pytest.approx(1.0 - 5.0 / 20.0)
+    # Too few shared joints: -inf.
+    xa_missing = xa.copy()
+    xa_missing[0, 1:] = np.nan
+    assert epipolar_affinity(xa_missing, xb, F, 20.0, 2)[0, 0] == -np.inf

@@ -1,0 +1,68 @@
+"""TrackerConfig: validation, presets (Table S2), TOML files."""
+
+import dataclasses
+
+import pytest
+
+from tracker.config import PRESETS, TABLE_S2, TrackerConfig, Triangulation
+
+
+def test_presets_keep_table_s2_and_the_paper_variants_are_verbatim():
+    for name, row in TABLE_S2.items():
+        paper = TrackerConfig.preset(f"{name}-paper")
+        for key, value in row.items():
+            assert getattr(paper, key) == value
+        assert paper.triangulation is Triangulation.PAPER and paper.alpha_2d_floor_px == 0.0
+        tuned = TrackerConfig.preset(name)
+        assert (tuned.alpha_3d_m, tuned.lambda_a_per_s, tuned.lambda_t_per_s) == (
+            row["alpha_3d_m"], row["lambda_a_per_s"], row["lambda_t_per_s"])
+        assert (tuned.w_2d, tuned.w_3d) == (0.4, 0.6)
+
+
+def test_unknown_preset_lists_the_valid_ones():
+    with pytest.raises(ValueError, match="campus, campus-paper, shelf"):
+        TrackerConfig.preset("nope")
+
+
+@pytest.mark.parametrize("field, value", [
+    ("alpha_3d_m", 0.0), ("score_threshold", 1.5), ("min_views", 1), ("velocity_history", 1.5),
+    ("lambda_t_per_s", -1.0), ("triangulation", "sideways"), ("w_2d", float("nan")),
+])
+def test_out_of_range_values_name_the_field(field, value):
+    with pytest.raises(ValueError, match=field):
+        TrackerConfig(**{field: value})
+
+
+def test_toml_overrides_a_preset(tmp_path):
+    path = tmp_path / "t.toml"
+    path.write_text('alpha_3d_m = 0.3\ntriangulation = "paper"\n')
+    config = TrackerConfig.from_toml(path, base="store")
+    assert config.alpha_3d_m == 0.3 and config.triangulation is Triangulation.PAPER
+    assert config.lambda_t_per_s == PRESETS["store"]["lambda_t_per_s"]
+
+
+def test_toml_under_a_tracker_table_with_a_preset_key(tmp_path):
+    path = tmp_path / "t.toml"
+    path.write_text('[tracker]\npreset = "campus"\nmin_views = 3\n')
+    config = TrackerConfig.from_toml(path)
+    assert config.min_views == 3 and config.alpha_3d_m == 0.10
+
+
+def test_toml_unknown_key_names_file_and_key(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("alpha_3d = 0.2\n")
+    with pytest.raises(ValueError, match=r"bad\.toml.*'alpha_3d'"):
+        TrackerConfig.from_toml(path)
+
+
+def test_toml_bad_value_names_file_and_field(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text("alpha_3d_m = -1.0\n")
+    with pytest.raises(ValueError, match=r"bad\.toml.*alpha_3d_m"):
+        TrackerConfig.from_toml(path)
+
+
+def test_every_field_is_documented():
+    doc = TrackerConfig.__doc__
+    missing = [f.name for f in dataclasses.fields(TrackerConfig) if f.name not in doc]
+    assert not missing

@@ -1,0 +1,73 @@
+"""Geometry: projection against OpenCV, undistortion round trip, rays (eq. 3), fundamental matrix (eq. S1)."""
+
+import cv2
+import numpy as np
+import pytest
+
+from tests.tracker.synthetic import look_at_camera
+from tracker.geometry import (
+    distort_points,
+    fundamental_matrix,
+    point_line_distance_px,
+    point_to_ray_distance,
+    project,
+    project_distorted,
+    ray_directions,
+    undistort_points,
+)
+
+DIST = np.array([-0.2, 0.05, 0.001, -0.001, 0.0])
+
+
+@pytest.fixture
+def camera():
+    return look_at_camera("a", [0.0, -4.0, 3.0], [0.5, 0.5, 1.0], dist=DIST)
+
+
+@pytest.fixture
+def points():
+    return np.random.default_rng(0).uniform([-1, -1, 0], [2, 2, 2], (50, 3))
+
+
+def test_project_distorted_agrees_with_opencv(camera, points):
+    rvec, _ = cv2.Rodrigues(camera.R_cam_from_world)
+    reference, _ = cv2.projectPoints(points, rvec, camera.t_cam_from_world, camera.K, camera.dist)
+    np.testing.assert_allclose(project_distorted(camera, points), reference.reshape(-1, 2), atol=1e-6)  # px
+
+
+def test_undistort_inverts_distortion_onto_the_pinhole_projection(camera, points):
+    distorted = project_distorted(camera, points)
+    np.testing.assert_allclose(undistort_points(camera, distorted), project(camera.P, points), atol=1e-3)  # px
+    np.testing.assert_allclose(distort_points(camera, project(camera.P, points)), distorted, atol=1e-3)  # px
+
+
+def test_undistort_keeps_nan_and_rejects_infinity(camera):
+    out = undistort_points(camera, np.array([[np.nan, 1.0], [np.inf, 2.0], [640.0, 360.0]]))
+    assert np.isnan(out[:2]).all() and np.isfinite(out[2]).all()
+
+
+def test_project_gives_nan_behind_the_camera(camera):
+    behind = camera.center_world - 2.0 * camera.R_cam_from_world[2]
+    assert np.isnan(project(camera.P, behind)).all()
+
+
+def test_ray_through_a_projection_passes_through_the_point(camera, points):
+    # Eq. (3): the back-projected ray of x = P X contains X.
+    rays = ray_directions(camera, project(camera.P, points))
+    np.testing.assert_allclose(point_to_ray_distance(points, camera.center_world, rays), 0.0, atol=1e-9)  # m
+    np.testing.assert_allclose(np.linalg.norm(rays, axis=-1), 1.0)
+
+
+def test_point_to_ray_distance_by_hand():
+    # A point 3 m along the z axis and 0.4 m to the side is 0.4 m from the z axis.
+    d = point_to_ray_distance(np.array([0.4, 0.0, 3.0]), np.zeros(3), np.array([0.0, 0.0, 1.0]))
+    assert d == pytest.approx(0.4)
+
+
+def test_fundamental_matrix_satisfies_the_epipolar_constraint(points):
+    a = look_at_camera("a", [0.0, -4.0, 3.0], [0.5, 0.5, 1.0])
+    b = look_at_camera("b", [4.0, 1.0, 2.5], [0.5, 0.5, 1.0])
+    F = fundamental_matrix(a, b)
+    xa, xb = project(a.P, points), project(b.P, points)
+    lines = np.concatenate([xa, np.ones((len(xa), 1))], axis=1) @ F.T  # eq. (S1): l_b = F x_a
+    np.testing.assert_allclose(point_line_distance_px(xb, lines), 0.0, atol=1e-6)  # px

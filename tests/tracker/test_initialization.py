@@ -1,0 +1,125 @@
+"""Initialisation: graph partitioning (S3-S5) against brute force, cycle consistency, plausibility."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from tracker.initialization import PlausibilityLimits, _partition_greedy, check_plausible, partition_graph
+from tracker.types import COCO17
+
+
+def _set_partitions(items):
+    if not items:
+        yield []
+        return
+    first, rest = items[0], items[1:]
+    for part in _set_partitions(rest):
+        for i in range(len(part)):
+            yield part[:i] + [[first] + part[i]] + part[i + 1:]
+        yield [[first]] + part
+
+
+def _objective(A, clusters):
+    total = 0.0
+    for c in clusters:
+        for i, j in itertools.combinations(sorted(c), 2):
+            total += A[i, j]
+    return total
+
+
+def _random_problem(rng, n, cams):
+    camera = rng.integers(0, cams, n)
+    A = rng.normal(0.0, 1.0, (n, n))
+    A = (A + A.T) / 2
+    A[camera[:, None] == camera[None, :]] = -np.inf
+    return A
+
+
+def test_exact_partition_matches_brute_force_optimum():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        A = _random_problem(rng, 6, 3)
+        best = max(_objective(A, p) for p in _set_partitions(list(range(6))))
+        got = partition_graph(A, max_exact_nodes=10)
+        assert _objective(A, got) == pytest.approx(best)
+
+
+def test_greedy_fallback_is_feasible_and_never_better_than_exact():
+    rng = np.random.default_rng(1)
+    for _ in range(10):
+        A = _random_problem(rng, 7, 4)
+        exact = partition_graph(A, max_exact_nodes=10)
+        greedy = partition_graph(A, max_exact_nodes=2)
+        assert np.isfinite(_objective(A, greedy))
+        assert _objective(A, greedy) <= _objective(A, exact) + 1e-9
+
+
+def test_cycle_consistency_beats_pairwise_matching():
+    # i-j and j-k are good matches but i and k are incompatible: the best consistent answer keeps
+    # one pair (eq. S5 forbids y_ij = y_jk = 1 with y_ik = 0).
+    A = np.array([[0.0, 1.0, -5.0], [1.0, 0.0, 0.8], [-5.0, 0.8, 0.0]])
+    clusters = sorted(sorted(c.tolist()) for c in partition_graph(A))
+    assert clusters == [[0, 1], [2]]
+
+
+def test_partition_covers_every_node_once_and_never_joins_one_camera():
+    rng = np.random.default_rng(2)
+    A = _random_problem(rng, 9, 3)
+    for clusters in (partition_graph(A), [np.asarray(c) for c in _partition_greedy(A)]):
+        nodes = np.sort(np.concatenate(clusters))
+        np.testing.assert_array_equal(nodes, np.arange(9))
+        for c in clusters:
+            for i, j in itertools.combinations(c, 2):
+                assert np.isfinite(A[i, j])
+
+
+def test_two_clear_people_in_three_cameras():
+    # Nodes 0-2: person a in cameras 0, 1, 2; nodes 3-5: person b in the same cameras.
+    cam = np.array([0, 1, 2, 0, 1, 2])
+    same = np.array([0, 0, 0, 1, 1, 1])
+    A = np.where(same[:, None] == same[None, :], 0.8, -0.7)
+    A[cam[:, None] == cam[None, :]] = -np.inf
+    clusters = sorted(sorted(c.tolist()) for c in partition_graph(A))
+    assert clusters == [[0, 1, 2], [3, 4, 5]]
+
+
+LIMITS = PlausibilityLimits(max_reprojection_px=10.0, min_joints_3d=6, max_bone_m=1.0, min_top_m=0.4,
+                            max_top_m=2.6, min_bottom_m=-0.5)
+
+
+def _standing():
+    from tests.tracker.synthetic import _REST
+
+    return _REST + np.array([2.0, 2.0, 0.0])
+
+
+def _views(pose):
+    from tests.tracker.synthetic import ceiling_rig
+    from tracker.geometry import project
+
+    P = np.stack([c.P for c in ceiling_rig(3, 4.0, 4.0)])
+    return P, project(P, pose)
+
+
+def test_plausible_person_passes():
+    pose = _standing()
+    P, x = _views(pose)
+    assert check_plausible(pose, P, x, COCO17, LIMITS) is None
+
+
+@pytest.mark.parametrize("change, reason", [
+    (lambda p: p + np.array([0.0, 0.0, 3.0]), "top joint"),
+    (lambda p: np.concatenate([p[:15], p[15:] - np.array([0.0, 0.0, 1.5])]), "bone"),
+    (lambda p: p * np.array([1.0, 1.0, 0.1]), "top joint"),
+])
+def test_implausible_people_are_rejected(change, reason):
+    pose = change(_standing())
+    P, x = _views(pose)
+    assert reason in check_plausible(pose, P, x, COCO17, LIMITS)
+
+
+def test_reprojection_error_is_checked():
+    pose = _standing()
+    P, x = _views(pose)
+    assert "reprojection" in check_plausible(pose + np.array([0.3, 0.0, 0.0]), P, x, COCO17, LIMITS)

@@ -1,0 +1,95 @@
+"""Triangulation: DLT round trip, eq. (11) weights by hand, incremental = standard when stamps agree,
+and the velocity-compensated variant."""
+
+import numpy as np
+import pytest
+
+from tests.tracker.synthetic import ceiling_rig
+from tracker.geometry import project
+from tracker.triangulation import dlt_rows, time_weights, triangulate, triangulate_incremental
+
+
+@pytest.fixture(scope="module")
+def rig():
+    cams = ceiling_rig(6, 5.0, 4.0)
+    return np.stack([c.P for c in cams])
+
+
+def _reference_dlt(P, x, weights=None):
+    """Independent per-point DLT: stack the two rows of eq. (9) per view, SVD, dehomogenise."""
+    rows = []
+    for c in range(len(P)):
+        if np.isnan(x[c]).any():
+            continue
+        r1 = x[c, 0] * P[c, 2] - P[c, 0]
+        r2 = x[c, 1] * P[c, 2] - P[c, 1]
+        w = 1.0 if weights is None else weights[c]
+        rows += [w * r1 / np.linalg.norm(r1), w * r2 / np.linalg.norm(r2)]
+    _, _, vt = np.linalg.svd(np.array(rows))
+    return vt[-1, :3] / vt[-1, 3]
+
+
+def test_triangulate_inverts_projection(rig):
+    X = np.random.default_rng(1).uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (20, 3))
+    x = np.moveaxis(project(rig, X), 0, 1)  # (N, C, 2)
+    np.testing.assert_allclose(triangulate(rig, x), X, atol=1e-7)  # m
+    np.testing.assert_allclose(triangulate(rig, x, normalize_rows=False), X, atol=1e-7)  # m
+
+
+def test_triangulate_matches_an_independent_svd_with_noise_and_missing_views(rig):
+    rng = np.random.default_rng(2)
+    X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (10, 3))
+    x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0, 3.0, (10, len(rig), 2))
+    x[0, :3] = np.nan
+    got = triangulate(rig, x)
+    for i in range(len(X)):
+        np.testing.assert_allclose(got[i], _reference_dlt(rig, x[i]), atol=1e-8)  # m
+
+
+def test_fewer_than_two_views_give_nan(rig):
+    x = np.moveaxis(project(rig, np.array([[2.0, 2.0, 1.0]])), 0, 1)
+    x[0, 1:] = np.nan
+    assert np.isnan(triangulate(rig, x)).all()
+
+
+def test_incremental_equals_standard_dlt_when_all_stamps_are_equal(rig):
+    rng = np.random.default_rng(3)
+    X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (10, 3))
+    x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0, 2.0, (10, len(rig), 2))
+    stamps = np.full((10, len(rig)), 7.5)
+    np.testing.assert_allclose(triangulate_incremental(rig, x, stamps, 7.5, 10.0), triangulate(rig, x), atol=1e-9)
+
+
+def test_time_weights_by_hand():
+    # Eq. (11): w_i = e^(-λt (t - t_i)) / ||c_i||.
+    rows = np.array([[[3.0, 4.0, 0.0, 0.0], [0.0, 0.0, 0.0, 2.0]]])  # one view, two rows of norms 5 and 2
+    w = time_weights(rows, np.array([0.8]), 1.0, 5.0)
+    np.testing.assert_allclose(w, [[np.exp(-1.0) / 5.0, np.exp(-1.0) / 2.0]])
+
+
+def test_incremental_weights_match_an_independent_weighted_svd(rig):
+    rng = np.random.default_rng(4)
+    X = np.array([2.0, 1.5, 1.0])
+    x = project(rig, X) + rng.normal(0, 2.0, (len(rig), 2))
+    stamps = 1.0 - rng.uniform(0, 0.3, len(rig))
+    got = triangulate_incremental(rig, x, stamps, 1.0, 10.0)
+    np.testing.assert_allclose(got, _reference_dlt(rig, x, np.exp(-10.0 * (1.0 - stamps))), atol=1e-8)
+
+
+def test_stale_views_pull_the_paper_estimate_back_and_velocity_compensation_removes_it(rig):
+    # A point moving at 1.4 m/s: the newest view at t = 1, the others up to 0.1 s older.
+    V = np.array([1.4, 0.0, 0.0])
+    X1 = np.array([2.0, 2.0, 1.0])
+    stamps = 1.0 - np.linspace(0.0, 0.1, len(rig))
+    x = np.stack([project(rig[c], X1 - V * (1.0 - stamps[c])) for c in range(len(rig))])
+    paper = triangulate_incremental(rig, x, stamps, 1.0, 5.0)
+    compensated = triangulate_incremental(rig, x, stamps, 1.0, 5.0, velocities=V)
+    assert np.linalg.norm(paper - X1) > 0.02  # m: the stale points lag
+    np.testing.assert_allclose(compensated, X1, atol=1e-7)  # m: exact with the true velocity
+
+
+def test_rows_are_those_of_eq_9(rig):
+    x = np.array([[10.0, 20.0]])
+    rows = dlt_rows(rig[:1], x)
+    np.testing.assert_allclose(rows[0, 0], 10.0 * rig[0, 2] - rig[0, 0])
+    np.testing.assert_allclose(rows[0, 1], 20.0 * rig[0, 2] - rig[0, 1])
