@@ -11,11 +11,14 @@ from __future__ import annotations
 import colorsys
 import functools
 import math
+import struct
+import zlib
 from collections.abc import Iterable, Sequence
 
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
 from foxglove_schemas_protobuf.Color_pb2 import Color
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from foxglove_schemas_protobuf.CubePrimitive_pb2 import CubePrimitive
 from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
@@ -54,6 +57,7 @@ BOX_COLORS = {
     BoxKind.EXIT: (0.85, 0.25, 0.25, 0.40),
 }
 CAMERA_COLOR = (1.0, 0.85, 0.1, 1.0)
+BACKDROP_GREY = 40  # 8-bit grey of the blank image the 2D detections are drawn over
 FALSE_POSITIVE_COLOR = (0.6, 0.6, 0.6, 1.0)
 
 
@@ -199,6 +203,32 @@ def camera_calibration(camera: Camera, t_ns: int = 0) -> CameraCalibration:
         K=camera.K.ravel().tolist(),
         R=np.eye(3).ravel().tolist(),
         P=P.ravel().tolist(),
+    )
+
+
+def _png_grey(width: int, height: int, value: int) -> bytes:
+    """A uniform 8-bit greyscale PNG, built with zlib alone so the bytes depend on nothing else."""
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    rows = (b"\x00" + bytes([value]) * width) * height  # filter byte 0 (None) before each row
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(rows, 9))
+        + chunk(b"IEND", b"")
+    )
+
+
+def camera_backdrop(camera: Camera, t_ns: int = 0) -> CompressedImage:
+    """A blank image of the camera's size: recordings hold no pixels, but an Image panel needs an image
+    (or at least its size) to draw the 2D detections and the projected 3D scene over."""
+    return CompressedImage(
+        timestamp=timestamp(t_ns),
+        frame_id=camera_frame_id(camera.name),
+        data=_png_grey(int(camera.width_px), int(camera.height_px), BACKDROP_GREY),
+        format="png",
     )
 
 

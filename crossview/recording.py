@@ -65,7 +65,7 @@ TOPIC_TRACK_SCENE = "/tracker/skeletons"
 
 
 def camera_topic(camera_name: str, what: str) -> str:
-    """Per-camera topics: `frame` (crossview.CameraFrame), `detections`, `calibration` (Foxglove)."""
+    """Per-camera topics: `frame` (crossview.CameraFrame); `detections`, `calibration`, `image` (Foxglove)."""
     return f"/cameras/{camera_name}/{what}"
 
 
@@ -535,7 +535,9 @@ class RecordingWriter:
                 self._frame_ch[camera.name] = out.protobuf_channel(camera_topic(camera.name, "frame"), CameraFrameMsg)
                 self._annotation_ch[camera.name] = out.protobuf_channel(
                     camera_topic(camera.name, "detections"), foxglove.ImageAnnotations)
+                backdrop = out.protobuf_channel(camera_topic(camera.name, "image"), foxglove.CompressedImage)
                 out.add(calibration, 0, foxglove.camera_calibration(camera, 0).SerializeToString())
+                out.add(backdrop, 0, foxglove.camera_backdrop(camera, 0).SerializeToString())
             out.add(self._tf, 0, foxglove.frame_transforms(self.cameras, 0).SerializeToString())
             out.add(self._store, 0, foxglove.store_scene(self.boxes, self.cameras, 0).SerializeToString())
             out.end_chunk()  # the header and the static scene get a chunk of their own

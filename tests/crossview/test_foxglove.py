@@ -161,11 +161,12 @@ def test_layout_is_valid_and_names_channels_the_recording_writes():
     written = {recording.TOPIC_STORE, recording.TOPIC_TRUTH_SCENE, recording.TOPIC_TRACK_SCENE,
                recording.TOPIC_HEADER}
     for name in ("cam00", "cam01"):
-        written |= {recording.camera_topic(name, "calibration"), recording.camera_topic(name, "detections")}
+        written |= {recording.camera_topic(name, what) for what in ("calibration", "detections", "image")}
     named = set(panels["3D!store"]["topics"])
     for key, panel in panels.items():
         if key.startswith("Image!"):
-            named |= {panel["imageMode"]["calibrationTopic"], *panel["imageMode"]["annotations"]}
+            mode = panel["imageMode"]
+            named |= {mode["imageTopic"], mode["calibrationTopic"], *mode["annotations"]}
     named.add(panels["RawMessages!header"]["topicPath"])
     assert named <= written
 
@@ -191,3 +192,13 @@ def test_wire_encoded_points_equal_points_built_by_protobuf(dims):
     assert fast == reference
     got = np.array([[p.x, p.y] + ([p.z] if dims == 3 else []) for p in fast.points])
     assert got.tobytes() == points.tobytes()  # bit for bit, -0.0 included
+
+
+def test_camera_backdrop_is_a_png_of_the_camera_size(camera):
+    image = foxglove.camera_backdrop(camera, t_ns=0)
+    assert image.format == "png" and image.frame_id == "camera_cam07"
+    # OpenCV's PNG decoder, an independent reader, sees a uniform image of the calibration's size.
+    pixels = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_UNCHANGED)
+    assert pixels.shape == (camera.height_px, camera.width_px) and pixels.dtype == np.uint8
+    assert np.all(pixels == foxglove.BACKDROP_GREY)
+    assert len(image.data) < 5000  # bytes: a blank picture costs next to nothing

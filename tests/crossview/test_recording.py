@@ -234,8 +234,10 @@ def _protobuf_classes():
         ImageAnnotations_pb2,
         SceneUpdate_pb2,
     )
+    from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 
     return {
+        "foxglove.CompressedImage": CompressedImage,
         "foxglove.SceneUpdate": SceneUpdate_pb2.SceneUpdate,
         "foxglove.FrameTransforms": FrameTransforms_pb2.FrameTransforms,
         "foxglove.CameraCalibration": CameraCalibration_pb2.CameraCalibration,
@@ -279,6 +281,7 @@ def test_independent_reader_decodes_every_message_with_its_schema(tmp_path, worl
     assert seen["/truth/skeletons"][0] == "foxglove.SceneUpdate"
     for camera in cameras:
         assert seen[f"/cameras/{camera.name}/calibration"] == ("foxglove.CameraCalibration", 1)
+        assert seen[f"/cameras/{camera.name}/image"] == ("foxglove.CompressedImage", 1)
         assert seen[f"/cameras/{camera.name}/detections"][0] == "foxglove.ImageAnnotations"
         assert seen[f"/cameras/{camera.name}/frame"][0] == "crossview.CameraFrame"
     assert seen["/truth/poses"] == ("crossview.PoseTruth", sum(isinstance(e, PoseTruth) for e in events))
