@@ -41,6 +41,10 @@ STANCE_FRACTION = 0.45
 SWING_LIFT_M = 0.09
 FULL_LIFT_STRIDE_M = 0.3
 MAX_ACCEL_M_S2 = 1.5
+# How far outside a door people walk before they vanish (or after they appear).
+OUTSIDE_REACH_M = 1.2
+# Fastest anybody moves, walking or pushed aside.
+MAX_SPEED_M_S = 2.0
 MAX_TURN_RAD_S = 3.0
 # A walker who has not moved for this long gives up on the current goal.
 STUCK_S = 4.0
@@ -332,7 +336,8 @@ class Crowd:
                 else:
                     goal = self.pos[s].copy()
         start = first[-1] if first else self.pos[s]
-        path = store.plan(start, goal)
+        near_exit = kind == Activity.WALK and agent.leaving and np.linalg.norm(self.pos[s] - store.exit.center) < 1.5
+        path = [] if near_exit else store.plan(start, goal)
         path = (first or []) + path
         if agent.leaving and kind == Activity.WALK:
             path.append(store.exit.outside)
@@ -396,7 +401,7 @@ class Crowd:
                 while agent.path:
                     tx, ty = agent.path[0]
                     d = math.hypot(tx - px, ty - py)
-                    if d < (0.15 if len(agent.path) == 1 else 0.35):
+                    if d < (0.15 if len(agent.path) == 1 else 0.35) or self._passed(s, agent, px, py):
                         agent.path.pop(0)
                         agent.rest.pop(0)
                         continue
@@ -448,6 +453,16 @@ class Crowd:
         self._gait(speed, active)
         self._arms(active)
 
+    def _passed(self, s: int, agent: _Agent, px: float, py: float) -> bool:
+        """Whether someone pushed off their path is already past its next waypoint (closer to the one after)."""
+        if len(agent.path) < 2:
+            return False
+        (ax, ay), (bx, by) = agent.path[0], agent.path[1]
+        if math.hypot(bx - px, by - py) >= math.hypot(bx - ax, by - ay):
+            return False
+        # The last leg out through the exit leaves the grid; elsewhere the shortcut must be clear.
+        return len(agent.path) == 2 and agent.leaving or self.store.line_free((px, py), (bx, by))
+
     def _avoid(self, pos: np.ndarray, want: np.ndarray, vel: np.ndarray) -> np.ndarray:
         """(n, 2) velocity corrections that steer each person off predicted close passes."""
         rx = pos[None, :, 0] - pos[:, None, 0]  # (i, j): j relative to i
@@ -487,13 +502,22 @@ class Crowd:
             for door in (self.store.entrance, self.store.exit):
                 rel = self.pos[s] - door.center
                 n = door.inward
+                depth = rel @ n
                 along = rel[0] * -n[1] + rel[1] * n[0]
-                if abs(along) <= door.width / 2 - WALL_CLEARANCE_M + 1e-9 and rel @ n < 1.0:
-                    axis = 0 if n[0] else 1
+                half_gap = door.width / 2 - WALL_CLEARANCE_M
+                axis = 0 if n[0] else 1
+                in_doorway = depth < WALL_CLEARANCE_M - 1e-6 and abs(along) <= door.width / 2
+                if in_doorway or (depth < 1.0 and abs(along) <= half_gap):
+                    # In front of the door, in the doorway or outside: the wall opens here.
                     if n[axis] > 0:
-                        lo[k, axis] = -1.2
+                        lo[k, axis] = -OUTSIDE_REACH_M
                     else:
-                        hi[k, axis] += WALL_CLEARANCE_M + 1.2
+                        hi[k, axis] += WALL_CLEARANCE_M + OUTSIDE_REACH_M
+                if in_doorway:
+                    # In the doorway or outside: between the door posts.
+                    t = 1 - axis
+                    lo[k, t] = max(lo[k, t], door.center[t] - half_gap)
+                    hi[k, t] = min(hi[k, t], door.center[t] + half_gap)
             if agent.in_door and (self.pos[s] - self.store.entrance.center) @ self.store.entrance.inward > 0.6:
                 agent.in_door = False
         return lo, hi
@@ -530,6 +554,10 @@ class Crowd:
                 p = np.minimum(np.maximum(p, lo), hi)
         out = new.copy()
         out[idx] = p
+        # Nobody is shoved faster than anybody walks: a longer push is no step at all.
+        shove = out[idx] - old[idx]
+        too_far = shove[:, 0] ** 2 + shove[:, 1] ** 2 > (MAX_SPEED_M_S * STEP_S) ** 2
+        out[idx[too_far]] = old[idx[too_far]]
         # Any remaining violation reverts that person's step (old positions were valid).
         while True:
             bad = self._violations(out[idx], lo, hi) & np.any(out[idx] != old[idx], axis=1)
