@@ -218,7 +218,12 @@ class Crowd:
                 if store.free[i, j]:
                     self._checkout_spots.append((p, math.atan2(-side, 0.0)))
         fi, fj = np.nonzero(store.free)
-        self._free_cells = store.cell_centers[fi, fj]
+        cells = store.cell_centers[fi, fj]
+        # Places to start or stand: free cells away from the walls (the door corridors are free too).
+        margin = WALL_CLEARANCE_M + 0.1
+        inner = np.all((cells >= margin) & (cells <= [store.config.width_m - margin, store.config.depth_m - margin]),
+                       axis=1)
+        self._free_cells = cells[inner]
         self._next_arrival = math.inf
         self._pending_arrivals = 0
         if config.start_inside:
