@@ -249,3 +249,21 @@ def test_profiles_order_from_ideal_to_harsh():
     assert ideal[0] == 0 and 0 < typical[0] < harsh[0]
     # 150 frames x 4 people; harsh misses and drops more.
     assert ideal[1] == 600 and harsh[1] < typical[1] <= 600 * 1.05
+
+
+def test_typical_on_store_layout2_looks_like_openpose_on_shelf():
+    # A short run of the real store (the closing figures use 60 s); the error figures settle fast,
+    # the miss rate needs the store to fill up and is only bounded here.
+    from crossview.detector_stats import SHELF_OPENPOSE, detector_stats
+    from sim import scenario as scenario_mod
+    from sim.simulate import Simulation
+    from sim.types import CameraFrame
+
+    sim = Simulation(scenario_mod.load("store_layout2"), seed=0)
+    frames = [e for e in sim.events(3.0) if isinstance(e, CameraFrame)]
+    stats = detector_stats(frames, sim.cameras)
+    for key in ("error_median", "error_p95", "error_p99"):
+        assert stats[key] == pytest.approx(SHELF_OPENPOSE[key], rel=0.25), key
+    assert stats["fragment_rate"] == pytest.approx(SHELF_OPENPOSE["fragment_rate"], rel=0.4)
+    assert stats["gross_error_rate"] == pytest.approx(SHELF_OPENPOSE["gross_error_rate"], rel=0.6)
+    assert 0.0 < stats["miss_rate"] < 0.08
