@@ -144,3 +144,33 @@ def epipolar_affinity(
     with np.errstate(invalid="ignore"):
         mean = np.nansum(per_joint, axis=-1) / np.maximum(common, 1)
     return np.where(common >= min_common_joints, mean, -np.inf)
+
+
+def epipolar_affinity_matrix(
+    points: np.ndarray, cameras: np.ndarray, F: np.ndarray, alpha_px: float, min_common_joints: int
+) -> np.ndarray:
+    """Eq. (S2) between every two detections of a pool, -inf within one camera (Algorithm S1).
+
+    Args:
+        points: (n, J, 2) undistorted pixels of the pooled detections (NaN missing).
+        cameras: (n,) camera index of each detection.
+        F: (C, C, 3, 3) fundamental matrices, F[a, b] with x_b^T F[a, b] x_a = 0 (any value on the diagonal).
+        alpha_px: threshold α, pixels.
+        min_common_joints: pairs sharing fewer joints get -inf.
+
+    Returns:
+        (n, n) symmetric affinity matrix.
+    """
+    h = np.concatenate([points, np.ones(points.shape[:-1] + (1,))], axis=-1)  # (n, J, 3)
+    Fp = F[cameras[:, None], cameras[None, :]]  # (n, n, 3, 3)
+    lines_b = np.einsum("abik,ajk->abji", Fp, h)  # l_b = F x_a, (n, n, J, 3)
+    lines_a = np.einsum("abki,bjk->abji", Fp, h)  # l_a = F^T x_b
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d_b = np.abs(np.einsum("abji,bji->abj", lines_b, h)) / np.hypot(lines_b[..., 0], lines_b[..., 1])
+        d_a = np.abs(np.einsum("abji,aji->abj", lines_a, h)) / np.hypot(lines_a[..., 0], lines_a[..., 1])
+    per_joint = 1.0 - (d_a + d_b) / (2.0 * alpha_px)
+    common = np.isfinite(per_joint).sum(axis=-1)
+    mean = np.nansum(per_joint, axis=-1) / np.maximum(common, 1)
+    A = np.where(common >= min_common_joints, mean, -np.inf)
+    A[cameras[:, None] == cameras[None, :]] = -np.inf
+    return A

@@ -97,20 +97,27 @@ def _partition_milp(a: np.ndarray) -> list[np.ndarray] | None:
 
 
 def _partition_greedy(a: np.ndarray) -> list[np.ndarray]:
-    """Greedy agglomeration: join the pair of clusters with the largest positive total affinity."""
-    clusters = [[i] for i in range(a.shape[0])]
+    """Greedy agglomeration: join the pair of clusters with the largest positive total affinity.
+
+    S holds the total affinity between every two clusters; -inf (a shared camera) stays -inf under sums.
+    """
+    n = a.shape[0]
+    S = np.where(np.isfinite(a), a, -np.inf).astype(np.float64)
+    np.fill_diagonal(S, -np.inf)
+    members = [[i] for i in range(n)]
+    alive = np.ones(n, dtype=bool)
     while True:
-        best, pair = 0.0, None
-        for x in range(len(clusters)):
-            for y in range(x + 1, len(clusters)):
-                total = a[np.ix_(clusters[x], clusters[y])].sum()
-                if np.isfinite(total) and total > best:
-                    best, pair = total, (x, y)
-        if pair is None:
-            return [np.asarray(sorted(c)) for c in clusters]
-        x, y = pair
-        clusters[x] = clusters[x] + clusters[y]
-        del clusters[y]
+        x, y = divmod(int(np.argmax(S)), n)
+        if not S[x, y] > 0:
+            break
+        S[x] = S[x] + S[y]
+        S[:, x] = S[x]
+        S[x, x] = -np.inf
+        S[y] = -np.inf
+        S[:, y] = -np.inf
+        members[x] += members[y]
+        alive[y] = False
+    return [np.asarray(sorted(members[i])) for i in range(n) if alive[i]]
 
 
 @dataclass(frozen=True)

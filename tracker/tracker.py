@@ -30,7 +30,7 @@ from tracker.association import associate
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, ray_directions, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.triangulation import triangulate_incremental
+from tracker.triangulation import triangulate_incremental_both
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
@@ -97,8 +97,11 @@ class Tracker:
         C, J = len(self.cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))
         self._centers = np.stack([c.center_world for c in self.cameras]) if C else np.zeros((0, 3))
-        self._F = {(a, b): fundamental_matrix(self.cameras[a], self.cameras[b])
-                   for a in range(C) for b in range(C) if a != b}
+        self._F = np.zeros((C, C, 3, 3))  # F[a, b]: x_b^T F x_a = 0 (eq. S1)
+        for a in range(C):
+            for b in range(C):
+                if a != b:
+                    self._F[a, b] = fundamental_matrix(self.cameras[a], self.cameras[b])
         self._targets = _Targets(C, J, config.velocity_history)
         self._next_id = 0
         self._camera_last_s = np.full(C, -np.inf)
@@ -219,16 +222,25 @@ class Tracker:
         tg.obs_px[rows] = obs_px
         tg.obs_s[rows] = obs_s
         # Eq. (6): the new point plus the last point of every other camera, not older than the age limit.
-        fresh = np.isfinite(obs_s) & (t - obs_s <= cfg.max_observation_age_s)
-        pts = np.where(fresh[..., None], obs_px, np.nan).transpose(0, 2, 1, 3)  # (M, J, C, 2)
-        stamps = np.where(fresh, obs_s, t).transpose(0, 2, 1)  # (M, J, C)
-        X = triangulate_incremental(self._P, pts, stamps, t, cfg.lambda_t_per_s, None, cfg.min_views)
+        # Only the joints the new detection holds change; only cameras that see them take part.
+        fresh = np.isfinite(obs_s) & (t - obs_s <= cfg.max_observation_age_s)  # (M, C, J)
+        m_idx, j_idx = np.nonzero(seen)
+        cams = np.flatnonzero(fresh.any(axis=(0, 2)))
+        sel_fresh = fresh[m_idx, :, j_idx][:, cams]  # (n, Cu)
+        pts = np.where(sel_fresh[..., None], obs_px[m_idx, :, j_idx][:, cams], np.nan)  # (n, Cu, 2)
+        stamps = np.where(sel_fresh, obs_s[m_idx, :, j_idx][:, cams], t)  # (n, Cu)
+        velocities = tg.vel[rows][m_idx, j_idx] if cfg.triangulation is Triangulation.VELOCITY else None
+        plain, compensated = triangulate_incremental_both(self._P[cams], pts, stamps, t, cfg.lambda_t_per_s,
+                                                          velocities, cfg.min_views)
+        X = np.full(seen.shape + (3,), np.nan)
+        X[m_idx, j_idx] = plain
         update = seen & np.all(np.isfinite(X), axis=-1)  # (M, J)
-        samples = X  # the velocity fit always uses eq. (10)-(11) estimates
-        if cfg.triangulation is Triangulation.VELOCITY:
+        samples = X.copy()  # the velocity fit always uses the eq. (10)-(11) estimates
+        if compensated is not None:
             # The compensated estimate is not fed back into the velocity fit: a velocity error would move
             # the stale points, whose shifted estimate would grow the velocity error (a positive loop).
-            Xv = triangulate_incremental(self._P, pts, stamps, t, cfg.lambda_t_per_s, tg.vel[rows], cfg.min_views)
+            Xv = np.full_like(X, np.nan)
+            Xv[m_idx, j_idx] = compensated
             X = np.where(np.isfinite(Xv), Xv, X)
         pos = tg.pos[rows]
         pos[update] = X[update]
@@ -294,16 +306,8 @@ class Tracker:
             return []
         node_cam = np.concatenate([np.full(self._pool_px[k].shape[0], k) for k in cams])
         node_pos = np.concatenate([np.arange(self._pool_px[k].shape[0]) for k in cams])
-        n = node_cam.size
-        A = np.full((n, n), -np.inf)
-        offsets = np.concatenate([[0], np.cumsum([self._pool_px[k].shape[0] for k in cams])])
-        for ia, ka in enumerate(cams):
-            for ib in range(ia + 1, len(cams)):
-                kb = cams[ib]
-                block = aff.epipolar_affinity(self._pool_px[ka], self._pool_px[kb], self._F[(ka, kb)],
-                                              cfg.alpha_epipolar_px, cfg.init_min_common_joints)
-                A[offsets[ia]:offsets[ia + 1], offsets[ib]:offsets[ib + 1]] = block
-                A[offsets[ib]:offsets[ib + 1], offsets[ia]:offsets[ia + 1]] = block.T
+        A = aff.epipolar_affinity_matrix(np.concatenate([self._pool_px[k] for k in cams]), node_cam, self._F,
+                                         cfg.alpha_epipolar_px, cfg.init_min_common_joints)  # eq. (S2)
         created: list[tuple[int, np.ndarray]] = []
         used: dict[int, list[int]] = {}
         for cluster in partition_graph(A, cfg.milp_max_nodes):

@@ -30,17 +30,21 @@ def solve_weighted(rows: np.ndarray, weights: np.ndarray, min_views: int = 2) ->
     Returns:
         (..., 3) points, metres; NaN with too few views or a degenerate solution.
     """
-    valid = np.all(np.isfinite(rows), axis=(-1, -2)) & (weights > 0)
-    w = np.where(valid, weights, 0.0)
-    r = np.where(valid[..., None, None], rows, 0.0) * w[..., None, None]
-    r = r.reshape(r.shape[:-3] + (-1, 4))
+    valid = np.isfinite(rows).all(axis=(-1, -2)) & (weights > 0)
+    r = np.where(valid[..., None, None], rows * np.where(valid, weights, 0.0)[..., None, None], 0.0)
+    return _smallest_solution(r, valid.sum(axis=-1), min_views)
+
+
+def _smallest_solution(r: np.ndarray, num_views: np.ndarray, min_views: int) -> np.ndarray:
+    """The unit X̃ minimising ||r X̃|| for rows r (..., C, 2, 4) (zero rows for missing views), dehomogenised."""
+    batch = r.shape[:-3]
+    flat = r.reshape((-1, r.shape[-3] * 2, 4))
     # The right singular vector of the smallest singular value = eigenvector of CᵀC for the smallest eigenvalue.
-    M = np.einsum("...ri,...rj->...ij", r, r)
-    _, vecs = np.linalg.eigh(M)
-    Xh = vecs[..., :, 0]
+    _, vecs = np.linalg.eigh(np.matmul(flat.transpose(0, 2, 1), flat))
+    Xh = vecs[:, :, 0].reshape(batch + (4,))
     with np.errstate(invalid="ignore", divide="ignore"):
         X = Xh[..., :3] / Xh[..., 3:4]
-    bad = (np.sum(valid, axis=-1) < min_views) | (np.abs(Xh[..., 3]) < 1e-12) | ~np.all(np.isfinite(X), axis=-1)
+    bad = (num_views < min_views) | (np.abs(Xh[..., 3]) < 1e-12) | ~np.isfinite(X).all(axis=-1)
     X[bad] = np.nan
     return X
 
@@ -109,17 +113,41 @@ def triangulate_incremental(
     Returns:
         (..., 3) world points at time t, metres (NaN with fewer than `min_views` views).
     """
-    rows = dlt_rows(P, points_px)  # (..., C, 2, 4)
-    # Eq. (11) normalises by the norm of the row of C itself (before any velocity shift).
-    w = time_weights(rows, stamps_s, stamp_s, lambda_t_per_s)
-    if velocities is not None:
-        dt = np.maximum(stamp_s - stamps_s, 0.0)  # (..., C)
-        shift = np.einsum("...crk,...ck->...cr", rows[..., :3], velocities[..., None, :] * dt[..., None])
-        rows = rows.copy()
-        rows[..., 3] -= shift
-    r = rows * w[..., None]
-    valid_view = np.all(np.isfinite(r), axis=(-1, -2))
-    return solve_weighted(np.where(valid_view[..., None, None], r, np.nan), valid_view.astype(np.float64), min_views)
+    plain, compensated = triangulate_incremental_both(P, points_px, stamps_s, stamp_s, lambda_t_per_s,
+                                                      velocities, min_views)
+    return plain if velocities is None else compensated
+
+
+def triangulate_incremental_both(
+    P: np.ndarray,
+    points_px: np.ndarray,
+    stamps_s: np.ndarray,
+    stamp_s: float,
+    lambda_t_per_s: float,
+    velocities: np.ndarray | None,
+    min_views: int = 2,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """`triangulate_incremental` without and with velocity compensation, sharing one batched solve.
+
+    Returns:
+        (paper estimate (..., 3), velocity-compensated estimate (..., 3) or None without velocities).
+    """
+    rows = dlt_rows(P, points_px)  # (..., C, 2, 4), eq. (9)
+    valid = np.isfinite(points_px).all(axis=-1)  # (..., C)
+    rows = np.where(valid[..., None, None], rows, 0.0)
+    num_views = valid.sum(axis=-1)
+    dt = np.where(valid, np.maximum(stamp_s - stamps_s, 0.0), 0.0)
+    # Eq. (11): e^(-λt (t - t_i)) / ||c_i||, the norm taken on the row of C itself (before any shift).
+    norm = np.sqrt(np.einsum("...k,...k->...", rows, rows))
+    w = np.exp(-lambda_t_per_s * dt)[..., None] / np.where(norm > 0, norm, 1.0)
+    weighted = rows * w[..., None]  # eq. (10)
+    if velocities is None:
+        return _smallest_solution(weighted, num_views, min_views), None
+    shift = np.einsum("...crk,...ck->...cr", rows[..., :3], velocities[..., None, :] * dt[..., None])
+    moved = weighted.copy()
+    moved[..., 3] -= shift * w
+    both = _smallest_solution(np.stack([weighted, moved]), np.stack([num_views, num_views]), min_views)
+    return both[0], both[1]
 
 
 def reprojection_error_px(P: np.ndarray, X: np.ndarray, points_px: np.ndarray) -> np.ndarray:
