@@ -34,13 +34,19 @@ SEPARATION_M = 0.5
 SHELF_CLEARANCE_M = 0.32
 WALL_CLEARANCE_M = 0.3
 # Distance people like to keep when passing each other.
-COMFORT_M = 0.75
+COMFORT_M = 0.8
+# Walkers keep this far from shelf faces when they can, pushed off at up to SHELF_PUSH_M_S.
+SHELF_COMFORT_M = 0.45
+SHELF_PUSH_M_S = 0.6
+# Gains (m/s per unit urgency) of steering off a predicted close pass and of the short-range push.
+AVOID_GAIN = 1.6
+PUSH_GAIN = 0.8
 # Fraction of the gait cycle a foot is locked to the floor (the rest is heel-off and swing).
 STANCE_FRACTION = 0.45
 # Peak foot lift in swing and the swing length over which it reaches it.
 SWING_LIFT_M = 0.09
 FULL_LIFT_STRIDE_M = 0.3
-MAX_ACCEL_M_S2 = 1.5
+MAX_ACCEL_M_S2 = 2.0
 # How far outside a door people walk before they vanish (or after they appear).
 OUTSIDE_REACH_M = 1.2
 # Fastest anybody moves, walking or pushed aside.
@@ -226,6 +232,7 @@ class Crowd:
         self._free_cells = cells[inner]
         self._next_arrival = math.inf
         self._pending_arrivals = 0
+        self._upper = np.array([store.config.width_m, store.config.depth_m]) - WALL_CLEARANCE_M
         if config.start_inside:
             for s in range(S):
                 self._spawn(s, inside=True)
@@ -406,7 +413,7 @@ class Crowd:
                 while agent.path:
                     tx, ty = agent.path[0]
                     d = math.hypot(tx - px, ty - py)
-                    if d < (0.15 if len(agent.path) == 1 else 0.35) or self._passed(s, agent, px, py):
+                    if d < (0.15 if len(agent.path) == 1 else 0.35) or (d < 1.0 and self._passed(agent, px, py)):
                         agent.path.pop(0)
                         agent.rest.pop(0)
                         continue
@@ -434,6 +441,12 @@ class Crowd:
             # People standing still hold their place; walkers steer around them.
             walking = np.array([self.agents[s].activity == Activity.WALK for s in idx.tolist()])
             w = want[idx] + self._avoid(self.pos[idx], want[idx], self.vel[idx]) * walking[:, None]
+            # Near a shelf: no steering into it, and a gentle push away from its face.
+            away = self.store.away_from_obstacles(self.pos[idx], SHELF_COMFORT_M)
+            norm = np.hypot(away[:, 0], away[:, 1])
+            unit = away / np.maximum(norm, 1e-9)[:, None]
+            into = np.minimum((w * unit).sum(axis=1), 0.0)
+            w = w - unit * into[:, None] + away * (SHELF_PUSH_M_S * walking)[:, None]
             cap = self.speed_pref[idx] * 1.1
             norm = np.hypot(w[:, 0], w[:, 1])
             want[idx] = w * np.minimum(1.0, cap / np.maximum(norm, 1e-9))[:, None]
@@ -458,7 +471,7 @@ class Crowd:
         self._gait(speed, active)
         self._arms(active)
 
-    def _passed(self, s: int, agent: _Agent, px: float, py: float) -> bool:
+    def _passed(self, agent: _Agent, px: float, py: float) -> bool:
         """Whether someone pushed off their path is already past its next waypoint (closer to the one after)."""
         if len(agent.path) < 2:
             return False
@@ -491,15 +504,15 @@ class Crowd:
         ay = np.where(head_on, wx, my) * inv * urgency
         # Short-range push so that nobody leans on a neighbour.
         push = np.minimum(np.maximum(COMFORT_M - d, 0.0) / (COMFORT_M - SEPARATION_M), 1.5) / d
-        cx = -0.9 * ax.sum(axis=1) - 0.4 * (rx * push).sum(axis=1)
-        cy = -0.9 * ay.sum(axis=1) - 0.4 * (ry * push).sum(axis=1)
+        cx = -AVOID_GAIN * ax.sum(axis=1) - PUSH_GAIN * (rx * push).sum(axis=1)
+        cy = -AVOID_GAIN * ay.sum(axis=1) - PUSH_GAIN * (ry * push).sum(axis=1)
         return np.stack([cx, cy], axis=-1)
 
     def _wall_bounds(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 2) lower and upper bounds of the pelvis positions of slots idx (doors open the wall)."""
-        W, D = self.store.config.width_m, self.store.config.depth_m
         lo = np.full((len(idx), 2), WALL_CLEARANCE_M)
-        hi = np.tile([W - WALL_CLEARANCE_M, D - WALL_CLEARANCE_M], (len(idx), 1))
+        hi = np.empty((len(idx), 2))
+        hi[:] = self._upper
         for k, s in enumerate(idx.tolist()):
             agent = self.agents[s]
             if not (agent.in_door or agent.leaving):
