@@ -116,7 +116,12 @@ def load_frames(dataset_dir, source: str = "auto") -> list[Frame]:
     Returns:
         Frames with (D, J, 2) pixels and (D, J) scores; a joint with score 0 is NaN.
     """
-    path = _source_path(Path(dataset_dir), source)
+    return [frame for frame, _ in _read_frames(Path(dataset_dir), source)]
+
+
+def _read_frames(dataset_dir: Path, source: str) -> list[tuple[Frame, np.ndarray]]:
+    """Frames sorted by (timestamp, camera), each with the (D,) `id` of its poses (-1 for detections)."""
+    path = _source_path(dataset_dir, source)
     data = _load(path)
     try:
         items = data["frames"]
@@ -130,25 +135,26 @@ def load_frames(dataset_dir, source: str = "auto") -> list[Frame]:
             points = [np.asarray(p["points_2d"], dtype=np.float64) for p in item["poses"]]
             scores = [np.asarray(p.get("scores", np.ones(len(p["points_2d"]))), dtype=np.float64)
                       for p in item["poses"]]
+            ids = np.asarray([int(p.get("id", -1)) for p in item["poses"]], dtype=np.int64)
         except (KeyError, TypeError, ValueError) as exc:
             raise DatasetError(f"{path}: frame {key!r}: key {exc} missing or malformed "
                                "(expected camera, timestamp, poses[points_2d, scores])") from exc
-        for p, s in zip(points, scores):
-            if p.ndim != 2 or p.shape[1] != 2 or s.shape != p.shape[:1]:
-                raise DatasetError(f"{path}: frame {key!r}: points_2d {p.shape} / scores {s.shape} do not match")
+        for p, sc in zip(points, scores):
+            if p.ndim != 2 or p.shape[1] != 2 or sc.shape != p.shape[:1]:
+                raise DatasetError(f"{path}: frame {key!r}: points_2d {p.shape} / scores {sc.shape} do not match")
             if num_joints is None:
                 num_joints = p.shape[0]
             elif p.shape[0] != num_joints:
                 raise DatasetError(f"{path}: frame {key!r}: {p.shape[0]} joints, earlier frames have {num_joints}")
-        parsed.append((stamp, camera, points, scores))
+        parsed.append((stamp, camera, points, scores, ids))
     num_joints = num_joints or COCO17.num_joints
-    frames = []
-    for stamp, camera, points, scores in sorted(parsed, key=lambda x: (x[0], x[1])):
+    out = []
+    for stamp, camera, points, scores, ids in sorted(parsed, key=lambda x: (x[0], x[1])):
         kp = np.stack(points) if points else np.zeros((0, num_joints, 2))
         sc = np.stack(scores) if scores else np.zeros((0, num_joints))
         kp = np.where((sc > 0)[..., None], kp, np.nan)
-        frames.append(Frame(camera=camera, stamp_s=stamp, keypoints_px=kp, scores=sc))
-    return frames
+        out.append((Frame(camera=camera, stamp_s=stamp, keypoints_px=kp, scores=sc), ids))
+    return out
 
 
 def skeleton_of(frames: list[Frame]):
@@ -228,3 +234,66 @@ def write_result_3d(outputs: Iterable[TrackerOutput], path) -> int:
     with open(path, "w") as f:
         json.dump(entries, f)
     return len(entries)
+
+
+def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
+    """Writes a dataset of the published layout as a recording (crossview.recording), frames in timestamp order.
+
+    Each frame keeps its own camera and stamp (capture = delivery = stamp). With annotation_2d.json the
+    per-detection truth holds the annotated ids and joints; with detection.json the ids are -1. The 3D truth
+    of annotation_3d.json (14 joints, metres) is written when the 2D joints use the same layout (CAMPUS14).
+
+    Returns:
+        The number of camera frames written.
+    """
+    import hashlib
+
+    from crossview.recording import RecordingHeader, RecordingWriter
+    from sim.types import CameraFrame, DetectionTruth, PoseTruth
+
+    dataset_dir = Path(dataset_dir)
+    cameras = load_cameras(dataset_dir)
+    known = {c.name for c in cameras}
+    frames = _read_frames(dataset_dir, source)
+    for frame, _ in frames:
+        if frame.camera not in known:
+            raise DatasetError(f"{_source_path(dataset_dir, source)}: camera {frame.camera!r} is not in "
+                               f"calibration.json ({', '.join(sorted(known))})")
+    skeleton = skeleton_of([f for f, _ in frames])
+    truth = load_truth_3d(dataset_dir) if (dataset_dir / "annotation_3d.json").is_file() else []
+    if truth and skeleton.num_joints != 14:
+        truth = []  # the 14-joint truth cannot be stored with COCO-17 frames in one recording
+    truth.sort(key=lambda entry: entry[0])
+    truth_stamps = np.array([entry[0] for entry in truth])
+    digest = hashlib.sha256()
+    for name in ("calibration.json", _source_path(dataset_dir, source).name, "annotation_3d.json"):
+        if (dataset_dir / name).is_file():
+            digest.update((dataset_dir / name).read_bytes())
+    end_s = max([f.stamp_s for f, _ in frames] + [e[0] for e in truth] + [0.0])
+    header = RecordingHeader(scenario_name=dataset_dir.resolve().name, scenario_text="",
+                             scenario_digest=digest.hexdigest(), seed=0, duration_s=float(end_s),
+                             skeleton_name=skeleton.name)
+    J = skeleton.num_joints
+    empty_truth = PoseTruth(0.0, np.zeros(0, dtype=np.int64), np.zeros((0, J, 3)))
+    events = [(t, 0, i) for i, (t, _, _) in enumerate(truth)] + [(f.stamp_s, 1, i) for i, (f, _) in enumerate(frames)]
+    events.sort()
+    with RecordingWriter(out_mcap, header, cameras, ()) as writer:
+        for t, kind, i in events:
+            if kind == 0:
+                writer.write(PoseTruth(float(t), truth[i][1], truth[i][2]))
+                continue
+            frame, ids = frames[i]
+            D = frame.num_detections
+            annotated = ids >= 0
+            keypoints = np.where(annotated[:, None, None], frame.keypoints_px, np.nan)
+            in_image = np.isfinite(keypoints[..., 0])
+            none = np.zeros((D, J), dtype=bool)
+            det_truth = DetectionTruth(capture_s=frame.stamp_s, delivery_s=frame.stamp_s, person_ids=ids,
+                                       keypoints_px=keypoints, in_image=in_image, occluded=none,
+                                       self_occluded=none, effects=np.zeros(D, dtype=np.int64))
+            poses = empty_truth
+            if truth:
+                k = int(np.argmin(np.abs(truth_stamps - frame.stamp_s)))
+                poses = PoseTruth(float(truth_stamps[k]), truth[k][1], truth[k][2])
+            writer.write(CameraFrame(frame=frame, truth=det_truth, poses_at_capture=poses))
+    return len(frames)
