@@ -33,6 +33,8 @@ STEP_S = 0.1
 SEPARATION_M = 0.5
 SHELF_CLEARANCE_M = 0.32
 WALL_CLEARANCE_M = 0.3
+# A projection moves people this much beyond the hard limits, so that they do not hit them again next step.
+PROJECTION_MARGIN_M = 0.06
 # Distance people like to keep when passing each other.
 COMFORT_M = 0.8
 # Walkers keep this far from shelf faces when they can, pushed off at up to SHELF_PUSH_M_S.
@@ -402,13 +404,15 @@ class Crowd:
                                       if self._pending_arrivals else math.inf)
         active = self.person_id >= 0
         S = self.slots
-        # 2. Wishes: walk the path, or stand and face the goal.
+        # 2. Wishes: walk the path, or stand and face the goal (plain floats: this loop runs per person).
         want = np.zeros((S, 2))
         want_heading = self.heading.copy()
-        speed_now = np.hypot(self.vel[:, 0], self.vel[:, 1])
+        speed_now = np.hypot(self.vel[:, 0], self.vel[:, 1]).tolist()
+        positions = self.pos.tolist()
+        preferred = self.speed_pref.tolist()
         for s in np.nonzero(active)[0].tolist():
             agent = self.agents[s]
-            px, py = self.pos[s]
+            px, py = positions[s]
             if agent.activity == Activity.WALK:
                 while agent.path:
                     tx, ty = agent.path[0]
@@ -425,8 +429,8 @@ class Crowd:
                         continue
                     self._start_activity(s, agent.goal_kind)
                 else:
-                    speed = min(self.speed_pref[s], 0.35 + 0.8 * (d + agent.rest[0]))
-                    want[s] = ((tx - px) / d * speed, (ty - py) / d * speed)
+                    speed = min(preferred[s], 0.35 + 0.8 * (d + agent.rest[0])) / d
+                    want[s] = ((tx - px) * speed, (ty - py) * speed)
                     agent.stuck = agent.stuck + dt if speed_now[s] < 0.15 else 0.0
                     if agent.stuck > STUCK_S:
                         self._choose_goal(s)
@@ -557,19 +561,20 @@ class Crowd:
             return new
         lo, hi = self._wall_bounds(idx)
         p = new[idx]
-        if self._violations(p, lo, hi).any():
-            for _ in range(3):
-                rx = p[None, :, 0] - p[:, None, 0]
-                ry = p[None, :, 1] - p[:, None, 1]
-                d = np.sqrt(rx * rx + ry * ry)
-                d.flat[:: len(p) + 1] = np.inf
-                f = np.maximum(SEPARATION_M + 0.01 - d, 0.0) * 0.5 / np.maximum(d, 1e-9)
-                if f.any():
-                    p = p - np.stack([(rx * f).sum(axis=1), (ry * f).sum(axis=1)], axis=-1)
-                near = self.store.obstacle_distance(p) < SHELF_CLEARANCE_M + 0.01
-                if near.any():
-                    p[near] = self.store.push_out(p[near], SHELF_CLEARANCE_M + 0.01)
-                p = np.minimum(np.maximum(p, lo), hi)
+        if not self._violations(p, lo, hi).any():
+            return new  # the usual case; nobody moves faster than MAX_SPEED_M_S without a projection
+        for _ in range(3):
+            rx = p[None, :, 0] - p[:, None, 0]
+            ry = p[None, :, 1] - p[:, None, 1]
+            d = np.sqrt(rx * rx + ry * ry)
+            d.flat[:: len(p) + 1] = np.inf
+            f = np.maximum(SEPARATION_M + PROJECTION_MARGIN_M - d, 0.0) * 0.5 / np.maximum(d, 1e-9)
+            if f.any():
+                p = p - np.stack([(rx * f).sum(axis=1), (ry * f).sum(axis=1)], axis=-1)
+            near = self.store.obstacle_distance(p) < SHELF_CLEARANCE_M + PROJECTION_MARGIN_M
+            if near.any():
+                p[near] = self.store.push_out(p[near], SHELF_CLEARANCE_M + PROJECTION_MARGIN_M)
+            p = np.minimum(np.maximum(p, lo), hi)
         out = new.copy()
         out[idx] = p
         # Nobody is shoved faster than anybody walks: a longer push is no step at all.
@@ -621,20 +626,19 @@ class Crowd:
         self.feet = np.where(touch[..., None], np.stack([tx, ty], axis=-1), self.feet)
 
     def _arms(self, active: np.ndarray):
-        """Browsing reaches and where people look."""
+        """How far each browsing arm is raised (ramps up, holds, ramps down), its height and side."""
         t = self.time_s
-        for s in np.nonzero(active)[0]:
+        self.reach[:] = 0.0
+        for s in np.nonzero(active)[0].tolist():
             agent = self.agents[s]
-            r = 0.0
             if agent.activity in (Activity.BROWSE, Activity.CHECKOUT):
                 for start, end, height, side in agent.reaches:
                     if start <= t <= end:
                         up = min(0.7, (end - start) / 3)
-                        r = min(1.0, (t - start) / up, (end - t) / up)
+                        self.reach[s] = min(1.0, (t - start) / up, (end - t) / up)
                         self.reach_height[s] = height
                         self.reach_side[s] = side
                         break
-            self.reach[s] = r
 
     def activities(self) -> np.ndarray:
         """(S,) `Activity` of each slot (WALK for empty slots)."""

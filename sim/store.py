@@ -397,12 +397,29 @@ class StoreGeometry:
 
     def distance_field(self, goal) -> np.ndarray:
         """(nx * ny,) path length from every cell to the goal's cell (inf where unreachable); cached."""
+        return self._field_and_next(goal)[0]
+
+    def _field_and_next(self, goal) -> tuple[np.ndarray, np.ndarray]:
+        """The goal's distance field and, per cell, the flat index of its downhill neighbour (itself at the
+        goal or where stuck); both cached per goal cell."""
         key = self.flat_index(goal)
-        field = self._fields.get(key)
-        if field is None:
+        cached = self._fields.get(key)
+        if cached is None:
             field = scipy.sparse.csgraph.dijkstra(self.graph, directed=False, indices=key)
-            self._fields[key] = field
-        return field
+            F = np.full((self.nx + 2, self.ny + 2), np.inf)
+            F[1:-1, 1:-1] = field.reshape(self.nx, self.ny)
+            best = F[1:-1, 1:-1].copy()
+            nxt = np.arange(self.nx * self.ny).reshape(self.nx, self.ny)
+            idx = nxt.copy()
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    if di or dj:
+                        shifted = F[1 + di: self.nx + 1 + di, 1 + dj: self.ny + 1 + dj]
+                        better = shifted < best - 1e-12
+                        best = np.where(better, shifted, best)
+                        nxt = np.where(better, idx + di * self.ny + dj, nxt)
+            cached = self._fields[key] = (field, nxt.ravel())
+        return cached
 
     def line_free(self, a, b) -> bool:
         """Whether the straight segment a-b stays on free cells (sampled every half cell)."""
@@ -426,33 +443,26 @@ class StoreGeometry:
         Returns:
             waypoints (each (2,)), ending at the goal; empty if the goal is unreachable.
         """
-        field = self.distance_field(goal)
+        field, nxt = self._field_and_next(goal)
         i, j = self.cell_of(start)
         if not self.free[i, j] or field[i * self.ny + j] == np.inf:
-            s = self.nearest_free(start)
-            i, j = self.cell_of(s)
-        if field[i * self.ny + j] == np.inf:
+            i, j = self.cell_of(self.nearest_free(start))
+        k = i * self.ny + j
+        if field[k] == np.inf:
             return []
-        cells = [(i, j)]
-        goal_key = self.flat_index(goal)
-        for _ in range(self.nx * self.ny):
-            if i * self.ny + j == goal_key:
+        cells = [k]
+        while True:
+            k2 = int(nxt[k])
+            if k2 == k:
                 break
-            best, best_d = None, field[i * self.ny + j]
-            for di in (-1, 0, 1):
-                for dj in (-1, 0, 1):
-                    a, b = i + di, j + dj
-                    if (di or dj) and 0 <= a < self.nx and 0 <= b < self.ny:
-                        d = field[a * self.ny + b]
-                        if d < best_d - 1e-12:
-                            best, best_d = (a, b), d
-            if best is None:
-                break
-            i, j = best
-            cells.append(best)
-        pts = [self.cell_centers[c] for c in cells]
+            cells.append(k2)
+            k = k2
+        # String pulling over every third cell: keep a waypoint only where the straight view from the
+        # previous one ends.
+        picks = cells[::3] if (len(cells) - 1) % 3 == 0 else cells[::3] + [cells[-1]]
+        flat = self.cell_centers.reshape(-1, 2)
+        pts = [flat[c] for c in picks]
         pts.append(np.asarray(goal, float))
-        # String pulling: keep a waypoint only where the straight view from the previous one ends.
         out = [np.asarray(start, float)]
         for k in range(1, len(pts)):
             if not self.line_free(out[-1], pts[k]):
