@@ -226,18 +226,18 @@ def leg_ik(d: np.ndarray, thigh: np.ndarray, shin: np.ndarray, sign: float) -> t
 
     Args:
         d: (..., 3) ankle target minus hip joint centre, in the pelvis frame, metres.
-        thigh, shin: (...,) segment lengths.
-        sign: +1 for the left leg, -1 for the right (the abduction axis is mirrored).
+        thigh, shin: segment lengths, broadcastable against d[..., 0].
+        sign: +1 for the left leg, -1 for the right (the abduction axis is mirrored); broadcastable too.
 
     Returns:
         hip_abd, hip_flex, knee: (...,) radians; a target out of reach gives the nearest reachable pose.
     """
     dx, dy, dz = d[..., 0], d[..., 1], d[..., 2]
     abd = sign * np.arctan2(dy, -dz)
-    down = np.hypot(dy, dz)
-    r = np.hypot(dx, down)
-    r = np.clip(r, np.abs(thigh - shin) + 1e-6, (thigh + shin) * MAX_LEG_STRETCH)
-    gamma = np.arctan2(dx, down)
-    delta = np.arccos(np.clip((thigh**2 + r**2 - shin**2) / (2 * thigh * r), -1.0, 1.0))
-    knee = math.pi - np.arccos(np.clip((thigh**2 + shin**2 - r**2) / (2 * thigh * shin), -1.0, 1.0))
-    return abd, gamma + delta, knee
+    down = np.sqrt(dy * dy + dz * dz)
+    r = np.minimum(np.maximum(np.sqrt(dx * dx + down * down), np.abs(thigh - shin) + 1e-6),
+                   (thigh + shin) * MAX_LEG_STRETCH)
+    # Law of cosines: the hip angle between thigh and hip-ankle line, and the knee's interior angle.
+    flex = np.arctan2(dx, down) + np.arccos(np.minimum((thigh * thigh + r * r - shin * shin) / (2 * thigh * r), 1.0))
+    knee = math.pi - np.arccos(np.maximum((thigh * thigh + shin * shin - r * r) / (2 * thigh * shin), -1.0))
+    return abd, flex, knee

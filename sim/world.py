@@ -126,7 +126,6 @@ class World:
         self._last_t = -math.inf
         self._sync_slots()
         self._prev = self._cur = self._snapshot()
-        self.timing_s = 0.0
 
     # -- model -------------------------------------------------------------------------------------
 
@@ -256,8 +255,6 @@ class World:
         thigh, shin = hm.THIGH * H, hm.SHIN * H
         self._k = {
             "thigh": thigh[:, None], "shin": shin[:, None],
-            "r_min": np.abs(thigh - shin)[:, None] + 1e-6,
-            "r_max": ((thigh + shin) * hm.MAX_LEG_STRETCH)[:, None],
             "reach2": ((thigh + shin) * hm.MAX_LEG_STRETCH * 0.995)[:, None] ** 2,
             "hw": (hm.HIP_HALF_WIDTH * H)[:, None] * _SIDES,
             "ankle_h": (hm.ANKLE_HEIGHT * H)[:, None],
@@ -309,12 +306,8 @@ class World:
         q[:, 6] = np.sin(0.5 * heading)
         # Legs: ankle target in the pelvis frame, two-link inverse kinematics (both legs at once).
         dx, dy, dz = rx * cc + ry * ss, ry * cc - rx * ss, az - z[:, None]
-        a, b = k["thigh"], k["shin"]
-        down = np.sqrt(dy * dy + dz * dz)
-        r = np.minimum(np.maximum(np.sqrt(dx * dx + down * down), k["r_min"]), k["r_max"])
-        flex = np.arctan2(dx, down) + np.arccos(np.minimum((a * a + r * r - b * b) / (2 * a * r), 1.0))
-        knee = math.pi - np.arccos(np.maximum((a * a + b * b - r * r) / (2 * a * b), -1.0))
-        q[:, _COL["hip_abd"]] = _SIDES * np.arctan2(dy, -dz)
+        abd, flex, knee = hm.leg_ik(np.stack([dx, dy, dz], axis=-1), k["thigh"], k["shin"], _SIDES)
+        q[:, _COL["hip_abd"]] = abd
         q[:, _COL["hip_flex"]] = flex
         q[:, _COL["knee"]] = knee
         # Foot flat on the floor, toes down a little in swing.
