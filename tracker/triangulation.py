@@ -35,18 +35,38 @@ def solve_weighted(rows: np.ndarray, weights: np.ndarray, min_views: int = 2) ->
     return _smallest_solution(r, valid.sum(axis=-1), min_views)
 
 
+_INVERSE_ITERATIONS = 2  # each multiplies the start's error by λ_min / λ_2, tiny for a posed triangulation
+
+
 def _smallest_solution(r: np.ndarray, num_views: np.ndarray, min_views: int) -> np.ndarray:
-    """The unit X̃ minimising ||r X̃|| for rows r (..., C, 2, 4) (zero rows for missing views), dehomogenised."""
+    """The unit X̃ minimising ||r X̃|| for rows r (..., C, 2, 4) (zero rows for missing views), dehomogenised.
+
+    That is the right singular vector of the smallest singular value of r (eq. 8, "solved via SVD"), i.e. the
+    eigenvector of M = rᵀr with the smallest eigenvalue. It is found by inverse iteration on M started from
+    the inhomogeneous solution (X̃4 = 1), which for 4x4 matrices in a batch is several times faster than a
+    batched eigendecomposition and agrees with it to rounding (tests compare with an SVD).
+    """
     batch = r.shape[:-3]
     flat = r.reshape((-1, r.shape[-3] * 2, 4))
-    # The right singular vector of the smallest singular value = eigenvector of CᵀC for the smallest eigenvalue.
-    _, vecs = np.linalg.eigh(np.matmul(flat.transpose(0, 2, 1), flat))
-    Xh = vecs[:, :, 0].reshape(batch + (4,))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        X = Xh[..., :3] / Xh[..., 3:4]
-    bad = (num_views < min_views) | (np.abs(Xh[..., 3]) < 1e-12) | ~np.isfinite(X).all(axis=-1)
-    X[bad] = np.nan
-    return X
+    ok = num_views.reshape(-1) >= min_views
+    X = np.full((flat.shape[0], 3), np.nan)
+    if ok.any():
+        M = np.matmul(flat[ok].transpose(0, 2, 1), flat[ok])
+        scale = np.trace(M, axis1=1, axis2=2)[:, None, None]
+        regular = M + 1e-13 * scale * np.eye(4)
+        try:
+            start = np.linalg.solve(regular[:, :3, :3], -M[:, :3, 3:])[..., 0]
+            v = np.concatenate([start, np.ones((start.shape[0], 1))], axis=1)
+            for _ in range(_INVERSE_ITERATIONS):
+                v = np.linalg.solve(regular, v[..., None])[..., 0]
+                v /= np.linalg.norm(v, axis=1, keepdims=True)
+        except np.linalg.LinAlgError:
+            v = np.linalg.eigh(M)[1][:, :, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            sol = v[:, :3] / v[:, 3:4]
+        sol[(np.abs(v[:, 3]) < 1e-12) | ~np.isfinite(sol).all(axis=1)] = np.nan
+        X[ok] = sol
+    return X.reshape(batch + (3,))
 
 
 def triangulate(P: np.ndarray, points_px: np.ndarray, min_views: int = 2, normalize_rows: bool = True) -> np.ndarray:
