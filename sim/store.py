@@ -145,6 +145,11 @@ class Door:
         return self.center - OUTSIDE_DOOR_M * self.inward
 
 
+def _xy(point) -> str:
+    """A point for an error message: (1.5, 2)."""
+    return "(" + ", ".join(f"{float(v):.4g}" for v in point) + ")"
+
+
 def _error(name: str, message: str):
     from sim.scenario import ScenarioError  # deferred: sim.scenario imports this module
 
@@ -233,7 +238,7 @@ class StoreGeometry:
         self.exit = self._door("store.exit_m", config.exit_m, (0.0, 0.75 * D))
         gap = np.linalg.norm(self.entrance.center - self.exit.center)
         if gap < config.door_width_m:
-            raise self._err("store.exit_m", f"door at {tuple(self.exit.center)} overlaps store.entrance_m (centres "
+            raise self._err("store.exit_m", f"door at {_xy(self.exit.center)} overlaps store.entrance_m (centres "
                                             f"{gap:.2f} m apart, need >= door_width_m = {config.door_width_m})")
         self.nav_clearance_m = nav_clearance_m
         self.wall_clearance_m = wall_clearance_m
@@ -241,7 +246,7 @@ class StoreGeometry:
         for door in (self.entrance, self.exit):
             if not self.free[self.cell_of(door.inside)]:
                 blocker = self._nearest_obstacle(door.inside)
-                raise self._err(door.key, f"door at {tuple(np.round(door.center, 2))} is blocked by {blocker} "
+                raise self._err(door.key, f"door at {_xy(door.center)} is blocked by {blocker} "
                                           f"(keep {INSIDE_DOOR_M + nav_clearance_m:.2f} m in front of a door clear)")
         if self.distance_field(self.exit.inside)[self.flat_index(self.entrance.inside)] == np.inf:
             raise self._err("store.exit_m", "cannot be reached from store.entrance_m around the shelves")
@@ -268,10 +273,10 @@ class StoreGeometry:
         ]
         dist, along, length, inward = min(walls, key=lambda w: w[0])
         if dist > 0.05:
-            raise self._err(key, f"{tuple(p)} is not on a wall of the [0, {W}] x [0, {D}] m floor "
+            raise self._err(key, f"{_xy(p)} is not on a wall of the [0, {W}] x [0, {D}] m floor "
                                  "(one coordinate must be 0 or the floor's width/depth)")
         if not half + 0.2 <= along <= length - half - 0.2:
-            raise self._err(key, f"{tuple(p)}: a door {self.config.door_width_m} m wide must keep 0.2 m from the "
+            raise self._err(key, f"{_xy(p)}: a door {self.config.door_width_m} m wide must keep 0.2 m from the "
                                  f"corners (along-wall coordinate in [{half + 0.2:.2f}, {length - half - 0.2:.2f}])")
         inward = np.array(inward)
         center = p + dist * inward * (1 if np.dot(p - np.array([W / 2, D / 2]), inward) < 0 else -1)
@@ -279,7 +284,7 @@ class StoreGeometry:
         for ob in self.obstacles:
             mouth = door.center + np.outer(np.linspace(0.0, INSIDE_DOOR_M, 9), inward)
             if np.any(rect_distance(mouth, ob.center, ob.half, ob.yaw) < 0.3):
-                raise self._err(key, f"door at {tuple(np.round(center, 2))} lies inside or against {ob.key}")
+                raise self._err(key, f"door at {_xy(center)} lies inside or against {ob.key}")
         return door
 
     def _local(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -216,9 +216,8 @@ class World:
 
     def geom_person_ids(self) -> np.ndarray:
         """(ngeom,) int64: the person each geom's body belongs to now; -1 for store geoms and parked bodies."""
-        slot = self._geom_slot
-        ids = np.where(self._present, self._person_ids, -1)
-        return np.where(slot >= 0, ids[np.maximum(slot, 0)], -1).astype(np.int64)
+        ids = np.append(np.where(self._present, self._person_ids, -1), -1)  # index -1: store geoms
+        return ids[self._geom_slot].astype(np.int64)
 
     def geom_body_ids(self) -> np.ndarray:
         """(ngeom,) int64: index in `sim.humanoid.BODIES` of each geom's body, -1 for store geoms.

@@ -220,3 +220,10 @@ def test_a_body_height_outside_the_supported_range_is_an_error():
         CrowdConfig(people=3, heights_m=(1.7, 2.3))
     with pytest.raises(ScenarioError, match=r"crowd\] heights_m\[0\]"):
         sc.load("store_layout1", overrides={"crowd.heights_m": [1.2]})
+
+
+def test_a_store_without_people_poses_nobody():
+    world = _world("store_layout1", people=0)
+    truth = world.advance(2.0)
+    assert truth.poses.shape == (0, 17, 3)
+    assert np.all(world.geom_person_ids() == -1)
