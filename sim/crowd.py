@@ -49,8 +49,9 @@ STANCE_FRACTION = 0.45
 SWING_LIFT_M = 0.09
 FULL_LIFT_STRIDE_M = 0.3
 MAX_ACCEL_M_S2 = 2.0
-# How far outside a door people walk before they vanish (or after they appear).
+# How far outside a door people may be pushed; leavers vanish once this far outside the exit.
 OUTSIDE_REACH_M = 1.2
+VANISH_DEPTH_M = 0.25
 # Fastest anybody moves, walking or pushed aside.
 MAX_SPEED_M_S = 2.0
 MAX_TURN_RAD_S = 3.0
@@ -410,9 +411,15 @@ class Crowd:
         speed_now = np.hypot(self.vel[:, 0], self.vel[:, 1]).tolist()
         positions = self.pos.tolist()
         preferred = self.speed_pref.tolist()
+        (exit_x, exit_y), (exit_nx, exit_ny) = self.store.exit.center.tolist(), self.store.exit.inward.tolist()
         for s in np.nonzero(active)[0].tolist():
             agent = self.agents[s]
             px, py = positions[s]
+            if agent.leaving and (px - exit_x) * exit_nx + (py - exit_y) * exit_ny < -VANISH_DEPTH_M:
+                # Out through the exit: gone.
+                self._depart(s)
+                active[s] = False
+                continue
             if agent.activity == Activity.WALK:
                 while agent.path:
                     tx, ty = agent.path[0]
