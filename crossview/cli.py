@@ -181,7 +181,7 @@ def _cmd_detector_stats(args) -> None:
     from crossview.detector_stats import detector_stats, format_detector_stats
 
     rec = recording.open_recording(args.recording)
-    print(format_detector_stats(detector_stats(rec.frames())))
+    print(format_detector_stats(detector_stats(rec.frames(), rec.cameras)))
 
 
 def _cmd_evaluate(args) -> None:
