@@ -22,7 +22,7 @@ _BOX_BGR = {
     BoxKind.EXIT: (80, 80, 210),
 }
 _MARGIN_PX = 30
-_LEGEND_PX = 22
+_LEGEND_PX = 40
 
 
 def _person_bgr(person_id: int) -> tuple[int, int, int]:
@@ -93,8 +93,14 @@ def draw_layout(
                      (40, 40, 40), 1, lineType=cv2.LINE_AA)
         cv2.circle(image, tuple(int(v) for v in px(centre)[0]), 4, (0, 0, 0), -1, lineType=cv2.LINE_AA)
     if title:
-        cv2.putText(image, title, (_MARGIN_PX, height - 8), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1,
-                    lineType=cv2.LINE_AA)
+        # One line if it fits, else split at the first ": ".
+        lines = [title]
+        if cv2.getTextSize(title, cv2.FONT_HERSHEY_SIMPLEX, 0.45, 1)[0][0] > width - _MARGIN_PX and ": " in title:
+            head, tail = title.split(": ", 1)
+            lines = [head + ":", tail]
+        for n, line in enumerate(lines[-2:]):
+            cv2.putText(image, line, (8, height - 26 + 16 * n + (8 if len(lines) == 1 else 0)),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 0), 1, lineType=cv2.LINE_AA)
     # Scale bar: 1 m.
     bar = px(np.array([[x0, y0], [x0 + 1.0, y0]]))
     bar[:, 1] += _MARGIN_PX // 2
@@ -151,7 +157,7 @@ def write_layout_pictures(out_dir: str | Path, names: tuple[str, ...] = ("store_
     written = []
     for name in names:
         scenario = sc.load(name)
-        scale = 40.0 if scenario.store.width_m <= 10 else 30.0
+        scale = 60.0 if scenario.store.width_m <= 6 else 40.0 if scenario.store.width_m <= 10 else 30.0
         image = layout_picture(scenario, seconds, px_per_m=scale)
         path = out / f"{name}.png"
         if not cv2.imwrite(str(path), image, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
