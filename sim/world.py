@@ -233,9 +233,15 @@ class World:
         wrist on its hand, a hip on its thigh, a knee on its shin, an ankle on its foot. The joint keypoints
         sit at the joint centre, so they may also lie inside the parent segment's geom (the shoulder in the
         torso's ellipsoid, the hip in the pelvis capsule, the knee in the thigh capsule, and so on);
-        `sim.humanoid.KEYPOINT_PARENT_BODY` gives that parent.
+        `keypoint_parent_body_ids` gives that parent.
         """
         return hm.KEYPOINT_BODY.copy()
+
+    def keypoint_parent_body_ids(self) -> np.ndarray:
+        """(17,) int64: index in `sim.humanoid.BODIES` of the parent of each keypoint's body (the torso for a
+        shoulder, the pelvis for a hip, the upper arm for an elbow, the neck for the face points, ...): a
+        joint keypoint at the joint centre also lies inside the parent segment's geom."""
+        return hm.KEYPOINT_PARENT_BODY.copy()
 
     def height_m(self, person_id: int) -> float:
         """Body height of a person who has appeared so far. Raises KeyError for an unknown id."""

@@ -190,6 +190,9 @@ def test_keypoint_body_ids_name_the_bodies_the_sites_hang_on():
     sites = world._kp_sites[0]
     body_of_site = world.model.site_bodyid[sites]
     np.testing.assert_array_equal(world._body_local[body_of_site], kb)
+    # The parent is the body one level up the kinematic tree.
+    parents = world.model.body_parentid[body_of_site]
+    np.testing.assert_array_equal(world._body_local[parents], world.keypoint_parent_body_ids())
 
 
 def test_heights_are_those_of_the_scenario_or_drawn_in_range():
