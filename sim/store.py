@@ -19,6 +19,8 @@ from sim.types import Box, BoxKind
 
 # Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast distance fields.
 GRID_CELL_M = 0.1
+# Distance fields kept per goal cell (a supermarket's is ~0.3 MB).
+FIELD_CACHE_SIZE = 128
 # Thickness of the walls and of the floor slab (the floor's top face is z = 0).
 WALL_THICKNESS_M = 0.1
 FLOOR_THICKNESS_M = 0.1
@@ -423,6 +425,8 @@ class StoreGeometry:
                         better = shifted < best - 1e-12
                         best = np.where(better, shifted, best)
                         nxt = np.where(better, idx + di * self.ny + dj, nxt)
+            if len(self._fields) >= FIELD_CACHE_SIZE:
+                del self._fields[next(iter(self._fields))]  # oldest first; only a cache, motion is unchanged
             cached = self._fields[key] = (field, nxt.ravel())
         return cached
 
