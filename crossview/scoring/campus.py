@@ -1,4 +1,4 @@
-"""The published Campus/Shelf PCP protocol on the crossview dataset layout, and export of tracks to it.
+"""The published Campus/Shelf PCP protocol on the crossview dataset layout.
 
 The layout is the one released with Chen et al. (CVPR 2020, longcw/crossview_3d_pose_tracking):
 `annotation_3d.json` is a list of `{"timestamp", "poses": [{"id", "points_3d": 14 x 3 cm}]}` whose index
@@ -15,13 +15,12 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from crossview.scoring.pose import PCP_ALPHA, PCP_BONE_GROUPS, coco17_to_campus14, match_nearest, pcp_bones
-from tracker.types import TrackerOutput
 
 CAMPUS_TEST_FRAMES = tuple(range(350, 471)) + tuple(range(650, 751))
 SHELF_TEST_FRAMES = tuple(range(300, 600))
@@ -166,32 +165,3 @@ def format_evaluation(result: dict) -> str:
     rule = "-" * (sum(widths) + 2 * (len(widths) - 1))
     title = f"PCP on {result['dataset']} ({result['num_frames']} test frames, alpha {PCP_ALPHA})"
     return "\n".join([title, fmt.format(*header), rule, *(fmt.format(*r) for r in lines)])
-
-
-def export(outputs: Iterable[TrackerOutput], path: str | Path) -> int:
-    """Writes tracker outputs as a result file of the dataset layout (COCO-17, centimetres, 0 = missing).
-
-    One entry per tracker output, sorted by stamp; unknown (NaN) joints are written as zeros.
-
-    Args:
-        outputs: tracker outputs; targets must carry (17, 3) COCO-17 poses in metres.
-        path: JSON file to write.
-
-    Returns:
-        the number of entries written.
-    """
-    entries = []
-    for out in sorted(outputs, key=lambda o: o.stamp_s):
-        poses = []
-        for target in out.targets:
-            pose = np.asarray(target.pose, dtype=np.float64)
-            if pose.shape != (17, 3):
-                raise ValueError(
-                    f"export: target {target.id} at {out.stamp_s} s has pose {pose.shape}, expected (17, 3) COCO-17"
-                )
-            pose_cm = np.where(np.isfinite(pose), pose * METRES_TO_CM, 0.0)
-            poses.append({"id": int(target.id), "points_3d": pose_cm.round(3).tolist()})
-        entries.append({"timestamp": float(out.stamp_s), "poses": poses})
-    with open(path, "w") as f:
-        json.dump(entries, f)
-    return len(entries)

@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crossview.scoring.campus import DatasetLayoutError, evaluate, export, format_evaluation
+from crossview.datasets import write_result_3d
+from crossview.scoring.campus import DatasetLayoutError, evaluate, format_evaluation
 from crossview.scoring.pose import coco17_to_campus14
 from tracker.types import Target, TrackerOutput
 
@@ -50,7 +51,7 @@ def test_exported_tracks_score_pcp_one_on_their_own_truth(tmp_path):
         outputs.append(TrackerOutput(i * 0.04, "Camera0", targets, np.zeros(0, dtype=np.int64)))
     root = _write_dataset(tmp_path / "synthetic", frames)
     # Export, then score with the protocol on every frame.
-    assert export(outputs, tmp_path / "result_3d.json") == 10
+    assert write_result_3d(outputs, tmp_path / "result_3d.json") == 10
     result = evaluate(root, tmp_path / "result_3d.json", test_frames=range(10))
     assert result["actors"] == {1: pytest.approx(1.0), 2: pytest.approx(1.0)}
 
@@ -59,7 +60,7 @@ def test_export_writes_centimetres_and_zeros_for_unknown_joints(tmp_path):
     pose = np.full((17, 3), 1.5)
     pose[4] = np.nan
     out = TrackerOutput(0.5, "c", [Target(3, pose, 0.5)], np.zeros(0, dtype=np.int64))
-    export([out], tmp_path / "r.json")
+    write_result_3d([out], tmp_path / "r.json")
     entry = json.loads((tmp_path / "r.json").read_text())[0]
     assert entry["timestamp"] == 0.5 and entry["poses"][0]["id"] == 3
     pts = np.asarray(entry["poses"][0]["points_3d"])
