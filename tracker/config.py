@@ -40,6 +40,9 @@ class TrackerConfig:
         velocity_history: number of past joint positions kept per target for that fit.
         max_speed_m_per_s: joint speeds above this are clipped (a guard against a bad fit), m/s.
         max_predict_s: a joint is predicted forward (eq. 5) at most this long past its last update, s.
+        stale_after_s: a joint not updated for this long moves with the body's velocity (beyond the paper), s.
+        max_bone_m: a joint update that would make one of its bones longer than this is not taken (a gross
+            2D error triangulated), metres; beyond the paper.
     Triangulation, eq. (6)-(11):
         lambda_t_per_s: time penalty rate λt of eq. (11), 1/s.
         triangulation: PAPER (eq. 6-11) or VELOCITY (stale points moved forward with the joint velocity).
@@ -81,6 +84,8 @@ class TrackerConfig:
     velocity_history: int = 12
     max_speed_m_per_s: float = 6.0
     max_predict_s: float = 0.5
+    max_bone_m: float = 0.8
+    stale_after_s: float = 0.3
     lambda_t_per_s: float = 10.0
     triangulation: Triangulation = Triangulation.PAPER
     max_observation_age_s: float = 1.0
@@ -113,7 +118,8 @@ class TrackerConfig:
         nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "alpha_2d_floor_px", "lambda_t_per_s", "max_predict_s",
                   "init_window_s", "confirm_min_age_s", "max_lateness_s")
         positive = ("alpha_2d_px_per_s", "alpha_3d_m", "velocity_window_s", "max_speed_m_per_s",
-                    "max_observation_age_s", "alpha_epipolar_px", "init_max_reprojection_px", "init_max_bone_m",
+                    "max_observation_age_s", "alpha_epipolar_px", "max_bone_m", "stale_after_s",
+                    "init_max_reprojection_px", "init_max_bone_m",
                     "tentative_timeout_s", "lost_after_s", "remove_after_s")
         for name in nonneg + positive:
             value = getattr(self, name)

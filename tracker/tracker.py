@@ -50,7 +50,8 @@ class _Targets:
         self.last_update_s = np.zeros(0)
         self.num_updates = np.zeros(0, dtype=np.int64)
         self.pos = np.zeros((0, J, 3))  # X_t' per joint, NaN never triangulated
-        self.joint_s = np.zeros((0, J))  # t' per joint (-inf never)
+        self.joint_s = np.zeros((0, J))  # t' per joint (-inf never): the time X_t' refers to
+        self.seen_s = np.zeros((0, J))  # last time the joint was triangulated from observations (-inf never)
         self.vel = np.zeros((0, J, 3))  # V_t' per joint (eq. 5)
         self.obs_px = np.zeros((0, C, J, 2))  # last matched undistorted joint per camera (eq. 2, 6)
         self.obs_s = np.zeros((0, C, J))  # its stamp, NaN none
@@ -61,7 +62,7 @@ class _Targets:
     def __len__(self) -> int:
         return self.ids.size
 
-    _FIELDS = ("ids", "state", "born_s", "last_update_s", "num_updates", "pos", "joint_s", "vel", "obs_px",
+    _FIELDS = ("ids", "state", "born_s", "last_update_s", "num_updates", "pos", "joint_s", "seen_s", "vel", "obs_px",
                "obs_s", "hist_pos", "hist_s", "hist_next")
 
     def keep(self, mask: np.ndarray) -> None:
@@ -94,6 +95,7 @@ class Tracker:
         self.config = config
         self.skeleton = skeleton
         self._index = {name: i for i, name in enumerate(names)}
+        self._bones = np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2)
         C, J = len(self.cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))
         self._centers = np.stack([c.center_world for c in self.cameras]) if C else np.zeros((0, 3))
@@ -243,15 +245,41 @@ class Tracker:
             Xv[m_idx, j_idx] = compensated
             X = np.where(np.isfinite(Xv), Xv, X)
         pos = tg.pos[rows]
+        update &= ~self._breaks_bones(pos, X, update)
         pos[update] = X[update]
         joint_s = tg.joint_s[rows]
         joint_s[update] = t
+        seen_s = tg.seen_s[rows]
+        seen_s[update] = t
         tg.pos[rows] = pos
         tg.joint_s[rows] = joint_s
+        tg.seen_s[rows] = seen_s
         self._update_velocity(rows, samples, update, t)
         tg.last_update_s[rows] = t
         tg.num_updates[rows] += 1
         tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, cfg)
+
+    def _breaks_bones(self, old: np.ndarray, new: np.ndarray, update: np.ndarray) -> np.ndarray:
+        """(M, J) joints whose new estimate would make a bone longer than `max_bone_m` that was not already.
+
+        A gross 2D error seen in two views triangulates far off; a joint of the face seen by few cameras may
+        then keep that value for seconds. The gate keeps the previous estimate instead (beyond the paper).
+
+        Args:
+            old: (M, J, 3) current joints; new: (M, J, 3) new estimates; update: (M, J) which would change.
+        """
+        if self._bones.size == 0:
+            return np.zeros_like(update)
+        a, b = self._bones[:, 0], self._bones[:, 1]
+        cand = np.where(update[..., None], new, old)
+        with np.errstate(invalid="ignore"):
+            long_new = np.linalg.norm(cand[:, a] - cand[:, b], axis=-1) > self.config.max_bone_m  # (M, B)
+            long_old = np.linalg.norm(old[:, a] - old[:, b], axis=-1) > self.config.max_bone_m
+        broken = long_new & ~long_old
+        hits = np.zeros(update.shape[::-1])  # (J, M) broken bones per updated joint
+        for end in (a, b):
+            np.add.at(hits, end, (broken & update[:, end]).T)
+        return hits.T > 0
 
     def _update_velocity(self, rows: np.ndarray, samples: np.ndarray, update: np.ndarray, t: float) -> None:
         """Eq. (5)'s V: linear least squares of joint position on time over the recent history.
@@ -287,6 +315,20 @@ class Tracker:
         vel = tg.vel[rows]
         vel[update] = v[update]
         tg.vel[rows] = vel
+        # A joint nobody has seen for `stale_after_s` (a face turned away, a hand behind the body) moves with
+        # the body (beyond the paper): at each update of its target it is carried forward with the median
+        # velocity of the target's fresh joints, so that it follows the body's path, turns included.
+        fresh = (t - tg.seen_s[rows]) <= cfg.stale_after_s  # (M, J)
+        stale = ~fresh & np.isfinite(tg.pos[rows, :, 0])
+        if stale.any():
+            with np.errstate(invalid="ignore"):
+                body = np.nanmedian(np.where(fresh[..., None], vel, np.nan), axis=1)  # (M, 3)
+            body = np.where(np.isfinite(body), body, 0.0)[:, None, :]
+            pos, joint_s = tg.pos[rows], tg.joint_s[rows]
+            dt = np.clip(t - joint_s, 0.0, cfg.max_predict_s)[..., None]
+            tg.pos[rows] = np.where(stale[..., None], pos + body * dt, pos)
+            tg.joint_s[rows] = np.where(stale, t, joint_s)
+            tg.vel[rows] = np.where(stale[..., None], body, vel)
 
     def _set_pool(self, c: int, px: np.ndarray, frame_index: np.ndarray, t: float) -> None:
         self._pool_px[c] = px
@@ -361,7 +403,8 @@ class Tracker:
         self._targets.append(
             ids=np.array([new_id]), state=np.array([lifecycle.TENTATIVE], dtype=np.int8), born_s=np.array([t]),
             last_update_s=np.array([t]), num_updates=np.array([ks.size]), pos=pose[None],
-            joint_s=np.where(known, t, -np.inf)[None], vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s,
+            joint_s=np.where(known, t, -np.inf)[None], seen_s=np.where(known, t, -np.inf)[None],
+            vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s,
             hist_pos=hist_pos, hist_s=hist_s, hist_next=np.array([1]))
         tg = self._targets
         tg.state[-1:] = lifecycle.on_match(tg.state[-1:], tg.born_s[-1:], tg.num_updates[-1:], t, self.config)
