@@ -68,6 +68,10 @@ class TrackerConfig:
         tentative_timeout_s: a tentative target not updated for this long is removed, s.
         lost_after_s: a confirmed target not updated for this long becomes lost (no longer output), s.
         remove_after_s: a lost target not updated for this long (since its last update) is removed, s.
+        reid_max_m: a new target born within reach of a LOST target takes its identity back; the reach is
+            `reid_speed_m_per_s` times the time since the lost target's last update, clipped to
+            [0.5, reid_max_m] metres; 0 disables it (the paper). Beyond the paper.
+        reid_speed_m_per_s: assumed walking speed for that reach, m/s.
     Input:
         max_lateness_s: a frame stamped more than this before the newest processed stamp is dropped, s.
     """
@@ -107,6 +111,8 @@ class TrackerConfig:
     tentative_timeout_s: float = 0.5
     lost_after_s: float = 0.5
     remove_after_s: float = 3.0
+    reid_max_m: float = 0.0
+    reid_speed_m_per_s: float = 1.5
     max_lateness_s: float = 0.5
 
     def __post_init__(self):
@@ -116,7 +122,7 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig.triangulation: {self.triangulation!r} is not one of "
                              f"{[m.value for m in Triangulation]}")
         nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "alpha_2d_floor_px", "lambda_t_per_s", "max_predict_s",
-                  "init_window_s", "confirm_min_age_s", "max_lateness_s")
+                  "init_window_s", "confirm_min_age_s", "max_lateness_s", "reid_max_m", "reid_speed_m_per_s")
         positive = ("alpha_2d_px_per_s", "alpha_3d_m", "velocity_window_s", "max_speed_m_per_s",
                     "max_observation_age_s", "alpha_epipolar_px", "max_bone_m", "stale_after_s",
                     "init_max_reprojection_px", "init_max_bone_m",
@@ -232,11 +238,12 @@ _COMMON: dict[str, dict] = {
     "campus": dict(alpha_epipolar_px=25.0, init_window_s=0.05, init_max_reprojection_px=15.0),
     "shelf": dict(alpha_epipolar_px=60.0, init_window_s=0.05),
     "store": dict(alpha_epipolar_px=70.0, init_window_s=0.12, velocity_window_s=0.4,
-                  triangulation=Triangulation.VELOCITY),
+                  triangulation=Triangulation.VELOCITY, reid_max_m=3.0, remove_after_s=15.0),
 }
 
 PRESETS: dict[str, dict] = {}
 for _name, _row in TABLE_S2.items():
     PRESETS[_name] = {**_COMMON[_name], **_row, "alpha_2d_px_per_s": _MEASURED_ALPHA_2D[_name],
                       "alpha_2d_floor_px": _MEASURED_FLOOR_PX[_name]}
-    PRESETS[f"{_name}-paper"] = {**_COMMON[_name], **_row, "triangulation": Triangulation.PAPER}
+    PRESETS[f"{_name}-paper"] = {**_COMMON[_name], **_row, "triangulation": Triangulation.PAPER,
+                                 "reid_max_m": 0.0, "remove_after_s": TrackerConfig.remove_after_s}

@@ -398,17 +398,47 @@ class Tracker:
         hist_s = np.full((1, H, J), np.nan)
         hist_pos[0, 0] = pose
         hist_s[0, 0] = np.where(known, t, np.nan)
-        new_id = self._next_id
-        self._next_id += 1
+        state, born_s, num_updates = lifecycle.TENTATIVE, t, ks.size
+        lost = self._lost_nearby(pose, t)
+        if lost is None:
+            new_id = self._next_id
+            self._next_id += 1
+        else:
+            # The person reappears near where a lost target was last seen: it takes that identity back.
+            tg = self._targets
+            new_id, state, born_s = int(tg.ids[lost]), int(tg.state[lost]), float(tg.born_s[lost])
+            num_updates += int(tg.num_updates[lost])
+            tg.keep(np.arange(len(tg)) != lost)
         self._targets.append(
-            ids=np.array([new_id]), state=np.array([lifecycle.TENTATIVE], dtype=np.int8), born_s=np.array([t]),
-            last_update_s=np.array([t]), num_updates=np.array([ks.size]), pos=pose[None],
+            ids=np.array([new_id]), state=np.array([state], dtype=np.int8), born_s=np.array([born_s]),
+            last_update_s=np.array([t]), num_updates=np.array([num_updates]), pos=pose[None],
             joint_s=np.where(known, t, -np.inf)[None], seen_s=np.where(known, t, -np.inf)[None],
             vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s,
             hist_pos=hist_pos, hist_s=hist_s, hist_next=np.array([1]))
         tg = self._targets
         tg.state[-1:] = lifecycle.on_match(tg.state[-1:], tg.born_s[-1:], tg.num_updates[-1:], t, self.config)
         return new_id
+
+    def _lost_nearby(self, pose: np.ndarray, t: float) -> int | None:
+        """Row of the LOST target whose last ground position is nearest to `pose` (J, 3) within reach, or None.
+
+        Reach: `reid_speed_m_per_s` times the time since the target's last update, at least 0.5 m and at
+        most `reid_max_m` (0 disables re-identification: the paper starts a new identity).
+        """
+        tg, cfg = self._targets, self.config
+        if cfg.reid_max_m <= 0 or not len(tg):
+            return None
+        lost = np.flatnonzero(tg.state == lifecycle.LOST)
+        if not lost.size:
+            return None
+        with np.errstate(invalid="ignore"):
+            here = np.nanmean(pose[:, :2], axis=0)
+            there = np.nanmean(tg.pos[lost, :, :2], axis=1)  # (L, 2)
+        dist = np.linalg.norm(there - here, axis=-1)
+        reach = np.clip(cfg.reid_speed_m_per_s * (t - tg.last_update_s[lost]), 0.5, cfg.reid_max_m)
+        dist = np.where(np.isfinite(dist) & (dist <= reach), dist, np.inf)
+        best = int(np.argmin(dist))
+        return int(lost[best]) if np.isfinite(dist[best]) else None
 
     def _emit(self, t: float, camera: str, assigned: np.ndarray) -> list[Target]:
         tg, cfg = self._targets, self.config

@@ -13,6 +13,7 @@ def test_presets_keep_table_s2_and_the_paper_variants_are_verbatim():
         for key, value in row.items():
             assert getattr(paper, key) == value
         assert paper.triangulation is Triangulation.PAPER and paper.alpha_2d_floor_px == 0.0
+        assert paper.reid_max_m == 0.0
         tuned = TrackerConfig.preset(name)
         assert (tuned.alpha_3d_m, tuned.lambda_a_per_s, tuned.lambda_t_per_s) == (
             row["alpha_3d_m"], row["lambda_a_per_s"], row["lambda_t_per_s"])

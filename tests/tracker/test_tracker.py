@@ -127,3 +127,20 @@ def test_an_unseen_joint_moves_with_the_body(layout1):
     # Walking ~1.2 m/s for 1.5 s: a frozen wrist would be ~1.8 m behind. Carried with the body it keeps
     # its offset, which the walkers' turn on their ellipses (~1.5 rad) rotates by up to ~0.5 m.
     assert max(errors) < 0.8  # m
+
+
+@pytest.mark.parametrize("reid_max_m, same_id", [(3.0, True), (0.0, False)])
+def test_a_person_hidden_for_two_seconds_gets_the_old_identity_back_with_reid(layout1, reid_max_m, same_id):
+    cams, walkers, frames, _ = layout1
+    tracker = Tracker(cams, CONFIG.replace(reid_max_m=reid_max_m))
+    # Story: everybody is tracked; for 1.0-3.0 s no camera sees anybody; then they reappear.
+    before = None
+    for frame in frames:
+        if 1.0 < frame.stamp_s < 3.0:
+            frame = Frame(frame.camera, frame.stamp_s, frame.keypoints_px[:0], frame.scores[:0])
+        tracker.update(frame)
+        if before is None and frame.stamp_s > 0.9:
+            before = {t.id for t in tracker.last_output.targets}
+    after = {t.id for t in tracker.last_output.targets}
+    assert len(before) == len(after) == 4
+    assert (after == before) is same_id
