@@ -206,6 +206,7 @@ def camera_calibration(camera: Camera, t_ns: int = 0) -> CameraCalibration:
     )
 
 
+@functools.lru_cache(maxsize=16)
 def _png_grey(width: int, height: int, value: int) -> bytes:
     """A uniform 8-bit greyscale PNG, built with zlib alone so the bytes depend on nothing else."""
 
@@ -261,7 +262,7 @@ def _bone_points(points: np.ndarray, skeleton: Skeleton) -> np.ndarray:
     return points[kept.ravel()]
 
 
-def _varint(value: int) -> bytes:
+def _varint_uncached(value: int) -> bytes:
     out = bytearray()
     while True:
         byte, value = value & 0x7F, value >> 7
@@ -272,9 +273,80 @@ def _varint(value: int) -> bytes:
             return bytes(out)
 
 
+_SMALL_VARINTS = tuple(_varint_uncached(v) for v in range(1 << 14))
+
+
+def _varint(value: int) -> bytes:
+    """Wire bytes of a non-negative varint (the small ones, every length and tag here, from a table)."""
+    return _SMALL_VARINTS[value] if value < 16384 else _varint_uncached(value)
+
+
 def _length_delimited(field_number: int, payload: bytes) -> bytes:
     """Wire bytes of one length-delimited field (an embedded message)."""
-    return _varint((field_number << 3) | 2) + _varint(len(payload)) + payload
+    return _SMALL_VARINTS[(field_number << 3) | 2] + _varint(len(payload)) + payload
+
+
+# Protobuf wire format written straight from numpy (proto3: a scalar equal to its default is left out,
+# as protobuf itself does; packed repeated fields are one length-delimited run). The writer's tests
+# check these bytes against protobuf's own serialisation.
+_ZERO8 = bytes(8)
+
+
+def wire_double(field_number: int, value: float) -> bytes:
+    """A proto3 `double` field (left out when its bits are all zero, as protobuf does)."""
+    data = struct.pack("<d", value)
+    return b"" if data == _ZERO8 else _SMALL_VARINTS[(field_number << 3) | 1] + data
+
+
+def wire_uint(field_number: int, value: int) -> bytes:
+    """A proto3 unsigned varint field (uint32/uint64/bool), left out when 0."""
+    return _SMALL_VARINTS[field_number << 3] + _varint(int(value)) if value else b""
+
+
+def wire_string(field_number: int, value: str) -> bytes:
+    """A proto3 `string` field, left out when empty."""
+    data = value.encode()
+    return _length_delimited(field_number, data) if data else b""
+
+
+def wire_packed(field_number: int, payload: bytes) -> bytes:
+    """A packed repeated field from its payload, left out when empty."""
+    return _length_delimited(field_number, payload) if payload else b""
+
+
+def encode_varints(values: np.ndarray) -> bytes:
+    """Concatenated varints of (N,) non-negative integers (uint64 semantics), as a packed field holds them."""
+    v = np.asarray(values).astype(np.uint64, copy=False).ravel()
+    if v.size == 0:
+        return b""
+    if int(v.max()) < 128:
+        return v.astype(np.uint8).tobytes()
+    n = np.ones(v.shape, dtype=np.int64)
+    for k in range(1, 10):
+        n += v >= np.uint64(1 << (7 * k))
+    out = np.empty(int(n.sum()), dtype=np.uint8)
+    starts = np.cumsum(n) - n
+    for k in range(int(n.max())):
+        sel = n > k
+        byte = ((v[sel] >> np.uint64(7 * k)) & np.uint64(0x7F)).astype(np.uint8)
+        out[starts[sel] + k] = byte | np.where(n[sel] > k + 1, 0x80, 0).astype(np.uint8)
+    return out.tobytes()
+
+
+def encode_sint64s(values: np.ndarray) -> bytes:
+    """Concatenated zigzag varints of (N,) int64 (`sint64`)."""
+    v = np.asarray(values, dtype=np.int64).ravel()
+    return encode_varints(((v << 1) ^ (v >> 63)).view(np.uint64))
+
+
+def encode_doubles(values: np.ndarray) -> bytes:
+    """Little-endian float64 bytes of `values` in C order (a packed `double` payload)."""
+    return np.ascontiguousarray(values, dtype="<f8").tobytes()
+
+
+def encode_bools(values: np.ndarray) -> bytes:
+    """One byte 0/1 per value in C order (a packed `bool` payload)."""
+    return np.ascontiguousarray(values, dtype=bool).view(np.uint8).tobytes()
 
 
 def _with_points(message, field_number: int, points: np.ndarray):
@@ -331,6 +403,58 @@ def truth_skeletons(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> SceneUpd
     return _replace_all(t_ns, entities)
 
 
+@functools.lru_cache(maxsize=4096)
+def _truth_entity_parts(person_id: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
+    """Constant wire pieces of a person's truth entity: the id field, the bone line before and after
+    its points, and what follows the pose in the label and in the top sphere."""
+    rgba = truth_color(person_id)
+    line_head = LinePrimitive(type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)),
+                              thickness=TRUTH_LINE_M).SerializeToString()
+    line_tail = LinePrimitive(color=rgba).SerializeToString()
+    text_tail = TextPrimitive(billboard=True, font_size=12.0, scale_invariant=True, color=rgba,
+                              text=f"p{person_id}").SerializeToString()
+    sphere_tail = SpherePrimitive(size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
+                                  color=rgba).SerializeToString()
+    return wire_string(3, f"person/{person_id}"), line_head, line_tail, text_tail, sphere_tail
+
+
+_ORIENTATION_IDENTITY = Pose(orientation=Quaternion(w=1.0)).SerializeToString()
+
+
+def _pose_bytes(x: float, y: float, z: float) -> bytes:
+    """Wire bytes of Pose(position=(x, y, z), orientation=identity)."""
+    position = wire_double(1, x) + wire_double(2, y) + wire_double(3, z)
+    return _length_delimited(1, position) + _ORIENTATION_IDENTITY
+
+
+def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
+    """`truth_skeletons(...)` as its wire bytes, built from cached pieces (what the recording writes)."""
+    head = _length_delimited(1, timestamp(t_ns).SerializeToString()) + wire_string(2, WORLD_FRAME)
+    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
+    parts = [_length_delimited(1, deletion)]
+    bones, bone_ends = _bone_table(tuple(skeleton.bones))
+    poses = np.asarray(truth.poses, dtype=np.float64)
+    for pid, pose in zip(np.asarray(truth.person_ids).tolist(), poses):
+        id_field, line_head, line_tail, text_tail, sphere_tail = _truth_entity_parts(int(pid))
+        known_joint = np.isfinite(pose).all(axis=1)
+        kept = bones[known_joint[bones[:, 0]] & known_joint[bones[:, 1]]]
+        line = line_head + encode_points(LinePrimitive.DESCRIPTOR.fields_by_name["points"].number,
+                                         pose[kept.ravel()]) + line_tail
+        entity = [head, id_field]
+        known = pose[known_joint]
+        if len(known):
+            x, y, z = known[np.argmax(known[:, 2])].tolist()
+            sphere = _length_delimited(1, _pose_bytes(x, y, z)) + sphere_tail
+            text = _length_delimited(1, _pose_bytes(x, y, z + 0.25)) + text_tail
+            entity += (_length_delimited(9, sphere), _length_delimited(11, line), _length_delimited(13, text))
+        else:
+            entity.append(_length_delimited(11, line))
+        parts.append(_length_delimited(2, b"".join(entity)))
+    data = b"".join(parts)
+    # A coordinate of exactly +0.0 is left out by protobuf; such rare messages go through it once.
+    return SceneUpdate.FromString(data).SerializeToString() if _has_zero_bits(poses) else data
+
+
 def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
     """The tracker's targets after one update, each in its own saturated colour, labelled with its id."""
     entities = [
@@ -344,49 +468,75 @@ def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> S
 
 
 @functools.lru_cache(maxsize=1024)
-def _detection_styles(person_id: int) -> tuple[bytes, bytes]:
-    """Serialized type, colours and thickness of a detection's bones and joints (-1: false positive)."""
+def _detection_styles(person_id: int) -> tuple[bytes, bytes, bytes, bytes]:
+    """Serialized style of a detection's bones and joints (-1: false positive), each split around the
+    points field so that type, points, colours, thickness come in field-number order: bones before,
+    bones after, joints before, joints after."""
     rgba = truth_color(person_id) if person_id >= 0 else color(FALSE_POSITIVE_COLOR)
     rgba.a = 1.0
-    bones = PointsAnnotation(type=PointsAnnotation.LINE_LIST, outline_color=rgba, thickness=DETECTION_LINE_PX)
-    joints = PointsAnnotation(type=PointsAnnotation.POINTS, outline_color=rgba, fill_color=rgba,
-                              thickness=2 * DETECTION_LINE_PX)
-    return bones.SerializeToString(), joints.SerializeToString()
+    bones_type = PointsAnnotation(type=PointsAnnotation.LINE_LIST)
+    bones_rest = PointsAnnotation(outline_color=rgba, thickness=DETECTION_LINE_PX)
+    joints_type = PointsAnnotation(type=PointsAnnotation.POINTS)
+    joints_rest = PointsAnnotation(outline_color=rgba, fill_color=rgba, thickness=2 * DETECTION_LINE_PX)
+    return tuple(m.SerializeToString() for m in (bones_type, bones_rest, joints_type, joints_rest))
 
 
 def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> ImageAnnotations:
     """One camera frame's 2D detections: keypoints and bones in pixels, coloured by the true person
     behind each detection (grey for false positives)."""
+    return ImageAnnotations.FromString(image_annotations_bytes(camera_frame, skeleton, t_ns))
+
+
+_POINTS_FIELD = PointsAnnotation.DESCRIPTOR.fields_by_name["points"].number
+_ANNOTATIONS_FIELD = ImageAnnotations.DESCRIPTOR.fields_by_name["points"].number
+_STAMP_FIELD = PointsAnnotation.DESCRIPTOR.fields_by_name["timestamp"].number
+
+
+@functools.lru_cache(maxsize=64)
+def _bone_table(bones: tuple) -> tuple[np.ndarray, np.ndarray]:
+    table = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
+    return table, table.ravel()
+
+
+def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> bytes:
+    """`image_annotations` as its wire bytes, built without protobuf objects (what the recording writes)."""
     frame, truth = camera_frame.frame, camera_frame.truth
-    stamp = timestamp(t_ns)
-    points_field = PointsAnnotation.DESCRIPTOR.fields_by_name["points"].number
-    annotations_field = ImageAnnotations.DESCRIPTOR.fields_by_name["points"].number
-    kp = frame.keypoints_px  # (D, J, 2)
-    bones = np.asarray(skeleton.bones, dtype=np.intp).reshape(-1, 2)
+    kp = np.asarray(frame.keypoints_px, dtype=np.float64)  # (D, J, 2)
+    D = kp.shape[0]
+    if D == 0:
+        return b""
+    bones, bone_ends = _bone_table(tuple(skeleton.bones))
     known = np.isfinite(kp).all(axis=2)  # (D, J)
     ends_known = np.repeat(known[:, bones[:, 0]] & known[:, bones[:, 1]], 2, axis=1)  # (D, 2 * bones)
     # All detections' points encoded at once, then cut per detection (every element has the same size).
-    bone_blob = encode_points(points_field, kp[:, bones.ravel()][ends_known])
-    joint_blob = encode_points(points_field, kp[known])
+    bone_blob = encode_points(_POINTS_FIELD, kp[:, bone_ends][ends_known])
+    joint_blob = encode_points(_POINTS_FIELD, kp[known])
     size = _POINT2_WIRE.itemsize
-    bone_end = np.cumsum(ends_known.sum(axis=1)) * size
-    joint_end = np.cumsum(known.sum(axis=1)) * size
+    bone_end = (np.cumsum(ends_known.sum(axis=1)) * size).tolist()
+    joint_end = (np.cumsum(known.sum(axis=1)) * size).tolist()
     person_ids = np.asarray(truth.person_ids).tolist()
-    stamp_field = _length_delimited(PointsAnnotation.DESCRIPTOR.fields_by_name["timestamp"].number,
-                                    stamp.SerializeToString())
-    bone_end, joint_end = bone_end.tolist(), joint_end.tolist()
-    body = bytearray()
-    for d in range(frame.num_detections):
+    stamp_field = _length_delimited(_STAMP_FIELD, timestamp(t_ns).SerializeToString())
+    key = _SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2]
+    parts = []
+    bone_start = joint_start = 0
+    for d in range(D):
         pid = person_ids[d] if d < len(person_ids) else -1
-        bones_style, joints_style = _detection_styles(max(pid, -1))
-        bone_start = bone_end[d - 1] if d else 0
+        bones_type, bones_rest, joints_type, joints_rest = _detection_styles(max(pid, -1))
         if bone_end[d] > bone_start:
-            body += _length_delimited(annotations_field, stamp_field + bones_style + bone_blob[bone_start:bone_end[d]])
-        joint_start = joint_end[d - 1] if d else 0
+            n = len(stamp_field) + len(bones_type) + len(bones_rest) + bone_end[d] - bone_start
+            parts += (key, _varint(n), stamp_field, bones_type, bone_blob[bone_start:bone_end[d]], bones_rest)
         if joint_end[d] > joint_start:
-            body += _length_delimited(annotations_field,
-                                      stamp_field + joints_style + joint_blob[joint_start:joint_end[d]])
-    return ImageAnnotations.FromString(bytes(body))
+            n = len(stamp_field) + len(joints_type) + len(joints_rest) + joint_end[d] - joint_start
+            parts += (key, _varint(n), stamp_field, joints_type, joint_blob[joint_start:joint_end[d]], joints_rest)
+        bone_start, joint_start = bone_end[d], joint_end[d]
+    data = b"".join(parts)
+    # A coordinate of exactly +0.0 is left out by protobuf; such rare messages go through it once.
+    return ImageAnnotations.FromString(data).SerializeToString() if _has_zero_bits(kp) else data
+
+
+def _has_zero_bits(values: np.ndarray) -> bool:
+    """Whether any float64 of `values` is exactly +0.0 (the value proto3 does not write)."""
+    return bool((np.ascontiguousarray(values, dtype=np.float64).view(np.int64) == 0).any())
 
 
 def file_descriptor_set(descriptor: Descriptor) -> bytes:

@@ -305,6 +305,59 @@ def _pose_truth_to_msg(truth: PoseTruth, msg) -> None:
     msg.poses_m.extend(poses.ravel().tolist())
 
 
+def pose_truth_bytes(truth: PoseTruth) -> bytes:
+    """`crossview.PoseTruth` wire bytes of `truth`, written from numpy (the same bytes as protobuf's)."""
+    poses = np.asarray(truth.poses, dtype=np.float64)
+    ids = np.asarray(truth.person_ids, dtype=np.int64)
+    if poses.ndim != 3 or poses.shape[2] != 3 or poses.shape[0] != ids.shape[0]:
+        raise ValueError(f"PoseTruth@{truth.t_s}: poses expected (P, J, 3) with P={ids.shape[0]}, got {poses.shape}")
+    return b"".join((
+        foxglove.wire_double(1, float(truth.t_s)),
+        foxglove.wire_uint(2, poses.shape[1]),
+        foxglove.wire_packed(3, foxglove.encode_sint64s(ids)),
+        foxglove.wire_packed(4, foxglove.encode_doubles(poses)),
+    ))
+
+
+def camera_frame_bytes(cf: CameraFrame) -> bytes:
+    """`crossview.CameraFrame` wire bytes of one camera frame, written from numpy (the same bytes as
+    protobuf's serialisation of `_camera_frame_to_msg`, which the tests check)."""
+    frame, truth = cf.frame, cf.truth
+    kp = np.asarray(frame.keypoints_px, dtype=np.float64)
+    D, J = kp.shape[:2]
+
+    def rows(name: str, value, shape: tuple, dtype) -> np.ndarray:
+        array = np.asarray(value, dtype=dtype)
+        if array.shape != shape:
+            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.{name} expected {shape}, got "
+                             f"{array.shape}")
+        return array
+
+    scores = np.asarray(frame.scores, dtype=np.float64)
+    effects = rows("effects", truth.effects, (D,), np.int64)
+    if effects.size and (effects.min() < 0 or effects.max() >= 1 << 32):
+        raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.effects must be uint32 bit masks")
+    poses = pose_truth_bytes(cf.poses_at_capture)
+    return b"".join((
+        foxglove.wire_string(1, frame.camera),
+        foxglove.wire_double(2, float(frame.stamp_s)),
+        foxglove.wire_double(3, float(truth.capture_s)),
+        foxglove.wire_double(4, float(truth.delivery_s)),
+        foxglove.wire_uint(5, D),
+        foxglove.wire_uint(6, J),
+        foxglove.wire_packed(7, foxglove.encode_doubles(kp)),
+        foxglove.wire_packed(8, foxglove.encode_doubles(scores)),
+        foxglove.wire_packed(9, foxglove.encode_sint64s(rows("person_ids", truth.person_ids, (D,), np.int64))),
+        foxglove.wire_packed(10, foxglove.encode_doubles(rows("keypoints_px", truth.keypoints_px, (D, J, 2),
+                                                              np.float64))),
+        foxglove.wire_packed(11, foxglove.encode_bools(rows("in_image", truth.in_image, (D, J), bool))),
+        foxglove.wire_packed(12, foxglove.encode_bools(rows("occluded", truth.occluded, (D, J), bool))),
+        foxglove.wire_packed(13, foxglove.encode_bools(rows("self_occluded", truth.self_occluded, (D, J), bool))),
+        foxglove.wire_packed(14, foxglove.encode_varints(effects)),
+        foxglove._length_delimited(15, poses),
+    ))
+
+
 def _pose_truth_from_msg(msg) -> PoseTruth:
     ids = np.array(msg.person_ids, dtype=np.int64)
     poses = np.array(msg.poses_m, dtype=np.float64).reshape(len(ids), msg.num_joints, 3)
@@ -562,12 +615,9 @@ class RecordingWriter:
         out = self._out
         if isinstance(event, PoseTruth):
             t_ns = self._log_time(event.t_s, "PoseTruth")
-            msg = PoseTruthMsg()
-            _pose_truth_to_msg(event, msg)
-            out.add(self._truth, t_ns, msg.SerializeToString())
+            out.add(self._truth, t_ns, pose_truth_bytes(event))
             if t_ns >= self._next_scene_ns:
-                scene = foxglove.truth_skeletons(event, self.skeleton, t_ns)
-                out.add(self._truth_scene, t_ns, scene.SerializeToString())
+                out.add(self._truth_scene, t_ns, foxglove.truth_skeletons_bytes(event, self.skeleton, t_ns))
                 self._next_scene_ns = t_ns + to_ns(TRUTH_SCENE_PERIOD_S)
             self._people.update(int(i) for i in event.person_ids)
             self._counts["truth"] += 1
@@ -576,9 +626,8 @@ class RecordingWriter:
             if name not in self._frame_ch:
                 raise ValueError(f"CameraFrame: camera {name!r} is not one of the recording's cameras")
             t_ns = self._log_time(event.truth.delivery_s, f"CameraFrame {name}")
-            out.add(self._frame_ch[name], t_ns, _camera_frame_to_msg(event).SerializeToString())
-            annotations = foxglove.image_annotations(event, self.skeleton, t_ns)
-            out.add(self._annotation_ch[name], t_ns, annotations.SerializeToString())
+            out.add(self._frame_ch[name], t_ns, camera_frame_bytes(event))
+            out.add(self._annotation_ch[name], t_ns, foxglove.image_annotations_bytes(event, self.skeleton, t_ns))
             self._counts["frames"] += 1
         else:
             raise TypeError(f"RecordingWriter.write: expected PoseTruth or CameraFrame, got {type(event).__name__}")

@@ -202,3 +202,49 @@ def test_camera_backdrop_is_a_png_of_the_camera_size(camera):
     assert pixels.shape == (camera.height_px, camera.width_px) and pixels.dtype == np.uint8
     assert np.all(pixels == foxglove.BACKDROP_GREY)
     assert len(image.data) < 5000  # bytes: a blank picture costs next to nothing
+
+
+def test_byte_builders_write_what_protobuf_writes():
+    from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+    from foxglove_schemas_protobuf.Point2_pb2 import Point2
+    from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+
+    """The recording writes truth scenes and 2D detections from cached wire pieces; the bytes must equal
+    protobuf's serialisation of the message-built versions, zero coordinates (left out) included."""
+    rng = np.random.default_rng(4)
+    poses = rng.normal(0, 2, (4, 17, 3))
+    poses[1, 5:] = np.nan
+    poses[2] = np.nan
+    truth = PoseTruth(0.37, np.array([3, 8, 12, 1000]), poses)
+    for t_ns in (0, 370_000_000):
+        assert foxglove.truth_skeletons_bytes(truth, COCO17, t_ns) == \
+            foxglove.truth_skeletons(truth, COCO17, t_ns).SerializeToString()
+    poses[3, 0] = 0.0
+    assert foxglove.truth_skeletons_bytes(truth, COCO17, 5) == \
+        foxglove.truth_skeletons(truth, COCO17, 5).SerializeToString()
+    kp = rng.uniform(0, 600, (3, 17, 2))
+    kp[0, ::3] = np.nan
+    kp[2, 4] = (0.0, 17.0)
+    scores = np.where(np.isnan(kp[..., 0]), 0.0, 0.7)
+    flags = np.zeros((3, 17), dtype=bool)
+    cf = CameraFrame(
+        Frame("cam00", 0.1, kp, scores),
+        DetectionTruth(0.1, 0.12, np.array([4, -1, 9]), kp, ~flags, flags, flags, np.zeros(3, dtype=np.int64)),
+        truth,
+    )
+    # An independent reference built point by point with protobuf objects.
+    reference = ImageAnnotations()
+    for d, pid in enumerate([4, -1, 9]):
+        rgba = foxglove.truth_color(pid) if pid >= 0 else foxglove.color(foxglove.FALSE_POSITIVE_COLOR)
+        rgba.a = 1.0
+        known = np.isfinite(kp[d]).all(axis=1)
+        ends = [e for a, b in COCO17.bones if known[a] and known[b] for e in (a, b)]
+        for kind, joints, extra in ((PointsAnnotation.LINE_LIST, ends, {}),
+                                    (PointsAnnotation.POINTS, np.nonzero(known)[0].tolist(), {"fill_color": rgba})):
+            if joints:
+                reference.points.append(PointsAnnotation(
+                    timestamp=foxglove.timestamp(120_000_000), type=kind, outline_color=rgba,
+                    thickness=foxglove.DETECTION_LINE_PX * (1 if kind == PointsAnnotation.LINE_LIST else 2),
+                    points=[Point2(x=x, y=y) for x, y in kp[d, joints].tolist()], **extra))
+    assert foxglove.image_annotations_bytes(cf, COCO17, 120_000_000) == reference.SerializeToString()
+    assert len(reference.points) == 6
