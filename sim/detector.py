@@ -312,8 +312,9 @@ class Detector:
             ids = np.asarray(poses.person_ids)[p_idx]
             if geom_person is None:
                 geom_person = np.asarray(world.geom_person_ids())
+            scene = world.ray_scene() if hasattr(world, "ray_scene") else (world.model, world.data)
             occ, self_occ = cast_visibility(
-                world.model, world.data, self._centres[camera_index], poses.poses[p_idx, j_idx], ids,
+                *scene, self._centres[camera_index], poses.poses[p_idx, j_idx], ids,
                 self._keypoint_bodies(world)[j_idx], geom_person,
                 self._geom_bodies(world), self.config.self_hit_margin_m,
             )

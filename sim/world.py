@@ -126,10 +126,11 @@ class World:
         self._last_t = -math.inf
         self._sync_slots()
         self._prev = self._cur = self._snapshot()
+        self._ray = _RayScene(self)
 
     # -- model -------------------------------------------------------------------------------------
 
-    def _xml(self) -> str:
+    def _store_geoms_xml(self) -> list[str]:
         geoms = []
         rgba = {BoxKind.FLOOR: ".55 .55 .5 1", BoxKind.WALL: ".8 .8 .75 1", BoxKind.SHELF: ".45 .3 .2 1",
                 BoxKind.CHECKOUT: ".3 .4 .6 1", BoxKind.ENTRANCE: ".2 .7 .2 1", BoxKind.EXIT: ".7 .2 .2 1"}
@@ -138,6 +139,10 @@ class World:
             pos = " ".join(f"{c:.6g}" for c in box.center_m)
             geoms.append(f'<geom name="{box.kind.value}{i}" type="box" pos="{pos}" size="{half}" '
                          f'euler="0 0 {box.yaw_rad:.9g}" rgba="{rgba[box.kind]}"/>')
+        return geoms
+
+    def _xml(self) -> str:
+        geoms = self._store_geoms_xml()
         people = "".join(hm.humanoid_xml(f"p{k}_") for k in range(self.slots))
         return (
             '<mujoco model="store"><compiler angle="radian"/>'
@@ -208,11 +213,20 @@ class World:
         qpos[~present, 2] = PARK_Z_M
         self.data.qpos[:] = qpos.reshape(-1)
         mujoco.mj_kinematics(self.model, self.data)
+        self._ray.stale = True
         self._present = present
         order = np.nonzero(present)[0]
         order = order[np.argsort(cur.person_id[order], kind="stable")]
         poses = self.data.site_xpos[self._kp_sites[order]]
         return PoseTruth(t_s=float(t_s), person_ids=cur.person_id[order].copy(), poses=poses)
+
+    def ray_scene(self) -> tuple:
+        """(model, data) to cast rays against at the last `advance`: the same geoms, in the same order
+        and at the same places as `model`/`data`, so `mujoco.mj_multiRay` gives the same geom ids and
+        distances, but grouped one body per person slot with bounding volumes, which lets MuJoCo skip the
+        people a ray passes far from (in `model` no geom collides, so MuJoCo builds no bounding volumes
+        and every ray is tested against every geom)."""
+        return self._ray.synced()
 
     def geom_person_ids(self) -> np.ndarray:
         """(ngeom,) int64: the person each geom's body belongs to now; -1 for store geoms and parked bodies."""
@@ -338,6 +352,93 @@ class World:
         h = q[:, 7:]
         np.minimum(np.maximum(h, self._lo, out=h), self._hi, out=h)
         return q
+
+
+class _RayScene:
+    """A second MuJoCo model holding only what rays need: the store's geoms, then one mocap body per
+    person slot carrying that slot's geoms, in `World.model`'s geom order.
+
+    The store's geoms collide with nothing, so the world body keeps no bounding volume and its geoms are
+    tried in order, as in `World.model` (two store faces at the same distance resolve alike). Nothing
+    moves in it by kinematics: `synced` copies the geoms' world poses (and sizes, which change
+    when a slot is resized) from the world's data, and sets every bounding-volume node of a slot body
+    to the box around its geoms' bounding spheres (leaves: one geom; inner nodes: the union of their
+    children). Those boxes contain the geoms, so the culling never drops a hit.
+    """
+
+    _TYPES = {int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere", int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule",
+              int(mujoco.mjtGeom.mjGEOM_ELLIPSOID): "ellipsoid", int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
+              int(mujoco.mjtGeom.mjGEOM_BOX): "box"}
+
+    def __init__(self, world: World):
+        self.world = world
+        m = world.model
+        # A standing pose (qpos0) places the geoms for a sensible bounding-volume tree.
+        d0 = mujoco.MjData(m)
+        mujoco.mj_kinematics(m, d0)
+        store_xml = "".join(world._store_geoms_xml())
+        bodies = []
+        for k in range(world.slots):
+            geoms = np.nonzero(world._geom_slot == k)[0]
+            root = d0.geom_xpos[geoms].mean(axis=0)
+            bodies.append(
+                f'<body name="r{k}" mocap="true"><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/>'
+                + "".join(f'<geom type="{self._TYPES[int(m.geom_type[g])]}" size="0.05 0.05 0.05" contype="1" '
+                          f'conaffinity="1" pos="{_fmt(*(d0.geom_xpos[g] - root))}"/>' for g in geoms)
+                + "</body>")
+        xml = ('<mujoco model="store_rays"><compiler angle="radian"/>'
+               '<option><flag contact="disable" gravity="disable"/></option>'
+               '<default><geom contype="0" conaffinity="0"/></default>'
+               f'<worldbody>{store_xml}{"".join(bodies)}</worldbody></mujoco>')
+        self.model = rm = mujoco.MjModel.from_xml_string(xml)
+        self.data = rd = mujoco.MjData(rm)
+        mujoco.mj_kinematics(rm, rd)  # body (and inertial) frames at the origin, identity rotations: set once
+        if np.abs(rd.xipos).max() > 0 or np.abs(rd.ximat - np.eye(3).ravel()).max() > 0:
+            raise RuntimeError("ray scene bodies are not at the origin")
+        if rm.ngeom != m.ngeom or not np.array_equal(rm.geom_type, m.geom_type):
+            raise RuntimeError("ray scene geoms do not match the world's")
+        static = world._geom_slot < 0
+        if not np.allclose(rd.geom_xpos[static], d0.geom_xpos[static]):
+            raise RuntimeError("ray scene store geoms are not where the world's are")
+        # Bounding-volume nodes of the slot bodies: leaves (their geom) and inner nodes by depth, deepest first.
+        slot_bodies = [mujoco.mj_name2id(rm, mujoco.mjtObj.mjOBJ_BODY, f"r{k}") for k in range(world.slots)]
+        nodes = np.concatenate([np.arange(rm.body_bvhadr[b], rm.body_bvhadr[b] + rm.body_bvhnum[b])
+                                for b in slot_bodies]) if slot_bodies else np.zeros(0, dtype=np.int64)
+        if nodes.size and (rm.body_bvhadr[slot_bodies] < 0).any():
+            raise RuntimeError("ray scene slot bodies have no bounding volumes")
+        adr = np.repeat([rm.body_bvhadr[b] for b in slot_bodies], [rm.body_bvhnum[b] for b in slot_bodies])
+        leaf = rm.bvh_nodeid[nodes] >= 0
+        self._leaf_nodes, self._leaf_geoms = nodes[leaf], rm.bvh_nodeid[nodes[leaf]]
+        inner = nodes[~leaf]
+        children = rm.bvh_child[inner] + adr[~leaf][:, None]
+        depth = rm.bvh_depth[inner]
+        self._levels = [(inner[depth == k], children[depth == k]) for k in sorted(set(depth.tolist()), reverse=True)]
+        self.stale = True
+
+    def synced(self) -> tuple:
+        if self.stale:
+            m, d, rm, rd = self.world.model, self.world.data, self.model, self.data
+            rm.geom_size[:] = m.geom_size
+            rm.geom_rbound[:] = m.geom_rbound
+            rm.geom_aabb[:] = m.geom_aabb
+            rd.geom_xpos[:] = d.geom_xpos
+            rd.geom_xmat[:] = d.geom_xmat
+            box = rm.bvh_aabb  # (nbvh, 6): centre, half sizes, world frame (the bodies sit at the origin)
+            centre, radius = d.geom_xpos[self._leaf_geoms], m.geom_rbound[self._leaf_geoms]
+            box[self._leaf_nodes, :3] = centre
+            box[self._leaf_nodes, 3:] = radius[:, None]
+            for parents, children in self._levels:
+                a, b = box[children[:, 0]], box[children[:, 1]]
+                lo = np.minimum(a[:, :3] - a[:, 3:], b[:, :3] - b[:, 3:])
+                hi = np.maximum(a[:, :3] + a[:, 3:], b[:, :3] + b[:, 3:])
+                box[parents, :3] = 0.5 * (lo + hi)
+                box[parents, 3:] = 0.5 * (hi - lo)
+            self.stale = False
+        return self.model, self.data
+
+
+def _fmt(*values: float) -> str:
+    return " ".join(f"{v:.9g}" for v in values)
 
 
 _SIDES = np.array([1.0, -1.0])
