@@ -319,6 +319,43 @@ def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.n
     return px, inside
 
 
+def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray, size: np.ndarray,
+                  max_radius: np.ndarray, points_world: np.ndarray, cameras: np.ndarray):
+    """`in_image` of several point sets, each seen by its own camera of a rig, in one vectorised pass.
+
+    Args:
+        R (C, 3, 3), t (C, 3), K (C, 3, 3), dist (C, 5): the rig's extrinsics, intrinsics and distortion.
+        size (C, 2): width and height in pixels; max_radius (C,): `monotonic_radius` of each camera.
+        points_world: (S, N, 3) world points, metres (NaN rows are never in the image).
+        cameras: (S,) index of the camera of each point set.
+
+    Returns:
+        (S, N, 2) distorted pixels (NaN behind the camera) and (S, N) bool visible-in-image mask.
+    """
+    points = np.asarray(points_world, dtype=np.float64)
+    cam = np.matmul(points, R[cameras].transpose(0, 2, 1)) + t[cameras][:, None, :]
+    z = cam[..., 2]
+    with np.errstate(invalid="ignore"):
+        in_front = z > _MIN_DEPTH_M
+    inv_z = np.divide(1.0, z, out=np.full(z.shape, np.nan), where=in_front)
+    xn, yn = cam[..., 0] * inv_z, cam[..., 1] * inv_z
+    d = dist[cameras][:, :, None]  # (S, 5, 1): columns broadcast over the points
+    k1, k2, p1, p2, k3 = d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4]
+    r2 = xn * xn + yn * yn
+    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+    xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+    yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+    Kc = K[cameras]
+    px = np.empty(points.shape[:2] + (2,))
+    px[..., 0] = Kc[:, 0, 0, None] * xd + Kc[:, 0, 1, None] * yd + Kc[:, 0, 2, None]
+    px[..., 1] = Kc[:, 1, 1, None] * yd + Kc[:, 1, 2, None]
+    wh = size[cameras][:, :, None] - 0.5
+    with np.errstate(invalid="ignore"):
+        inside = (in_front & (r2 <= max_radius[cameras][:, None] ** 2)
+                  & (px[..., 0] >= -0.5) & (px[..., 0] <= wh[:, 0]) & (px[..., 1] >= -0.5) & (px[..., 1] <= wh[:, 1]))
+    return px, inside
+
+
 def mujoco_camera_pose(camera: Camera) -> tuple[np.ndarray, np.ndarray, float]:
     """The MuJoCo camera that sees what `camera` sees (without distortion).
 

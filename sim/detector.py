@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.cameras import in_image
+from sim.cameras import in_image, in_image_many, monotonic_radius
 from sim.types import CameraFrame, DetectionEffect, DetectionTruth, PoseTruth
 from tracker.types import COCO17, Camera, Frame, Skeleton
 
@@ -287,6 +287,13 @@ class Detector:
             self._fragment_masks[i, list(part)] = True
         self._template = _TEMPLATE_COCO17 if coco else None
         self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
+        # Per-camera constants stacked for projecting the captures of one truth tick at once.
+        self._R = np.array([c.R_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
+        self._t = np.array([c.t_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3)
+        self._K = np.array([c.K for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
+        self._dist = np.array([c.dist for c in self.cameras], dtype=np.float64).reshape(-1, 5)
+        self._size = np.array([(c.width_px, c.height_px) for c in self.cameras], dtype=np.float64).reshape(-1, 2)
+        self._max_radius = np.array([monotonic_radius(c.dist) for c in self.cameras], dtype=np.float64)
         # Per camera: joints in the image, occluded, self-occluded (all person views, detected or not).
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
 
@@ -322,6 +329,58 @@ class Detector:
             self_occluded[p_idx, j_idx] = self_occ
         self.visibility_counts[camera_index] += (in_img.sum(), occluded.sum(), self_occluded.sum())
         return px, in_img, occluded, self_occluded
+
+    def visibility_many(self, world, requests) -> list[tuple]:
+        """`visibility` of several captures whose bodies are all in `world`'s data (one truth tick): the
+        projections in one vectorised pass, then one `mj_multiRay` batch per capture.
+
+        Args:
+            world: the world (or None to skip ray casting).
+            requests: (camera_index, poses, ...) per capture.
+
+        Returns:
+            Per request: px (P, J, 2), in_img, occluded, self_occluded (P, J).
+        """
+        if not requests:
+            return []
+        cams = np.array([r[0] for r in requests], dtype=np.int64)
+        counts = [r[1].poses.shape[0] for r in requests]
+        J = self.skeleton.num_joints
+        if any(np.shape(r[1].poses)[1:] != (J, 3) for r in requests):
+            return [self.visibility(r[0], world, r[1]) for r in requests]
+        N = max(counts) * J
+        if all(c * J == N for c in counts):
+            points = np.stack([np.asarray(r[1].poses, dtype=np.float64).reshape(N, 3) for r in requests])
+        else:  # someone arrived or left between two captures of the tick: pad with NaN (never in view)
+            points = np.full((len(requests), N, 3), np.nan)
+            for i, r in enumerate(requests):
+                points[i, :counts[i] * J] = np.asarray(r[1].poses, dtype=np.float64).reshape(-1, 3)
+        px_all, in_all = in_image_many(self._R, self._t, self._K, self._dist, self._size, self._max_radius,
+                                       points, cams)
+        out = []
+        rays = world is not None and self.config.occlusion
+        if rays:
+            scene = world.ray_scene() if hasattr(world, "ray_scene") else (world.model, world.data)
+            geom_person = np.asarray(world.geom_person_ids())
+            kp_bodies, geom_body = self._keypoint_bodies(world), self._geom_bodies(world)
+        for i, (camera_index, poses, *_) in enumerate(requests):
+            P = counts[i]
+            px = px_all[i, :P * J].reshape(P, J, 2)
+            in_img = in_all[i, :P * J].reshape(P, J)
+            occluded = np.zeros((P, J), dtype=bool)
+            self_occluded = np.zeros((P, J), dtype=bool)
+            if rays and in_img.any():
+                p_idx, j_idx = np.nonzero(in_img)
+                occ, self_occ = cast_visibility(
+                    *scene, self._centres[camera_index], poses.poses[p_idx, j_idx],
+                    np.asarray(poses.person_ids)[p_idx], kp_bodies[j_idx], geom_person, geom_body,
+                    self.config.self_hit_margin_m,
+                )
+                occluded[p_idx, j_idx] = occ
+                self_occluded[p_idx, j_idx] = self_occ
+            self.visibility_counts[camera_index] += (in_img.sum(), occluded.sum(), self_occluded.sum())
+            out.append((px, in_img, occluded, self_occluded))
+        return out
 
     def _keypoint_bodies(self, world) -> np.ndarray:
         """(J, 2) body of each keypoint and its parent body, in the numbering of `world.geom_body_ids()`."""
@@ -361,9 +420,7 @@ class Detector:
             world: the world (or None to skip occlusion).
             requests: (camera_index, poses, capture_s, stamp_s, delivery_s) per capture.
         """
-        geom_person = np.asarray(world.geom_person_ids()) if world is not None and requests else None
-        visibilities = [self.visibility(r[0], world, r[1], geom_person) for r in requests]
-        return self.detect_visible(requests, visibilities)
+        return self.detect_visible(requests, self.visibility_many(world, requests))
 
     def detect_visible(self, requests, visibilities) -> list[CameraFrame]:
         """`detect_many` from visibility already computed (`Detector.visibility` of the same poses).
@@ -376,19 +433,22 @@ class Detector:
         group = np.concatenate([np.full(len(r[1].person_ids), i) for i, r in enumerate(requests)])
         px, in_img, occluded, self_occluded = (np.concatenate([v[k] for v in visibilities]) for k in range(4))
         rows = self._detections(ids, px, in_img, occluded, self_occluded, group)
-        order = np.argsort(rows[-1], kind="stable")
+        # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
+        n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
+        phantoms = [(i, ph) for i in np.repeat(np.arange(len(requests)), n_phantoms)
+                    for ph in [self._phantom(self.cameras[requests[i][0]])] if ph is not None]
+        if phantoms:
+            extra = [np.stack([ph[k] for _, ph in phantoms]) for k in range(8)]
+            extra.append(np.array([i for i, _ in phantoms], dtype=rows[-1].dtype))
+            rows = [np.concatenate([r, e]) for r, e in zip(rows, extra)]
+        # Each frame's rows in a random order: sort by frame, then by a uniform key.
+        order = np.lexsort((self._rng.random(rows[-1].shape[0]), rows[-1]))
         rows = [r[order] for r in rows]
         bounds = np.searchsorted(rows[-1], np.arange(len(requests) + 1))
         frames = []
         for i, (camera_index, poses, capture_s, stamp_s, delivery_s) in enumerate(requests):
             camera = self.cameras[camera_index]
-            mine = [r[bounds[i]:bounds[i + 1]] for r in rows[:-1]]
-            phantoms = [self._phantom(camera) for _ in range(self._rng.poisson(self.params.phantom_rate))]
-            phantoms = [ph for ph in phantoms if ph is not None]
-            if phantoms:
-                mine = [np.concatenate([r, np.stack([ph[k] for ph in phantoms])]) for k, r in enumerate(mine)]
-            shuffle = self._rng.permutation(mine[0].shape[0])
-            d_ids, kp, scores, true_px, img, occ, self_occ, effects = (r[shuffle] for r in mine)
+            d_ids, kp, scores, true_px, img, occ, self_occ, effects = (r[bounds[i]:bounds[i + 1]] for r in rows[:-1])
             frame = Frame(camera.name, float(stamp_s), kp, scores)
             truth = DetectionTruth(
                 capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=d_ids, keypoints_px=true_px,

@@ -117,6 +117,7 @@ class World:
         self._ref = {name: getattr(m, name).copy() for name in
                      ("body_pos", "geom_pos", "geom_size", "geom_rbound", "geom_aabb", "site_pos", "site_size")}
         self._slot_height = np.full(S, hm.REFERENCE_HEIGHT_M)
+        self._sizes_version = 0  # counts slot resizes (the ray scene copies the geom sizes when it changes)
         self._body_constants()
         self._lo, self._hi = hm.HINGE_RANGES[:, 0].copy(), hm.HINGE_RANGES[:, 1].copy()
         self._heights: dict[int, float] = {}
@@ -163,6 +164,7 @@ class World:
                            ("site_pos", sites), ("site_size", sites)):
             getattr(m, name)[mask] = self._ref[name][mask] * scale
         self._slot_height[slot] = height_m
+        self._sizes_version += 1
 
     def _sync_slots(self):
         """Rescales slots whose person changed in the latest crowd step."""
@@ -362,8 +364,8 @@ class _RayScene:
     tried in order, as in `World.model` (two store faces at the same distance resolve alike). Nothing
     moves in it by kinematics: `synced` copies the geoms' world poses (and sizes, which change
     when a slot is resized) from the world's data, and sets every bounding-volume node of a slot body
-    to the box around its geoms' bounding spheres (leaves: one geom; inner nodes: the union of their
-    children). Those boxes contain the geoms, so the culling never drops a hit.
+    to the box around the bounding spheres of the geoms beneath it. Those boxes contain the geoms, so
+    the culling never drops a hit.
     """
 
     _TYPES = {int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere", int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule",
@@ -400,39 +402,39 @@ class _RayScene:
         static = world._geom_slot < 0
         if not np.allclose(rd.geom_xpos[static], d0.geom_xpos[static]):
             raise RuntimeError("ray scene store geoms are not where the world's are")
-        # Bounding-volume nodes of the slot bodies: leaves (their geom) and inner nodes by depth, deepest first.
+        # Bounding-volume nodes of the slot bodies.
         slot_bodies = [mujoco.mj_name2id(rm, mujoco.mjtObj.mjOBJ_BODY, f"r{k}") for k in range(world.slots)]
         nodes = np.concatenate([np.arange(rm.body_bvhadr[b], rm.body_bvhadr[b] + rm.body_bvhnum[b])
                                 for b in slot_bodies]) if slot_bodies else np.zeros(0, dtype=np.int64)
         if nodes.size and (rm.body_bvhadr[slot_bodies] < 0).any():
             raise RuntimeError("ray scene slot bodies have no bounding volumes")
-        adr = np.repeat([rm.body_bvhadr[b] for b in slot_bodies], [rm.body_bvhnum[b] for b in slot_bodies])
+        self._sizes_version = -1
+        self._slot_geoms = np.array([np.nonzero(world._geom_slot == k)[0] for k in range(world.slots)],
+                                    dtype=np.int64).reshape(world.slots, -1 if world.slots else 0)
         leaf = rm.bvh_nodeid[nodes] >= 0
         self._leaf_nodes, self._leaf_geoms = nodes[leaf], rm.bvh_nodeid[nodes[leaf]]
-        inner = nodes[~leaf]
-        children = rm.bvh_child[inner] + adr[~leaf][:, None]
-        depth = rm.bvh_depth[inner]
-        self._levels = [(inner[depth == k], children[depth == k]) for k in sorted(set(depth.tolist()), reverse=True)]
+        self._inner_nodes = nodes[~leaf]
+        self._inner_slot = np.repeat(np.arange(world.slots), [rm.body_bvhnum[b] for b in slot_bodies])[~leaf]
         self.stale = True
 
     def synced(self) -> tuple:
         if self.stale:
             m, d, rm, rd = self.world.model, self.world.data, self.model, self.data
-            rm.geom_size[:] = m.geom_size
-            rm.geom_rbound[:] = m.geom_rbound
-            rm.geom_aabb[:] = m.geom_aabb
+            if self._sizes_version != self.world._sizes_version:
+                rm.geom_size[:] = m.geom_size
+                rm.geom_rbound[:] = m.geom_rbound
+                rm.geom_aabb[:] = m.geom_aabb
+                self._sizes_version = self.world._sizes_version
             rd.geom_xpos[:] = d.geom_xpos
             rd.geom_xmat[:] = d.geom_xmat
-            box = rm.bvh_aabb  # (nbvh, 6): centre, half sizes, world frame (the bodies sit at the origin)
-            centre, radius = d.geom_xpos[self._leaf_geoms], m.geom_rbound[self._leaf_geoms]
-            box[self._leaf_nodes, :3] = centre
-            box[self._leaf_nodes, 3:] = radius[:, None]
-            for parents, children in self._levels:
-                a, b = box[children[:, 0]], box[children[:, 1]]
-                lo = np.minimum(a[:, :3] - a[:, 3:], b[:, :3] - b[:, 3:])
-                hi = np.maximum(a[:, :3] + a[:, 3:], b[:, :3] + b[:, 3:])
-                box[parents, :3] = 0.5 * (lo + hi)
-                box[parents, 3:] = 0.5 * (hi - lo)
+            # bvh_aabb rows: centre and half sizes in the world frame (the bodies sit at the origin). A leaf
+            # holds one geom's bounding sphere; every inner node the box around all of its slot's spheres.
+            pos, r = d.geom_xpos[self._slot_geoms], m.geom_rbound[self._slot_geoms][..., None]  # (S, G, 3)
+            lo, hi = (pos - r).min(axis=1), (pos + r).max(axis=1)
+            slot_box = np.concatenate([0.5 * (lo + hi), 0.5 * (hi - lo)], axis=1)
+            rm.bvh_aabb[self._inner_nodes] = slot_box[self._inner_slot]
+            rm.bvh_aabb[self._leaf_nodes, :3] = d.geom_xpos[self._leaf_geoms]
+            rm.bvh_aabb[self._leaf_nodes, 3:] = m.geom_rbound[self._leaf_geoms][:, None]
             self.stale = False
         return self.model, self.data
 
