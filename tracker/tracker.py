@@ -203,7 +203,9 @@ class Tracker:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
         rays = ray_directions(self.cameras[c], det_px)  # (D, J, 3), eq. (3)
         predicted = aff.predict_positions(tg.pos, tg.vel, tg.joint_s, t, cfg.max_predict_s)  # eq. (5)
-        a3d = aff.affinity_3d(predicted, tg.joint_s, self._centers[c], rays, t, cfg.w_3d, cfg.alpha_3d_m,
+        # Eq. (4)'s time penalty counts from the joint's last observation t', also for a joint carried with
+        # the body since (its position is a guess, so it keeps losing weight as in the paper).
+        a3d = aff.affinity_3d(predicted, tg.seen_s, self._centers[c], rays, t, cfg.w_3d, cfg.alpha_3d_m,
                               cfg.lambda_a_per_s)  # eq. (4)
         prev_s = tg.obs_s[:, c]
         a2d = None
