@@ -251,6 +251,22 @@ def cast_visibility(model, data, origin: np.ndarray, points: np.ndarray, point_p
     dist = np.empty(n)
     mujoco.mj_multiRay(model, data, np.asarray(origin, dtype=np.float64), unit.ravel(), None, 1, -1,
                        geomid, dist, None, n, float(length.max()))
+    return classify_hits(geomid, dist, length, point_person, point_bodies, geom_person, geom_body, self_hit_margin_m)
+
+
+def classify_hits(geomid: np.ndarray, dist: np.ndarray, length: np.ndarray, point_person: np.ndarray,
+                  point_bodies: np.ndarray, geom_person: np.ndarray, geom_body: np.ndarray,
+                  self_hit_margin_m: float):
+    """Occluded and self-occluded flags from the first hits of rays cast at keypoints.
+
+    Args:
+        geomid, dist: (N,) first geom hit by each ray (-1: none) and its distance.
+        length: (N,) distance from the ray origin to the keypoint.
+        point_person, point_bodies, geom_person, geom_body, self_hit_margin_m: as in `cast_visibility`.
+
+    Returns:
+        (N,) bool occluded and (N,) bool self-occluded, as `cast_visibility`.
+    """
     hit = (geomid >= 0) & (dist >= 0) & (dist < length)
     g = np.maximum(geomid, 0)
     same_person = hit & (geom_person[g] == point_person)
@@ -357,29 +373,45 @@ class Detector:
                 points[i, :counts[i] * J] = np.asarray(r[1].poses, dtype=np.float64).reshape(-1, 3)
         px_all, in_all = in_image_many(self._R, self._t, self._K, self._dist, self._size, self._max_radius,
                                        points, cams)
-        out = []
-        rays = world is not None and self.config.occlusion
-        if rays:
-            scene = world.ray_scene() if hasattr(world, "ray_scene") else (world.model, world.data)
+        n_req = len(requests)
+        occluded = np.zeros(in_all.shape, dtype=bool)
+        self_occluded = np.zeros(in_all.shape, dtype=bool)
+        if world is not None and self.config.occlusion and in_all.any():
+            import mujoco
+
+            model, data = world.ray_scene() if hasattr(world, "ray_scene") else (world.model, world.data)
             geom_person = np.asarray(world.geom_person_ids())
             kp_bodies, geom_body = self._keypoint_bodies(world), self._geom_bodies(world)
-        for i, (camera_index, poses, *_) in enumerate(requests):
+            # Every ray of the tick prepared at once; one mj_multiRay batch per capture (one origin each).
+            r_idx, k_idx = np.nonzero(in_all)  # request, flat (person, joint) index
+            origin = np.array(self._centres)[cams[r_idx]]
+            vec = points[r_idx, k_idx] - origin
+            length = np.sqrt(np.einsum("ij,ij->i", vec, vec))
+            unit = vec / length[:, None]
+            ids = np.full((n_req, N // J if J else 0), -1, dtype=np.int64)
+            for i, r in enumerate(requests):
+                ids[i, :counts[i]] = np.asarray(r[1].person_ids, dtype=np.int64)
+            point_person = ids[r_idx, k_idx // J]
+            geomid = np.empty(r_idx.size, dtype=np.int32)
+            dist = np.empty(r_idx.size)
+            bounds = np.searchsorted(r_idx, np.arange(n_req + 1))
+            ends = np.maximum.reduceat(length, bounds[:-1]) if r_idx.size else length
+            for i in range(n_req):
+                a, b = bounds[i], bounds[i + 1]
+                if b > a:
+                    mujoco.mj_multiRay(model, data, self._centres[cams[i]], unit[a:b].ravel(), None, 1, -1,
+                                       geomid[a:b], dist[a:b], None, b - a, float(ends[i]))
+            occ, self_occ = classify_hits(geomid, dist, length, point_person, kp_bodies[k_idx % J], geom_person,
+                                          geom_body, self.config.self_hit_margin_m)
+            occluded[r_idx, k_idx] = occ
+            self_occluded[r_idx, k_idx] = self_occ
+        out = []
+        for i, camera_index in enumerate(cams.tolist()):
             P = counts[i]
-            px = px_all[i, :P * J].reshape(P, J, 2)
-            in_img = in_all[i, :P * J].reshape(P, J)
-            occluded = np.zeros((P, J), dtype=bool)
-            self_occluded = np.zeros((P, J), dtype=bool)
-            if rays and in_img.any():
-                p_idx, j_idx = np.nonzero(in_img)
-                occ, self_occ = cast_visibility(
-                    *scene, self._centres[camera_index], poses.poses[p_idx, j_idx],
-                    np.asarray(poses.person_ids)[p_idx], kp_bodies[j_idx], geom_person, geom_body,
-                    self.config.self_hit_margin_m,
-                )
-                occluded[p_idx, j_idx] = occ
-                self_occluded[p_idx, j_idx] = self_occ
-            self.visibility_counts[camera_index] += (in_img.sum(), occluded.sum(), self_occluded.sum())
-            out.append((px, in_img, occluded, self_occluded))
+            view = (px_all[i, :P * J].reshape(P, J, 2), in_all[i, :P * J].reshape(P, J),
+                    occluded[i, :P * J].reshape(P, J), self_occluded[i, :P * J].reshape(P, J))
+            self.visibility_counts[camera_index] += (view[1].sum(), view[2].sum(), view[3].sum())
+            out.append(view)
         return out
 
     def _keypoint_bodies(self, world) -> np.ndarray:
