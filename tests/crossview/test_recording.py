@@ -581,3 +581,13 @@ def test_numpy_encoding_is_protobufs_own_serialisation(world):
             assert recording.camera_frame_bytes(bigger) == recording._camera_frame_to_msg(bigger).SerializeToString()
         checked += 1
     assert checked > 50
+
+
+def test_fast_message_path_writes_what_the_mcap_writer_writes(tmp_path, world, monkeypatch):
+    """Messages go straight into the mcap writer's chunk; the file must equal one written through
+    `Writer.add_message` (small chunks, so that chunks are finalised along the way)."""
+    cameras, events = world
+    fast = write_recording(tmp_path / "fast.mcap", cameras, events, chunk_size=4096).read_bytes()
+    monkeypatch.setattr(recording, "_fast_path", lambda writer, chunk_size: None)
+    slow = write_recording(tmp_path / "slow.mcap", cameras, events, chunk_size=4096).read_bytes()
+    assert fast == slow
