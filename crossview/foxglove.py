@@ -419,6 +419,7 @@ def _truth_entity_parts(person_id: int) -> tuple[bytes, bytes, bytes, bytes, byt
 
 
 _ORIENTATION_IDENTITY = Pose(orientation=Quaternion(w=1.0)).SerializeToString()
+_LINE_POINTS_FIELD = LinePrimitive.DESCRIPTOR.fields_by_name["points"].number
 
 
 def _pose_bytes(x: float, y: float, z: float) -> bytes:
@@ -434,22 +435,28 @@ def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> by
     parts = [_length_delimited(1, deletion)]
     bones, bone_ends = _bone_table(tuple(skeleton.bones))
     poses = np.asarray(truth.poses, dtype=np.float64)
-    for pid, pose in zip(np.asarray(truth.person_ids).tolist(), poses):
+    P = poses.shape[0]
+    # Everybody's bone endpoints encoded at once, then cut per person (every point has the same size).
+    known = np.isfinite(poses).all(axis=2)  # (P, J)
+    ends_known = np.repeat(known[:, bones[:, 0]] & known[:, bones[:, 1]], 2, axis=1)  # (P, 2 * bones)
+    blob = encode_points(_LINE_POINTS_FIELD, poses[:, bone_ends][ends_known])
+    ends = (np.cumsum(ends_known.sum(axis=1)) * _POINT3_WIRE.itemsize).tolist()
+    height = np.where(known, poses[..., 2], -np.inf)
+    tops = poses[np.arange(P), np.argmax(height, axis=1)].tolist()  # the highest known joint of each person
+    has_top = known.any(axis=1).tolist()
+    start = 0
+    for i, pid in enumerate(np.asarray(truth.person_ids).tolist()):
         id_field, line_head, line_tail, text_tail, sphere_tail = _truth_entity_parts(int(pid))
-        known_joint = np.isfinite(pose).all(axis=1)
-        kept = bones[known_joint[bones[:, 0]] & known_joint[bones[:, 1]]]
-        line = line_head + encode_points(LinePrimitive.DESCRIPTOR.fields_by_name["points"].number,
-                                         pose[kept.ravel()]) + line_tail
-        entity = [head, id_field]
-        known = pose[known_joint]
-        if len(known):
-            x, y, z = known[np.argmax(known[:, 2])].tolist()
-            sphere = _length_delimited(1, _pose_bytes(x, y, z)) + sphere_tail
-            text = _length_delimited(1, _pose_bytes(x, y, z + 0.25)) + text_tail
-            entity += (_length_delimited(9, sphere), _length_delimited(11, line), _length_delimited(13, text))
+        line = _length_delimited(11, line_head + blob[start:ends[i]] + line_tail)
+        start = ends[i]
+        if has_top[i]:
+            x, y, z = tops[i]
+            sphere = _length_delimited(9, _length_delimited(1, _pose_bytes(x, y, z)) + sphere_tail)
+            text = _length_delimited(13, _length_delimited(1, _pose_bytes(x, y, z + 0.25)) + text_tail)
+            entity = b"".join((head, id_field, sphere, line, text))
         else:
-            entity.append(_length_delimited(11, line))
-        parts.append(_length_delimited(2, b"".join(entity)))
+            entity = head + id_field + line
+        parts.append(_length_delimited(2, entity))
     data = b"".join(parts)
     # A coordinate of exactly +0.0 is left out by protobuf; such rare messages go through it once.
     return SceneUpdate.FromString(data).SerializeToString() if _has_zero_bits(poses) else data
