@@ -66,6 +66,12 @@ def camera_frame_id(camera_name: str) -> str:
     return f"camera_{camera_name}"
 
 
+def _timestamp_bytes(t_ns: int) -> bytes:
+    """Wire bytes of `timestamp(t_ns)` (seconds and nanos as varints, each left out when 0)."""
+    seconds, nanos = divmod(int(t_ns), 1_000_000_000)
+    return wire_uint(1, seconds) + wire_uint(2, nanos)
+
+
 def timestamp(t_ns: int) -> Timestamp:
     """A protobuf Timestamp of `t_ns` nanoseconds since the scenario start."""
     seconds, nanos = divmod(int(t_ns), 1_000_000_000)
@@ -430,7 +436,7 @@ def _pose_bytes(x: float, y: float, z: float) -> bytes:
 
 def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
     """`truth_skeletons(...)` as its wire bytes, built from cached pieces (what the recording writes)."""
-    head = _length_delimited(1, timestamp(t_ns).SerializeToString()) + wire_string(2, WORLD_FRAME)
+    head = _length_delimited(1, _timestamp_bytes(t_ns)) + wire_string(2, WORLD_FRAME)
     deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
     parts = [_length_delimited(1, deletion)]
     bones, bone_ends = _bone_table(tuple(skeleton.bones))
@@ -475,17 +481,18 @@ def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> S
 
 
 @functools.lru_cache(maxsize=1024)
-def _detection_styles(person_id: int) -> tuple[bytes, bytes, bytes, bytes]:
+def _detection_styles(person_id: int) -> tuple[bytes, bytes, bytes, bytes, int, int]:
     """Serialized style of a detection's bones and joints (-1: false positive), each split around the
     points field so that type, points, colours, thickness come in field-number order: bones before,
-    bones after, joints before, joints after."""
+    bones after, joints before, joints after; then the bones' and the joints' total style length."""
     rgba = truth_color(person_id) if person_id >= 0 else color(FALSE_POSITIVE_COLOR)
     rgba.a = 1.0
     bones_type = PointsAnnotation(type=PointsAnnotation.LINE_LIST)
     bones_rest = PointsAnnotation(outline_color=rgba, thickness=DETECTION_LINE_PX)
     joints_type = PointsAnnotation(type=PointsAnnotation.POINTS)
     joints_rest = PointsAnnotation(outline_color=rgba, fill_color=rgba, thickness=2 * DETECTION_LINE_PX)
-    return tuple(m.SerializeToString() for m in (bones_type, bones_rest, joints_type, joints_rest))
+    pieces = tuple(m.SerializeToString() for m in (bones_type, bones_rest, joints_type, joints_rest))
+    return (*pieces, len(pieces[0]) + len(pieces[1]), len(pieces[2]) + len(pieces[3]))
 
 
 def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> ImageAnnotations:
@@ -515,27 +522,29 @@ def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns:
     bones, bone_ends = _bone_table(tuple(skeleton.bones))
     known = np.isfinite(kp).all(axis=2)  # (D, J)
     ends_known = np.repeat(known[:, bones[:, 0]] & known[:, bones[:, 1]], 2, axis=1)  # (D, 2 * bones)
-    # All detections' points encoded at once, then cut per detection (every element has the same size).
-    bone_blob = encode_points(_POINTS_FIELD, kp[:, bone_ends][ends_known])
-    joint_blob = encode_points(_POINTS_FIELD, kp[known])
+    # All detections' bone and joint points encoded at once, then cut per detection (every element has
+    # the same size): bones first, joints after.
+    blob = encode_points(_POINTS_FIELD, np.concatenate([kp[:, bone_ends][ends_known], kp[known]]))
     size = _POINT2_WIRE.itemsize
     bone_end = (np.cumsum(ends_known.sum(axis=1)) * size).tolist()
-    joint_end = (np.cumsum(known.sum(axis=1)) * size).tolist()
+    joint_end = (np.cumsum(known.sum(axis=1)) * size + bone_end[-1]).tolist()
     person_ids = np.asarray(truth.person_ids).tolist()
-    stamp_field = _length_delimited(_STAMP_FIELD, timestamp(t_ns).SerializeToString())
+    stamp_field = _length_delimited(_STAMP_FIELD, _timestamp_bytes(t_ns))
     key = _SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2]
     parts = []
-    bone_start = joint_start = 0
+    bone_start, joint_start = 0, bone_end[-1]
+    fixed = len(stamp_field)
     for d in range(D):
         pid = person_ids[d] if d < len(person_ids) else -1
-        bones_type, bones_rest, joints_type, joints_rest = _detection_styles(max(pid, -1))
-        if bone_end[d] > bone_start:
-            n = len(stamp_field) + len(bones_type) + len(bones_rest) + bone_end[d] - bone_start
-            parts += (key, _varint(n), stamp_field, bones_type, bone_blob[bone_start:bone_end[d]], bones_rest)
-        if joint_end[d] > joint_start:
-            n = len(stamp_field) + len(joints_type) + len(joints_rest) + joint_end[d] - joint_start
-            parts += (key, _varint(n), stamp_field, joints_type, joint_blob[joint_start:joint_end[d]], joints_rest)
-        bone_start, joint_start = bone_end[d], joint_end[d]
+        bones_type, bones_rest, joints_type, joints_rest, bones_len, joints_len = _detection_styles(max(pid, -1))
+        b, j = bone_end[d], joint_end[d]
+        if b > bone_start:
+            parts += (key, _varint(fixed + bones_len + b - bone_start), stamp_field, bones_type, blob[bone_start:b],
+                      bones_rest)
+        if j > joint_start:
+            parts += (key, _varint(fixed + joints_len + j - joint_start), stamp_field, joints_type,
+                      blob[joint_start:j], joints_rest)
+        bone_start, joint_start = b, j
     data = b"".join(parts)
     # A coordinate of exactly +0.0 is left out by protobuf; such rare messages go through it once.
     return ImageAnnotations.FromString(data).SerializeToString() if _has_zero_bits(kp) else data
