@@ -20,6 +20,7 @@ A frame whose joint count differs from the skeleton's is a programming error: Va
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -323,7 +324,8 @@ class Tracker:
         fresh = (t - tg.seen_s[rows]) <= cfg.stale_after_s  # (M, J)
         stale = ~fresh & np.isfinite(tg.pos[rows, :, 0])
         if stale.any():
-            with np.errstate(invalid="ignore"):
+            with warnings.catch_warnings():  # a target with no fresh joint: all-NaN median, handled below
+                warnings.simplefilter("ignore", RuntimeWarning)
                 body = np.nanmedian(np.where(fresh[..., None], vel, np.nan), axis=1)  # (M, 3)
             body = np.where(np.isfinite(body), body, 0.0)[:, None, :]
             pos, joint_s = tg.pos[rows], tg.joint_s[rows]
