@@ -333,26 +333,34 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
         (S, N, 2) distorted pixels (NaN behind the camera) and (S, N) bool visible-in-image mask.
     """
     points = np.asarray(points_world, dtype=np.float64)
-    cam = np.matmul(points, R[cameras].transpose(0, 2, 1)) + t[cameras][:, None, :]
+    cam = np.matmul(points, R[cameras].transpose(0, 2, 1))
+    cam += t[cameras][:, None, :]
     z = cam[..., 2]
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore"):
         in_front = z > _MIN_DEPTH_M
-    inv_z = np.divide(1.0, z, out=np.full(z.shape, np.nan), where=in_front)
+        inv_z = 1.0 / np.where(in_front, z, np.nan)
     xn, yn = cam[..., 0] * inv_z, cam[..., 1] * inv_z
     d = dist[cameras][:, :, None]  # (S, 5, 1): columns broadcast over the points
     k1, k2, p1, p2, k3 = d[:, 0], d[:, 1], d[:, 2], d[:, 3], d[:, 4]
     r2 = xn * xn + yn * yn
     radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
-    yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
+    xd, yd = xn * radial, yn * radial
+    if p1.any() or p2.any():  # tangential terms (adding their exact zeros would change nothing)
+        xd = xd + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
+        yd = yd + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
     Kc = K[cameras]
     px = np.empty(points.shape[:2] + (2,))
-    px[..., 0] = Kc[:, 0, 0, None] * xd + Kc[:, 0, 1, None] * yd + Kc[:, 0, 2, None]
-    px[..., 1] = Kc[:, 1, 1, None] * yd + Kc[:, 1, 2, None]
+    u, v = px[..., 0], px[..., 1]
+    np.multiply(Kc[:, 0, 0, None], xd, out=u)
+    if Kc[:, 0, 1].any():  # skew
+        u += Kc[:, 0, 1, None] * yd
+    u += Kc[:, 0, 2, None]
+    np.multiply(Kc[:, 1, 1, None], yd, out=v)
+    v += Kc[:, 1, 2, None]
     wh = size[cameras][:, :, None] - 0.5
     with np.errstate(invalid="ignore"):
-        inside = (in_front & (r2 <= max_radius[cameras][:, None] ** 2)
-                  & (px[..., 0] >= -0.5) & (px[..., 0] <= wh[:, 0]) & (px[..., 1] >= -0.5) & (px[..., 1] <= wh[:, 1]))
+        inside = in_front & (r2 <= max_radius[cameras][:, None] ** 2)
+        inside &= (u >= -0.5) & (u <= wh[:, 0]) & (v >= -0.5) & (v <= wh[:, 1])
     return px, inside
 
 
