@@ -30,6 +30,9 @@ class ClockConfig:
         burst_mean_frames: mean length of a burst of drops (geometric), >= 1.
         delay_mean_s: mean delivery delay, >= 0.
         delay_std_s: std of the delivery delay (Gamma distributed; 0 gives a constant delay).
+        in_order_delivery: each camera's frames reach the tracker in the order they were taken, as over
+            one stream connection (a late frame holds back the ones behind it); frames of different
+            cameras still interleave out of stamp order. False delivers each frame after its own delay.
     """
 
     fps: float = 10.0
@@ -42,6 +45,7 @@ class ClockConfig:
     burst_mean_frames: float = 5.0
     delay_mean_s: float = 0.05
     delay_std_s: float = 0.02
+    in_order_delivery: bool = True
 
     def __post_init__(self):
         if not (self.fps > 0 and math.isfinite(self.fps)):
@@ -134,6 +138,8 @@ def schedule(camera_names, config: ClockConfig, duration_s: float, rng: np.rando
         stamp = capture + offset + (cam_rng.normal(0.0, config.stamp_noise_std_s, n)
                                     if config.stamp_noise_std_s > 0 else 0.0)
         delivery = capture + delays(config, n, cam_rng)
+        if config.in_order_delivery:
+            delivery = np.maximum.accumulate(delivery)
         keep = ~drop_mask(config, n, cam_rng) & (capture >= 0) & (capture < duration_s)
         captures.extend(
             Capture(c, int(k), float(capture[k]), float(stamp[k]), float(delivery[k])) for k in np.nonzero(keep)[0]

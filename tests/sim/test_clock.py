@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from scipy import stats
@@ -47,7 +49,7 @@ def test_jitter_offset_and_stamp_noise_have_their_configured_spread():
 
 
 def test_delays_are_gamma_with_configured_mean_and_std_and_reorder_cameras():
-    config = ClockConfig(delay_mean_s=0.05, delay_std_s=0.02, drop_prob=0, burst_prob=0)
+    config = ClockConfig(delay_mean_s=0.05, delay_std_s=0.02, drop_prob=0, burst_prob=0, in_order_delivery=False)
     captures = schedule([f"c{i}" for i in range(12)], config, 60.0, np.random.default_rng(3))
     delays = np.array([c.delivery_s - c.capture_s for c in captures])
     assert delays.min() > 0
@@ -57,6 +59,27 @@ def test_delays_are_gamma_with_configured_mean_and_std_and_reorder_cameras():
     assert stats.kstest(delays, stats.gamma(shape, scale=0.02**2 / 0.05).cdf).pvalue > 0.01
     # Delivery order differs from stamp order: frames arrive out of stamp order.
     stamps_in_delivery_order = [c.stamp_s for c in sorted(captures, key=lambda c: c.delivery_s)]
+    assert stamps_in_delivery_order != sorted(stamps_in_delivery_order)
+
+
+def test_in_order_delivery_keeps_each_cameras_frames_in_order_but_not_the_streams():
+    # Long-tailed delays: without in-order delivery a camera's own frames overtake each other.
+    config = ClockConfig(delay_mean_s=0.1, delay_std_s=0.08, drop_prob=0, burst_prob=0)
+    names = [f"c{i}" for i in range(12)]
+    loose = schedule(names, dataclasses.replace(config, in_order_delivery=False), 60.0, np.random.default_rng(8))
+    fifo = schedule(names, config, 60.0, np.random.default_rng(8))
+
+    def overtaken(captures):
+        return sum(
+            int(np.any(np.diff([c.capture_s for c in sorted(cam, key=lambda c: c.delivery_s)]) < 0))
+            for cam in _by_camera(captures, 12)
+        )
+
+    assert overtaken(loose) > 0
+    assert overtaken(fifo) == 0
+    # A frame is never delivered before its own delay has passed, and the streams still interleave.
+    assert all(f.delivery_s >= g.delivery_s for f, g in zip(fifo, loose))
+    stamps_in_delivery_order = [c.stamp_s for c in sorted(fifo, key=lambda c: c.delivery_s)]
     assert stamps_in_delivery_order != sorted(stamps_in_delivery_order)
 
 
