@@ -1,5 +1,8 @@
 """Bad input never crashes the tracker and never puts NaN or inf into a joint it has once estimated."""
 
+import copy
+import functools
+
 import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -35,11 +38,17 @@ def bad_frames(draw):
     return Frame(camera, stamp, kp, sc)
 
 
-def _warm(tracker_type):
-    tracker = tracker_type(CAMS, CONFIG)
+@functools.cache
+def _warmed(tracker_type, config):
+    tracker = tracker_type(CAMS, config)
     for frame in FRAMES:
         tracker.update(frame)
     return tracker
+
+
+def _warm(tracker_type, config=CONFIG):
+    """A tracker that has seen the synthetic frames (a copy, so that examples do not share state)."""
+    return copy.deepcopy(_warmed(tracker_type, config))
 
 
 def _check(tracker, frames):
@@ -58,19 +67,21 @@ def _check(tracker, frames):
             known[target.id] = before | finite
 
 
-@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(bad_frames(), min_size=1, max_size=6))
 def test_tracker_survives_bad_frames(frames):
     _check(_warm(Tracker), frames)
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+# The baseline re-partitions every camera's latest frame on each update; the greedy partition keeps the
+# property test fast (the exact milp path is tested in test_initialization).
+BASELINE_CONFIG = CONFIG.replace(milp_max_nodes=2)
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.lists(bad_frames(), min_size=1, max_size=4))
 def test_baseline_survives_bad_frames(frames):
-    tracker = BaselineTracker(CAMS, CONFIG)
-    for frame in FRAMES[-24:]:
-        tracker.update(frame)
-    _check(tracker, frames)
+    _check(_warm(BaselineTracker, BASELINE_CONFIG), frames)
 
 
 def test_all_zero_scores_and_empty_frames_only_age_the_targets():
