@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -62,7 +63,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     def tracker_options(p):
         p.add_argument("--method", default="crossview", choices=("crossview", "baseline"))
-        p.add_argument("--preset", default="store", help="tracker preset: campus, shelf or store (default store)")
+        p.add_argument(
+            "--preset",
+            default="store",
+            help="tracker preset: campus, shelf, store, or campus-paper, shelf-paper, store-paper for Table S2 "
+            "verbatim (default store)",
+        )
         p.add_argument("--config", type=Path, help="TOML file of tracker parameters over the preset")
 
     p = sub.add_parser("run", help="generate, track and score a scenario (default: the built-in store)")
@@ -229,7 +235,14 @@ COMMANDS = {
 }
 
 
+# The tracker and the simulator work on many tiny matrices: BLAS threads only add contention there, so
+# one thread per process unless the user asked otherwise (set before numpy is first imported).
+_SINGLE_THREAD_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
 def main(argv: list[str] | None = None) -> int:
+    for name in _SINGLE_THREAD_ENV:
+        os.environ.setdefault(name, "1")
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as e:  # --help (0) or a bad argument (2, message already printed)
