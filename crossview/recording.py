@@ -593,7 +593,29 @@ def _flat_metadata(kind: str, header) -> dict[str, str]:
     }
 
 
-class RecordingWriter:
+class _WriterContext:
+    """Context-manager behaviour shared by the writers: close on a clean exit, abort on any exception.
+
+    Subclasses hold an `_AtomicMcapWriter` in `_out` and define `close()`.
+    """
+
+    _out: _AtomicMcapWriter
+
+    def abort(self) -> None:
+        """Drops the temporary file; nothing appears under the final name."""
+        self._out.abort()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class RecordingWriter(_WriterContext):
     """Writes a recording atomically. Events must come in log-time order (truth at t_s, frames at
     delivery_s), which makes the file streamable in that order.
 
@@ -690,20 +712,9 @@ class RecordingWriter:
         }
         self._out.close({"json": _json(summary).decode()})
 
-    def abort(self) -> None:
-        self._out.abort()
-
-    def __enter__(self) -> RecordingWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
-class TracksWriter:
+class TracksWriter(_WriterContext):
     """Writes a tracks file atomically: one TrackerOutput per processed frame, in processing order.
 
     The log time of an output is its stamp (clamped at 0: a camera clock may stamp a frame slightly
@@ -769,17 +780,6 @@ class TracksWriter:
         summary = {"num_outputs": self._count, "num_targets": len(self._targets)} | self._summary
         self._out.close({"json": _json(summary).decode()})
 
-    def abort(self) -> None:
-        self._out.abort()
-
-    def __enter__(self) -> TracksWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if exc_type is None:
-            self.close()
-        else:
-            self.abort()
 
 
 # --------------------------------------------------------------------------------------------------
