@@ -27,6 +27,16 @@ import numpy as np
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
 from sim.store import StoreGeometry
 
+try:  # numba compiles the per-step numeric kernels (plain Python runs the same code, slowly, without it)
+    from numba import njit as _njit
+
+    def jit(function):
+        """Compiles a numeric kernel once (cached on disk); the kernels are written for plain Python too."""
+        return _njit(cache=True, nogil=True, error_model="numpy")(function)
+except ImportError:  # pragma: no cover - numba is a dependency; this keeps the code importable without it
+    def jit(function):
+        return function
+
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
 STEP_S = 0.1
 # Hard limits the crowd keeps at every step (interpolation between steps loses a few centimetres at most).
@@ -217,6 +227,8 @@ class Crowd:
         self.departures = 0
         self.agents = [_Agent() for _ in range(S)]
         self._spots = store.browse_spots()
+        self._obstacles = store.obstacle_arrays()
+        _warm_up()
         checkout = [o for o in store.obstacles if o.key == "store.checkout_m"]
         self._checkout_spots = []
         if checkout:
@@ -446,21 +458,15 @@ class Crowd:
                     want_heading[s] = agent.goal_heading
                 if t >= agent.until:
                     self._choose_goal(s)
-        # 3. Local avoidance against predicted close passes.
+        # 3. Local avoidance against predicted close passes; near a shelf, no steering into it and a gentle
+        # push away from its face (`_steer_kernel`).
         idx = np.nonzero(active)[0]
         if len(idx) > 1:
             # People standing still hold their place; walkers steer around them.
             walking = np.array([self.agents[s].activity == Activity.WALK for s in idx.tolist()])
-            w = want[idx] + self._avoid(self.pos[idx], want[idx], self.vel[idx]) * walking[:, None]
-            # Near a shelf: no steering into it, and a gentle push away from its face.
-            away = self.store.away_from_obstacles(self.pos[idx], SHELF_COMFORT_M)
-            norm = np.hypot(away[:, 0], away[:, 1])
-            unit = away / np.maximum(norm, 1e-9)[:, None]
-            into = np.minimum((w * unit).sum(axis=1), 0.0)
-            w = w - unit * into[:, None] + away * (SHELF_PUSH_M_S * walking)[:, None]
-            cap = self.speed_pref[idx] * 1.1
-            norm = np.hypot(w[:, 0], w[:, 1])
-            want[idx] = w * np.minimum(1.0, cap / np.maximum(norm, 1e-9))[:, None]
+            w = np.empty((len(idx), 2))
+            _steer_kernel(self.pos[idx], want[idx], self.vel[idx], walking, self.speed_pref[idx], *self._obstacles, w)
+            want[idx] = w
         # 4. Integration with bounded acceleration.
         dv = want - self.vel
         dvn = np.hypot(dv[:, 0], dv[:, 1])
@@ -491,33 +497,6 @@ class Crowd:
             return False
         # The last leg out through the exit leaves the grid; elsewhere the shortcut must be clear.
         return len(agent.path) == 2 and agent.leaving or self.store.line_free((px, py), (bx, by))
-
-    def _avoid(self, pos: np.ndarray, want: np.ndarray, vel: np.ndarray) -> np.ndarray:
-        """(n, 2) velocity corrections that steer each person off predicted close passes."""
-        rx = pos[None, :, 0] - pos[:, None, 0]  # (i, j): j relative to i
-        ry = pos[None, :, 1] - pos[:, None, 1]
-        wx = want[:, None, 0] - vel[None, :, 0]  # i's wish relative to j's motion
-        wy = want[:, None, 1] - vel[None, :, 1]
-        ww = np.maximum(wx * wx + wy * wy, 1e-9)
-        tau = np.minimum(np.maximum((rx * wx + ry * wy) / ww, 0.0), 2.5)
-        mx, my = rx - wx * tau, ry - wy * tau
-        md = np.sqrt(mx * mx + my * my)
-        d = np.sqrt(rx * rx + ry * ry)
-        n = len(pos)
-        md.flat[:: n + 1] = np.inf
-        d.flat[:: n + 1] = np.inf
-        # Steer away from the point of closest approach, harder when it is close and soon.
-        urgency = np.maximum(COMFORT_M - md, 0.0) / (COMFORT_M * (0.5 + tau))
-        # Head-on (miss vector ~0): pass on the right.
-        head_on = md < 0.05
-        inv = np.where(head_on, 1.0 / np.sqrt(ww), 1.0 / np.maximum(md, 1e-9))
-        ax = np.where(head_on, -wy, mx) * inv * urgency
-        ay = np.where(head_on, wx, my) * inv * urgency
-        # Short-range push so that nobody leans on a neighbour.
-        push = np.minimum(np.maximum(COMFORT_M - d, 0.0) / (COMFORT_M - SEPARATION_M), 1.5) / d
-        cx = -AVOID_GAIN * ax.sum(axis=1) - PUSH_GAIN * (rx * push).sum(axis=1)
-        cy = -AVOID_GAIN * ay.sum(axis=1) - PUSH_GAIN * (ry * push).sum(axis=1)
-        return np.stack([cx, cy], axis=-1)
 
     def _wall_bounds(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 2) lower and upper bounds of the pelvis positions of slots idx (doors open the wall)."""
@@ -553,13 +532,9 @@ class Crowd:
 
     def _violations(self, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         """(n,) whether each of the points (n, 2) breaks a hard constraint."""
-        bad = self.store.obstacle_distance(q) < SHELF_CLEARANCE_M
-        bad |= np.any((q < lo - 1e-9) | (q > hi + 1e-9), axis=1)
-        rx = q[None, :, 0] - q[:, None, 0]
-        ry = q[None, :, 1] - q[:, None, 1]
-        d2 = rx * rx + ry * ry
-        d2.flat[:: len(q) + 1] = np.inf
-        return bad | np.any(d2 < SEPARATION_M**2, axis=1)
+        bad = np.empty(len(q), dtype=bool)
+        _violations_kernel(np.ascontiguousarray(q), lo, hi, *self._obstacles, bad)
+        return bad
 
     def _constrain(self, new: np.ndarray, old: np.ndarray, active: np.ndarray) -> np.ndarray:
         """Projects the step onto the hard constraints; anyone still in violation keeps `old`."""
@@ -570,18 +545,7 @@ class Crowd:
         p = new[idx]
         if not self._violations(p, lo, hi).any():
             return new  # the usual case; nobody moves faster than MAX_SPEED_M_S without a projection
-        for _ in range(3):
-            rx = p[None, :, 0] - p[:, None, 0]
-            ry = p[None, :, 1] - p[:, None, 1]
-            d = np.sqrt(rx * rx + ry * ry)
-            d.flat[:: len(p) + 1] = np.inf
-            f = np.maximum(SEPARATION_M + PROJECTION_MARGIN_M - d, 0.0) * 0.5 / np.maximum(d, 1e-9)
-            if f.any():
-                p = p - np.stack([(rx * f).sum(axis=1), (ry * f).sum(axis=1)], axis=-1)
-            near = self.store.obstacle_distance(p) < SHELF_CLEARANCE_M + PROJECTION_MARGIN_M
-            if near.any():
-                p[near] = self.store.push_out(p[near], SHELF_CLEARANCE_M + PROJECTION_MARGIN_M)
-            p = np.minimum(np.maximum(p, lo), hi)
+        _project_kernel(p, lo, hi, *self._obstacles)
         out = new.copy()
         out[idx] = p
         # Nobody is shoved faster than anybody walks: a longer push is no step at all.
@@ -596,41 +560,9 @@ class Crowd:
             out[idx[bad]] = old[idx[bad]]
 
     def _gait(self, speed: np.ndarray, active: np.ndarray):
-        """Advances the gait phase and moves the feet (locked in stance, swinging otherwise)."""
-        dt = STEP_S
-        v_eff = speed + 0.3 * np.abs(self.omega)
-        cadence = cadence_steps_s(v_eff, self.height)
-        self.stride = 2.0 * v_eff / cadence
-        rate = cadence / 2.0  # cycles per second
-        old_phase = self.phase
-        self.phase = np.where(active, self.phase + rate * dt, self.phase)
-        c, s = np.cos(self.heading), np.sin(self.heading)
-        offsets = np.array([0.0, 0.5])
-        sides = np.array([1.0, -1.0])
-        p_old = (old_phase[:, None] + offsets) % 1.0  # (S, 2) per leg
-        p_new = (self.phase[:, None] + offsets) % 1.0
-        wrapped = (np.floor(self.phase[:, None] + offsets) > np.floor(old_phase[:, None] + offsets)) & active[:, None]
-        lifted = (p_old < STANCE_FRACTION) & (p_new >= STANCE_FRACTION) & active[:, None]
-        swing = (p_new >= STANCE_FRACTION) & active[:, None]
-        lateral = (HIP_HALF_WIDTH * self.height)[:, None] * sides  # (S, 2)
-        # Where a swinging foot lands: ahead by half the stance travel, at the body's predicted position.
-        ahead = (self.stride * STANCE_FRACTION / 2)[:, None]
-        t_left = (1.0 - p_new) / rate[:, None]
-        lx = self.pos[:, None, 0] + self.vel[:, None, 0] * t_left + c[:, None] * ahead - s[:, None] * lateral
-        ly = self.pos[:, None, 1] + self.vel[:, None, 1] * t_left + s[:, None] * ahead + c[:, None] * lateral
-        landing = np.stack([lx, ly], axis=-1)  # (S, 2, 2)
-        self.liftoff[lifted] = self.feet[lifted]
-        u = (p_new - STANCE_FRACTION) / (1.0 - STANCE_FRACTION)
-        ease = u**3 * (u * (u * 6 - 15) + 10)
-        span = landing - self.liftoff
-        self.swing_len = np.where(swing, np.hypot(span[..., 0], span[..., 1]), self.swing_len)
-        self.feet = np.where(swing[..., None], self.liftoff + span * ease[..., None], self.feet)
-        # Touchdown this step: lock the foot where the swing was heading, less the stance already done.
-        back = self.stride[:, None] * (STANCE_FRACTION / 2 - p_new)
-        tx = self.pos[:, None, 0] + c[:, None] * back - s[:, None] * lateral
-        ty = self.pos[:, None, 1] + s[:, None] * back + c[:, None] * lateral
-        touch = wrapped & (self.swing_len > 1e-3)
-        self.feet = np.where(touch[..., None], np.stack([tx, ty], axis=-1), self.feet)
+        """Advances the gait phase and moves the feet (locked in stance, swinging otherwise; `_gait_kernel`)."""
+        _gait_kernel(speed, self.omega, self.height, active, self.heading, self.pos, self.vel, self.phase, self.stride,
+                     self.feet, self.liftoff, self.swing_len)
 
     def _arms(self, active: np.ndarray):
         """How far each browsing arm is raised (ramps up, holds, ramps down), its height and side."""
@@ -650,3 +582,213 @@ class Crowd:
     def activities(self) -> np.ndarray:
         """(S,) `Activity` of each slot (WALK for empty slots)."""
         return np.array([a.activity for a in self.agents], dtype=np.int64)
+
+
+# -- compiled kernels (plain floats and loops: a few dozen people make numpy's per-call cost dominate) ------
+
+
+@jit
+def _obstacle_distance(x, y, center, half, cos, sin):
+    """Distance from the point (x, y) to the nearest footprint (inf without any); as `rect_distance`."""
+    best = np.inf
+    for o in range(center.shape[0]):
+        dx, dy = x - center[o, 0], y - center[o, 1]
+        lx, ly = dx * cos[o] + dy * sin[o], -dx * sin[o] + dy * cos[o]
+        ox, oy = max(abs(lx) - half[o, 0], 0.0), max(abs(ly) - half[o, 1], 0.0)
+        best = min(best, math.sqrt(ox * ox + oy * oy))
+    return best
+
+
+@jit
+def _steer_kernel(pos, want, vel, walking, speed_pref, center, half, cos, sin, out):
+    """out (n, 2): each wish (n, 2) steered off predicted close passes (walkers only: time to closest
+    approach against everybody's current motion, plus a short-range push), kept from heading into a shelf
+    within SHELF_COMFORT_M and pushed off its face, then capped at 1.1 times the preferred speed."""
+    n = pos.shape[0]
+    for i in range(n):
+        wx0, wy0 = want[i, 0], want[i, 1]
+        if walking[i]:
+            cx = cy = 0.0
+            for j in range(n):
+                if j == i:
+                    continue
+                rx, ry = pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]  # j relative to i
+                wx, wy = wx0 - vel[j, 0], wy0 - vel[j, 1]  # i's wish relative to j's motion
+                ww = max(wx * wx + wy * wy, 1e-9)
+                tau = min(max((rx * wx + ry * wy) / ww, 0.0), 2.5)
+                mx, my = rx - wx * tau, ry - wy * tau
+                md = math.sqrt(mx * mx + my * my)
+                d = math.sqrt(rx * rx + ry * ry)
+                # Steer away from the point of closest approach, harder when it is close and soon.
+                urgency = max(COMFORT_M - md, 0.0) / (COMFORT_M * (0.5 + tau))
+                if md < 0.05:  # head-on (miss vector ~0): pass on the right
+                    inv = urgency / math.sqrt(ww)
+                    ax, ay = -wy * inv, wx * inv
+                else:
+                    inv = urgency / max(md, 1e-9)
+                    ax, ay = mx * inv, my * inv
+                # Short-range push so that nobody leans on a neighbour.
+                push = min(max(COMFORT_M - d, 0.0) / (COMFORT_M - SEPARATION_M), 1.5) / max(d, 1e-9)
+                cx += -AVOID_GAIN * ax - PUSH_GAIN * rx * push
+                cy += -AVOID_GAIN * ay - PUSH_GAIN * ry * push
+            wx0 += cx
+            wy0 += cy
+        # Near a shelf: the sum over footprints within SHELF_COMFORT_M of the outward normal times
+        # (1 - d / SHELF_COMFORT_M), as `StoreGeometry.away_from_obstacles`.
+        awx = awy = 0.0
+        for o in range(center.shape[0]):
+            dx, dy = pos[i, 0] - center[o, 0], pos[i, 1] - center[o, 1]
+            lx, ly = dx * cos[o] + dy * sin[o], -dx * sin[o] + dy * cos[o]
+            ox, oy = lx - min(max(lx, -half[o, 0]), half[o, 0]), ly - min(max(ly, -half[o, 1]), half[o, 1])
+            dist = math.sqrt(ox * ox + oy * oy)
+            if dist < SHELF_COMFORT_M:
+                weight = (SHELF_COMFORT_M - dist) / (SHELF_COMFORT_M * max(dist, 1e-9))
+                ox, oy = ox * weight, oy * weight
+                awx += ox * cos[o] - oy * sin[o]
+                awy += ox * sin[o] + oy * cos[o]
+        norm = max(math.sqrt(awx * awx + awy * awy), 1e-9)
+        ux, uy = awx / norm, awy / norm
+        into = min(wx0 * ux + wy0 * uy, 0.0)
+        push = SHELF_PUSH_M_S if walking[i] else 0.0
+        wx0 += -ux * into + awx * push
+        wy0 += -uy * into + awy * push
+        scale = min(1.0, speed_pref[i] * 1.1 / max(math.sqrt(wx0 * wx0 + wy0 * wy0), 1e-9))
+        out[i, 0], out[i, 1] = wx0 * scale, wy0 * scale
+
+
+@jit
+def _violations_kernel(q, lo, hi, center, half, cos, sin, bad):
+    """bad (n,): whether each point of q (n, 2) is outside its wall bounds lo/hi (n, 2), closer than
+    SHELF_CLEARANCE_M to a footprint, or closer than SEPARATION_M to another point."""
+    n = q.shape[0]
+    for i in range(n):
+        x, y = q[i, 0], q[i, 1]
+        b = x < lo[i, 0] - 1e-9 or y < lo[i, 1] - 1e-9 or x > hi[i, 0] + 1e-9 or y > hi[i, 1] + 1e-9
+        if not b:
+            b = _obstacle_distance(x, y, center, half, cos, sin) < SHELF_CLEARANCE_M
+        if not b:
+            for j in range(n):
+                dx, dy = q[j, 0] - x, q[j, 1] - y
+                if j != i and dx * dx + dy * dy < SEPARATION_M * SEPARATION_M:
+                    b = True
+                    break
+        bad[i] = b
+
+
+@jit
+def _project_kernel(p, lo, hi, center, half, cos, sin):
+    """Moves the points p (n, 2) in place toward the hard constraints: up to three rounds of pushing
+    pairs apart to SEPARATION_M + PROJECTION_MARGIN_M (half each), pushing points out of every footprint
+    grown by SHELF_CLEARANCE_M + PROJECTION_MARGIN_M (as `StoreGeometry.push_out`) and clipping to the
+    wall bounds lo/hi (n, 2)."""
+    n = p.shape[0]
+    clearance = SHELF_CLEARANCE_M + PROJECTION_MARGIN_M
+    shift = np.zeros((n, 2))
+    for k in range(3):
+        moved = False
+        for i in range(n):
+            sx = sy = 0.0
+            for j in range(n):
+                if j == i:
+                    continue
+                rx, ry = p[j, 0] - p[i, 0], p[j, 1] - p[i, 1]
+                d = math.sqrt(rx * rx + ry * ry)
+                if d < SEPARATION_M + PROJECTION_MARGIN_M:
+                    f = (SEPARATION_M + PROJECTION_MARGIN_M - d) * 0.5 / max(d, 1e-9)
+                    sx += rx * f
+                    sy += ry * f
+                    moved = True
+            shift[i, 0], shift[i, 1] = sx, sy
+        for i in range(n):
+            p[i, 0] -= shift[i, 0]
+            p[i, 1] -= shift[i, 1]
+            x, y = p[i, 0], p[i, 1]
+            # Outside a footprint's core: radially from its nearest point; inside: through the nearest face.
+            for o in range(center.shape[0]):
+                hx, hy = half[o, 0], half[o, 1]
+                dx, dy = x - center[o, 0], y - center[o, 1]
+                lx, ly = dx * cos[o] + dy * sin[o], -dx * sin[o] + dy * cos[o]
+                qx, qy = min(max(lx, -hx), hx), min(max(ly, -hy), hy)
+                ox, oy = lx - qx, ly - qy
+                dist = math.sqrt(ox * ox + oy * oy)
+                if dist >= clearance:
+                    continue
+                moved = True
+                if dist < 1e-12:
+                    if hx - abs(lx) < hy - abs(ly):
+                        nx, ny = (hx + clearance if lx >= 0 else -hx - clearance), ly
+                    else:
+                        nx, ny = lx, (hy + clearance if ly >= 0 else -hy - clearance)
+                else:
+                    scale = clearance / dist
+                    nx, ny = qx + ox * scale, qy + oy * scale
+                ex, ey = nx - lx, ny - ly
+                p[i, 0] += ex * cos[o] - ey * sin[o]
+                p[i, 1] += ex * sin[o] + ey * cos[o]
+        if k and not moved:
+            break  # already within the walls: the remaining rounds would change nothing
+        for i in range(n):
+            p[i, 0] = min(max(p[i, 0], lo[i, 0]), hi[i, 0])
+            p[i, 1] = min(max(p[i, 1], lo[i, 1]), hi[i, 1])
+
+
+@jit
+def _gait_kernel(speed, omega, height, active, heading, pos, vel, phase, stride, feet, liftoff, swing_len):
+    """Advances the gait phase (S,) and moves the feet (S, 2, 2) in place.
+
+    A foot is locked to the floor in stance; at lift-off its position is kept (liftoff) and it swings
+    (minimum-jerk easing) toward where it lands: ahead by half the stance travel, at the body's
+    predicted position; at touchdown it is locked where the swing was heading, less the stance already
+    done. swing_len (S, 2) is each swing's length, stride (S,) the distance per gait cycle.
+    """
+    dt = STEP_S
+    for s in range(speed.shape[0]):
+        v_eff = speed[s] + 0.3 * abs(omega[s])
+        cadence = (1.2 + 0.6 * v_eff) * math.sqrt(1.75 / height[s])  # as `cadence_steps_s`
+        stride[s] = 2.0 * v_eff / cadence
+        if not active[s]:
+            continue
+        rate = cadence / 2.0  # cycles per second
+        old = phase[s]
+        new = old + rate * dt
+        phase[s] = new
+        c, sn = math.cos(heading[s]), math.sin(heading[s])
+        ahead = stride[s] * STANCE_FRACTION / 2
+        for leg in range(2):
+            offset = 0.5 * leg
+            lateral = HIP_HALF_WIDTH * height[s] * (1.0 - 2.0 * leg)
+            p_old, p_new = (old + offset) % 1.0, (new + offset) % 1.0
+            if p_old < STANCE_FRACTION <= p_new:
+                liftoff[s, leg, 0], liftoff[s, leg, 1] = feet[s, leg, 0], feet[s, leg, 1]
+            if p_new >= STANCE_FRACTION:
+                t_left = (1.0 - p_new) / rate
+                lx = pos[s, 0] + vel[s, 0] * t_left + c * ahead - sn * lateral
+                ly = pos[s, 1] + vel[s, 1] * t_left + sn * ahead + c * lateral
+                u = (p_new - STANCE_FRACTION) / (1.0 - STANCE_FRACTION)
+                ease = u * u * u * (u * (u * 6 - 15) + 10)
+                spx, spy = lx - liftoff[s, leg, 0], ly - liftoff[s, leg, 1]
+                swing_len[s, leg] = math.sqrt(spx * spx + spy * spy)
+                feet[s, leg, 0], feet[s, leg, 1] = liftoff[s, leg, 0] + spx * ease, liftoff[s, leg, 1] + spy * ease
+            if math.floor(new + offset) > math.floor(old + offset) and swing_len[s, leg] > 1e-3:
+                back = stride[s] * (STANCE_FRACTION / 2 - p_new)
+                feet[s, leg, 0] = pos[s, 0] + c * back - sn * lateral
+                feet[s, leg, 1] = pos[s, 1] + sn * back + c * lateral
+
+
+_WARM = []
+
+
+def _warm_up():
+    """Loads (or, the first time on a machine, compiles) the kernels for the argument types the steps use,
+    so that the first steps run as fast as the others."""
+    if _WARM:
+        return
+    pts, obs = np.zeros((2, 2)), (np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), np.zeros(1))
+    flags = np.zeros(2, dtype=bool)
+    _steer_kernel(pts, pts, pts, flags, np.ones(2), *obs, np.empty((2, 2)))
+    _violations_kernel(pts, pts, pts, *obs, flags.copy())
+    _project_kernel(pts.copy(), pts, pts, *obs)
+    one = np.ones(2)
+    _gait_kernel(one, one, one, flags, one, pts, pts, np.zeros(2), np.zeros(2), np.zeros((2, 2, 2)),
+                 np.zeros((2, 2, 2)), np.zeros((2, 2)))
+    _WARM.append(True)

@@ -340,6 +340,12 @@ class StoreGeometry:
         c, s = self._ob_cos, self._ob_sin
         return points + np.stack([(dx * c - dy * s).sum(axis=1), (dx * s + dy * c).sum(axis=1)], axis=-1)
 
+    def obstacle_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The footprints as contiguous arrays for compiled loops: centres (O, 2), half extents (O, 2),
+        cos and sin of the yaws (O,)."""
+        return tuple(np.ascontiguousarray(a, dtype=float) for a in (self._ob_center, self._ob_half, self._ob_cos,
+                                                                     self._ob_sin))
+
     # -- navigation grid -------------------------------------------------------------------------
 
     def _build_grid(self):
@@ -378,6 +384,9 @@ class StoreGeometry:
         n = self.nx * self.ny
         self.graph = scipy.sparse.csr_matrix(
             (np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        # Both directions of every edge, so that Dijkstra need not symmetrise the graph per goal.
+        self._graph_both = (self.graph + self.graph.T).tocsr()
+        self._free_flat = free.ravel()
         self._fields: dict[int, np.ndarray] = {}
         self.free_area_m2 = float(free.sum()) * GRID_CELL_M**2
         # Distance from every cell to the nearest blocked cell: used to smooth paths away from corners.
@@ -406,41 +415,38 @@ class StoreGeometry:
         """(nx * ny,) path length from every cell to the goal's cell (inf where unreachable); cached."""
         return self._field_and_next(goal)[0]
 
-    def _field_and_next(self, goal) -> tuple[np.ndarray, np.ndarray]:
+    def _field_and_next(self, goal) -> tuple[np.ndarray, list[int]]:
         """The goal's distance field and, per cell, the flat index of its downhill neighbour (itself at the
         goal or where stuck); both cached per goal cell."""
         key = self.flat_index(goal)
         cached = self._fields.get(key)
         if cached is None:
-            field = scipy.sparse.csgraph.dijkstra(self.graph, directed=False, indices=key)
-            F = np.full((self.nx + 2, self.ny + 2), np.inf)
-            F[1:-1, 1:-1] = field.reshape(self.nx, self.ny)
-            best = F[1:-1, 1:-1].copy()
-            nxt = np.arange(self.nx * self.ny).reshape(self.nx, self.ny)
-            idx = nxt.copy()
-            for di in (-1, 0, 1):
-                for dj in (-1, 0, 1):
-                    if di or dj:
-                        shifted = F[1 + di: self.nx + 1 + di, 1 + dj: self.ny + 1 + dj]
-                        better = shifted < best - 1e-12
-                        best = np.where(better, shifted, best)
-                        nxt = np.where(better, idx + di * self.ny + dj, nxt)
+            # Dijkstra from the goal over the undirected grid: its predecessor tree is, per cell, the next
+            # cell on a shortest path to the goal.
+            field, pred = scipy.sparse.csgraph.dijkstra(self._graph_both, directed=True, indices=key,
+                                                        return_predecessors=True)
+            nxt = np.where(pred < 0, np.arange(self.nx * self.ny), pred)
             if len(self._fields) >= FIELD_CACHE_SIZE:
                 del self._fields[next(iter(self._fields))]  # oldest first; only a cache, motion is unchanged
-            cached = self._fields[key] = (field, nxt.ravel())
+            cached = self._fields[key] = (field, nxt.tolist())
         return cached
 
     def line_free(self, a, b) -> bool:
         """Whether the straight segment a-b stays on free cells (sampled every half cell)."""
-        ax, ay = a[0], a[1]
-        dx, dy = b[0] - ax, b[1] - ay
+        ax, ay = float(a[0]), float(a[1])
+        dx, dy = float(b[0]) - ax, float(b[1]) - ay
+        inv = 1 / GRID_CELL_M
+        # The grid is a rectangle: the segment is on it if both ends are (int() truncates like astype).
+        for x, y in ((ax, ay), (ax + dx, ay + dy)):
+            if not (0 <= int(x * inv) < self.nx and 0 <= int(y * inv) < self.ny):
+                return False
         n = max(2, int(math.hypot(dx, dy) / (GRID_CELL_M * 0.5)) + 1)
-        u = self._ramp[:n] / (n - 1) if n <= len(self._ramp) else np.linspace(0.0, 1.0, n)
-        i = ((ax + u * dx) * (1 / GRID_CELL_M)).astype(np.int64)
-        j = ((ay + u * dy) * (1 / GRID_CELL_M)).astype(np.int64)
-        if i.min() < 0 or j.min() < 0 or i.max() >= self.nx or j.max() >= self.ny:
-            return False
-        return bool(self.free[i, j].all())
+        u = self._ramp[:n] * (1 / (n - 1)) if n <= len(self._ramp) else np.linspace(0.0, 1.0, n)
+        i = ((ax + u * dx) * inv).astype(np.int64)
+        j = ((ay + u * dy) * inv).astype(np.int64)
+        np.minimum(np.maximum(i, 0, out=i), self.nx - 1, out=i)
+        np.minimum(np.maximum(j, 0, out=j), self.ny - 1, out=j)
+        return bool(self._free_flat[i * self.ny + j].all())
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
         """A path from start to goal around the obstacles: grid shortest path, then string-pulled.
@@ -461,7 +467,7 @@ class StoreGeometry:
             return []
         cells = [k]
         while True:
-            k2 = int(nxt[k])
+            k2 = nxt[k]
             if k2 == k:
                 break
             cells.append(k2)

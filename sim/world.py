@@ -17,7 +17,7 @@ import mujoco
 import numpy as np
 
 from sim import humanoid as hm
-from sim.crowd import FULL_LIFT_STRIDE_M, STANCE_FRACTION, STEP_S, SWING_LIFT_M, Activity, Crowd
+from sim.crowd import FULL_LIFT_STRIDE_M, STANCE_FRACTION, STEP_S, SWING_LIFT_M, Activity, Crowd, jit
 from sim.crowd import validate as validate_crowd
 from sim.store import StoreGeometry
 from sim.types import Box, BoxKind, PoseTruth
@@ -126,7 +126,7 @@ class World:
         self._person_ids = np.full(S, -1, dtype=np.int64)
         self._last_t = -math.inf
         self._sync_slots()
-        self._prev = self._cur = self._snapshot()
+        self._prev = self._cur = self._snapshot()  # (also loads the compiled posing kernel)
         self._ray = _RayScene(self)
 
     # -- model -------------------------------------------------------------------------------------
@@ -284,6 +284,12 @@ class World:
             "shoulder": (hm.LUMBAR_ABOVE_HIP + hm.SHOULDER_ABOVE_LUMBAR) * H,
             "arm": (hm.UPPER_ARM + hm.FOREARM + 0.05) * H,
         }
+        # The same per slot for `_qpos_kernel` (S, 9): thigh, shin, reach², hip half width, ankle height,
+        # standing and lowest hip heights, shoulder above hip, arm length.
+        k = self._k
+        self._k_rows = np.ascontiguousarray(np.column_stack([
+            k["thigh"][:, 0], k["shin"][:, 0], k["reach2"][:, 0], k["hw"][:, 0], k["ankle_h"][:, 0], k["z_stand"],
+            k["z_low"], k["shoulder"], k["arm"]]), dtype=float)
 
     def _snapshot(self) -> _Snapshot:
         crowd = self.crowd
@@ -292,68 +298,97 @@ class World:
                          v[:, 2].copy())
 
     def _qpos(self, v: np.ndarray, t: float, person_id: np.ndarray) -> np.ndarray:
-        """(S, NQ) joint positions from the crowd's numbers (S, F) at time t.
-
-        The pelvis follows the crowd's ground point and heading; each ankle goes where the crowd put its
-        foot (lifted in swing) by two-link inverse kinematics; the pelvis drops as far as needed (within
-        limits) to keep both feet in reach; arms swing against the legs or reach to a shelf.
-        """
-        k = self._k
+        """(S, NQ) joint positions from the crowd's numbers (S, F) at time t (see `_qpos_kernel`)."""
         q = np.zeros((self.slots, hm.NQ))
-        heading, phase = v[:, 2], v[:, 3]
-        reach, reach_h, reach_side, speed = v[:, 11], v[:, 12], v[:, 13], v[:, 14]
-        c, s = np.cos(heading), np.sin(heading)
-        walk = np.minimum(speed * (1 / 0.6), 1.0)
-        stand = 1.0 - walk
-        ph = (2 * math.pi) * phase
-        sin_ph, cos_ph = np.sin(ph), np.cos(ph)
-        # Pelvis over the stance foot while walking, slow weight shift while standing.
-        sway = 0.02 * walk * sin_ph + SWAY_M * stand * np.sin((2 * math.pi * SWAY_HZ) * t + 2.4 * person_id)
-        px, py = v[:, 0] - s * sway, v[:, 1] + c * sway
-        cc, ss = c[:, None], s[:, None]
-        hx, hy = px[:, None] - ss * k["hw"], py[:, None] + cc * k["hw"]  # (S, 2) hip joints
-        rx, ry = v[:, 5:9:2] - hx, v[:, 6:9:2] - hy  # foot minus hip, world
-        # Foot height: lifted in swing, in proportion to how far the foot travels.
-        u = np.maximum((phase[:, None] + _LEG_OFFSETS) % 1.0 - STANCE_FRACTION, 0.0) * (1 / (1 - STANCE_FRACTION))
-        sin_u = np.sin(math.pi * u)
-        lift = (SWING_LIFT_M / FULL_LIFT_STRIDE_M) * np.minimum(v[:, 9:11], FULL_LIFT_STRIDE_M) * sin_u
-        az = k["ankle_h"] + lift
-        z_leg = az + np.sqrt(np.maximum(k["reach2"] - rx * rx - ry * ry, 0.0))
-        z = np.minimum(np.maximum(z_leg.min(axis=1), k["z_low"]), k["z_stand"])
-        q[:, 0] = px
-        q[:, 1] = py
-        q[:, 2] = z
-        q[:, 3] = np.cos(0.5 * heading)
-        q[:, 6] = np.sin(0.5 * heading)
-        # Legs: ankle target in the pelvis frame, two-link inverse kinematics (both legs at once).
-        dx, dy, dz = rx * cc + ry * ss, ry * cc - rx * ss, az - z[:, None]
-        abd, flex, knee = hm.leg_ik(np.stack([dx, dy, dz], axis=-1), k["thigh"], k["shin"], _SIDES)
-        q[:, _COL["hip_abd"]] = abd
-        q[:, _COL["hip_flex"]] = flex
-        q[:, _COL["knee"]] = knee
-        # Foot flat on the floor, toes down a little in swing.
-        q[:, _COL["ankle"]] = flex - knee + 0.25 * sin_u * (lift > 0)
-        # Trunk: slight forward lean with speed, counter-rotation with the stride, bend for low shelves.
-        low = np.minimum(np.maximum((0.8 - reach_h) * (1 / 0.45), 0.0), 1.0) * reach
-        q[:, _COL["spine_flex"]] = 0.06 * speed + 0.55 * low
-        q[:, _COL["spine_twist"]] = -0.08 * walk * cos_ph
-        q[:, _COL["spine_lateral"]] = 0.03 * walk * sin_ph
-        q[:, _COL["neck_flex"]] = 0.12 + 0.35 * low - 0.06 * speed
-        q[:, _COL["neck_twist"]] = (0.5 * stand * np.maximum(1.0 - 4 * reach, 0.0)
-                                    * np.sin((2 * math.pi * 0.11) * t + 1.7 * person_id))
-        # Arms: swing opposite to the legs when walking; one arm reaches to the shelf when browsing.
-        swing = (-0.4 * np.minimum(speed * (1 / 1.3), 1.2) * cos_ph)[:, None] * _SIDES
-        shoulder_z = z + k["shoulder"] * np.cos(0.55 * low)
-        reach_flex = np.arccos(np.minimum(np.maximum((shoulder_z - reach_h) / k["arm"], -1.0), 1.0))
-        ra = reach[:, None] * (reach_side[:, None] == _SIDES)
-        rest = 1.0 - ra
-        q[:, _COL["shoulder_flex"]] = rest * swing + ra * reach_flex[:, None]
-        q[:, _COL["shoulder_abd"]] = 0.07 + 0.08 * ra
-        q[:, _COL["elbow"]] = rest * (0.25 + 0.25 * np.maximum(swing, 0.0)) + 0.12 * ra
-        q[:, _COL["wrist"]] = 0.1 + 0.25 * ra
-        h = q[:, 7:]
-        np.minimum(np.maximum(h, self._lo, out=h), self._hi, out=h)
+        _qpos_kernel(v, float(t), person_id, self._k_rows, self._lo, self._hi, q)
         return q
+
+
+@jit
+def _qpos_kernel(v, t, person_id, k, lo, hi, q):
+    """Fills q (S, NQ) with joint positions from the crowd's numbers v (S, F) at time t.
+
+    The pelvis follows the crowd's ground point and heading; each ankle goes where the crowd put its
+    foot (lifted in swing) by two-link inverse kinematics (`sim.humanoid.leg_ik`, per slot); the pelvis
+    drops as far as needed (within limits) to keep both feet in reach; arms swing against the legs or
+    reach to a shelf. k (S, 9): per slot thigh, shin, squared leg reach, hip half width, ankle height,
+    standing and lowest hip heights, shoulder above hip, arm length. Hinges are clipped to [lo, hi].
+    """
+    pi = math.pi
+    two_pi = 2 * math.pi
+    lift_gain = SWING_LIFT_M / FULL_LIFT_STRIDE_M
+    swing_scale = 1 / (1 - STANCE_FRACTION)
+    sway_arg = (2 * math.pi * SWAY_HZ) * t
+    look_arg = (2 * math.pi * 0.11) * t
+    for n in range(v.shape[0]):
+        x, y, heading, phase = v[n, 0], v[n, 1], v[n, 2], v[n, 3]
+        reach, reach_h, reach_side, speed = v[n, 11], v[n, 12], v[n, 13], v[n, 14]
+        thigh, shin, reach2, hw, ankle_h = k[n, 0], k[n, 1], k[n, 2], k[n, 3], k[n, 4]
+        z_stand, z_low, shoulder, arm = k[n, 5], k[n, 6], k[n, 7], k[n, 8]
+        pid = float(person_id[n])
+        c, s = math.cos(heading), math.sin(heading)
+        walk = min(speed * (1 / 0.6), 1.0)
+        stand = 1.0 - walk
+        ph = two_pi * phase
+        sin_ph, cos_ph = math.sin(ph), math.cos(ph)
+        # Pelvis over the stance foot while walking, slow weight shift while standing.
+        sway = 0.02 * walk * sin_ph + SWAY_M * stand * math.sin(sway_arg + 2.4 * pid)
+        px, py = x - s * sway, y + c * sway
+        # Per leg (0 left, 1 right): foot minus hip joint (world), ankle height, lift, swing fraction.
+        rx = [0.0, 0.0]
+        ry = [0.0, 0.0]
+        az = [0.0, 0.0]
+        lift = [0.0, 0.0]
+        sin_u = [0.0, 0.0]
+        z_leg = 1e9
+        for leg in range(2):
+            side = 1.0 - 2.0 * leg
+            rx[leg] = v[n, 5 + 2 * leg] - (px - s * hw * side)
+            ry[leg] = v[n, 6 + 2 * leg] - (py + c * hw * side)
+            # Foot height: lifted in swing, in proportion to how far the foot travels.
+            u = max((phase + 0.5 * leg) % 1.0 - STANCE_FRACTION, 0.0) * swing_scale
+            sin_u[leg] = math.sin(pi * u)
+            lift[leg] = lift_gain * min(v[n, 9 + leg], FULL_LIFT_STRIDE_M) * sin_u[leg]
+            az[leg] = ankle_h + lift[leg]
+            z_leg = min(z_leg, az[leg] + math.sqrt(max(reach2 - rx[leg] * rx[leg] - ry[leg] * ry[leg], 0.0)))
+        z = min(max(z_leg, z_low), z_stand)
+        q[n, 0], q[n, 1], q[n, 2] = px, py, z
+        q[n, 3], q[n, 6] = math.cos(0.5 * heading), math.sin(0.5 * heading)
+        # Legs: ankle target in the pelvis frame, two-link inverse kinematics.
+        for leg in range(2):
+            side = 1.0 - 2.0 * leg
+            dx, dy, dz = rx[leg] * c + ry[leg] * s, ry[leg] * c - rx[leg] * s, az[leg] - z
+            down = math.sqrt(dy * dy + dz * dz)
+            r = min(max(math.sqrt(dx * dx + down * down), abs(thigh - shin) + 1e-6), (thigh + shin) * MAX_LEG_STRETCH)
+            flex = math.atan2(dx, down) + math.acos(
+                max(min((thigh * thigh + r * r - shin * shin) / (2 * thigh * r), 1.0), -1.0))
+            knee = pi - math.acos(min(max((thigh * thigh + shin * shin - r * r) / (2 * thigh * shin), -1.0), 1.0))
+            q[n, C_HIP_ABD + leg * LEG_STRIDE] = side * math.atan2(dy, -dz)
+            q[n, C_HIP_FLEX + leg * LEG_STRIDE] = flex
+            q[n, C_KNEE + leg * LEG_STRIDE] = knee
+            # Foot flat on the floor, toes down a little in swing.
+            q[n, C_ANKLE + leg * LEG_STRIDE] = flex - knee + (0.25 * sin_u[leg] if lift[leg] > 0 else 0.0)
+        # Trunk: slight forward lean with speed, counter-rotation with the stride, bend for low shelves.
+        low = min(max((0.8 - reach_h) * (1 / 0.45), 0.0), 1.0) * reach
+        q[n, C_SPINE_FLEX] = 0.06 * speed + 0.55 * low
+        q[n, C_SPINE_TWIST] = -0.08 * walk * cos_ph
+        q[n, C_SPINE_LATERAL] = 0.03 * walk * sin_ph
+        q[n, C_NECK_FLEX] = 0.12 + 0.35 * low - 0.06 * speed
+        q[n, C_NECK_TWIST] = 0.5 * stand * max(1.0 - 4 * reach, 0.0) * math.sin(look_arg + 1.7 * pid)
+        # Arms: swing opposite to the legs when walking; one arm reaches to the shelf when browsing.
+        swing0 = -0.4 * min(speed * (1 / 1.3), 1.2) * cos_ph
+        reach_flex = math.acos(min(max((z + shoulder * math.cos(0.55 * low) - reach_h) / arm, -1.0), 1.0))
+        for leg in range(2):
+            side = 1.0 - 2.0 * leg
+            swing = swing0 * side
+            ra = reach if reach_side == side else 0.0
+            rest = 1.0 - ra
+            q[n, C_SHOULDER_FLEX + leg * ARM_STRIDE] = rest * swing + ra * reach_flex
+            q[n, C_SHOULDER_ABD + leg * ARM_STRIDE] = 0.07 + 0.08 * ra
+            q[n, C_ELBOW + leg * ARM_STRIDE] = rest * (0.25 + 0.25 * max(swing, 0.0)) + 0.12 * ra
+            q[n, C_WRIST + leg * ARM_STRIDE] = 0.1 + 0.25 * ra
+        for j in range(lo.shape[0]):
+            q[n, 7 + j] = min(max(q[n, 7 + j], lo[j]), hi[j])
 
 
 class _RayScene:
@@ -444,13 +479,18 @@ def _fmt(*values: float) -> str:
 
 
 _SIDES = np.array([1.0, -1.0])
-_LEG_OFFSETS = np.array([0.0, 0.5])
-# qpos columns of each joint: (2,) left/right pairs for limbs, a scalar for the trunk and head.
-_COL = {
-    **{name: 7 + hm.J[name] for name in ("spine_flex", "spine_lateral", "spine_twist", "neck_flex", "neck_twist")},
-    **{name: np.array([7 + hm.J[f"left_{name}"], 7 + hm.J[f"right_{name}"]])
-       for name in ("hip_abd", "hip_flex", "knee", "ankle", "shoulder_flex", "shoulder_abd", "elbow", "wrist")},
-}
+# qpos columns (NQ layout of `sim.humanoid`) the posing writes; the right limb is the left one plus the stride.
+C_SPINE_FLEX, C_SPINE_LATERAL, C_SPINE_TWIST, C_NECK_FLEX, C_NECK_TWIST = (
+    7 + hm.J[name] for name in ("spine_flex", "spine_lateral", "spine_twist", "neck_flex", "neck_twist"))
+C_HIP_ABD, C_HIP_FLEX, C_KNEE, C_ANKLE = (7 + hm.J[f"left_{n}"] for n in ("hip_abd", "hip_flex", "knee", "ankle"))
+LEG_STRIDE = hm.J["right_hip_abd"] - hm.J["left_hip_abd"]
+C_SHOULDER_FLEX, C_SHOULDER_ABD, C_ELBOW, C_WRIST = (
+    7 + hm.J[f"left_{n}"] for n in ("shoulder_flex", "shoulder_abd", "elbow", "wrist"))
+ARM_STRIDE = hm.J["right_shoulder_flex"] - hm.J["left_shoulder_flex"]
+MAX_LEG_STRETCH = hm.MAX_LEG_STRETCH
+if any(hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != LEG_STRIDE for n in ("hip_flex", "knee", "ankle")) or any(
+        hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != ARM_STRIDE for n in ("shoulder_abd", "elbow", "wrist")):
+    raise RuntimeError("humanoid hinge layout: right limbs are not the left ones shifted")
 
 
 def simulation_speed(scenario, seconds: float = 60.0, rate_hz: float = 10.0, seed: int | None = None) -> dict:
