@@ -1,0 +1,64 @@
+"""The main job end to end on a short run: generate, track, score, through the command line."""
+
+import json
+
+import pytest
+
+from crossview import pipeline
+from crossview.cli import EXIT_BAD_INPUT, main
+
+SCORE_KEYS = [
+    "scenario", "seed", "num_cameras", "num_people", "duration_s", "pcp", "mpjpe_mm", "pck_100mm", "mota",
+    "idf1", "id_switches", "hota", "association_accuracy", "tracker_fps", "camera_frames_per_s",
+]
+FRACTIONS = ["pcp", "pck_100mm", "idf1", "hota", "association_accuracy"]
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    status = main(["--no-progress", "run", "--duration", "4", "--seed", "3", "--out", str(out)])
+    assert status == 0
+    return out
+
+
+def test_run_writes_recording_tracks_and_a_complete_score(short_run):
+    assert sorted(p.name for p in short_run.iterdir()) == [
+        "store_layout1.mcap", "store_layout1.score.json", "store_layout1.tracks.mcap"
+    ]
+    score = json.loads((short_run / "store_layout1.score.json").read_text())
+    assert list(score)[: len(SCORE_KEYS)] == SCORE_KEYS
+    assert (score["scenario"], score["seed"], score["num_cameras"], score["duration_s"]) == ("store_layout1", 3, 12, 4)
+    for key in FRACTIONS:
+        assert 0.0 <= score[key] <= 1.0, key
+    # Four people in an open store seen by twelve cameras: the tracker must find them.
+    assert score["pcp"] > 0.8 and score["idf1"] > 0.8
+    assert score["tracker_fps"] > 0
+
+
+def test_tracks_are_refused_against_another_recording(short_run, tmp_path, capsys):
+    other = tmp_path / "other.mcap"
+    scenario = pipeline.load_scenario("store_layout1", duration_s=1.0, seed=4)
+    pipeline.generate(scenario, other, progress=False)
+    status = main(["score", str(other), str(short_run / "store_layout1.tracks.mcap")])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT
+    assert "tracks were made from scenario 'store_layout1' seed 3" in err and len(err.splitlines()) == 1
+
+
+def test_a_tracks_file_is_not_a_recording(short_run, tmp_path, capsys):
+    status = main(["track", str(short_run / "store_layout1.tracks.mcap"), "-o", str(tmp_path / "t.mcap")])
+    assert status == EXIT_BAD_INPUT
+    assert not (tmp_path / "t.mcap").exists()
+    assert "tracks file" in capsys.readouterr().err
+
+
+def test_info_describes_the_recording(short_run, capsys):
+    assert main(["info", str(short_run / "store_layout1.mcap")]) == 0
+    text = capsys.readouterr().out
+    assert "store_layout1" in text and "12" in text
+
+
+@pytest.mark.parametrize("count, expected", [(12, (3, 4)), (28, (4, 7)), (7, (1, 7)), (1, (1, 1))])
+def test_camera_grid_fits_the_floor(count, expected):
+    assert pipeline.camera_grid(count, width_m=8.0, depth_m=6.0) == expected
