@@ -25,17 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
-from sim.store import StoreGeometry
-
-try:  # numba compiles the per-step numeric kernels (plain Python runs the same code, slowly, without it)
-    from numba import njit as _njit
-
-    def jit(function):
-        """Compiles a numeric kernel once (cached on disk); the kernels are written for plain Python too."""
-        return _njit(cache=True, nogil=True, error_model="numpy")(function)
-except ImportError:  # pragma: no cover - numba is a dependency; this keeps the code importable without it
-    def jit(function):
-        return function
+from sim.store import StoreGeometry, _astar, _segment_free, jit
 
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
 STEP_S = 0.1
@@ -791,4 +781,7 @@ def _warm_up():
     one = np.ones(2)
     _gait_kernel(one, one, one, flags, one, pts, pts, np.zeros(2), np.zeros(2), np.zeros((2, 2, 2)),
                  np.zeros((2, 2, 2)), np.zeros((2, 2)))
+    grid = np.ones((2, 2), dtype=bool)
+    _segment_free(grid, 0.05, 0.05, 0.15, 0.15, 0.1)
+    _astar(grid, 0, 3, 0.1)
     _WARM.append(True)

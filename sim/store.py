@@ -7,6 +7,7 @@ obstacle rectangles, the doors, and a navigation grid with distance fields to na
 
 from __future__ import annotations
 
+import heapq
 import math
 from dataclasses import dataclass
 
@@ -16,6 +17,16 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from sim.types import Box, BoxKind
+
+try:  # numba compiles the numeric kernels of the crowd (plain Python runs the same code, slowly, without it)
+    from numba import njit as _njit
+
+    def jit(function):
+        """Compiles a numeric kernel once (cached on disk); the kernels are written for plain Python too."""
+        return _njit(cache=True, nogil=True, error_model="numpy")(function)
+except ImportError:  # pragma: no cover - numba is a dependency; this keeps the code importable without it
+    def jit(function):
+        return function
 
 # Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast distance fields.
 GRID_CELL_M = 0.1
@@ -369,7 +380,6 @@ class StoreGeometry:
             free |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= INSIDE_DOOR_M + 0.1) & (
                 self.shelf_distance >= self.nav_clearance_m)
         self.free = free
-        self._ramp = np.arange(4096, dtype=float)
         # 8-connected grid graph over free cells, edge weights = metres.
         idx = np.arange(self.nx * self.ny).reshape(self.nx, self.ny)
         rows, cols, w = [], [], []
@@ -386,7 +396,6 @@ class StoreGeometry:
             (np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
         # Both directions of every edge, so that Dijkstra need not symmetrise the graph per goal.
         self._graph_both = (self.graph + self.graph.T).tocsr()
-        self._free_flat = free.ravel()
         self._fields: dict[int, np.ndarray] = {}
         self.free_area_m2 = float(free.sum()) * GRID_CELL_M**2
         # Distance from every cell to the nearest blocked cell: used to smooth paths away from corners.
@@ -413,65 +422,36 @@ class StoreGeometry:
 
     def distance_field(self, goal) -> np.ndarray:
         """(nx * ny,) path length from every cell to the goal's cell (inf where unreachable); cached."""
-        return self._field_and_next(goal)[0]
-
-    def _field_and_next(self, goal) -> tuple[np.ndarray, list[int]]:
-        """The goal's distance field and, per cell, the flat index of its downhill neighbour (itself at the
-        goal or where stuck); both cached per goal cell."""
         key = self.flat_index(goal)
-        cached = self._fields.get(key)
-        if cached is None:
-            # Dijkstra from the goal over the undirected grid: its predecessor tree is, per cell, the next
-            # cell on a shortest path to the goal.
-            field, pred = scipy.sparse.csgraph.dijkstra(self._graph_both, directed=True, indices=key,
-                                                        return_predecessors=True)
-            nxt = np.where(pred < 0, np.arange(self.nx * self.ny), pred)
+        field = self._fields.get(key)
+        if field is None:
+            field = scipy.sparse.csgraph.dijkstra(self._graph_both, directed=True, indices=key)
             if len(self._fields) >= FIELD_CACHE_SIZE:
-                del self._fields[next(iter(self._fields))]  # oldest first; only a cache, motion is unchanged
-            cached = self._fields[key] = (field, nxt.tolist())
-        return cached
+                del self._fields[next(iter(self._fields))]  # oldest first; only a cache
+            field = self._fields[key] = field
+        return field
 
     def line_free(self, a, b) -> bool:
         """Whether the straight segment a-b stays on free cells (sampled every half cell)."""
-        ax, ay = float(a[0]), float(a[1])
-        dx, dy = float(b[0]) - ax, float(b[1]) - ay
-        inv = 1 / GRID_CELL_M
-        # The grid is a rectangle: the segment is on it if both ends are (int() truncates like astype).
-        for x, y in ((ax, ay), (ax + dx, ay + dy)):
-            if not (0 <= int(x * inv) < self.nx and 0 <= int(y * inv) < self.ny):
-                return False
-        n = max(2, int(math.hypot(dx, dy) / (GRID_CELL_M * 0.5)) + 1)
-        u = self._ramp[:n] * (1 / (n - 1)) if n <= len(self._ramp) else np.linspace(0.0, 1.0, n)
-        i = ((ax + u * dx) * inv).astype(np.int64)
-        j = ((ay + u * dy) * inv).astype(np.int64)
-        np.minimum(np.maximum(i, 0, out=i), self.nx - 1, out=i)
-        np.minimum(np.maximum(j, 0, out=j), self.ny - 1, out=j)
-        return bool(self._free_flat[i * self.ny + j].all())
+        return _segment_free(self.free, float(a[0]), float(a[1]), float(b[0]), float(b[1]), GRID_CELL_M)
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
         """A path from start to goal around the obstacles: grid shortest path, then string-pulled.
 
-        The grid search is Dijkstra from the goal (cached per goal, so many people heading to the same
-        shelf share it), walked downhill from the start; the smoothing keeps only the waypoints needed
+        The grid search is A* over the 8-connected free cells (octile distance to the goal, which never
+        overestimates, so the path is a shortest one); the smoothing keeps only the waypoints needed
         for straight segments that stay on free cells.
 
         Returns:
             waypoints (each (2,)), ending at the goal; empty if the goal is unreachable.
         """
-        field, nxt = self._field_and_next(goal)
         i, j = self.cell_of(start)
-        if not self.free[i, j] or field[i * self.ny + j] == np.inf:
+        if not self.free[i, j]:
             i, j = self.cell_of(self.nearest_free(start))
-        k = i * self.ny + j
-        if field[k] == np.inf:
+        gi, gj = self.cell_of(goal)
+        cells = _astar(self.free, i * self.ny + j, gi * self.ny + gj, GRID_CELL_M).tolist()
+        if not cells:
             return []
-        cells = [k]
-        while True:
-            k2 = nxt[k]
-            if k2 == k:
-                break
-            cells.append(k2)
-            k = k2
         # String pulling over every third cell: keep a waypoint only where the straight view from the
         # previous one ends.
         picks = cells[::3] if (len(cells) - 1) % 3 == 0 else cells[::3] + [cells[-1]]
@@ -545,3 +525,72 @@ class StoreGeometry:
                             if self.free[i, j] and np.linalg.norm(near - p) < 0.2:
                                 spots.append((p, math.atan2(-normal[1], -normal[0]), k))
         return spots
+
+
+@jit
+def _segment_free(free, ax, ay, bx, by, cell):
+    """Whether the segment (ax, ay)-(bx, by) stays on the True cells of free (nx, ny), sampled every half cell."""
+    dx, dy = bx - ax, by - ay
+    n = max(2, int(math.sqrt(dx * dx + dy * dy) / (cell * 0.5)) + 1)
+    inv = 1 / cell
+    for k in range(n):
+        u = k / (n - 1)
+        i, j = int((ax + u * dx) * inv), int((ay + u * dy) * inv)  # truncation, as astype
+        if i < 0 or j < 0 or i >= free.shape[0] or j >= free.shape[1] or not free[i, j]:
+            return False
+    return True
+
+
+@jit
+def _astar(free, start, goal, cell):
+    """(L,) int64 flat cells (i * ny + j) of a shortest 8-connected path over the True cells of free (nx, ny)
+    from start to goal, both included; empty if there is none. Edges cost cell or cell * sqrt(2); ties
+    in the open list go to the earlier pushed cell, so the result is deterministic."""
+    nx, ny = free.shape
+    if not (free[start // ny, start % ny] and free[goal // ny, goal % ny]):
+        return np.zeros(0, dtype=np.int64)
+    cost = np.full(nx * ny, np.inf)
+    parent = np.full(nx * ny, -1, dtype=np.int64)
+    closed = np.zeros(nx * ny, dtype=np.bool_)
+    gi, gj = goal // ny, goal % ny
+    diag = cell * math.sqrt(2.0)
+    cost[start] = 0.0
+    heap = [(0.0, 0, start)]
+    pushed = 0
+    while heap:
+        _, _, k = heapq.heappop(heap)
+        if closed[k]:
+            continue
+        closed[k] = True
+        if k == goal:
+            break
+        i, j = k // ny, k % ny
+        for di in range(-1, 2):
+            for dj in range(-1, 2):
+                i2, j2 = i + di, j + dj
+                if (di == 0 and dj == 0) or i2 < 0 or j2 < 0 or i2 >= nx or j2 >= ny or not free[i2, j2]:
+                    continue
+                k2 = i2 * ny + j2
+                if closed[k2]:
+                    continue
+                c = cost[k] + (diag if di != 0 and dj != 0 else cell)
+                if c < cost[k2]:
+                    cost[k2] = c
+                    parent[k2] = k
+                    ai, aj = abs(gi - i2), abs(gj - j2)
+                    h = cell * (max(ai, aj) - min(ai, aj)) + diag * min(ai, aj)  # octile distance
+                    pushed += 1
+                    heapq.heappush(heap, (c + h, pushed, k2))
+    if not closed[goal]:
+        return np.zeros(0, dtype=np.int64)
+    n = 1
+    k = goal
+    while k != start:
+        k = parent[k]
+        n += 1
+    path = np.empty(n, dtype=np.int64)
+    k = goal
+    for m in range(n - 1, -1, -1):
+        path[m] = k
+        k = parent[k]
+    return path
