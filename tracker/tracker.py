@@ -31,7 +31,7 @@ from tracker.association import associate
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, ray_directions, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.triangulation import triangulate_incremental_both
+from tracker.triangulation import triangulate_observations
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
@@ -228,24 +228,22 @@ class Tracker:
         tg.obs_s[rows] = obs_s
         # Eq. (6): the new point plus the last point of every other camera, not older than the age limit.
         # Only the joints the new detection holds change; only cameras that see them take part.
-        fresh = np.isfinite(obs_s) & (t - obs_s <= cfg.max_observation_age_s)  # (M, C, J)
-        m_idx, j_idx = np.nonzero(seen)
-        cams = np.flatnonzero(fresh.any(axis=(0, 2)))
-        sel_fresh = fresh[m_idx, :, j_idx][:, cams]  # (n, Cu)
-        pts = np.where(sel_fresh[..., None], obs_px[m_idx, :, j_idx][:, cams], np.nan)  # (n, Cu, 2)
-        stamps = np.where(sel_fresh, obs_s[m_idx, :, j_idx][:, cams], t)  # (n, Cu)
-        velocities = tg.vel[rows][m_idx, j_idx] if cfg.triangulation is Triangulation.VELOCITY else None
-        plain, compensated = triangulate_incremental_both(self._P[cams], pts, stamps, t, cfg.lambda_t_per_s,
-                                                          velocities, cfg.min_views)
-        X = np.full(seen.shape + (3,), np.nan)
-        X[m_idx, j_idx] = plain
-        update = seen & np.all(np.isfinite(X), axis=-1)  # (M, J)
-        samples = X.copy()  # the velocity fit always uses the eq. (10)-(11) estimates
+        # Flat list of the (target, joint, camera) observations that take part, sorted by (target, joint).
+        with np.errstate(invalid="ignore"):
+            fresh = (t - obs_s <= cfg.max_observation_age_s).transpose(0, 2, 1) & seen[..., None]  # (M, J, C)
+        m_obs, j_obs, c_obs = np.nonzero(fresh)
+        M, J = seen.shape
+        velocities = tg.vel[rows].reshape(M * J, 3) if cfg.triangulation is Triangulation.VELOCITY else None
+        plain, compensated = triangulate_observations(
+            self._P, m_obs * J + j_obs, c_obs, obs_px[m_obs, c_obs, j_obs], obs_s[m_obs, c_obs, j_obs], M * J, t,
+            cfg.lambda_t_per_s, velocities, cfg.min_views)
+        X = plain.reshape(M, J, 3)  # NaN for joints not seen now (no observation takes part)
+        update = seen & np.isfinite(X[..., 0])  # (M, J)
+        samples = X  # the velocity fit always uses the eq. (10)-(11) estimates
         if compensated is not None:
             # The compensated estimate is not fed back into the velocity fit: a velocity error would move
             # the stale points, whose shifted estimate would grow the velocity error (a positive loop).
-            Xv = np.full_like(X, np.nan)
-            Xv[m_idx, j_idx] = compensated
+            Xv = compensated.reshape(M, J, 3)
             X = np.where(np.isfinite(Xv), Xv, X)
         pos = tg.pos[rows]
         update &= ~self._breaks_bones(pos, X, update)

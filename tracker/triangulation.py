@@ -42,31 +42,48 @@ def _smallest_solution(r: np.ndarray, num_views: np.ndarray, min_views: int) -> 
     """The unit X̃ minimising ||r X̃|| for rows r (..., C, 2, 4) (zero rows for missing views), dehomogenised.
 
     That is the right singular vector of the smallest singular value of r (eq. 8, "solved via SVD"), i.e. the
-    eigenvector of M = rᵀr with the smallest eigenvalue. It is found by inverse iteration on M started from
-    the inhomogeneous solution (X̃4 = 1), which for 4x4 matrices in a batch is several times faster than a
-    batched eigendecomposition and agrees with it to rounding (tests compare with an SVD).
+    eigenvector of M = rᵀr with the smallest eigenvalue (see `_smallest_eigenvector`).
     """
     batch = r.shape[:-3]
     flat = r.reshape((-1, r.shape[-3] * 2, 4))
     ok = num_views.reshape(-1) >= min_views
     X = np.full((flat.shape[0], 3), np.nan)
     if ok.any():
-        M = np.matmul(flat[ok].transpose(0, 2, 1), flat[ok])
-        scale = np.trace(M, axis1=1, axis2=2)[:, None, None]
-        regular = M + 1e-13 * scale * np.eye(4)
-        try:
-            start = np.linalg.solve(regular[:, :3, :3], -M[:, :3, 3:])[..., 0]
-            v = np.concatenate([start, np.ones((start.shape[0], 1))], axis=1)
-            for _ in range(_INVERSE_ITERATIONS):
-                v = np.linalg.solve(regular, v[..., None])[..., 0]
-                v /= np.linalg.norm(v, axis=1, keepdims=True)
-        except np.linalg.LinAlgError:
-            v = np.linalg.eigh(M)[1][:, :, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            sol = v[:, :3] / v[:, 3:4]
-        sol[(np.abs(v[:, 3]) < 1e-12) | ~np.isfinite(sol).all(axis=1)] = np.nan
-        X[ok] = sol
+        sel = flat[ok]
+        X[ok] = _smallest_eigenvector(np.einsum("nki,nkj->nij", sel, sel))
     return X.reshape(batch + (3,))
+
+
+def _smallest_eigenvector(M: np.ndarray) -> np.ndarray:
+    """Dehomogenised eigenvector of the smallest eigenvalue of each symmetric PSD 4x4 normal matrix.
+
+    Found by inverse iteration on M started from the inhomogeneous solution (X̃4 = 1), which for 4x4 matrices
+    in a batch is several times faster than a batched eigendecomposition and agrees with it to rounding (tests
+    compare with an SVD). That start, [-a⁻¹b; 1] for M = [[a, b], [bᵀ, d]], is the last column of M⁻¹ up to
+    a scale, so start plus `_INVERSE_ITERATIONS` steps is M⁻¹ applied to e4 1 + `_INVERSE_ITERATIONS` times:
+    one batched inverse and a few 4x4 products.
+
+    Args:
+        M: (N, 4, 4) normal matrices rᵀr (eq. 8).
+
+    Returns:
+        (N, 3) points; NaN for a degenerate solution (X̃4 ≈ 0 or non-finite).
+    """
+    scale = np.trace(M, axis1=1, axis2=2)[:, None, None]
+    regular = M + 1e-13 * scale * np.eye(4)
+    try:
+        inv = np.linalg.inv(regular)
+        v = inv[:, :, 3]
+        v = v / np.linalg.norm(v, axis=1, keepdims=True)
+        for _ in range(_INVERSE_ITERATIONS):
+            v = np.einsum("nij,nj->ni", inv, v)
+            v /= np.linalg.norm(v, axis=1, keepdims=True)
+    except np.linalg.LinAlgError:
+        v = np.linalg.eigh(M)[1][:, :, 0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sol = v[:, :3] / v[:, 3:4]
+    sol[(np.abs(v[:, 3]) < 1e-12) | ~np.isfinite(sol).all(axis=1)] = np.nan
+    return sol
 
 
 def triangulate(P: np.ndarray, points_px: np.ndarray, min_views: int = 2, normalize_rows: bool = True) -> np.ndarray:
@@ -152,22 +169,81 @@ def triangulate_incremental_both(
     Returns:
         (paper estimate (..., 3), velocity-compensated estimate (..., 3) or None without velocities).
     """
-    rows = dlt_rows(P, points_px)  # (..., C, 2, 4), eq. (9)
-    valid = np.isfinite(points_px).all(axis=-1)  # (..., C)
-    rows = np.where(valid[..., None, None], rows, 0.0)
-    num_views = valid.sum(axis=-1)
-    dt = np.where(valid, np.maximum(stamp_s - stamps_s, 0.0), 0.0)
-    # Eq. (11): e^(-λt (t - t_i)) / ||c_i||, the norm taken on the row of C itself (before any shift).
-    norm = np.sqrt(np.einsum("...k,...k->...", rows, rows))
-    w = np.exp(-lambda_t_per_s * dt)[..., None] / np.where(norm > 0, norm, 1.0)
-    weighted = rows * w[..., None]  # eq. (10)
+    batch = points_px.shape[:-2]
+    C = points_px.shape[-2]
+    valid = np.isfinite(points_px).all(axis=-1).reshape(-1, C)  # (N, C)
+    group, cam = np.nonzero(valid)
+    px = points_px.reshape(-1, C, 2)[group, cam]
+    stamps = np.broadcast_to(stamps_s, batch + (C,)).reshape(-1, C)[group, cam]
+    vel = None if velocities is None else np.broadcast_to(velocities, batch + (3,)).reshape(-1, 3)
+    plain, compensated = triangulate_observations(P, group, cam, px, stamps, valid.shape[0], stamp_s,
+                                                  lambda_t_per_s, vel, min_views)
+    return plain.reshape(batch + (3,)), None if compensated is None else compensated.reshape(batch + (3,))
+
+
+def triangulate_observations(
+    P: np.ndarray,
+    group: np.ndarray,
+    cam: np.ndarray,
+    points_px: np.ndarray,
+    stamps_s: np.ndarray,
+    num_groups: int,
+    stamp_s: float,
+    lambda_t_per_s: float,
+    velocities: np.ndarray | None,
+    min_views: int = 2,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Eq. (6)-(11) for many points at once, from a flat list of their observations (no missing entries).
+
+    Each observation adds its two weighted rows' outer products to its point's 4x4 normal matrix (eq. 8, 10);
+    the sums are segment sums over the observations, which must be sorted by `group`.
+
+    Args:
+        P: (C, 3, 4) projection matrices.
+        group: (K,) sorted point index of each observation, in [0, num_groups).
+        cam: (K,) camera index of each observation.
+        points_px: (K, 2) undistorted pixels.
+        stamps_s: (K,) their stamps t_i, s.
+        num_groups: number of points N.
+        stamp_s: the time t of the estimate, s.
+        lambda_t_per_s: λt, 1/s.
+        velocities: None, or (N, 3) joint velocities, m/s (see `triangulate_incremental`).
+        min_views: least number of views.
+
+    Returns:
+        (paper estimate (N, 3), velocity-compensated estimate (N, 3) or None without velocities); NaN for a
+        point with fewer than `min_views` observations.
+    """
+    plain = np.full((num_groups, 3), np.nan)
+    compensated = None if velocities is None else np.full((num_groups, 3), np.nan)
+    counts = np.bincount(group, minlength=num_groups)
+    ok = counts >= min_views
+    if not ok.any():
+        return plain, compensated
+    keep = ok[group]
+    if not keep.all():
+        group, cam, points_px, stamps_s = group[keep], cam[keep], points_px[keep], stamps_s[keep]
+    Pc = P[cam]  # (K, 3, 4)
+    rows = points_px[:, :, None] * Pc[:, 2:3, :] - Pc[:, 0:2, :]  # (K, 2, 4), eq. (9)
+    dt = np.maximum(stamp_s - stamps_s, 0.0)  # (K,)
+    # Eq. (11): w = e^(-λt (t - t_i)) / ||c_i||, the norm taken on the row of C itself (before any shift).
+    norm2 = np.einsum("kri,kri->kr", rows, rows)  # (K, 2)
+    w2 = np.exp(-2.0 * lambda_t_per_s * dt)[:, None] / np.where(norm2 > 0, norm2, 1.0)  # (K, 2) squared weights
+    starts = np.concatenate([[0], np.cumsum(counts[ok])[:-1]])
+    targets = np.flatnonzero(ok)
+    weighted = rows * w2[..., None]
+    M = np.add.reduceat(np.einsum("kri,krj->kij", weighted, rows), starts, axis=0)  # (N', 4, 4), eq. (8), (10)
     if velocities is None:
-        return _smallest_solution(weighted, num_views, min_views), None
-    shift = np.einsum("...crk,...ck->...cr", rows[..., :3], velocities[..., None, :] * dt[..., None])
-    moved = weighted.copy()
-    moved[..., 3] -= shift * w
-    both = _smallest_solution(np.stack([weighted, moved]), np.stack([num_views, num_views]), min_views)
-    return both[0], both[1]
+        plain[targets] = _smallest_eigenvector(M)
+        return plain, None
+    # Beyond the paper: row·[X - V dt_i; 1] = 0, i.e. the constant term becomes c4 - c[:3]·V dt_i.
+    moved = rows.copy()
+    moved[..., 3] -= np.einsum("kri,ki->kr", rows[..., :3], velocities[group] * dt[:, None])
+    Mv = np.add.reduceat(np.einsum("kri,krj->kij", moved * w2[..., None], moved), starts, axis=0)
+    both = _smallest_eigenvector(np.concatenate([M, Mv]))
+    plain[targets] = both[: targets.size]
+    compensated[targets] = both[targets.size:]
+    return plain, compensated
 
 
 def reprojection_error_px(P: np.ndarray, X: np.ndarray, points_px: np.ndarray) -> np.ndarray:
