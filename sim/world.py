@@ -95,7 +95,8 @@ class World:
         self.skeleton: Skeleton = COCO17
         self.slots = S = scenario.crowd.people
         self.model = mujoco.MjModel.from_xml_string(self._xml())
-        self.data = mujoco.MjData(self.model)
+        self._data = mujoco.MjData(self.model)
+        self._kinematics_stale = False
         m = self.model
         self._nq = hm.NQ
         root_adr = [m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, f"p{k}_root")] for k in range(S)]
@@ -127,6 +128,19 @@ class World:
         self._last_t = -math.inf
         self._sync_slots()
         self._prev = self._cur = self._snapshot()  # (also loads the compiled posing kernel)
+        self._orders = None
+        self._fk_body = np.zeros((S, len(hm.BODIES)), dtype=np.int64)  # (S, 16) model body id per slot and body
+        for b in range(m.nbody):
+            if self._body_slot[b] >= 0:
+                self._fk_body[self._body_slot[b], self._body_local[b]] = b
+        if S and not np.array_equal(self._body_local[m.site_bodyid[self._kp_sites]], np.tile(_FK_KP_BODY, (S, 1))):
+            raise RuntimeError("keypoint sites are not on the bodies sim.humanoid names")
+        # Load (or compile) the per-tick kernels now rather than in the first `advance`.
+        no_slot = np.zeros((0, hm.NQ))
+        _interpolate_kernel(no_slot, no_slot, np.zeros(0), np.zeros(0), 0.0, np.zeros(0, dtype=bool), np.zeros(0))
+        _keypoints_kernel(self._data.qpos, np.zeros(0, dtype=np.int64), self._fk_body, _FK_PARENT, _FK_JNT_FIRST,
+                          _FK_JNT_NUM, _FK_HINGE_QPOS, _FK_HINGE_AXIS, m.body_pos, self._kp_sites, _FK_KP_BODY,
+                          m.site_pos, np.empty((0, 17, 3)))
         self._ray = _RayScene(self)
 
     # -- model -------------------------------------------------------------------------------------
@@ -201,26 +215,40 @@ class World:
             crowd.step()
             self._sync_slots()
             self._cur = self._snapshot()
+            self._orders = None
         prev, cur = self._prev, self._cur
-        if cur.time_s <= t_s or prev is cur:
-            present = cur.person_id >= 0
-            qpos = cur.qpos.copy()
+        if self._orders is None:
+            # Who is present between the last two steps (someone who arrived or left in the step is parked)
+            # and at the latest step, in ascending person id order.
+            self._orders = []
+            for present in ((cur.person_id >= 0) & (prev.person_id == cur.person_id), cur.person_id >= 0):
+                order = np.nonzero(present)[0]
+                self._orders.append((present, order[np.argsort(cur.person_id[order], kind="stable")]))
+        exact = cur.time_s <= t_s or prev is cur
+        present, order = self._orders[exact]
+        if exact:
+            _interpolate_kernel(cur.qpos, cur.qpos, cur.heading, cur.heading, 0.0, present, self._data.qpos)
         else:
-            a = (t_s - prev.time_s) / STEP_S
-            present = (cur.person_id >= 0) & (prev.person_id == cur.person_id)
-            qpos = prev.qpos + (cur.qpos - prev.qpos) * a
-            heading = prev.heading + (cur.heading - prev.heading) * a
-            qpos[:, 3] = np.cos(0.5 * heading)
-            qpos[:, 6] = np.sin(0.5 * heading)
-        qpos[~present, 2] = PARK_Z_M
-        self.data.qpos[:] = qpos.reshape(-1)
-        mujoco.mj_kinematics(self.model, self.data)
+            _interpolate_kernel(prev.qpos, cur.qpos, prev.heading, cur.heading, (t_s - prev.time_s) / STEP_S, present,
+                                self._data.qpos)
+        # The keypoints by forward kinematics of the keypoint sites alone; MuJoCo's full kinematics (every
+        # body, geom and site) runs when `data` or `ray_scene` is next asked for.
+        self._kinematics_stale = True
         self._ray.stale = True
         self._present = present
-        order = np.nonzero(present)[0]
-        order = order[np.argsort(cur.person_id[order], kind="stable")]
-        poses = self.data.site_xpos[self._kp_sites[order]]
-        return PoseTruth(t_s=float(t_s), person_ids=cur.person_id[order].copy(), poses=poses)
+        poses = np.empty((len(order), 17, 3))
+        m = self.model
+        _keypoints_kernel(self._data.qpos, order, self._fk_body, _FK_PARENT, _FK_JNT_FIRST, _FK_JNT_NUM, _FK_HINGE_QPOS,
+                          _FK_HINGE_AXIS, m.body_pos, self._kp_sites, _FK_KP_BODY, m.site_pos, poses)
+        return PoseTruth(t_s=float(t_s), person_ids=cur.person_id[order], poses=poses)
+
+    @property
+    def data(self) -> mujoco.MjData:
+        """The MuJoCo data (`model`'s) posed at the last `advance`; its kinematics run on first access after it."""
+        if self._kinematics_stale:
+            mujoco.mj_kinematics(self.model, self._data)
+            self._kinematics_stale = False
+        return self._data
 
     def ray_scene(self) -> tuple:
         """(model, data) to cast rays against at the last `advance`: the same geoms, in the same order
@@ -491,6 +519,105 @@ MAX_LEG_STRETCH = hm.MAX_LEG_STRETCH
 if any(hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != LEG_STRIDE for n in ("hip_flex", "knee", "ankle")) or any(
         hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != ARM_STRIDE for n in ("shoulder_abd", "elbow", "wrist")):
     raise RuntimeError("humanoid hinge layout: right limbs are not the left ones shifted")
+
+
+@jit
+def _interpolate_kernel(q0, q1, h0, h1, a, present, out):
+    """out (S * NQ,): joint positions a (0..1) of the way from q0 to q1 (S, NQ), the pelvis yaw quaternion
+    from the interpolated unwrapped headings h0 -> h1 (S,), and slots not present parked below the floor."""
+    S, nq = q0.shape
+    for s in range(S):
+        for j in range(nq):
+            out[s * nq + j] = q0[s, j] + (q1[s, j] - q0[s, j]) * a
+        heading = h0[s] + (h1[s] - h0[s]) * a
+        out[s * nq + 3] = math.cos(0.5 * heading)
+        out[s * nq + 6] = math.sin(0.5 * heading)
+        if not present[s]:
+            out[s * nq + 2] = PARK_Z_M
+
+
+@jit
+def _keypoints_kernel(qpos, order, body, parent, jnt_first, jnt_num, hinge_qpos, hinge_axis, body_pos, kp_sites,
+                      kp_body, site_pos, out):
+    """out (P, 17, 3): the keypoint sites of slots order (P,) posed by qpos (S * NQ,), by the same forward
+    kinematics as MuJoCo's (a free pelvis, then per body its offset in the parent frame and its hinges
+    in order; the humanoid's bodies, joints and sites have no rotation or offset of their own).
+
+    body (S, 16): model body ids; parent, jnt_first, jnt_num (16,): per local body; hinge_qpos (H,),
+    hinge_axis (H, 3): qpos column and axis of each hinge; kp_sites (S, 17) model site ids on local
+    bodies kp_body (17,); body_pos, site_pos: the model's (after resizing).
+    """
+    nb = parent.shape[0]
+    nq = NQ
+    R = np.empty((nb, 3, 3))
+    P = np.empty((nb, 3))
+    M = np.empty((3, 3))
+    for n in range(order.shape[0]):
+        s = order[n]
+        base = s * nq
+        w, x, y, z = qpos[base + 3], qpos[base + 4], qpos[base + 5], qpos[base + 6]
+        norm = math.sqrt(w * w + x * x + y * y + z * z)
+        w, x, y, z = w / norm, x / norm, y / norm, z / norm
+        R[0, 0, 0], R[0, 0, 1], R[0, 0, 2] = 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)
+        R[0, 1, 0], R[0, 1, 1], R[0, 1, 2] = 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)
+        R[0, 2, 0], R[0, 2, 1], R[0, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
+        P[0, 0], P[0, 1], P[0, 2] = qpos[base], qpos[base + 1], qpos[base + 2]
+        for b in range(1, nb):
+            pa = parent[b]
+            bp = body_pos[body[s, b]]
+            for r in range(3):
+                P[b, r] = P[pa, r] + R[pa, r, 0] * bp[0] + R[pa, r, 1] * bp[1] + R[pa, r, 2] * bp[2]
+                for c in range(3):
+                    R[b, r, c] = R[pa, r, c]
+            for h in range(jnt_first[b], jnt_first[b] + jnt_num[b]):
+                angle = qpos[base + hinge_qpos[h]]
+                ax, ay, az = hinge_axis[h, 0], hinge_axis[h, 1], hinge_axis[h, 2]
+                c, sn = math.cos(angle), math.sin(angle)
+                t = 1 - c
+                # Rodrigues: rotation by angle about the unit axis, right-multiplied (a child frame turn).
+                M[0, 0], M[0, 1], M[0, 2] = c + ax * ax * t, ax * ay * t - az * sn, ax * az * t + ay * sn
+                M[1, 0], M[1, 1], M[1, 2] = ay * ax * t + az * sn, c + ay * ay * t, ay * az * t - ax * sn
+                M[2, 0], M[2, 1], M[2, 2] = az * ax * t - ay * sn, az * ay * t + ax * sn, c + az * az * t
+                for r in range(3):
+                    r0, r1, r2 = R[b, r, 0], R[b, r, 1], R[b, r, 2]
+                    for cc in range(3):
+                        R[b, r, cc] = r0 * M[0, cc] + r1 * M[1, cc] + r2 * M[2, cc]
+        for k in range(kp_body.shape[0]):
+            b = kp_body[k]
+            sp = site_pos[kp_sites[s, k]]
+            for r in range(3):
+                out[n, k, r] = P[b, r] + R[b, r, 0] * sp[0] + R[b, r, 1] * sp[1] + R[b, r, 2] * sp[2]
+
+
+def _hinge_tables():
+    """Per local body of `sim.humanoid` (BODIES order): parent, first hinge and hinge count; per hinge its
+    qpos column and axis (from a standalone humanoid, whose layout every slot repeats)."""
+    m = mujoco.MjModel.from_xml_string(hm.standalone_xml())
+    names = [m.body(b).name[2:] for b in range(1, m.nbody)]  # "p_" prefix; body 0 is the world
+    if tuple(names) != hm.BODIES:
+        raise RuntimeError("humanoid bodies are not in sim.humanoid.BODIES order")
+    parent = np.array([-1 if b == 0 else m.body_parentid[b + 1] - 1 for b in range(len(names))], dtype=np.int64)
+    first = np.zeros(len(names), dtype=np.int64)
+    num = np.zeros(len(names), dtype=np.int64)
+    qcol, axes = [], []
+    for b in range(len(names)):
+        first[b] = len(qcol)
+        for j in range(m.body_jntadr[b + 1], m.body_jntadr[b + 1] + m.body_jntnum[b + 1]):
+            if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
+                if np.any(m.jnt_pos[j]):
+                    raise RuntimeError("humanoid hinges are expected at their body origin")
+                qcol.append(m.jnt_qposadr[j])
+                axes.append(m.jnt_axis[j])
+        num[b] = len(qcol) - first[b]
+    if np.any(m.body_quat[1:] != [1, 0, 0, 0]) or np.any(m.site_quat != [1, 0, 0, 0]):
+        raise RuntimeError("humanoid bodies and sites are expected unrotated")
+    kp_body = np.array([m.site_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"p_{n}")] - 1
+                        for n in hm.KEYPOINT_NAMES], dtype=np.int64)
+    return parent, first, num, np.array(qcol, dtype=np.int64), np.ascontiguousarray(axes, dtype=float), kp_body
+
+
+NQ = hm.NQ
+_FK_PARENT, _FK_JNT_FIRST, _FK_JNT_NUM, _FK_HINGE_QPOS, _FK_HINGE_AXIS, _FK_KP_BODY = _hinge_tables()
 
 
 def simulation_speed(scenario, seconds: float = 60.0, rate_hz: float = 10.0, seed: int | None = None) -> dict:
