@@ -135,12 +135,12 @@ class World:
                 self._fk_body[self._body_slot[b], self._body_local[b]] = b
         if S and not np.array_equal(self._body_local[m.site_bodyid[self._kp_sites]], np.tile(_FK_KP_BODY, (S, 1))):
             raise RuntimeError("keypoint sites are not on the bodies sim.humanoid names")
-        # Load (or compile) the per-tick kernels now rather than in the first `advance`.
+        self._body_pos, self._site_pos = m.body_pos, m.site_pos  # views: they see the resizing
+        # Load (or compile) the per-tick kernel now rather than in the first `advance`.
         no_slot = np.zeros((0, hm.NQ))
-        _interpolate_kernel(no_slot, no_slot, np.zeros(0), np.zeros(0), 0.0, np.zeros(0, dtype=bool), np.zeros(0))
-        _keypoints_kernel(self._data.qpos, np.zeros(0, dtype=np.int64), self._fk_body, _FK_PARENT, _FK_JNT_FIRST,
-                          _FK_JNT_NUM, _FK_HINGE_QPOS, _FK_HINGE_AXIS, m.body_pos, self._kp_sites, _FK_KP_BODY,
-                          m.site_pos, np.empty((0, 17, 3)))
+        _pose_kernel(no_slot, no_slot, np.zeros(0), np.zeros(0), 0.0, np.zeros(0, dtype=bool), np.zeros(0),
+                     np.zeros(0, dtype=np.int64), self._fk_body, _FK_TABLES, _FK_HINGES, self._body_pos, self._kp_sites,
+                     self._site_pos, np.empty((0, 17, 3)))
         self._ray = _RayScene(self)
 
     # -- model -------------------------------------------------------------------------------------
@@ -226,20 +226,15 @@ class World:
                 self._orders.append((present, order[np.argsort(cur.person_id[order], kind="stable")]))
         exact = cur.time_s <= t_s or prev is cur
         present, order = self._orders[exact]
-        if exact:
-            _interpolate_kernel(cur.qpos, cur.qpos, cur.heading, cur.heading, 0.0, present, self._data.qpos)
-        else:
-            _interpolate_kernel(prev.qpos, cur.qpos, prev.heading, cur.heading, (t_s - prev.time_s) / STEP_S, present,
-                                self._data.qpos)
         # The keypoints by forward kinematics of the keypoint sites alone; MuJoCo's full kinematics (every
         # body, geom and site) runs when `data` or `ray_scene` is next asked for.
+        poses = np.empty((len(order), 17, 3))
+        q0, h0, a = (cur.qpos, cur.heading, 0.0) if exact else (prev.qpos, prev.heading, (t_s - prev.time_s) / STEP_S)
+        _pose_kernel(q0, cur.qpos, h0, cur.heading, a, present, self._data.qpos, order, self._fk_body, _FK_TABLES,
+                     _FK_HINGES, self._body_pos, self._kp_sites, self._site_pos, poses)
         self._kinematics_stale = True
         self._ray.stale = True
         self._present = present
-        poses = np.empty((len(order), 17, 3))
-        m = self.model
-        _keypoints_kernel(self._data.qpos, order, self._fk_body, _FK_PARENT, _FK_JNT_FIRST, _FK_JNT_NUM, _FK_HINGE_QPOS,
-                          _FK_HINGE_AXIS, m.body_pos, self._kp_sites, _FK_KP_BODY, m.site_pos, poses)
         return PoseTruth(t_s=float(t_s), person_ids=cur.person_id[order], poses=poses)
 
     @property
@@ -522,36 +517,32 @@ if any(hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != LEG_STRIDE for n in ("hip_flex"
 
 
 @jit
-def _interpolate_kernel(q0, q1, h0, h1, a, present, out):
-    """out (S * NQ,): joint positions a (0..1) of the way from q0 to q1 (S, NQ), the pelvis yaw quaternion
-    from the interpolated unwrapped headings h0 -> h1 (S,), and slots not present parked below the floor."""
+def _pose_kernel(q0, q1, h0, h1, a, present, qpos, order, body, tables, hinges, body_pos, kp_sites, site_pos, out):
+    """Poses the bodies between two crowd steps and computes the keypoint sites of those present.
+
+    qpos (S * NQ,) becomes the joint positions a (0..1) of the way from q0 to q1 (S, NQ), with the
+    pelvis yaw quaternion from the interpolated unwrapped headings h0 -> h1 (S,) and the slots not
+    present (S,) parked below the floor. out (P, 17, 3) gets the keypoint sites of slots order (P,) by
+    the same forward kinematics as MuJoCo's: a free pelvis, then per body its offset in the parent frame
+    and its hinges in order (the humanoid's bodies, joints and sites have no rotation or offset of their
+    own, and every hinge axis is a signed unit axis).
+
+    body (S, 16): model body ids; tables (16 + 17, 3): per local body parent, first hinge, hinge count,
+    then per keypoint its local body; hinges (H, 3): qpos column, axis (0 x, 1 y, 2 z) and sign of each
+    hinge; kp_sites (S, 17) model site ids; body_pos, site_pos: the model's (after resizing).
+    """
     S, nq = q0.shape
     for s in range(S):
         for j in range(nq):
-            out[s * nq + j] = q0[s, j] + (q1[s, j] - q0[s, j]) * a
+            qpos[s * nq + j] = q0[s, j] + (q1[s, j] - q0[s, j]) * a
         heading = h0[s] + (h1[s] - h0[s]) * a
-        out[s * nq + 3] = math.cos(0.5 * heading)
-        out[s * nq + 6] = math.sin(0.5 * heading)
+        qpos[s * nq + 3] = math.cos(0.5 * heading)
+        qpos[s * nq + 6] = math.sin(0.5 * heading)
         if not present[s]:
-            out[s * nq + 2] = PARK_Z_M
-
-
-@jit
-def _keypoints_kernel(qpos, order, body, parent, jnt_first, jnt_num, hinge_qpos, hinge_axis, body_pos, kp_sites,
-                      kp_body, site_pos, out):
-    """out (P, 17, 3): the keypoint sites of slots order (P,) posed by qpos (S * NQ,), by the same forward
-    kinematics as MuJoCo's (a free pelvis, then per body its offset in the parent frame and its hinges
-    in order; the humanoid's bodies, joints and sites have no rotation or offset of their own).
-
-    body (S, 16): model body ids; parent, jnt_first, jnt_num (16,): per local body; hinge_qpos (H,),
-    hinge_axis (H, 3): qpos column and axis of each hinge; kp_sites (S, 17) model site ids on local
-    bodies kp_body (17,); body_pos, site_pos: the model's (after resizing).
-    """
-    nb = parent.shape[0]
-    nq = NQ
+            qpos[s * nq + 2] = PARK_Z_M
+    nb = body.shape[1]
     R = np.empty((nb, 3, 3))
     P = np.empty((nb, 3))
-    M = np.empty((3, 3))
     for n in range(order.shape[0]):
         s = order[n]
         base = s * nq
@@ -563,27 +554,23 @@ def _keypoints_kernel(qpos, order, body, parent, jnt_first, jnt_num, hinge_qpos,
         R[0, 2, 0], R[0, 2, 1], R[0, 2, 2] = 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)
         P[0, 0], P[0, 1], P[0, 2] = qpos[base], qpos[base + 1], qpos[base + 2]
         for b in range(1, nb):
-            pa = parent[b]
+            pa = tables[b, 0]
             bp = body_pos[body[s, b]]
             for r in range(3):
                 P[b, r] = P[pa, r] + R[pa, r, 0] * bp[0] + R[pa, r, 1] * bp[1] + R[pa, r, 2] * bp[2]
                 for c in range(3):
                     R[b, r, c] = R[pa, r, c]
-            for h in range(jnt_first[b], jnt_first[b] + jnt_num[b]):
-                angle = qpos[base + hinge_qpos[h]]
-                ax, ay, az = hinge_axis[h, 0], hinge_axis[h, 1], hinge_axis[h, 2]
+            for h in range(tables[b, 1], tables[b, 1] + tables[b, 2]):
+                angle = qpos[base + hinges[h, 0]] * hinges[h, 2]
                 c, sn = math.cos(angle), math.sin(angle)
-                t = 1 - c
-                # Rodrigues: rotation by angle about the unit axis, right-multiplied (a child frame turn).
-                M[0, 0], M[0, 1], M[0, 2] = c + ax * ax * t, ax * ay * t - az * sn, ax * az * t + ay * sn
-                M[1, 0], M[1, 1], M[1, 2] = ay * ax * t + az * sn, c + ay * ay * t, ay * az * t - ax * sn
-                M[2, 0], M[2, 1], M[2, 2] = az * ax * t - ay * sn, az * ay * t + ax * sn, c + az * az * t
+                # Right-multiplying by a turn about unit axis k mixes the other two columns u, v.
+                u, v = (hinges[h, 1] + 1) % 3, (hinges[h, 1] + 2) % 3
                 for r in range(3):
-                    r0, r1, r2 = R[b, r, 0], R[b, r, 1], R[b, r, 2]
-                    for cc in range(3):
-                        R[b, r, cc] = r0 * M[0, cc] + r1 * M[1, cc] + r2 * M[2, cc]
-        for k in range(kp_body.shape[0]):
-            b = kp_body[k]
+                    ru, rv = R[b, r, u], R[b, r, v]
+                    R[b, r, u] = ru * c + rv * sn
+                    R[b, r, v] = rv * c - ru * sn
+        for k in range(out.shape[1]):
+            b = tables[nb + k, 0]
             sp = site_pos[kp_sites[s, k]]
             for r in range(3):
                 out[n, k, r] = P[b, r] + R[b, r, 0] * sp[0] + R[b, r, 1] * sp[1] + R[b, r, 2] * sp[2]
@@ -599,25 +586,32 @@ def _hinge_tables():
     parent = np.array([-1 if b == 0 else m.body_parentid[b + 1] - 1 for b in range(len(names))], dtype=np.int64)
     first = np.zeros(len(names), dtype=np.int64)
     num = np.zeros(len(names), dtype=np.int64)
-    qcol, axes = [], []
+    qcol = []
     for b in range(len(names)):
         first[b] = len(qcol)
         for j in range(m.body_jntadr[b + 1], m.body_jntadr[b + 1] + m.body_jntnum[b + 1]):
             if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_HINGE:
                 if np.any(m.jnt_pos[j]):
                     raise RuntimeError("humanoid hinges are expected at their body origin")
-                qcol.append(m.jnt_qposadr[j])
-                axes.append(m.jnt_axis[j])
+                axis = m.jnt_axis[j]
+                k = int(np.argmax(np.abs(axis)))
+                if abs(axis[k]) != 1.0:
+                    raise RuntimeError("humanoid hinge axes are expected along x, y or z")
+                qcol.append((m.jnt_qposadr[j], k, int(axis[k])))
         num[b] = len(qcol) - first[b]
     if np.any(m.body_quat[1:] != [1, 0, 0, 0]) or np.any(m.site_quat != [1, 0, 0, 0]):
         raise RuntimeError("humanoid bodies and sites are expected unrotated")
     kp_body = np.array([m.site_bodyid[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"p_{n}")] - 1
                         for n in hm.KEYPOINT_NAMES], dtype=np.int64)
-    return parent, first, num, np.array(qcol, dtype=np.int64), np.ascontiguousarray(axes, dtype=float), kp_body
+    tables = np.zeros((len(names) + len(kp_body), 3), dtype=np.int64)
+    tables[:len(names)] = np.column_stack([parent, first, num])
+    tables[len(names):, 0] = kp_body
+    return tables, np.array(qcol, dtype=np.int64).reshape(-1, 3)
 
 
-NQ = hm.NQ
-_FK_PARENT, _FK_JNT_FIRST, _FK_JNT_NUM, _FK_HINGE_QPOS, _FK_HINGE_AXIS, _FK_KP_BODY = _hinge_tables()
+# Per local body (parent, first hinge, hinge count) then per keypoint (its body); per hinge (qpos column, axis, sign).
+_FK_TABLES, _FK_HINGES = _hinge_tables()
+_FK_KP_BODY = _FK_TABLES[len(hm.BODIES):, 0].copy()
 
 
 def simulation_speed(scenario, seconds: float = 60.0, rate_hz: float = 10.0, seed: int | None = None) -> dict:
