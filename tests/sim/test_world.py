@@ -260,3 +260,17 @@ def test_ray_scene_gives_the_same_hits_as_the_world_model():
             np.testing.assert_array_equal(hits[0][1], hits[1][1])
             rays += len(targets)
     assert rays > 20_000 and len(heights) > world.slots  # slots were resized along the way
+
+
+def test_keypoints_are_mujocos_sites_after_its_own_kinematics():
+    """advance computes the keypoints by its own forward kinematics and leaves MuJoCo's for when `data`
+    is read: both must agree, through arrivals (resized slots) and interpolated ticks."""
+    world = _world(mean_visit_s=20.0, mean_arrival_gap_s=2.0)
+    worst = 0.0
+    for k in range(0, 1500, 7):
+        truth = world.advance(k / 25)
+        data = world.data  # runs mj_kinematics for the pose just set
+        slots = [int(np.nonzero(world.crowd.person_id == pid)[0][0]) for pid in truth.person_ids]
+        reference = data.site_xpos[world._kp_sites[slots]].reshape(-1, 17, 3)
+        worst = max(worst, float(np.abs(reference - truth.poses).max()) if slots else 0.0)
+    assert worst < 1e-12
