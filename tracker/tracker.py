@@ -31,7 +31,7 @@ from tracker.association import associate
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, ray_directions, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.triangulation import triangulate_observations
+from tracker.triangulation import camera_quadrics, triangulate_observations
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
@@ -99,6 +99,7 @@ class Tracker:
         self._bones = np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2)
         C, J = len(self.cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))
+        self._quadrics = camera_quadrics(self._P)  # (C, 5, 4, 4), eq. (9) normal-matrix constants
         self._centers = np.stack([c.center_world for c in self.cameras]) if C else np.zeros((0, 3))
         self._F = np.zeros((C, C, 3, 3))  # F[a, b]: x_b^T F x_a = 0 (eq. S1)
         for a in range(C):
@@ -157,7 +158,9 @@ class Tracker:
         if matched_rows.size:
             self._update_targets(c, matched_rows, det_px[matched_cols], t)
             assigned[matched_cols] = self._targets.ids[matched_rows]
-        unmatched = np.setdiff1d(np.arange(D), matched_cols)
+        free = np.ones(D, dtype=bool)
+        free[matched_cols] = False
+        unmatched = np.flatnonzero(free)
         enough = np.sum(np.isfinite(det_px[unmatched, :, 0]), axis=1) >= self.config.init_min_joints
         unmatched = unmatched[enough]
         self._set_pool(c, det_px[unmatched], unmatched, t)
@@ -236,7 +239,7 @@ class Tracker:
         velocities = tg.vel[rows].reshape(M * J, 3) if cfg.triangulation is Triangulation.VELOCITY else None
         plain, compensated = triangulate_observations(
             self._P, m_obs * J + j_obs, c_obs, obs_px[m_obs, c_obs, j_obs], obs_s[m_obs, c_obs, j_obs], M * J, t,
-            cfg.lambda_t_per_s, velocities, cfg.min_views)
+            cfg.lambda_t_per_s, velocities, cfg.min_views, self._quadrics)
         X = plain.reshape(M, J, 3)  # NaN for joints not seen now (no observation takes part)
         update = seen & np.isfinite(X[..., 0])  # (M, J)
         samples = X  # the velocity fit always uses the eq. (10)-(11) estimates
@@ -298,16 +301,17 @@ class Tracker:
         tg.hist_pos[rows] = hp
         tg.hist_s[rows] = hs
         tg.hist_next[rows] = (slot + 1) % cfg.velocity_history
-        use = np.isfinite(hs) & (t - hs <= cfg.velocity_window_s)  # (M, H, J)
+        with np.errstate(invalid="ignore"):
+            use = t - hs <= cfg.velocity_window_s  # (M, H, J); False for empty slots (NaN)
         n = use.sum(axis=1)  # (M, J)
         ts = np.where(use, hs, 0.0)
         tmean = ts.sum(axis=1) / np.maximum(n, 1)
-        dt = np.where(use, hs - tmean[:, None, :], 0.0)  # (M, H, J)
-        xs = np.where(use[..., None], hp, 0.0)
+        dt = np.where(use, ts - tmean[:, None, :], 0.0)  # (M, H, J)
+        xs = np.where(use[..., None], hp, 0.0)  # (M, H, J, 3)
         xmean = xs.sum(axis=1) / np.maximum(n, 1)[..., None]
-        dx = np.where(use[..., None], hp - xmean[:, None], 0.0)
-        sxx = np.sum(dt * dt, axis=1)  # (M, J)
-        sxy = np.sum(dt[..., None] * dx, axis=1)  # (M, J, 3)
+        sxx = np.einsum("mhj,mhj->mj", dt, dt)  # (M, J)
+        # Σ dt (x - x̄) = Σ dt x - x̄ Σ dt, the second sum zero up to rounding (kept for equivalence).
+        sxy = np.einsum("mhj,mhjk->mjk", dt, xs) - xmean * dt.sum(axis=1)[..., None]  # (M, J, 3)
         span = np.where(use, hs, -np.inf).max(axis=1) - np.where(use, hs, np.inf).min(axis=1)
         ok = (n >= 2) & (span >= _MIN_VELOCITY_SPAN_S) & (sxx > 0)
         v = np.where(ok[..., None], sxy / np.where(sxx > 0, sxx, 1.0)[..., None], 0.0)
@@ -449,8 +453,8 @@ class Tracker:
         if confirmed.size:
             poses = aff.predict_positions(tg.pos[confirmed], tg.vel[confirmed], tg.joint_s[confirmed], t,
                                           cfg.max_predict_s)
-            for row, pose in zip(confirmed, poses):
-                targets.append(Target(id=int(tg.ids[row]), pose=pose, stamp_s=t,
-                                      state=lifecycle.to_state(tg.state[row])))
+            state = lifecycle.to_state(lifecycle.CONFIRMED)
+            targets = [Target(id=target_id, pose=pose, stamp_s=t, state=state)
+                       for target_id, pose in zip(tg.ids[confirmed].tolist(), poses)]
         self.last_output = TrackerOutput(stamp_s=t, camera=camera, targets=targets, detection_target_ids=assigned)
         return targets

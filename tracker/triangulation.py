@@ -192,16 +192,17 @@ def triangulate_observations(
     lambda_t_per_s: float,
     velocities: np.ndarray | None,
     min_views: int = 2,
+    quadrics: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Eq. (6)-(11) for many points at once, from a flat list of their observations (no missing entries).
 
-    Each observation adds its two weighted rows' outer products to its point's 4x4 normal matrix (eq. 8, 10);
-    the sums are segment sums over the observations, which must be sorted by `group`.
+    Each observation adds its two weighted rows' outer products to its point's 4x4 normal matrix (eq. 8, 10),
+    written as a weighted sum of per-camera constant matrices (`camera_quadrics`).
 
     Args:
         P: (C, 3, 4) projection matrices.
-        group: (K,) sorted point index of each observation, in [0, num_groups).
-        cam: (K,) camera index of each observation.
+        group: (K,) point index of each observation, in [0, num_groups).
+        cam: (K,) camera index of each observation (at most one observation per point and camera).
         points_px: (K, 2) undistorted pixels.
         stamps_s: (K,) their stamps t_i, s.
         num_groups: number of points N.
@@ -209,6 +210,7 @@ def triangulate_observations(
         lambda_t_per_s: λt, 1/s.
         velocities: None, or (N, 3) joint velocities, m/s (see `triangulate_incremental`).
         min_views: least number of views.
+        quadrics: `camera_quadrics(P)` if already computed (a tracker keeps it), else None.
 
     Returns:
         (paper estimate (N, 3), velocity-compensated estimate (N, 3) or None without velocities); NaN for a
@@ -223,27 +225,63 @@ def triangulate_observations(
     keep = ok[group]
     if not keep.all():
         group, cam, points_px, stamps_s = group[keep], cam[keep], points_px[keep], stamps_s[keep]
-    Pc = P[cam]  # (K, 3, 4)
-    rows = points_px[:, :, None] * Pc[:, 2:3, :] - Pc[:, 0:2, :]  # (K, 2, 4), eq. (9)
-    dt = np.maximum(stamp_s - stamps_s, 0.0)  # (K,)
-    # Eq. (11): w = e^(-λt (t - t_i)) / ||c_i||, the norm taken on the row of C itself (before any shift).
-    norm2 = np.einsum("kri,kri->kr", rows, rows)  # (K, 2)
-    w2 = np.exp(-2.0 * lambda_t_per_s * dt)[:, None] / np.where(norm2 > 0, norm2, 1.0)  # (K, 2) squared weights
-    starts = np.concatenate([[0], np.cumsum(counts[ok])[:-1]])
     targets = np.flatnonzero(ok)
-    weighted = rows * w2[..., None]
-    M = np.add.reduceat(np.einsum("kri,krj->kij", weighted, rows), starts, axis=0)  # (N', 4, 4), eq. (8), (10)
+    slot = (np.cumsum(ok) - 1)[group]  # (K,) row of each observation's point among `targets`
+    Q = camera_quadrics(P) if quadrics is None else quadrics  # (C, 5, 4, 4)
+    C = Q.shape[0]
+    dt = np.maximum(stamp_s - stamps_s, 0.0)  # (K,)
+    x0, x1 = points_px[:, 0], points_px[:, 1]
+    # Eq. (9) row r = x_r p3 - p_r, so rᵀr = x_r² p3ᵀp3 - 2 x_r sym(p_rᵀp3) + p_rᵀp_r and ||r||² is the same
+    # combination of the quadrics' traces. Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||².
+    tr = np.trace(Q, axis1=2, axis2=3)[cam]  # (K, 5)
+    decay = np.exp(-2.0 * lambda_t_per_s * dt)
+    w0 = decay / (x0 * x0 * tr[:, 0] - 2.0 * x0 * tr[:, 1] + tr[:, 3])
+    w1 = decay / (x1 * x1 * tr[:, 0] - 2.0 * x1 * tr[:, 2] + tr[:, 4])
+    coef = np.stack([w0 * x0 * x0 + w1 * x1 * x1, -2.0 * w0 * x0, -2.0 * w1 * x1, w0, w1], axis=-1)  # (K, 5)
+    # Sum over each point's observations (eq. 8, 10): one dense product (points, cameras x 5) @ (cameras x 5, 16).
+    moments = 1 if velocities is None else 3
+    table = np.zeros((moments, targets.size, C, 5))
+    table[0, slot, cam] = coef
+    if velocities is not None:
+        table[1, slot, cam] = coef * dt[:, None]
+        table[2, slot, cam] = coef * (dt * dt)[:, None]
+    sums = (table.reshape(moments * targets.size, C * 5) @ Q.reshape(C * 5, 16)).reshape(moments, -1, 4, 4)
+    M = sums[0]
     if velocities is None:
         plain[targets] = _smallest_eigenvector(M)
         return plain, None
-    # Beyond the paper: row·[X - V dt_i; 1] = 0, i.e. the constant term becomes c4 - c[:3]·V dt_i.
-    moved = rows.copy()
-    moved[..., 3] -= np.einsum("kri,ki->kr", rows[..., :3], velocities[group] * dt[:, None])
-    Mv = np.add.reduceat(np.einsum("kri,krj->kij", moved * w2[..., None], moved), starts, axis=0)
+    # Beyond the paper: row·[X - V dt_i; 1] = 0, i.e. rows r T_i with T_i = [[I, -V dt_i], [0, 1]], so the
+    # normal matrix Σ T_iᵀ A_i T_i follows from the moments Σ A_i, Σ dt_i A_i and Σ dt_i² A_i.
+    V = velocities[targets]  # (N', 3)
+    M1, M2 = sums[1], sums[2]
+    Mv = M.copy()
+    col = M[:, :3, 3] - np.einsum("nij,nj->ni", M1[:, :3, :3], V)
+    Mv[:, :3, 3] = col
+    Mv[:, 3, :3] = col
+    Mv[:, 3, 3] = (M[:, 3, 3] - 2.0 * np.einsum("ni,ni->n", M1[:, :3, 3], V)
+                   + np.einsum("ni,nij,nj->n", V, M2[:, :3, :3], V))
     both = _smallest_eigenvector(np.concatenate([M, Mv]))
     plain[targets] = both[: targets.size]
     compensated[targets] = both[targets.size:]
     return plain, compensated
+
+
+def camera_quadrics(P: np.ndarray) -> np.ndarray:
+    """Per-camera constants of the eq. (9) normal matrices: p3ᵀp3, sym(p1ᵀp3), sym(p2ᵀp3), p1ᵀp1, p2ᵀp2.
+
+    Args:
+        P: (C, 3, 4) projection matrices (rows p1, p2, p3).
+
+    Returns:
+        (C, 5, 4, 4) symmetric matrices.
+    """
+    p1, p2, p3 = P[:, 0], P[:, 1], P[:, 2]
+
+    def outer(u, v):
+        return u[:, :, None] * v[:, None, :]
+
+    return np.stack([outer(p3, p3), 0.5 * (outer(p1, p3) + outer(p3, p1)), 0.5 * (outer(p2, p3) + outer(p3, p2)),
+                     outer(p1, p1), outer(p2, p2)], axis=1)
 
 
 def reprojection_error_px(P: np.ndarray, X: np.ndarray, points_px: np.ndarray) -> np.ndarray:
