@@ -458,24 +458,15 @@ class Crowd:
             _steer_kernel(self.pos[idx], want[idx], self.vel[idx], walking, self.speed_pref[idx], *self._obstacles, w)
             want[idx] = w
         # 4. Integration with bounded acceleration.
-        dv = want - self.vel
-        dvn = np.hypot(dv[:, 0], dv[:, 1])
-        dv *= np.minimum(1.0, MAX_ACCEL_M_S2 * dt / np.maximum(dvn, 1e-9))[:, None]
         old = self.pos
-        new = old + (self.vel + dv) * dt
-        new[~active] = old[~active]
+        new = np.empty_like(old)
+        _accelerate_kernel(want, self.vel, old, active, new)
         # 5. Hard constraints.
         new = self._constrain(new, old, active)
-        self.vel = (new - old) / dt
+        # 6. Velocity and heading from the step taken, then the gait.
         self.pos = new
-        speed = np.hypot(self.vel[:, 0], self.vel[:, 1])
-        want_heading = np.where(speed > 0.3, np.arctan2(self.vel[:, 1], self.vel[:, 0]), want_heading)
-        turn = (want_heading - self.heading + math.pi) % (2 * math.pi) - math.pi
-        turn = np.minimum(np.maximum(turn, -MAX_TURN_RAD_S * dt), MAX_TURN_RAD_S * dt)
-        self.heading = self.heading + turn
-        self.omega = turn / dt
-        # 6. Gait.
-        self._gait(speed, active)
+        _turn_and_gait_kernel(old, new, want_heading, active, self.height, self.vel, self.heading, self.omega,
+                              self.phase, self.stride, self.feet, self.liftoff, self.swing_len)
         self._arms(active)
 
     def _passed(self, agent: _Agent, px: float, py: float) -> bool:
@@ -548,11 +539,6 @@ class Crowd:
             if not bad.any():
                 return out
             out[idx[bad]] = old[idx[bad]]
-
-    def _gait(self, speed: np.ndarray, active: np.ndarray):
-        """Advances the gait phase and moves the feet (locked in stance, swinging otherwise; `_gait_kernel`)."""
-        _gait_kernel(speed, self.omega, self.height, active, self.heading, self.pos, self.vel, self.phase, self.stride,
-                     self.feet, self.liftoff, self.swing_len)
 
     def _arms(self, active: np.ndarray):
         """How far each browsing arm is raised (ramps up, holds, ramps down), its height and side."""
@@ -723,6 +709,40 @@ def _project_kernel(p, lo, hi, center, half, cos, sin):
 
 
 @jit
+def _accelerate_kernel(want, vel, pos, active, new):
+    """new (S, 2): where everybody active would be after STEP_S moving from pos toward the wished velocity
+    want (S, 2) with acceleration at most MAX_ACCEL_M_S2 from vel; the inactive stay at pos."""
+    dt = STEP_S
+    for s in range(pos.shape[0]):
+        if not active[s]:
+            new[s, 0], new[s, 1] = pos[s, 0], pos[s, 1]
+            continue
+        dvx, dvy = want[s, 0] - vel[s, 0], want[s, 1] - vel[s, 1]
+        scale = min(1.0, MAX_ACCEL_M_S2 * dt / max(math.sqrt(dvx * dvx + dvy * dvy), 1e-9))
+        new[s, 0] = pos[s, 0] + (vel[s, 0] + dvx * scale) * dt
+        new[s, 1] = pos[s, 1] + (vel[s, 1] + dvy * scale) * dt
+
+
+@jit
+def _turn_and_gait_kernel(old, new, want_heading, active, height, vel, heading, omega, phase, stride, feet, liftoff,
+                          swing_len):
+    """In place: vel (S, 2) from the step old -> new (S, 2); the heading (S,) turns, at most MAX_TURN_RAD_S,
+    toward the direction of motion above 0.3 m/s or else toward want_heading (S,), omega is its rate;
+    then `_gait_kernel`."""
+    dt = STEP_S
+    speed = np.empty(old.shape[0])
+    for s in range(old.shape[0]):
+        vel[s, 0], vel[s, 1] = (new[s, 0] - old[s, 0]) / dt, (new[s, 1] - old[s, 1]) / dt
+        speed[s] = math.sqrt(vel[s, 0] * vel[s, 0] + vel[s, 1] * vel[s, 1])
+        target = math.atan2(vel[s, 1], vel[s, 0]) if speed[s] > 0.3 else want_heading[s]
+        turn = (target - heading[s] + math.pi) % (2 * math.pi) - math.pi
+        turn = min(max(turn, -MAX_TURN_RAD_S * dt), MAX_TURN_RAD_S * dt)
+        heading[s] += turn
+        omega[s] = turn / dt
+    _gait_kernel(speed, omega, height, active, heading, new, vel, phase, stride, feet, liftoff, swing_len)
+
+
+@jit
 def _gait_kernel(speed, omega, height, active, heading, pos, vel, phase, stride, feet, liftoff, swing_len):
     """Advances the gait phase (S,) and moves the feet (S, 2, 2) in place.
 
@@ -779,8 +799,9 @@ def _warm_up():
     _violations_kernel(pts, pts, pts, *obs, flags.copy())
     _project_kernel(pts.copy(), pts, pts, *obs)
     one = np.ones(2)
-    _gait_kernel(one, one, one, flags, one, pts, pts, np.zeros(2), np.zeros(2), np.zeros((2, 2, 2)),
-                 np.zeros((2, 2, 2)), np.zeros((2, 2)))
+    _accelerate_kernel(pts, pts, pts, flags, np.empty((2, 2)))
+    _turn_and_gait_kernel(pts, pts, one, flags, one, pts.copy(), one.copy(), one.copy(), np.zeros(2), np.zeros(2),
+                          np.zeros((2, 2, 2)), np.zeros((2, 2, 2)), np.zeros((2, 2)))
     grid = np.ones((2, 2), dtype=bool)
     _segment_free(grid, 0.05, 0.05, 0.15, 0.15, 0.1)
     _astar(grid, 0, 3, 0.1)
