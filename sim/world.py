@@ -49,23 +49,6 @@ class _Snapshot:
     heading: np.ndarray  # (S,) unwrapped yaw
 
 
-def _pack(crowd: Crowd) -> np.ndarray:
-    """(S, F) the crowd's numbers that the posing reads (column order used by `World._qpos`)."""
-    speed = np.hypot(crowd.vel[:, 0], crowd.vel[:, 1])
-    return np.column_stack([
-        crowd.pos,  # 0, 1
-        crowd.heading,  # 2
-        crowd.phase,  # 3
-        crowd.stride,  # 4
-        crowd.feet.reshape(-1, 4),  # 5..8: left xy, right xy
-        crowd.swing_len,  # 9, 10
-        crowd.reach,  # 11
-        crowd.reach_height,  # 12
-        crowd.reach_side,  # 13
-        speed,  # 14
-    ])
-
-
 class World:
     """The store, its people and their bodies in MuJoCo.
 
@@ -316,20 +299,18 @@ class World:
 
     def _snapshot(self) -> _Snapshot:
         crowd = self.crowd
-        v = _pack(crowd)
-        return _Snapshot(crowd.time_s, crowd.person_id.copy(), self._qpos(v, crowd.time_s, crowd.person_id),
-                         v[:, 2].copy())
-
-    def _qpos(self, v: np.ndarray, t: float, person_id: np.ndarray) -> np.ndarray:
-        """(S, NQ) joint positions from the crowd's numbers (S, F) at time t (see `_qpos_kernel`)."""
         q = np.zeros((self.slots, hm.NQ))
-        _qpos_kernel(v, float(t), person_id, self._k_rows, self._lo, self._hi, q)
-        return q
+        _qpos_kernel(crowd.pos, crowd.vel, crowd.heading, crowd.phase, crowd.feet, crowd.swing_len, crowd.reach,
+                     crowd.reach_height, crowd.reach_side, float(crowd.time_s), crowd.person_id, self._k_rows, self._lo,
+                     self._hi, q)
+        return _Snapshot(crowd.time_s, crowd.person_id.copy(), q, crowd.heading.copy())
 
 
 @jit
-def _qpos_kernel(v, t, person_id, k, lo, hi, q):
-    """Fills q (S, NQ) with joint positions from the crowd's numbers v (S, F) at time t.
+def _qpos_kernel(pos, vel, heading_, phase_, feet, swing_len, reach_, reach_height, reach_side_, t, person_id, k,
+                 lo, hi, q):
+    """Fills q (S, NQ) with joint positions at time t from the crowd's state (`Crowd` attributes of the
+    same names: pelvis ground point, velocity, heading, gait phase, feet, swing lengths, reach).
 
     The pelvis follows the crowd's ground point and heading; each ankle goes where the crowd put its
     foot (lifted in swing) by two-link inverse kinematics (`sim.humanoid.leg_ik`, per slot); the pelvis
@@ -343,9 +324,10 @@ def _qpos_kernel(v, t, person_id, k, lo, hi, q):
     swing_scale = 1 / (1 - STANCE_FRACTION)
     sway_arg = (2 * math.pi * SWAY_HZ) * t
     look_arg = (2 * math.pi * 0.11) * t
-    for n in range(v.shape[0]):
-        x, y, heading, phase = v[n, 0], v[n, 1], v[n, 2], v[n, 3]
-        reach, reach_h, reach_side, speed = v[n, 11], v[n, 12], v[n, 13], v[n, 14]
+    for n in range(pos.shape[0]):
+        x, y, heading, phase = pos[n, 0], pos[n, 1], heading_[n], phase_[n]
+        reach, reach_h, reach_side = reach_[n], reach_height[n], reach_side_[n]
+        speed = math.sqrt(vel[n, 0] * vel[n, 0] + vel[n, 1] * vel[n, 1])
         thigh, shin, reach2, hw, ankle_h = k[n, 0], k[n, 1], k[n, 2], k[n, 3], k[n, 4]
         z_stand, z_low, shoulder, arm = k[n, 5], k[n, 6], k[n, 7], k[n, 8]
         pid = float(person_id[n])
@@ -366,12 +348,12 @@ def _qpos_kernel(v, t, person_id, k, lo, hi, q):
         z_leg = 1e9
         for leg in range(2):
             side = 1.0 - 2.0 * leg
-            rx[leg] = v[n, 5 + 2 * leg] - (px - s * hw * side)
-            ry[leg] = v[n, 6 + 2 * leg] - (py + c * hw * side)
+            rx[leg] = feet[n, leg, 0] - (px - s * hw * side)
+            ry[leg] = feet[n, leg, 1] - (py + c * hw * side)
             # Foot height: lifted in swing, in proportion to how far the foot travels.
             u = max((phase + 0.5 * leg) % 1.0 - STANCE_FRACTION, 0.0) * swing_scale
             sin_u[leg] = math.sin(pi * u)
-            lift[leg] = lift_gain * min(v[n, 9 + leg], FULL_LIFT_STRIDE_M) * sin_u[leg]
+            lift[leg] = lift_gain * min(swing_len[n, leg], FULL_LIFT_STRIDE_M) * sin_u[leg]
             az[leg] = ankle_h + lift[leg]
             z_leg = min(z_leg, az[leg] + math.sqrt(max(reach2 - rx[leg] * rx[leg] - ry[leg] * ry[leg], 0.0)))
         z = min(max(z_leg, z_low), z_stand)
