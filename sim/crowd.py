@@ -68,6 +68,10 @@ class Activity(enum.IntEnum):
     CHECKOUT = 3
 
 
+# The same as plain module constants: an enum member's class attribute lookup is slow in per-person loops.
+_WALK, _BROWSE, _CHECKOUT = Activity.WALK, Activity.BROWSE, Activity.CHECKOUT
+
+
 @dataclass(frozen=True)
 class CrowdConfig:
     """[crowd]: who walks through the store and how.
@@ -315,8 +319,9 @@ class Crowd:
     # -- goals and activities --------------------------------------------------------------------
 
     def _taken(self, p: np.ndarray, s: int) -> bool:
-        for k, a in enumerate(self.agents):
-            if k != s and self.person_id[k] >= 0 and a.goal is not None and np.linalg.norm(a.goal - p) < 0.8:
+        px, py = float(p[0]), float(p[1])
+        for k, (a, pid) in enumerate(zip(self.agents, self.person_id.tolist())):
+            if k != s and pid >= 0 and a.goal is not None and math.hypot(a.goal[0] - px, a.goal[1] - py) < 0.8:
                 return True
         return False
 
@@ -422,7 +427,7 @@ class Crowd:
                 self._depart(s)
                 active[s] = False
                 continue
-            if agent.activity == Activity.WALK:
+            if agent.activity == _WALK:
                 while agent.path:
                     tx, ty = agent.path[0]
                     d = math.hypot(tx - px, ty - py)
@@ -443,7 +448,7 @@ class Crowd:
                     agent.stuck = agent.stuck + dt if speed_now[s] < 0.15 else 0.0
                     if agent.stuck > STUCK_S:
                         self._choose_goal(s)
-            if agent.activity != Activity.WALK:
+            if agent.activity != _WALK:
                 if agent.goal_heading is not None:
                     want_heading[s] = agent.goal_heading
                 if t >= agent.until:
@@ -453,7 +458,8 @@ class Crowd:
         idx = np.nonzero(active)[0]
         if len(idx) > 1:
             # People standing still hold their place; walkers steer around them.
-            walking = np.array([self.agents[s].activity == Activity.WALK for s in idx.tolist()])
+            agents = self.agents
+            walking = np.array([agents[s].activity == _WALK for s in idx.tolist()])
             w = np.empty((len(idx), 2))
             _steer_kernel(self.pos[idx], want[idx], self.vel[idx], walking, self.speed_pref[idx], *self._obstacles, w)
             want[idx] = w
@@ -543,17 +549,17 @@ class Crowd:
     def _arms(self, active: np.ndarray):
         """How far each browsing arm is raised (ramps up, holds, ramps down), its height and side."""
         t = self.time_s
-        self.reach[:] = 0.0
-        for s in np.nonzero(active)[0].tolist():
-            agent = self.agents[s]
-            if agent.activity in (Activity.BROWSE, Activity.CHECKOUT):
+        reach = [0.0] * self.slots
+        for s, agent in enumerate(self.agents):
+            if (agent.activity == _BROWSE or agent.activity == _CHECKOUT) and active[s]:
                 for start, end, height, side in agent.reaches:
                     if start <= t <= end:
                         up = min(0.7, (end - start) / 3)
-                        self.reach[s] = min(1.0, (t - start) / up, (end - t) / up)
+                        reach[s] = min(1.0, (t - start) / up, (end - t) / up)
                         self.reach_height[s] = height
                         self.reach_side[s] = side
                         break
+        self.reach[:] = reach
 
     def activities(self) -> np.ndarray:
         """(S,) `Activity` of each slot (WALK for empty slots)."""
