@@ -242,6 +242,10 @@ class Crowd:
         self._next_arrival = math.inf
         self._pending_arrivals = 0
         self._upper = np.array([store.config.width_m, store.config.depth_m]) - WALL_CLEARANCE_M
+        self._upper_xy = tuple(self._upper.tolist())
+        # Entrance then exit: (centre, inward normal, width) in plain floats.
+        self._doors = tuple((tuple(d.center.tolist()), tuple(d.inward.tolist()), float(d.width))
+                            for d in (store.entrance, store.exit))
         if config.start_inside:
             for s in range(S):
                 self._spawn(s, inside=True)
@@ -487,34 +491,36 @@ class Crowd:
 
     def _wall_bounds(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 2) lower and upper bounds of the pelvis positions of slots idx (doors open the wall)."""
-        lo = np.full((len(idx), 2), WALL_CLEARANCE_M)
-        hi = np.empty((len(idx), 2))
-        hi[:] = self._upper
+        lo = [[WALL_CLEARANCE_M, WALL_CLEARANCE_M] for _ in range(len(idx))]
+        hi = [list(self._upper_xy) for _ in range(len(idx))]
+        agents = self.agents
         for k, s in enumerate(idx.tolist()):
-            agent = self.agents[s]
+            agent = agents[s]
             if not (agent.in_door or agent.leaving):
                 continue
-            for door in (self.store.entrance, self.store.exit):
-                rel = self.pos[s] - door.center
-                n = door.inward
-                depth = rel @ n
-                along = rel[0] * -n[1] + rel[1] * n[0]
-                half_gap = door.width / 2 - WALL_CLEARANCE_M
-                axis = 0 if n[0] else 1
-                in_doorway = depth < WALL_CLEARANCE_M - 1e-6 and abs(along) <= door.width / 2
+            px, py = self.pos[s].tolist()
+            for (cx, cy), (nx, ny), width in self._doors:
+                rx, ry = px - cx, py - cy
+                depth = rx * nx + ry * ny
+                along = rx * -ny + ry * nx
+                half_gap = width / 2 - WALL_CLEARANCE_M
+                axis = 0 if nx else 1
+                in_doorway = depth < WALL_CLEARANCE_M - 1e-6 and abs(along) <= width / 2
                 if in_doorway or (depth < 1.0 and abs(along) <= half_gap):
                     # In front of the door, in the doorway or outside: the wall opens here.
-                    if n[axis] > 0:
-                        lo[k, axis] = -OUTSIDE_REACH_M
+                    if (nx, ny)[axis] > 0:
+                        lo[k][axis] = -OUTSIDE_REACH_M
                     else:
-                        hi[k, axis] += WALL_CLEARANCE_M + OUTSIDE_REACH_M
+                        hi[k][axis] += WALL_CLEARANCE_M + OUTSIDE_REACH_M
                 if in_doorway:
                     # In the doorway or outside: between the door posts.
                     t = 1 - axis
-                    lo[k, t] = max(lo[k, t], door.center[t] - half_gap)
-                    hi[k, t] = min(hi[k, t], door.center[t] + half_gap)
-            if agent.in_door and (self.pos[s] - self.store.entrance.center) @ self.store.entrance.inward > 0.6:
+                    lo[k][t] = max(lo[k][t], (cx, cy)[t] - half_gap)
+                    hi[k][t] = min(hi[k][t], (cx, cy)[t] + half_gap)
+            (cx, cy), (nx, ny), _ = self._doors[0]
+            if agent.in_door and (px - cx) * nx + (py - cy) * ny > 0.6:
                 agent.in_door = False
+        lo, hi = np.array(lo, dtype=float).reshape(-1, 2), np.array(hi, dtype=float).reshape(-1, 2)
         return lo, hi
 
     def _violations(self, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
