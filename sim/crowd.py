@@ -242,7 +242,8 @@ class Crowd:
         self._next_arrival = math.inf
         self._pending_arrivals = 0
         self._upper = np.array([store.config.width_m, store.config.depth_m]) - WALL_CLEARANCE_M
-        self._upper_xy = tuple(self._upper.tolist())
+        self._lo_bounds = np.full((S, 2), WALL_CLEARANCE_M)  # the walls' bounds for everybody away from a door
+        self._hi_bounds = np.tile(self._upper, (S, 1))
         # Entrance then exit: (centre, inward normal, width) in plain floats.
         self._doors = tuple((tuple(d.center.tolist()), tuple(d.inward.tolist()), float(d.width))
                             for d in (store.entrance, store.exit))
@@ -459,14 +460,10 @@ class Crowd:
                     self._choose_goal(s)
         # 3. Local avoidance against predicted close passes; near a shelf, no steering into it and a gentle
         # push away from its face (`_steer_kernel`).
-        idx = np.nonzero(active)[0]
-        if len(idx) > 1:
+        if np.count_nonzero(active) > 1:
             # People standing still hold their place; walkers steer around them.
-            agents = self.agents
-            walking = np.array([agents[s].activity == _WALK for s in idx.tolist()])
-            w = np.empty((len(idx), 2))
-            _steer_kernel(self.pos[idx], want[idx], self.vel[idx], walking, self.speed_pref[idx], *self._obstacles, w)
-            want[idx] = w
+            walking = np.array([a.activity == _WALK for a in self.agents]) & active
+            _steer_kernel(self.pos, want, self.vel, active, walking, self.speed_pref, *self._obstacles)
         # 4. Integration with bounded acceleration.
         old = self.pos
         new = np.empty_like(old)
@@ -491,8 +488,8 @@ class Crowd:
 
     def _wall_bounds(self, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(n, 2) lower and upper bounds of the pelvis positions of slots idx (doors open the wall)."""
-        lo = [[WALL_CLEARANCE_M, WALL_CLEARANCE_M] for _ in range(len(idx))]
-        hi = [list(self._upper_xy) for _ in range(len(idx))]
+        lo = self._lo_bounds[:len(idx)].copy()
+        hi = self._hi_bounds[:len(idx)].copy()
         agents = self.agents
         for k, s in enumerate(idx.tolist()):
             agent = agents[s]
@@ -509,18 +506,17 @@ class Crowd:
                 if in_doorway or (depth < 1.0 and abs(along) <= half_gap):
                     # In front of the door, in the doorway or outside: the wall opens here.
                     if (nx, ny)[axis] > 0:
-                        lo[k][axis] = -OUTSIDE_REACH_M
+                        lo[k, axis] = -OUTSIDE_REACH_M
                     else:
-                        hi[k][axis] += WALL_CLEARANCE_M + OUTSIDE_REACH_M
+                        hi[k, axis] += WALL_CLEARANCE_M + OUTSIDE_REACH_M
                 if in_doorway:
                     # In the doorway or outside: between the door posts.
                     t = 1 - axis
-                    lo[k][t] = max(lo[k][t], (cx, cy)[t] - half_gap)
-                    hi[k][t] = min(hi[k][t], (cx, cy)[t] + half_gap)
+                    lo[k, t] = max(lo[k, t], (cx, cy)[t] - half_gap)
+                    hi[k, t] = min(hi[k, t], (cx, cy)[t] + half_gap)
             (cx, cy), (nx, ny), _ = self._doors[0]
             if agent.in_door and (px - cx) * nx + (py - cy) * ny > 0.6:
                 agent.in_door = False
-        lo, hi = np.array(lo, dtype=float).reshape(-1, 2), np.array(hi, dtype=float).reshape(-1, 2)
         return lo, hi
 
     def _violations(self, q: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
@@ -588,17 +584,20 @@ def _obstacle_distance(x, y, center, half, cos, sin):
 
 
 @jit
-def _steer_kernel(pos, want, vel, walking, speed_pref, center, half, cos, sin, out):
-    """out (n, 2): each wish (n, 2) steered off predicted close passes (walkers only: time to closest
-    approach against everybody's current motion, plus a short-range push), kept from heading into a shelf
-    within SHELF_COMFORT_M and pushed off its face, then capped at 1.1 times the preferred speed."""
+def _steer_kernel(pos, want, vel, active, walking, speed_pref, center, half, cos, sin):
+    """In place: each active person's wish want (S, 2) steered off predicted close passes with the other
+    active people (walkers only: time to closest approach against everybody's current motion, plus a
+    short-range push), kept from heading into a shelf within SHELF_COMFORT_M and pushed off its face,
+    then capped at 1.1 times the preferred speed."""
     n = pos.shape[0]
     for i in range(n):
+        if not active[i]:
+            continue
         wx0, wy0 = want[i, 0], want[i, 1]
         if walking[i]:
             cx = cy = 0.0
             for j in range(n):
-                if j == i:
+                if j == i or not active[j]:
                     continue
                 rx, ry = pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1]  # j relative to i
                 wx, wy = wx0 - vel[j, 0], wy0 - vel[j, 1]  # i's wish relative to j's motion
@@ -641,7 +640,7 @@ def _steer_kernel(pos, want, vel, walking, speed_pref, center, half, cos, sin, o
         wx0 += -ux * into + awx * push
         wy0 += -uy * into + awy * push
         scale = min(1.0, speed_pref[i] * 1.1 / max(math.sqrt(wx0 * wx0 + wy0 * wy0), 1e-9))
-        out[i, 0], out[i, 1] = wx0 * scale, wy0 * scale
+        want[i, 0], want[i, 1] = wx0 * scale, wy0 * scale
 
 
 @jit
@@ -807,7 +806,7 @@ def _warm_up():
         return
     pts, obs = np.zeros((2, 2)), (np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), np.zeros(1))
     flags = np.zeros(2, dtype=bool)
-    _steer_kernel(pts, pts, pts, flags, np.ones(2), *obs, np.empty((2, 2)))
+    _steer_kernel(pts, pts.copy(), pts, flags, flags, np.ones(2), *obs)
     _violations_kernel(pts, pts, pts, *obs, flags.copy())
     _project_kernel(pts.copy(), pts, pts, *obs)
     one = np.ones(2)
