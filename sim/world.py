@@ -544,6 +544,8 @@ def _pose_kernel(q0, q1, h0, h1, a, present, qpos, order, body, tables, hinges, 
                     R[b, r, c] = R[pa, r, c]
             for h in range(tables[b, 1], tables[b, 1] + tables[b, 2]):
                 angle = qpos[base + hinges[h, 0]] * hinges[h, 2]
+                if angle == 0.0:
+                    continue  # (the hinges the posing never moves: shoulder and hip rotation, head nod and tilt)
                 c, sn = math.cos(angle), math.sin(angle)
                 # Right-multiplying by a turn about unit axis k mixes the other two columns u, v.
                 u, v = (hinges[h, 1] + 1) % 3, (hinges[h, 1] + 2) % 3
