@@ -3,8 +3,15 @@
 The model holds the store's boxes and `crowd.people` humanoids (slots). A slot is reused when its
 person leaves and a newcomer arrives: the slot's bodies are rescaled to the newcomer's height (every
 length of `sim.humanoid` is proportional to height) and it gets a new, never reused person id. The
-world is kinematic: `advance` sets qpos from the crowd's motion and runs `mj_kinematics`, which is
-all `mj_ray` needs to see the bodies where they are.
+world is kinematic: `advance` sets qpos from the crowd's motion and computes the 17 keypoint sites by
+its own forward kinematics of the keypoint chain (a compiled kernel; equal to MuJoCo's site positions to
+~1e-15 m); MuJoCo's `mj_kinematics`, which is all `mj_ray` needs to see the bodies where they are, runs
+when `data` or `ray_scene` is next asked for, so people-only simulation skips it.
+
+Speed: the per-step and per-tick numeric work (posing, keypoints, and in `sim.crowd` steering, hard
+constraints, gait; A* in `sim.store`) runs in numba-compiled loops over plain floats, because with a few
+dozen people numpy's per-call cost dominated. Kernels are compiled once per machine (about 10 s, cached
+on disk under __pycache__) and loaded when the first world is built.
 """
 
 from __future__ import annotations
