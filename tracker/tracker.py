@@ -31,7 +31,7 @@ from tracker.association import associate
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, ray_directions, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.triangulation import camera_quadrics, triangulate_observations
+from tracker.triangulation import camera_quadrics, triangulate_observations_robust
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
@@ -237,9 +237,9 @@ class Tracker:
         m_obs, j_obs, c_obs = np.nonzero(fresh)
         M, J = seen.shape
         velocities = tg.vel[rows].reshape(M * J, 3) if cfg.triangulation is Triangulation.VELOCITY else None
-        plain, compensated = triangulate_observations(
+        plain, compensated = triangulate_observations_robust(
             self._P, m_obs * J + j_obs, c_obs, obs_px[m_obs, c_obs, j_obs], obs_s[m_obs, c_obs, j_obs], M * J, t,
-            cfg.lambda_t_per_s, velocities, cfg.min_views, self._quadrics)
+            cfg.lambda_t_per_s, velocities, cfg.min_views, self._quadrics, cfg.reject_factor, cfg.reject_floor_px)
         X = plain.reshape(M, J, 3)  # NaN for joints not seen now (no observation takes part)
         update = seen & np.isfinite(X[..., 0])  # (M, J)
         samples = X  # the velocity fit always uses the eq. (10)-(11) estimates

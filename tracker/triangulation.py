@@ -266,6 +266,61 @@ def triangulate_observations(
     return plain, compensated
 
 
+def triangulate_observations_robust(
+    P: np.ndarray,
+    group: np.ndarray,
+    cam: np.ndarray,
+    points_px: np.ndarray,
+    stamps_s: np.ndarray,
+    num_groups: int,
+    stamp_s: float,
+    lambda_t_per_s: float,
+    velocities: np.ndarray | None,
+    min_views: int,
+    quadrics: np.ndarray | None,
+    reject_factor: float,
+    reject_floor_px: float,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """`triangulate_observations`, then once more without the views whose reprojection error exceeds both
+    `reject_floor_px` and `reject_factor` times the median error of the point's views (beyond the paper).
+
+    The error of an observation taken at t_i is measured against the estimate moved back to t_i with the
+    velocity when velocities are given. A point keeps its first estimate if fewer than `min_views` views
+    would remain. Arguments as `triangulate_observations`; reject_factor 0 disables the second pass.
+    """
+    args = (num_groups, stamp_s, lambda_t_per_s, velocities, min_views, quadrics)
+    plain, compensated = triangulate_observations(P, group, cam, points_px, stamps_s, *args)
+    if reject_factor <= 0 or group.size == 0:
+        return plain, compensated
+    X = (plain if compensated is None else compensated)[group]  # (K, 3)
+    if velocities is not None:
+        X = X - velocities[group] * np.maximum(stamp_s - stamps_s, 0.0)[:, None]
+    Pc = P[cam]  # (K, 3, 4)
+    proj = np.einsum("kij,kj->ki", Pc[:, :, :3], X) + Pc[:, :, 3]  # (K, 3)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        err = np.linalg.norm(proj[:, :2] / proj[:, 2:3] - points_px, axis=-1)  # (K,) pixels
+    err = np.where(np.isfinite(err), err, 0.0)
+    order = np.lexsort((err, group))  # by point, then error
+    counts = np.bincount(group, minlength=num_groups)
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    median = np.zeros(num_groups)
+    has = counts > 0
+    median[has] = err[order][starts[has] + (counts[has] - 1) // 2]  # lower median
+    drop = (err > reject_floor_px) & (err > reject_factor * median[group])
+    if not drop.any():
+        return plain, compensated
+    keep = ~drop
+    plain2, compensated2 = triangulate_observations(P, group[keep], cam[keep], points_px[keep], stamps_s[keep],
+                                                    *args)
+    redo = np.zeros(num_groups, dtype=bool)
+    redo[group[drop]] = True
+    redo &= np.isfinite(plain2[:, 0])
+    plain[redo] = plain2[redo]
+    if compensated is not None:
+        compensated[redo] = compensated2[redo]
+    return plain, compensated
+
+
 def camera_quadrics(P: np.ndarray) -> np.ndarray:
     """Per-camera constants of the eq. (9) normal matrices: p3ᵀp3, sym(p1ᵀp3), sym(p2ᵀp3), p1ᵀp1, p2ᵀp2.
 

@@ -6,7 +6,14 @@ import pytest
 
 from tests.tracker.synthetic import ceiling_rig
 from tracker.geometry import project
-from tracker.triangulation import dlt_rows, time_weights, triangulate, triangulate_incremental
+from tracker.triangulation import (
+    dlt_rows,
+    time_weights,
+    triangulate,
+    triangulate_incremental,
+    triangulate_observations,
+    triangulate_observations_robust,
+)
 
 
 @pytest.fixture(scope="module")
@@ -93,3 +100,40 @@ def test_rows_are_those_of_eq_9(rig):
     rows = dlt_rows(rig[:1], x)
     np.testing.assert_allclose(rows[0, 0], 10.0 * rig[0, 2] - rig[0, 0])
     np.testing.assert_allclose(rows[0, 1], 20.0 * rig[0, 2] - rig[0, 1])
+
+
+def _flat(x, stamps):
+    """Flat observation list (group, cam, px, stamps) of (N, C, 2) points, NaN missing."""
+    group, cam = np.nonzero(np.isfinite(x[..., 0]))
+    return group, cam, x[group, cam], stamps[group, cam]
+
+
+def test_flat_observations_match_the_padded_incremental_dlt_with_velocities(rig):
+    rng = np.random.default_rng(5)
+    X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (12, 3))
+    x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0.0, 1.0, (12, len(rig), 2))
+    x[rng.random((12, len(rig))) < 0.3] = np.nan
+    stamps = 2.0 - rng.uniform(0.0, 0.2, (12, len(rig)))
+    V = rng.normal(0.0, 1.0, (12, 3))
+    plain, compensated = triangulate_observations(rig, *_flat(x, stamps), 12, 2.0, 5.0, V)
+    np.testing.assert_allclose(plain, triangulate_incremental(rig, x, stamps, 2.0, 5.0), atol=1e-8)  # m
+    np.testing.assert_allclose(compensated, triangulate_incremental(rig, x, stamps, 2.0, 5.0, velocities=V),
+                               atol=1e-8)  # m
+
+
+def test_robust_pass_is_the_dlt_of_the_views_within_the_rejection_rule(rig):
+    rng = np.random.default_rng(6)
+    X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (8, 3))
+    x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0.0, 0.5, (8, len(rig), 2))
+    x[:, 2] += 30.0  # one view 30 px off for every point
+    stamps = np.full((8, len(rig)), 1.0)
+    got, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 8, 1.0, 5.0, None, 2, None, 3.0, 10.0)
+    first = np.stack([_reference_dlt(rig, p) for p in x])
+    errors = np.stack([np.linalg.norm(project(rig, p)[:, :2] - xp, axis=-1) for p, xp in zip(first, x)])  # (N, C)
+    median = np.sort(errors, axis=1)[:, (len(rig) - 1) // 2]  # lower median
+    drop = (errors > 10.0) & (errors > 3.0 * median[:, None])
+    assert drop[:, 2].sum() >= 2 and drop.any(axis=1).sum() < 8  # the rule bites on some points only
+    kept = np.where(drop[..., None], np.nan, x)
+    np.testing.assert_allclose(got, np.stack([_reference_dlt(rig, p) for p in kept]), atol=1e-7)  # m
+    off, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 8, 1.0, 5.0, None, 2, None, 0.0, 10.0)
+    np.testing.assert_allclose(off, first, atol=1e-8)  # m
