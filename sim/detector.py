@@ -395,7 +395,11 @@ class Detector:
             geomid = np.empty(r_idx.size, dtype=np.int32)
             dist = np.empty(r_idx.size)
             bounds = np.searchsorted(r_idx, np.arange(n_req + 1))
-            ends = np.maximum.reduceat(length, bounds[:-1]) if r_idx.size else length
+            # Farthest keypoint per capture (the ray cutoff); captures that see nobody have no segment.
+            ends = np.zeros(n_req)
+            nonempty = bounds[1:] > bounds[:-1]
+            if nonempty.any():
+                ends[nonempty] = np.maximum.reduceat(length, bounds[:-1][nonempty])
             for i in range(n_req):
                 a, b = bounds[i], bounds[i + 1]
                 if b > a:

@@ -114,6 +114,21 @@ def test_limbs_behind_the_body_are_self_occluded_and_other_people_occlude():
     assert detector.visibility_counts[0].tolist() == [in_img.sum(), occluded.sum(), self_occluded.sum()]
 
 
+def test_a_capture_that_sees_nobody_does_not_break_the_batch():
+    # Two cameras posed in one batch; the second looks away from everybody (its rays segment is empty).
+    world = BoxWorld([(2.6, 1.5)])
+    cams = _cameras(CameraPlacement((0.3, 1.5, 2.8), (2.6, 1.5, 0.9)),
+                    CameraPlacement((5.8, 3.8, 2.8), (5.9, 3.9, 0.0)))
+    detector = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
+    for order in ((0, 1), (1, 0), (1, 1)):
+        views = detector.visibility_many(world, [(c, world.truth()) for c in order])
+        for c, (_, in_img, occluded, _) in zip(order, views):
+            assert in_img.any() == (c == 0)
+            if c == 0:
+                _, in_single, occluded_single, _ = detector.visibility(0, world, world.truth())
+                assert (in_img == in_single).all() and (occluded == occluded_single).all()
+
+
 def _open_scene(people=4):
     xy = [(1.0 + 0.8 * i, 1.5 + 0.3 * (i % 2)) for i in range(people)]
     world = BoxWorld(xy, shelf=((9.0, 9.0, 0.1), (0.1, 0.1, 0.1)))
