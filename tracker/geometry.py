@@ -90,7 +90,7 @@ def project_distorted(camera: Camera, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def ray_directions(camera: Camera, points_px: np.ndarray) -> np.ndarray:
+def ray_directions(camera: Camera, points_px: np.ndarray, world_from_pixel: np.ndarray | None = None) -> np.ndarray:
     """Eq. (3): unit world directions of the rays from the camera centre through undistorted pixels.
 
     The ray P⁺x̃ + μX̃_c of eq. (3) is the line through the centre X_c with direction R^T K^-1 x̃.
@@ -98,15 +98,20 @@ def ray_directions(camera: Camera, points_px: np.ndarray) -> np.ndarray:
     Args:
         camera: the camera.
         points_px: (..., 2) undistorted pixels.
+        world_from_pixel: (3, 3) R^T K^-1 of the camera if already computed (`world_from_pixel(camera)`).
 
     Returns:
         (..., 3) unit directions in the world frame (NaN where the pixel is NaN).
     """
     points = np.asarray(points_px, dtype=np.float64)
-    xh = np.concatenate([points, np.ones(points.shape[:-1] + (1,))], axis=-1)
-    M = camera.R_cam_from_world.T @ np.linalg.inv(camera.K)
-    d = xh @ M.T
+    M = world_from_pixel_matrix(camera) if world_from_pixel is None else world_from_pixel
+    d = points @ M[:, :2].T + M[:, 2]
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def world_from_pixel_matrix(camera: Camera) -> np.ndarray:
+    """(3, 3) R^T K^-1: the world direction of the ray through an undistorted homogeneous pixel (eq. 3)."""
+    return camera.R_cam_from_world.T @ np.linalg.inv(camera.K)
 
 
 def point_to_ray_distance(X: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:

@@ -29,7 +29,7 @@ from tracker import affinity as aff
 from tracker import lifecycle
 from tracker.association import associate
 from tracker.config import TrackerConfig, Triangulation
-from tracker.geometry import fundamental_matrix, ray_directions, undistort_points
+from tracker.geometry import fundamental_matrix, ray_directions, undistort_points, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
 from tracker.triangulation import camera_quadrics, triangulate_observations_robust
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
@@ -97,8 +97,11 @@ class Tracker:
         self.skeleton = skeleton
         self._index = {name: i for i, name in enumerate(names)}
         self._bones = np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2)
+        # (2, B, J) one-hot first and second joint of each bone, to count broken bones per joint
+        self._bone_ends = np.eye(skeleton.num_joints)[self._bones.T] if self._bones.size else None
         C, J = len(self.cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))
+        self._world_from_pixel = [world_from_pixel_matrix(cam) for cam in self.cameras]  # eq. (3)
         self._quadrics = camera_quadrics(self._P)  # (C, 5, 4, 4), eq. (9) normal-matrix constants
         self._centers = np.stack([c.center_world for c in self.cameras]) if C else np.zeros((0, 3))
         self._F = np.zeros((C, C, 3, 3))  # F[a, b]: x_b^T F x_a = 0 (eq. S1)
@@ -205,7 +208,7 @@ class Tracker:
         tg, cfg = self._targets, self.config
         if not len(tg):
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        rays = ray_directions(self.cameras[c], det_px)  # (D, J, 3), eq. (3)
+        rays = ray_directions(self.cameras[c], det_px, self._world_from_pixel[c])  # (D, J, 3), eq. (3)
         predicted = aff.predict_positions(tg.pos, tg.vel, tg.joint_s, t, cfg.max_predict_s)  # eq. (5)
         # Eq. (4)'s time penalty counts from the joint's last observation t', also for a joint carried with
         # the body since (its position is a guess, so it keeps losing weight as in the paper).
@@ -280,10 +283,8 @@ class Tracker:
             long_new = np.linalg.norm(cand[:, a] - cand[:, b], axis=-1) > self.config.max_bone_m  # (M, B)
             long_old = np.linalg.norm(old[:, a] - old[:, b], axis=-1) > self.config.max_bone_m
         broken = long_new & ~long_old
-        hits = np.zeros(update.shape[::-1])  # (J, M) broken bones per updated joint
-        for end in (a, b):
-            np.add.at(hits, end, (broken & update[:, end]).T)
-        return hits.T > 0
+        hits = (broken & update[:, a]) @ self._bone_ends[0] + (broken & update[:, b]) @ self._bone_ends[1]  # (M, J)
+        return hits > 0
 
     def _update_velocity(self, rows: np.ndarray, samples: np.ndarray, update: np.ndarray, t: float) -> None:
         """Eq. (5)'s V: linear least squares of joint position on time over the recent history.
