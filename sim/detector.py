@@ -92,14 +92,14 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
     # Calibrated against OpenPose on Shelf (../shared/data/README.md); see docs/sensor-model.md.
     DetectorProfile.TYPICAL: DetectorParams(
         noise_frac=0.013, noise_tail_dof=5.0, occluded_noise_scale=1.6, self_occluded_noise_scale=1.3,
-        gross_error_prob=0.001, miss_prob=0.001, miss_occlusion_gain=0.05, min_visible_joints=2,
+        gross_error_prob=0.001, miss_prob=0.03, miss_occlusion_gain=0.15, min_visible_joints=2,
         occluded_drop_prob=0.4, self_occluded_drop_prob=0.1, joint_drop_prob=0.02, fragment_prob=0.07,
         swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.02, score_visible=0.8, score_occluded=0.45,
         score_std=0.12,
     ),
     DetectorProfile.HARSH: DetectorParams(
         noise_frac=0.022, noise_tail_dof=3.0, occluded_noise_scale=2.5, self_occluded_noise_scale=1.5,
-        gross_error_prob=0.01, miss_prob=0.05, miss_occlusion_gain=0.4, min_visible_joints=4,
+        gross_error_prob=0.01, miss_prob=0.10, miss_occlusion_gain=0.4, min_visible_joints=4,
         occluded_drop_prob=0.6, self_occluded_drop_prob=0.2, joint_drop_prob=0.05, fragment_prob=0.15,
         swap_prob=0.02, duplicate_prob=0.05, phantom_rate=0.2, score_visible=0.7, score_occluded=0.35,
         score_std=0.15,
