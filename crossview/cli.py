@@ -100,6 +100,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("detector-stats", help="measure the synthetic detector's error statistics in a recording")
     p.add_argument("recording", type=Path)
 
+    p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
+    p.add_argument("scenario", help="scenario file or shipped name")
+    p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
+    p.add_argument("--minutes", type=_positive_float, default=10.0, help="simulated minutes (default 10)")
+
     p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
     p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
@@ -190,6 +195,16 @@ def _cmd_detector_stats(args) -> None:
     print(format_detector_stats(detector_stats(rec.frames(), rec.cameras)))
 
 
+def _cmd_world_stats(args) -> None:
+    import json
+
+    from crossview import pipeline
+    from sim.world import measure
+
+    scenario = pipeline.load_scenario(args.scenario, seed=args.seed)
+    print(json.dumps(measure(scenario, minutes=args.minutes), indent=1))
+
+
 def _cmd_evaluate(args) -> None:
     from crossview.scoring.campus import evaluate, format_evaluation
 
@@ -228,6 +243,7 @@ COMMANDS = {
     "score": _cmd_score,
     "info": _cmd_info,
     "detector-stats": _cmd_detector_stats,
+    "world-stats": _cmd_world_stats,
     "evaluate": _cmd_evaluate,
     "export": _cmd_export,
     "convert": _cmd_convert,
