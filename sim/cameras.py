@@ -179,7 +179,9 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
         try:
             cameras = load_panoptic(path, config.calibration_kind, origin_m=config.calibration_origin_m)
         except (OSError, ValueError, KeyError, TypeError) as e:
-            raise ScenarioError(f"cameras.calibration: cannot use {config.calibration!r}: {e}") from None
+            raise ScenarioError(
+                f"{scenario.where}: cameras.calibration: cannot use {config.calibration!r}: {e}"
+            ) from None
         key = "cameras.calibration"
     elif config.placements:
         cameras = []
@@ -203,8 +205,8 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
         if not inside:
             where = f"{key}[{i}]" if key != "cameras.rows/cols" else key
             raise ScenarioError(
-                f"{where}: camera {cam.name} at ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) m is outside the store "
-                f"[0, {store.width_m}] x [0, {store.depth_m}] x [0, {store.ceiling_m}] m"
+                f"{scenario.where}: {where}: camera {cam.name} at ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) m "
+                f"is outside the store [0, {store.width_m}] x [0, {store.depth_m}] x [0, {store.ceiling_m}] m"
             )
     return cameras
 

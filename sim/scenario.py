@@ -53,6 +53,7 @@ class Scenario:
     clock: ClockConfig = field(default_factory=ClockConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
     source_text: str = field(default="", repr=False, compare=False)
+    source_path: str = field(default="", repr=False, compare=False)
 
     def __post_init__(self):
         if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
@@ -61,6 +62,11 @@ class Scenario:
             raise ValueError(f"duration_s: {self.duration_s} must be > 0")
         if self.seed < 0:
             raise ValueError(f"seed: {self.seed} must be >= 0")
+
+    @property
+    def where(self) -> str:
+        """What error messages name: the scenario's file, or its name when it was built in code."""
+        return self.source_path or self.name
 
     @property
     def digest(self) -> str:
@@ -118,7 +124,7 @@ def load(name_or_path: str | Path | None = None, overrides: dict | None = None) 
     scenario = from_dict(Scenario, tree, str(path), "")
     # Overrides are part of what was simulated, so they are part of the recorded description.
     note = "".join(f"\n# override: {k} = {v!r}" for k, v in sorted(overrides.items()))
-    return dataclasses.replace(scenario, source_text=text + note)
+    return dataclasses.replace(scenario, source_text=text + note, source_path=str(path))
 
 
 def from_dict(cls, tree: dict, file: str, prefix: str):
@@ -126,7 +132,7 @@ def from_dict(cls, tree: dict, file: str, prefix: str):
     if not isinstance(tree, dict):
         raise ScenarioError(f"{file}: [{prefix.rstrip('.')}] must be a table, got {type(tree).__name__}")
     hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name != "source_text"}
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name not in ("source_text", "source_path")}
     unknown = sorted(set(tree) - set(fields))
     if unknown:
         raise ScenarioError(

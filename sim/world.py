@@ -79,8 +79,8 @@ class World:
                 people than the floor holds, ...), naming the scenario key.
         """
         self.scenario = scenario
-        self.store = StoreGeometry(scenario.store, name=scenario.name)
-        validate_crowd(scenario.crowd, self.store, scenario.name)
+        self.store = StoreGeometry(scenario.store, name=scenario.where)
+        validate_crowd(scenario.crowd, self.store, scenario.where)
         self.boxes: tuple[Box, ...] = self.store.boxes
         self.skeleton: Skeleton = COCO17
         self.slots = S = scenario.crowd.people

@@ -59,3 +59,17 @@ def test_unwritable_output_folder_is_named(tmp_path, capsys):
 @pytest.mark.parametrize("argv", [["run", "--cameras", "0"], ["run", "--seed", "-1"], ["track"]])
 def test_bad_arguments_exit_2(capsys, argv):
     _run_bad(capsys, argv)
+
+
+def test_geometry_errors_found_while_building_the_world_name_the_file(tmp_path, capsys):
+    # Two shelves on the same spot: only building the store finds it, and the message still names the file.
+    bad = tmp_path / "overlap.toml"
+    bad.write_text(
+        "[store]\nwidth_m = 8.0\ndepth_m = 6.0\n"
+        "[[store.shelves]]\ncenter_m = [4.0, 2.0]\nsize_m = [2.0, 0.5, 1.6]\n"
+        "[[store.shelves]]\ncenter_m = [4.2, 2.1]\nsize_m = [2.0, 0.5, 1.6]\n"
+    )
+    out = tmp_path / "a.mcap"
+    err = _run_bad(capsys, ["generate", str(bad), "-o", str(out), "--duration", "1"])
+    assert f"{bad}: store.shelves[1]: overlaps store.shelves[0]" in err
+    assert not out.exists()
