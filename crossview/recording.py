@@ -212,6 +212,11 @@ HEADER_JSON_SCHEMAS = {
 # Headers.
 
 
+def _check_skeleton_name(name: str) -> None:
+    if name not in SKELETONS:
+        raise ValueError(f"skeleton_name: {name!r} is not one of {sorted(SKELETONS)}")
+
+
 @dataclass(frozen=True)
 class RecordingHeader:
     """What a recording says about itself."""
@@ -226,8 +231,7 @@ class RecordingHeader:
     format_version: int = FORMAT_VERSION
 
     def __post_init__(self):
-        if self.skeleton_name not in SKELETONS:
-            raise ValueError(f"skeleton_name: {self.skeleton_name!r} is not one of {sorted(SKELETONS)}")
+        _check_skeleton_name(self.skeleton_name)
 
 
 @dataclass(frozen=True)
@@ -245,8 +249,7 @@ class TracksHeader:
     format_version: int = FORMAT_VERSION
 
     def __post_init__(self):
-        if self.skeleton_name not in SKELETONS:
-            raise ValueError(f"skeleton_name: {self.skeleton_name!r} is not one of {sorted(SKELETONS)}")
+        _check_skeleton_name(self.skeleton_name)
 
 
 def _json(value) -> bytes:
