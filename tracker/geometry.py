@@ -24,34 +24,35 @@ def undistort_points(camera: Camera, points_px: np.ndarray) -> np.ndarray:
     Returns:
         (..., 2) undistorted pixel coordinates, NaN where the input was not finite.
     """
-    points = np.asarray(points_px, dtype=np.float64)
-    out = np.full(points.shape, np.nan)
-    finite = np.all(np.isfinite(points), axis=-1)
-    if not finite.any():
-        return out
-    if not np.any(camera.dist):
-        out[finite] = points[finite]
-        return out
-    flat = np.ascontiguousarray(points[finite].reshape(-1, 1, 2))
-    und = cv2.undistortPoints(flat, camera.K, camera.dist, P=camera.K)
-    out[finite] = und.reshape(-1, 2)
-    return out
+    def undistort(finite_px: np.ndarray) -> np.ndarray:
+        flat = np.ascontiguousarray(finite_px.reshape(-1, 1, 2))
+        return cv2.undistortPoints(flat, camera.K, camera.dist, P=camera.K).reshape(-1, 2)
+
+    return _map_finite_pixels(camera, points_px, undistort)
 
 
 def distort_points(camera: Camera, points_px: np.ndarray) -> np.ndarray:
     """Inverse of `undistort_points`: maps undistorted pinhole pixels (..., 2) to distorted pixels (..., 2)."""
+    def distort(finite_px: np.ndarray) -> np.ndarray:
+        normalised = (finite_px - camera.K[:2, 2]) @ np.linalg.inv(camera.K[:2, :2]).T
+        rays = np.concatenate([normalised, np.ones((normalised.shape[0], 1))], axis=1)
+        projected, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
+        return projected.reshape(-1, 2)
+
+    return _map_finite_pixels(camera, points_px, distort)
+
+
+def _map_finite_pixels(camera: Camera, points_px: np.ndarray, lens_map) -> np.ndarray:
+    """Applies `lens_map` ((N, 2) -> (N, 2) pixels) to the finite points of (..., 2); NaN elsewhere.
+
+    A camera without distortion maps pixels to themselves, so `lens_map` is skipped.
+    """
     points = np.asarray(points_px, dtype=np.float64)
     out = np.full(points.shape, np.nan)
     finite = np.all(np.isfinite(points), axis=-1)
     if not finite.any():
         return out
-    if not np.any(camera.dist):
-        out[finite] = points[finite]
-        return out
-    normalised = (points[finite] - camera.K[:2, 2]) @ np.linalg.inv(camera.K[:2, :2]).T
-    rays = np.concatenate([normalised, np.ones((normalised.shape[0], 1))], axis=1)
-    projected, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
-    out[finite] = projected.reshape(-1, 2)
+    out[finite] = lens_map(points[finite]) if np.any(camera.dist) else points[finite]
     return out
 
 
