@@ -15,11 +15,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from tqdm import tqdm
 
 from crossview import recording
 from sim import scenario as scenario_mod
-from sim.types import CameraFrame
+from sim.types import BoxKind, CameraFrame
 
 log = logging.getLogger(__name__)
 
@@ -187,6 +188,21 @@ def _jsonable(value):
     return json.loads(json.dumps(value, default=lambda v: getattr(v, "value", str(v))))
 
 
+def watched_floor(boxes) -> tuple[float, float, float, float] | None:
+    """(x_min, y_min, x_max, y_max) of the store's floor (the cameras' ground), metres; None without a floor."""
+    floors = [b for b in boxes if b.kind is BoxKind.FLOOR]
+    if not floors:
+        return None
+    corners = []
+    for b in floors:
+        c, s = np.cos(b.yaw_rad), np.sin(b.yaw_rad)
+        for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1)):
+            hx, hy = dx * b.size_m[0] / 2, dy * b.size_m[1] / 2
+            corners.append((b.center_m[0] + c * hx - s * hy, b.center_m[1] + s * hx + c * hy))
+    xy = np.array(corners)
+    return (*xy.min(axis=0).tolist(), *xy.max(axis=0).tolist())
+
+
 def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
     """Scores a tracks file against the recording it was made from; returns (report, json dict)."""
     from crossview.scoring import score as score_outputs
@@ -201,7 +217,7 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
         )
     truth = list(rec.truth())
     outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
-    report = score_outputs(truth, outputs, rec.frames(), rec.cameras)
+    report = score_outputs(truth, outputs, rec.frames(), rec.cameras, scored_area=watched_floor(rec.boxes))
     summary = tracks.summary or {}
     tracker_s = summary.get("tracker_s") or 0.0
     updates = summary.get("updates") or len(outputs)

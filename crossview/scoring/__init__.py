@@ -2,7 +2,11 @@
 
 `score` compares tracker outputs with the simulator's ground truth on a regular evaluation grid:
 
-- grid: ticks t_k = t_0 + k / eval_rate_hz from the first to the last truth sample;
+- grid: ticks t_k = t_0 + k / eval_rate_hz from the first to the last truth sample; ticks before the
+  tracker's first output (before any camera frame was delivered) are not scored;
+- scored area: with `scored_area` (the store's floor inside its walls), only people whose body root lies
+  in it are scored; a target in the store nearest to a person outside it (walking in or out of a door,
+  where no camera sees), or a target outside it, is neither a hit nor a false positive;
 - at each tick the latest tracker output with stamp <= tick is taken (outputs sorted by stamp, on equal
   stamps the later one delivered), and its targets are compared with the truth interpolated at that
   output's stamp (a tracker output stamped at t is compared with the truth at t);
@@ -105,6 +109,29 @@ def _targets(out: TrackerOutput) -> tuple[np.ndarray, np.ndarray]:
     return ids, poses
 
 
+def _in_area(g_ids, g_poses, t_ids, t_poses, area):
+    """The people whose body root lies in `area`, and the targets that are not about anybody outside it.
+
+    A target outside the area, or whose root is nearer to a person outside the area than to every person
+    inside it, is dropped (a "don't care" region: the person walking in or out of a door is not scored).
+    """
+    x0, y0, x1, y1 = area
+    g_roots, t_roots = body_roots(g_poses), body_roots(t_poses)
+
+    def inside(roots):
+        return (roots[:, 0] >= x0) & (roots[:, 0] <= x1) & (roots[:, 1] >= y0) & (roots[:, 1] <= y1)
+
+    g_in = inside(g_roots)
+    t_keep = inside(t_roots) | ~np.isfinite(t_roots[:, 0])
+    if t_roots.size and (~g_in).any():
+        with np.errstate(invalid="ignore"):
+            dist = np.linalg.norm(t_roots[:, None, :] - g_roots[None, :, :], axis=-1)  # (T, G)
+        near_out = np.min(np.where(~g_in[None, :], dist, np.inf), axis=1, initial=np.inf)
+        near_in = np.min(np.where(g_in[None, :], dist, np.inf), axis=1, initial=np.inf)
+        t_keep &= ~(near_out < near_in)
+    return g_ids[g_in], g_poses[g_in], t_ids[t_keep], t_poses[t_keep]
+
+
 def _check_same_recording(timeline: TruthTimeline, outputs: Sequence[TrackerOutput], cameras) -> None:
     if cameras is not None:
         names = {c.name for c in cameras}
@@ -130,6 +157,7 @@ def score(
     eval_rate_hz: float = 10.0,
     root_threshold_m: float = ROOT_MATCH_THRESHOLD_M,
     hota_zero_distance_m: float = HOTA_ZERO_DISTANCE_M,
+    scored_area: tuple[float, float, float, float] | None = None,
 ) -> ScoreReport:
     """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
 
@@ -141,6 +169,7 @@ def score(
         eval_rate_hz: rate of the evaluation grid.
         root_threshold_m: ground-plane gate of MOTA/IDF1, metres.
         hota_zero_distance_m: distance at which the HOTA similarity reaches 0, metres.
+        scored_area: (x_min, y_min, x_max, y_max) of the floor the cameras watch, metres; None: everywhere.
 
     Returns:
         the report; metrics that cannot be measured are None.
@@ -167,22 +196,28 @@ def score(
                          hota_zero_distance_m=hota_zero_distance_m)
     t_start, t_end = timeline.span
     num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
+    scored_ticks = 0
     for k in range(num_ticks):
         tick = t_start + k / eval_rate_hz
         j = int(np.searchsorted(stamps, tick, side="right")) - 1
+        if j < 0 and stamps.size:
+            continue  # nothing delivered yet: no tracker could know anything
+        scored_ticks += 1
         if j >= 0 and tick - stamps[j] <= OUTPUT_MAX_AGE_S:
             t_ids, t_poses = _targets(ordered[j])
             g_ids, g_poses = timeline.at(stamps[j])
         else:
             t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, 17, 3))
             g_ids, g_poses = timeline.at(tick)
+        if scored_area is not None:
+            g_ids, g_poses, t_ids, t_poses = _in_area(g_ids, g_poses, t_ids, t_poses, scored_area)
         pose_acc.update(g_ids, g_poses, t_poses)
         id_acc.update(g_ids, g_poses, t_ids, t_poses)
         hota_truth.append(g_ids)
         hota_targets.append(t_ids)
         hota_sims.append(ground_similarity(body_roots(g_poses), body_roots(t_poses), hota_zero_distance_m))
         report.truth_person_instants += len(g_ids)
-    report.eval_instants = num_ticks
+    report.eval_instants = scored_ticks
 
     p = pose_acc.result()
     report.pcp, report.pcp_per_actor, report.pcp_per_group = p.pcp, p.pcp_per_actor, p.pcp_per_group

@@ -62,3 +62,18 @@ def test_info_describes_the_recording(short_run, capsys):
 @pytest.mark.parametrize("count, expected", [(12, (3, 4)), (28, (4, 7)), (7, (1, 7)), (1, (1, 1))])
 def test_camera_grid_fits_the_floor(count, expected):
     assert pipeline.camera_grid(count, width_m=8.0, depth_m=6.0) == expected
+
+
+def test_the_watched_floor_is_the_floor_box_footprint_walls_included():
+    import numpy as np
+
+    from sim.scenario import load
+    from sim.store import StoreGeometry
+    from sim.types import Box, BoxKind
+
+    store = StoreGeometry(load("store_layout1").store)
+    x0, y0, x1, y1 = pipeline.watched_floor(store.boxes)
+    assert (x0, y0) == pytest.approx((-0.1, -0.1)) and (x1, y1) == pytest.approx((4.7, 3.9))  # 4.6 x 3.8 m, 0.1 m walls
+    turned = Box(BoxKind.FLOOR, (1.0, 2.0, 0.0), (4.0, 2.0, 0.1), np.pi / 2)
+    assert pipeline.watched_floor([turned]) == pytest.approx((0.0, 0.0, 2.0, 4.0))
+    assert pipeline.watched_floor([Box(BoxKind.SHELF, (0, 0, 0), (1, 1, 1))]) is None

@@ -143,3 +143,32 @@ def test_speed_set_on_the_report_reaches_table_and_json():
     assert (d["tracker_fps"], d["camera_frames_per_s"]) == (120.0, 1440.0)
     d = r.to_json(scenario="s", seed=0, num_cameras=12, num_people=2, duration_s=1.0, tracker_fps=5.0)
     assert d["tracker_fps"] == 5.0  # an explicit argument wins
+
+
+def test_ticks_before_the_first_output_are_not_scored():
+    # No camera frame before 1 s: ticks 0.0 .. 0.9 s are left out, not counted as misses.
+    late = [o for o in _outputs() if o.stamp_s >= 1.0]
+    r = score(_truth(), late)
+    assert r.eval_instants == 91 and r.truth_person_instants == 182
+    assert r.false_negatives == 0 and r.mota == 1.0 and r.pcp == 1.0
+
+
+def test_people_outside_the_scored_area_are_neither_missed_nor_matched():
+    area = (-2.0, -1.0, 4.0, 10.0)
+    roots = {pid: _pose(pid, 0.0)[[11, 12], :2].mean(axis=0) for pid in (1, 2)}
+    # Person 1 walks out of the area (x > 4 m) at t_out; person 2 stays in for the whole run.
+    t_out = (4.0 - roots[1][0]) / VELOCITY[1][0]
+    end_2 = roots[2] + VELOCITY[2][:2] * DURATION_S
+    assert 3.0 < t_out < 7.0 and -2.0 < end_2[0] < roots[2][0] < 4.0 and -1.0 < roots[2][1] < end_2[1] < 10.0
+    r = score(_truth(), _outputs(), scored_area=area)
+    inside_ticks = int(np.floor(t_out * 10.0)) + 1
+    assert r.truth_person_instants == 101 + inside_ticks
+    # Its target, still reported outside, is no false positive: everything scored is perfect.
+    assert (r.false_positives, r.false_negatives, r.mota, r.pcp) == (0, 0, 1.0, 1.0)
+    # A tracker that drops person 1 once outside the area loses nothing either.
+    def drop_outside(out):
+        kept = [t for t in out.targets if t.id != 10 or out.stamp_s <= t_out]
+        return TrackerOutput(out.stamp_s, out.camera, kept, out.detection_target_ids)
+
+    r2 = score(_truth(), [drop_outside(o) for o in _outputs()], scored_area=area)
+    assert (r2.false_negatives, r2.mota, r2.idf1) == (0, 1.0, 1.0)
