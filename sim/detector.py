@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.cameras import in_image, in_image_many, monotonic_radius
+from sim.store import jit
 from sim.types import CameraFrame, DetectionEffect, DetectionTruth, PoseTruth
 from tracker.types import COCO17, Camera, Frame, Skeleton
 
@@ -303,6 +304,7 @@ class Detector:
             self._fragment_masks[i, list(part)] = True
         self._template = _TEMPLATE_COCO17 if coco else None
         self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
+        self._centre_array = np.array(self._centres, dtype=np.float64).reshape(-1, 3)
         # Per-camera constants stacked for projecting the captures of one truth tick at once.
         self._R = np.array([c.R_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
         self._t = np.array([c.t_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3)
@@ -313,14 +315,13 @@ class Detector:
         # Per camera: joints in the image, occluded, self-occluded (all person views, detected or not).
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
 
-    def visibility(self, camera_index: int, world, poses: PoseTruth, geom_person: np.ndarray | None = None):
+    def visibility(self, camera_index: int, world, poses: PoseTruth):
         """Projection and occlusion of everybody's joints in one camera.
 
         Args:
             camera_index: which camera.
             world: a `sim.world.World` advanced to the poses' time (or None to skip ray casting).
             poses: the true poses, (P, J, 3).
-            geom_person: `world.geom_person_ids()` when the caller already has it.
 
         Returns:
             px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J).
@@ -331,24 +332,16 @@ class Detector:
         occluded = np.zeros((P, J), dtype=bool)
         self_occluded = np.zeros((P, J), dtype=bool)
         if world is not None and self.config.occlusion and in_img.any():
-            p_idx, j_idx = np.nonzero(in_img)
-            ids = np.asarray(poses.person_ids)[p_idx]
-            if geom_person is None:
-                geom_person = np.asarray(world.geom_person_ids())
-            scene = world.ray_scene() if hasattr(world, "ray_scene") else (world.model, world.data)
-            occ, self_occ = cast_visibility(
-                *scene, self._centres[camera_index], poses.poses[p_idx, j_idx], ids,
-                self._keypoint_bodies(world)[j_idx], geom_person,
-                self._geom_bodies(world), self.config.self_hit_margin_m,
-            )
-            occluded[p_idx, j_idx] = occ
-            self_occluded[p_idx, j_idx] = self_occ
+            person = np.asarray(poses.person_ids, dtype=np.int64)[None]
+            occ, self_occ, _, _ = self._cast(world, self._centres[camera_index][None], poses.poses.reshape(1, P * J, 3),
+                                       in_img.reshape(1, P * J), person)
+            occluded, self_occluded = occ.reshape(P, J), self_occ.reshape(P, J)
         self.visibility_counts[camera_index] += (in_img.sum(), occluded.sum(), self_occluded.sum())
         return px, in_img, occluded, self_occluded
 
     def visibility_many(self, world, requests) -> list[tuple]:
         """`visibility` of several captures whose bodies are all in `world`'s data (one truth tick): the
-        projections in one vectorised pass, then one `mj_multiRay` batch per capture.
+        projections in one vectorised pass, then every ray of the tick in one compiled pass.
 
         Args:
             world: the world (or None to skip ray casting).
@@ -377,38 +370,10 @@ class Detector:
         occluded = np.zeros(in_all.shape, dtype=bool)
         self_occluded = np.zeros(in_all.shape, dtype=bool)
         if world is not None and self.config.occlusion and in_all.any():
-            import mujoco
-
-            model, data = world.ray_scene() if hasattr(world, "ray_scene") else (world.model, world.data)
-            geom_person = np.asarray(world.geom_person_ids())
-            kp_bodies, geom_body = self._keypoint_bodies(world), self._geom_bodies(world)
-            # Every ray of the tick prepared at once; one mj_multiRay batch per capture (one origin each).
-            r_idx, k_idx = np.nonzero(in_all)  # request, flat (person, joint) index
-            origin = np.array(self._centres)[cams[r_idx]]
-            vec = points[r_idx, k_idx] - origin
-            length = np.sqrt(np.einsum("ij,ij->i", vec, vec))
-            unit = vec / length[:, None]
             ids = np.full((n_req, N // J if J else 0), -1, dtype=np.int64)
             for i, r in enumerate(requests):
                 ids[i, :counts[i]] = np.asarray(r[1].person_ids, dtype=np.int64)
-            point_person = ids[r_idx, k_idx // J]
-            geomid = np.empty(r_idx.size, dtype=np.int32)
-            dist = np.empty(r_idx.size)
-            bounds = np.searchsorted(r_idx, np.arange(n_req + 1))
-            # Farthest keypoint per capture (the ray cutoff); captures that see nobody have no segment.
-            ends = np.zeros(n_req)
-            nonempty = bounds[1:] > bounds[:-1]
-            if nonempty.any():
-                ends[nonempty] = np.maximum.reduceat(length, bounds[:-1][nonempty])
-            for i in range(n_req):
-                a, b = bounds[i], bounds[i + 1]
-                if b > a:
-                    mujoco.mj_multiRay(model, data, self._centres[cams[i]], unit[a:b].ravel(), None, 1, -1,
-                                       geomid[a:b], dist[a:b], None, b - a, float(ends[i]))
-            occ, self_occ = classify_hits(geomid, dist, length, point_person, kp_bodies[k_idx % J], geom_person,
-                                          geom_body, self.config.self_hit_margin_m)
-            occluded[r_idx, k_idx] = occ
-            self_occluded[r_idx, k_idx] = self_occ
+            occluded, self_occluded, _, _ = self._cast(world, self._centre_array[cams], points, in_all, ids)
         out = []
         for i, camera_index in enumerate(cams.tolist()):
             P = counts[i]
@@ -418,23 +383,48 @@ class Detector:
             out.append(view)
         return out
 
-    def _keypoint_bodies(self, world) -> np.ndarray:
-        """(J, 2) body of each keypoint and its parent body, in the numbering of `world.geom_body_ids()`."""
-        if getattr(self, "_kp_bodies_of", None) is not world:
+    def _scene(self, world) -> tuple:
+        """What the ray caster needs of `world` that does not change while it runs (cached per world):
+        (J, 2) body and parent body of each keypoint and, per geom, its body within its person, its type
+        and the groups of geoms that move together (`World.geom_groups`, else runs of one person's geoms)."""
+        if getattr(self, "_scene_of", None) is not world:
             bodies = np.asarray(world.keypoint_body_ids(), dtype=np.int64)
             if bodies.shape != (self.skeleton.num_joints,):
                 raise ValueError(f"World.keypoint_body_ids(): expected ({self.skeleton.num_joints},), "
                                  f"got {bodies.shape}")
             parents = getattr(world, "keypoint_parent_body_ids", None)
             parents = np.asarray(parents(), dtype=np.int64) if parents is not None else _parent_bodies(bodies)
-            self._kp_bodies = np.stack([bodies, parents], axis=1)
-            self._geom_body_table = np.asarray(world.geom_body_ids(), dtype=np.int64)
-            self._kp_bodies_of = world
-        return self._kp_bodies
+            geom_type = np.asarray(world.model.geom_type, dtype=np.int64)
+            unsupported = sorted(set(geom_type.tolist()) - set(_RAY_GEOM_TYPES))
+            if unsupported:
+                raise ValueError(f"world geoms: mjtGeom types {unsupported} are not supported by the keypoint ray "
+                                 "caster (spheres, capsules, ellipsoids, cylinders and boxes are)")
+            if hasattr(world, "geom_groups"):
+                groups = np.asarray(world.geom_groups(), dtype=np.int64)
+            else:
+                person = np.asarray(world.geom_person_ids())
+                groups = np.concatenate([[0], np.nonzero(person[1:] != person[:-1])[0] + 1, [person.size]])
+            self._scene_cache = (np.ascontiguousarray(np.stack([bodies, parents], axis=1)),
+                                 np.asarray(world.geom_body_ids(), dtype=np.int64), geom_type, groups)
+            self._scene_of = world
+        return self._scene_cache
 
-    def _geom_bodies(self, world) -> np.ndarray:
-        self._keypoint_bodies(world)
-        return self._geom_body_table
+    def _cast(self, world, origins: np.ndarray, points: np.ndarray, mask: np.ndarray, person: np.ndarray):
+        """Occluded and self-occluded flags (R, N) of keypoints points (R, N, 3) seen from origins (R, 3),
+        where mask (R, N); person (R, N // J) is the person id of each row of J keypoints. Also the nearest
+        geom hit before each keypoint (R, N) (-1: none) and its distance."""
+        kp_bodies, geom_body, geom_type, groups = self._scene(world)
+        model, data = world.model, world.data
+        shape = mask.shape
+        occluded, self_occluded = np.empty(shape, dtype=bool), np.empty(shape, dtype=bool)
+        geomid, dist = np.empty(shape, dtype=np.int32), np.empty(shape)
+        _cast_keypoint_rays(
+            np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(points, dtype=np.float64),
+            np.ascontiguousarray(mask), np.ascontiguousarray(person, dtype=np.int64), self.skeleton.num_joints,
+            kp_bodies, geom_type, data.geom_xpos, data.geom_xmat, model.geom_size, model.geom_rbound,
+            np.asarray(world.geom_person_ids(), dtype=np.int64), geom_body, groups,
+            float(self.config.self_hit_margin_m), occluded, self_occluded, geomid, dist)
+        return occluded, self_occluded, geomid, dist
 
     def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
                delivery_s: float) -> CameraFrame:
@@ -608,3 +598,200 @@ def _parent_bodies(bodies: np.ndarray) -> np.ndarray:
                   B["right_shin"]: B["right_thigh"], B["left_foot"]: B["left_shin"], B["right_foot"]: B["right_shin"]}
         return np.array([parent.get(int(b), int(b)) for b in bodies], dtype=np.int64)
     return bodies.copy()
+
+
+# -- ray casting ---------------------------------------------------------------------------------------
+# Keypoint rays are cast by compiled loops that evaluate MuJoCo's own ray-primitive formulas (the
+# quadratic of `mj_ray` for spheres, capsules, ellipsoids and cylinders, the slab faces for boxes) term
+# by term in the same order, so every hit distance is the one `mujoco.mj_multiRay` returns, and the
+# nearest hit is chosen as MuJoCo chooses it (geoms in model order, a later geom only when strictly
+# nearer). What differs is the culling: a whole person (a contiguous group of geoms) and then a single
+# geom are skipped when the segment from the camera to the keypoint misses its bounding sphere, which
+# never drops a hit nearer than the keypoint (the only hits the flags depend on). tests/sim checks the
+# flags and the hits against `mj_multiRay` on the store. This replaced one `mj_multiRay` call per
+# capture, whose per-call set-up (bounding angles of every geom) cost more than its rays.
+
+_MJ_MINVAL = 1e-15  # mjMINVAL: MuJoCo's smallest denominator
+_GEOM_SPHERE, _GEOM_CAPSULE, _GEOM_ELLIPSOID, _GEOM_CYLINDER, _GEOM_BOX = 2, 3, 4, 5, 6  # mjtGeom
+_RAY_GEOM_TYPES = (_GEOM_SPHERE, _GEOM_CAPSULE, _GEOM_ELLIPSOID, _GEOM_CYLINDER, _GEOM_BOX)
+# Slack on the bounding spheres of the culling, far above the rounding of the hit distances.
+_CULL_SLACK_M = 1e-6
+
+
+@jit
+def _quadratic_roots(a, b, c):
+    """Roots of a x² + 2 b x + c = 0 (both -1 when the discriminant is below mjMINVAL) and the smallest
+    non-negative one (-1 when none), as MuJoCo's ray code solves it."""
+    det = b * b - a * c
+    if det < _MJ_MINVAL:
+        return -1.0, -1.0, -1.0
+    det = math.sqrt(det)
+    x0 = (-b - det) / a
+    x1 = (-b + det) / a
+    if x0 >= 0:
+        return x0, x1, x0
+    if x1 >= 0:
+        return x0, x1, x1
+    return x0, x1, -1.0
+
+
+@jit
+def _ray_sphere(cx, cy, cz, radius_sq, px, py, pz, vx, vy, vz):
+    dx, dy, dz = px - cx, py - cy, pz - cz
+    a = vx * vx + vy * vy + vz * vz
+    b = vx * dx + vy * dy + vz * dz
+    c = dx * dx + dy * dy + dz * dz - radius_sq
+    return _quadratic_roots(a, b, c)[2]
+
+
+@jit
+def _ray_geom(kind, pos, mat, size, px, py, pz, vx, vy, vz):
+    """Distance along the ray (p, v) to geom `kind` at pos (3,) with rotation mat (9,) and size (3,); -1: no hit."""
+    if kind == _GEOM_SPHERE:
+        return _ray_sphere(pos[0], pos[1], pos[2], size[0] * size[0], px, py, pz, vx, vy, vz)
+    if kind == _GEOM_CAPSULE:
+        outer = size[0] + size[1]
+        if _ray_sphere(pos[0], pos[1], pos[2], outer * outer, px, py, pz, vx, vy, vz) < 0:
+            return -1.0
+    elif kind == _GEOM_CYLINDER:
+        if _ray_sphere(pos[0], pos[1], pos[2], size[0] * size[0] + size[1] * size[1], px, py, pz, vx, vy, vz) < 0:
+            return -1.0
+    elif kind == _GEOM_BOX:
+        if _ray_sphere(pos[0], pos[1], pos[2], size[0] * size[0] + size[1] * size[1] + size[2] * size[2],
+                       px, py, pz, vx, vy, vz) < 0:
+            return -1.0
+    # The ray in the geom's frame: mat' (p - pos) and mat' v.
+    dx, dy, dz = px - pos[0], py - pos[1], pz - pos[2]
+    l0 = mat[0] * dx + mat[3] * dy + mat[6] * dz
+    l1 = mat[1] * dx + mat[4] * dy + mat[7] * dz
+    l2 = mat[2] * dx + mat[5] * dy + mat[8] * dz
+    w0 = mat[0] * vx + mat[3] * vy + mat[6] * vz
+    w1 = mat[1] * vx + mat[4] * vy + mat[7] * vz
+    w2 = mat[2] * vx + mat[5] * vy + mat[8] * vz
+    if kind == _GEOM_ELLIPSOID:
+        s0, s1, s2 = 1 / (size[0] * size[0]), 1 / (size[1] * size[1]), 1 / (size[2] * size[2])
+        a = s0 * w0 * w0 + s1 * w1 * w1 + s2 * w2 * w2
+        b = s0 * w0 * l0 + s1 * w1 * l1 + s2 * w2 * l2
+        c = s0 * l0 * l0 + s1 * l1 * l1 + s2 * l2 * l2 - 1
+        return _quadratic_roots(a, b, c)[2]
+    x = -1.0
+    if kind == _GEOM_BOX:
+        for i in range(3):
+            li, wi = (l0, w0) if i == 0 else ((l1, w1) if i == 1 else (l2, w2))
+            if abs(wi) <= _MJ_MINVAL:
+                continue
+            # The two other axes of face i.
+            la, wa, sa = (l1, w1, size[1]) if i == 0 else (l0, w0, size[0])
+            lb, wb, sb = (l1, w1, size[1]) if i == 2 else (l2, w2, size[2])
+            for side in (-1.0, 1.0):
+                sol = (side * size[i] - li) / wi
+                if sol >= 0 and abs(la + sol * wa) <= sa and abs(lb + sol * wb) <= sb and (x < 0 or sol < x):
+                    x = sol
+        return x
+    # Capsule and cylinder: the round side first.
+    a = w0 * w0 + w1 * w1
+    b = w0 * l0 + w1 * l1
+    c = l0 * l0 + l1 * l1 - size[0] * size[0]
+    if kind == _GEOM_CYLINDER:
+        if abs(w2) > _MJ_MINVAL:  # flat ends
+            for side in (-1.0, 1.0):
+                sol = (side * size[1] - l2) / w2
+                if sol >= 0:
+                    e0, e1 = l0 + sol * w0, l1 + sol * w1
+                    if e0 * e0 + e1 * e1 <= size[0] * size[0] and (x < 0 or sol < x):
+                        x = sol
+        sol = _quadratic_roots(a, b, c)[2]
+        if sol >= 0 and abs(l2 + sol * w2) <= size[1] and (x < 0 or sol < x):
+            x = sol
+        return x
+    sol = _quadratic_roots(a, b, c)[2]
+    if sol >= 0 and abs(l2 + sol * w2) <= size[1]:
+        x = sol
+    # The two hemispherical caps, each only on its own side of the round part.
+    a = w0 * w0 + w1 * w1 + w2 * w2
+    for side in (1.0, -1.0):
+        e2 = l2 - size[1] if side > 0 else l2 + size[1]
+        b = w0 * l0 + w1 * l1 + w2 * e2
+        c = l0 * l0 + l1 * l1 + e2 * e2 - size[0] * size[0]
+        r0, r1, _ = _quadratic_roots(a, b, c)
+        for r in (r0, r1):
+            if r >= 0 and (l2 + r * w2 >= size[1] if side > 0 else l2 + r * w2 <= -size[1]) and (x < 0 or r < x):
+                x = r
+    return x
+
+
+@jit
+def _segment_misses_sphere(cx, cy, cz, radius, ox, oy, oz, ux, uy, uz, length):
+    """Whether the segment o + s u, 0 <= s <= length (u a unit vector), stays clear of a sphere."""
+    dx, dy, dz = cx - ox, cy - oy, cz - oz
+    along = dx * ux + dy * uy + dz * uz
+    r = radius + _CULL_SLACK_M
+    if along + r < 0 or along - r > length:
+        return True
+    return dx * dx + dy * dy + dz * dz - along * along > r * r
+
+
+@jit
+def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_xpos, geom_xmat, geom_size,
+                        geom_rbound, geom_person, geom_body, groups, margin, occluded, self_occluded, geomid, dist):
+    """Occlusion flags of keypoints seen from camera centres (see the section comment).
+
+    origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
+    cast, person (R, N // J) person id of each row of J keypoints; kp_bodies (J, 2) body and parent body
+    of each keypoint; geom_* (G, ...) the scene's geoms (xmat rows of 9); groups (K + 1,) starts of
+    contiguous geom groups (a person's geoms, the store's) for the culling; margin: self_hit_margin_m.
+    Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
+    than the keypoint) and its distance dist (R, N).
+    """
+    K = groups.shape[0] - 1
+    centre = np.empty((K, 3))
+    radius = np.zeros(K)
+    for k in range(K):  # a bounding sphere per group: around its geoms' bounding spheres
+        lo = np.full(3, np.inf)
+        hi = np.full(3, -np.inf)
+        for g in range(groups[k], groups[k + 1]):
+            for i in range(3):
+                lo[i] = min(lo[i], geom_xpos[g, i] - geom_rbound[g])
+                hi[i] = max(hi[i], geom_xpos[g, i] + geom_rbound[g])
+        for i in range(3):
+            centre[k, i] = 0.5 * (lo[i] + hi[i])
+        for g in range(groups[k], groups[k + 1]):
+            d = math.sqrt((geom_xpos[g, 0] - centre[k, 0]) ** 2 + (geom_xpos[g, 1] - centre[k, 1]) ** 2
+                          + (geom_xpos[g, 2] - centre[k, 2]) ** 2) + geom_rbound[g]
+            radius[k] = max(radius[k], d)
+    for r in range(points.shape[0]):
+        ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        for n in range(points.shape[1]):
+            occluded[r, n] = False
+            self_occluded[r, n] = False
+            geomid[r, n] = -1
+            dist[r, n] = -1.0
+            if not mask[r, n]:
+                continue
+            vx, vy, vz = points[r, n, 0] - ox, points[r, n, 1] - oy, points[r, n, 2] - oz
+            length = math.sqrt(vx * vx + vy * vy + vz * vz)
+            ux, uy, uz = vx / length, vy / length, vz / length
+            best, best_g = -1.0, -1
+            for k in range(K):
+                if _segment_misses_sphere(centre[k, 0], centre[k, 1], centre[k, 2], radius[k], ox, oy, oz,
+                                          ux, uy, uz, length):
+                    continue
+                for g in range(groups[k], groups[k + 1]):
+                    if _segment_misses_sphere(geom_xpos[g, 0], geom_xpos[g, 1], geom_xpos[g, 2], geom_rbound[g],
+                                              ox, oy, oz, ux, uy, uz, length):
+                        continue
+                    x = _ray_geom(geom_type[g], geom_xpos[g], geom_xmat[g], geom_size[g], ox, oy, oz, ux, uy, uz)
+                    if x >= 0 and (best < 0 or x < best):
+                        best, best_g = x, g
+            if best_g < 0 or not best < length:
+                continue
+            geomid[r, n] = best_g
+            dist[r, n] = best
+            own = person[r, n // J]
+            if geom_person[best_g] != own:
+                occluded[r, n] = True
+            else:
+                body = geom_body[best_g]
+                j = n % J
+                near = (body == kp_bodies[j, 0] or body == kp_bodies[j, 1]) and length - best <= margin
+                self_occluded[r, n] = not near

@@ -131,7 +131,7 @@ class World:
         _pose_kernel(no_slot, no_slot, np.zeros(0), np.zeros(0), 0.0, np.zeros(0, dtype=bool), np.zeros(0),
                      np.zeros(0, dtype=np.int64), self._fk_body, _FK_TABLES, _FK_HINGES, self._body_pos, self._kp_sites,
                      self._site_pos, np.empty((0, 17, 3)))
-        self._ray = _RayScene(self)
+        self._ray: _RayScene | None = None  # built when first asked for
 
     # -- model -------------------------------------------------------------------------------------
 
@@ -223,7 +223,8 @@ class World:
         _pose_kernel(q0, cur.qpos, h0, cur.heading, a, present, self._data.qpos, order, self._fk_body, _FK_TABLES,
                      _FK_HINGES, self._body_pos, self._kp_sites, self._site_pos, poses)
         self._kinematics_stale = True
-        self._ray.stale = True
+        if self._ray is not None:
+            self._ray.stale = True
         self._present = present
         return PoseTruth(t_s=float(t_s), person_ids=cur.person_id[order], poses=poses)
 
@@ -241,7 +242,15 @@ class World:
         distances, but grouped one body per person slot with bounding volumes, which lets MuJoCo skip the
         people a ray passes far from (in `model` no geom collides, so MuJoCo builds no bounding volumes
         and every ray is tested against every geom)."""
+        if self._ray is None:
+            self._ray = _RayScene(self)
         return self._ray.synced()
+
+    def geom_groups(self) -> np.ndarray:
+        """(K + 1,) int64 starts of the contiguous runs of geoms that move together (the store's, then one
+        per person slot), ending with ngeom: the ray caster culls a whole run by one bounding sphere."""
+        slot = self._geom_slot
+        return np.concatenate([[0], np.nonzero(slot[1:] != slot[:-1])[0] + 1, [slot.size]]).astype(np.int64)
 
     def geom_person_ids(self) -> np.ndarray:
         """(ngeom,) int64: the person each geom's body belongs to now; -1 for store geoms and parked bodies."""
