@@ -591,3 +591,17 @@ def test_fast_message_path_writes_what_the_mcap_writer_writes(tmp_path, world, m
     monkeypatch.setattr(recording, "_fast_path", lambda writer, chunk_size: None)
     slow = write_recording(tmp_path / "slow.mcap", cameras, events, chunk_size=4096).read_bytes()
     assert fast == slow
+
+
+def test_a_failure_on_the_chunk_thread_is_raised_and_leaves_no_file(tmp_path, world, monkeypatch):
+    """Chunks are compressed and written on a thread; its failure (a full disk, say) reaches the caller
+    as the exception it was, and the file is dropped as for any other failure."""
+    cameras, events = world
+
+    def disk_full(data):
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(recording, "COMPRESSION_CODEC", disk_full)
+    with pytest.raises(OSError, match="No space left"):
+        write_recording(tmp_path / "rec.mcap", cameras, events, chunk_size=4096)
+    assert list(tmp_path.iterdir()) == []
