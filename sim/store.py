@@ -17,16 +17,7 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from sim.types import Box, BoxKind
-
-try:  # numba compiles the numeric kernels of the crowd (plain Python runs the same code, slowly, without it)
-    from numba import njit as _njit
-
-    def jit(function):
-        """Compiles a numeric kernel once (cached on disk); the kernels are written for plain Python too."""
-        return _njit(cache=True, nogil=True, error_model="numpy")(function)
-except ImportError:  # pragma: no cover - numba is a dependency; this keeps the code importable without it
-    def jit(function):
-        return function
+from tracker.jit import jit  # numba compiles the crowd's numeric kernels (plain Python runs them without it)
 
 # Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast distance fields.
 GRID_CELL_M = 0.1

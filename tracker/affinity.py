@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tracker.jit import jit
+
 
 def affinity_2d(
     prev_px: np.ndarray,
@@ -111,6 +113,79 @@ def combine(a2d: np.ndarray | None, a3d: np.ndarray, normalize: bool) -> np.ndar
         count = np.sum(np.isfinite(a3d), axis=-1)
         total = np.where(count > 0, total / np.maximum(count, 1), 0.0)
     return total
+
+
+@jit
+def affinity_matrix(
+    positions, velocities, joint_stamp_s, seen_stamp_s, prev_px, prev_stamp_s, camera, det_px, world_from_pixel, center,
+    stamp_s, w_2d, alpha_2d_px_per_s, alpha_2d_floor_px, w_3d, alpha_3d_m, lambda_a_per_s, max_predict_s, normalize,
+    out,
+):
+    """Eq. (1)-(5) in one pass from the tracker's target arrays: `combine` of `affinity_2d` and `affinity_3d`
+    after `predict_positions` and `geometry.ray_directions` (compiled kernel, no intermediate (T, D, J) arrays).
+
+    Args:
+        positions, velocities: (T, J, 3) X_t' (NaN unknown) and V_t'; joint_stamp_s: (T, J) t' of X_t', s.
+        seen_stamp_s: (T, J) last observation of each joint, from which eq. (4)'s time penalty counts, s.
+        prev_px: (T, C, J, 2) last matched undistorted joints per camera; prev_stamp_s: (T, C, J) their stamps
+            (NaN none); only camera `camera` is read (eq. 2).
+        det_px: (D, J, 2) the frame's undistorted joints (NaN missing).
+        world_from_pixel: (3, 3) R^T K^-1 of the camera; center: (3,) its centre (eq. 3).
+        stamp_s: t, s. The weights and thresholds as in `affinity_2d`, `affinity_3d` and `predict_positions`.
+        normalize: as `combine`.
+        out: (T, D) the affinity matrix, written.
+    """
+    T, J = positions.shape[0], positions.shape[1]
+    D = det_px.shape[0]
+    rays = np.empty((D, J, 3))
+    for d in range(D):
+        for j in range(J):
+            x, y = det_px[d, j, 0], det_px[d, j, 1]
+            for k in range(3):  # eq. (3): direction R^T K^-1 x̃, normalised
+                rays[d, j, k] = x * world_from_pixel[k, 0] + y * world_from_pixel[k, 1] + world_from_pixel[k, 2]
+            norm = np.sqrt(rays[d, j, 0] ** 2 + rays[d, j, 1] ** 2 + rays[d, j, 2] ** 2)
+            for k in range(3):
+                rays[d, j, k] /= norm
+    sum_3d = np.empty(D)
+    sum_2d = np.empty(D)
+    count = np.empty(D)
+    for t in range(T):
+        sum_3d[:] = 0.0
+        sum_2d[:] = 0.0
+        count[:] = 0.0
+        for j in range(J):
+            # Eq. (5): X̂_t = X_t' + V_t' (t - t'), the horizon clipped to [0, max_predict_s].
+            horizon = min(max(stamp_s - joint_stamp_s[t, j], 0.0), max_predict_s)
+            r0 = positions[t, j, 0] + velocities[t, j, 0] * horizon - center[0]
+            r1 = positions[t, j, 1] + velocities[t, j, 1] * horizon - center[1]
+            r2 = positions[t, j, 2] + velocities[t, j, 2] * horizon - center[2]
+            if np.isfinite(r0 + r1 + r2):
+                rel_sq = r0 * r0 + r1 * r1 + r2 * r2
+                decay_3d = np.exp(-lambda_a_per_s * max(stamp_s - seen_stamp_s[t, j], 0.0))
+                for d in range(D):
+                    # Eq. (4): d_l = |rel × d| = sqrt(|rel|² - (rel·d)²) for the unit ray direction d.
+                    along = r0 * rays[d, j, 0] + r1 * rays[d, j, 1] + r2 * rays[d, j, 2]
+                    a = w_3d * (1.0 - np.sqrt(max(rel_sq - along * along, 0.0)) / alpha_3d_m) * decay_3d
+                    if not np.isnan(a):
+                        sum_3d[d] += a
+                        count[d] += 1.0
+            prev_s = prev_stamp_s[t, camera, j]
+            if not np.isnan(prev_s):
+                # Eq. (2); t > t'' for frames of one camera, a repeated stamp counts as one microsecond apart.
+                dt = max(stamp_s - prev_s, 1e-6)
+                threshold = max(alpha_2d_px_per_s * dt, alpha_2d_floor_px)
+                decay_2d = np.exp(-lambda_a_per_s * dt)
+                px, py = prev_px[t, camera, j, 0], prev_px[t, camera, j, 1]
+                for d in range(D):
+                    dx, dy = det_px[d, j, 0] - px, det_px[d, j, 1] - py
+                    a = w_2d * (1.0 - np.sqrt(dx * dx + dy * dy) / threshold) * decay_2d
+                    if not np.isnan(a):
+                        sum_2d[d] += a
+        for d in range(D):  # eq. (1)
+            total = sum_3d[d] + sum_2d[d]
+            if normalize:
+                total = total / count[d] if count[d] > 0 else 0.0
+            out[t, d] = total
 
 
 def epipolar_affinity(

@@ -20,7 +20,6 @@ A frame whose joint count differs from the skeleton's is a programming error: Va
 from __future__ import annotations
 
 import logging
-import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -29,14 +28,14 @@ from tracker import affinity as aff
 from tracker import lifecycle
 from tracker.association import associate
 from tracker.config import TrackerConfig, Triangulation
-from tracker.geometry import fundamental_matrix, ray_directions, undistort_points, world_from_pixel_matrix
+from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.triangulation import camera_quadrics, triangulate_observations_robust
+from tracker.kernels import predict_rows, update_matched
+from tracker.triangulation import camera_quadrics, quadric_traces
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
 
-_MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
 _DEFAULT_CONFIG = TrackerConfig()
 
 
@@ -96,14 +95,25 @@ class Tracker:
         self.config = config
         self.skeleton = skeleton
         self._index = {name: i for i, name in enumerate(names)}
-        self._bones = np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2)
-        # (2, B, J) one-hot first and second joint of each bone, to count broken bones per joint
-        self._bone_ends = np.eye(skeleton.num_joints)[self._bones.T] if self._bones.size else None
+        self._bones = np.ascontiguousarray(np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2))
         C, J = len(self.cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))
-        self._world_from_pixel = [world_from_pixel_matrix(cam) for cam in self.cameras]  # eq. (3)
-        self._quadrics = camera_quadrics(self._P)  # (C, 5, 4, 4), eq. (9) normal-matrix constants
+        # Per-camera constants of the compiled kernels: eq. (3) R^T K^-1 and centre, lens model, eq. (9) quadrics.
+        self._world_from_pixel = np.stack([world_from_pixel_matrix(cam) for cam in self.cameras]) if C else None
         self._centers = np.stack([c.center_world for c in self.cameras]) if C else np.zeros((0, 3))
+        self._K = [np.ascontiguousarray(cam.K, dtype=np.float64) for cam in self.cameras]
+        self._dist = [np.ascontiguousarray(cam.dist, dtype=np.float64) for cam in self.cameras]
+        self._quadrics = camera_quadrics(self._P)  # (C, 5, 4, 4), eq. (9) normal-matrix constants
+        self._quadric_traces = quadric_traces(self._quadrics)  # (C, 5)
+        cfg = config
+        self._affinity_params = (float(cfg.w_2d), float(cfg.alpha_2d_px_per_s), float(cfg.alpha_2d_floor_px),
+                                 float(cfg.w_3d), float(cfg.alpha_3d_m), float(cfg.lambda_a_per_s),
+                                 float(cfg.max_predict_s), bool(cfg.normalize_affinity))
+        self._update_params = (float(cfg.max_observation_age_s), float(cfg.lambda_t_per_s),
+                               cfg.triangulation is Triangulation.VELOCITY, int(cfg.min_views),
+                               float(cfg.reject_factor), float(cfg.reject_floor_px), float(cfg.max_bone_m),
+                               float(cfg.velocity_window_s), float(cfg.max_speed_m_per_s), float(cfg.stale_after_s),
+                               float(cfg.max_predict_s))
         self._F = np.zeros((C, C, 3, 3))  # F[a, b]: x_b^T F x_a = 0 (eq. S1)
         for a in range(C):
             for b in range(C):
@@ -156,16 +166,14 @@ class Tracker:
             self._set_pool(c, np.zeros((0, J, 2)), np.zeros(0, dtype=np.int64), t)
             return self._emit(t, frame.camera, assigned)
 
-        det_px = self._clean(frame, c)  # (D, J, 2) undistorted, NaN for unusable joints
+        det_px, usable = self._clean(frame, c)  # (D, J, 2) undistorted, NaN for unusable joints; (D,) counts
         matched_rows, matched_cols = self._associate(c, det_px, t)
         if matched_rows.size:
-            self._update_targets(c, matched_rows, det_px[matched_cols], t)
+            self._update_targets(c, matched_rows, matched_cols, det_px, t)
             assigned[matched_cols] = self._targets.ids[matched_rows]
-        free = np.ones(D, dtype=bool)
-        free[matched_cols] = False
-        unmatched = np.flatnonzero(free)
-        enough = np.sum(np.isfinite(det_px[unmatched, :, 0]), axis=1) >= self.config.init_min_joints
-        unmatched = unmatched[enough]
+        enough = usable >= self.config.init_min_joints
+        enough[matched_cols] = False
+        unmatched = np.flatnonzero(enough)
         self._set_pool(c, det_px[unmatched], unmatched, t)
         if unmatched.size:
             for new_id, frame_index in self._initialize(c, t):
@@ -186,13 +194,15 @@ class Tracker:
             return f"more than max_lateness_s={self.config.max_lateness_s} s older than stamp {self._newest_s}"
         return None
 
-    def _clean(self, frame: Frame, c: int) -> np.ndarray:
-        """(D, J, 2) undistorted pixels with NaN where the joint is missing, non-finite or below threshold."""
-        scores = np.clip(np.nan_to_num(frame.scores, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
-        kp = frame.keypoints_px
-        ok = np.all(np.isfinite(kp), axis=-1) & (scores >= self.config.score_threshold) & (scores > 0)
-        kp = np.where(ok[..., None], kp, np.nan)
-        return undistort_points(self.cameras[c], kp)
+    def _clean(self, frame: Frame, c: int) -> tuple[np.ndarray, np.ndarray]:
+        """(D, J, 2) undistorted pixels, NaN where the joint is missing, non-finite or below threshold (scores
+        NaN read as 0, clipped to [0, 1]), and the (D,) number of usable joints of each detection."""
+        kp, scores = frame.keypoints_px, frame.scores
+        out = np.empty(kp.shape)
+        usable = undistort_detections(kp if kp.flags.c_contiguous else np.ascontiguousarray(kp),
+                                      scores if scores.flags.c_contiguous else np.ascontiguousarray(scores),
+                                      float(self.config.score_threshold), self._K[c], self._dist[c], out)
+        return out, usable
 
     def _advance_lifecycle(self, t: float) -> None:
         tg = self._targets
@@ -205,137 +215,33 @@ class Tracker:
 
     def _associate(self, c: int, det_px: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Eq. (1)-(5) affinity of every (target, detection) pair, then the Hungarian algorithm."""
-        tg, cfg = self._targets, self.config
+        tg = self._targets
         if not len(tg):
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-        rays = ray_directions(self.cameras[c], det_px, self._world_from_pixel[c])  # (D, J, 3), eq. (3)
-        predicted = aff.predict_positions(tg.pos, tg.vel, tg.joint_s, t, cfg.max_predict_s)  # eq. (5)
         # Eq. (4)'s time penalty counts from the joint's last observation t', also for a joint carried with
         # the body since (its position is a guess, so it keeps losing weight as in the paper).
-        a3d = aff.affinity_3d(predicted, tg.seen_s, self._centers[c], rays, t, cfg.w_3d, cfg.alpha_3d_m,
-                              cfg.lambda_a_per_s)  # eq. (4)
-        prev_s = tg.obs_s[:, c]
-        a2d = None
-        if np.any(np.isfinite(prev_s)):
-            a2d = aff.affinity_2d(tg.obs_px[:, c], prev_s, det_px, t, cfg.w_2d, cfg.alpha_2d_px_per_s,
-                                  cfg.lambda_a_per_s, cfg.alpha_2d_floor_px)  # eq. (2)
-        matrix = aff.combine(a2d, a3d, cfg.normalize_affinity)  # eq. (1), (T, D)
-        return associate(matrix)
+        matrix = np.empty((len(tg), det_px.shape[0]))
+        aff.affinity_matrix(tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s, c, det_px,
+                            self._world_from_pixel[c], self._centers[c], t, *self._affinity_params, matrix)
+        return associate(matrix)  # eq. (1), (T, D)
 
-    def _update_targets(self, c: int, rows: np.ndarray, det_px: np.ndarray, t: float) -> None:
-        """Incremental 3D reconstruction (eq. 6-11) of the matched targets, then velocity and lifecycle."""
-        tg, cfg = self._targets, self.config
-        seen = np.isfinite(det_px[..., 0])  # (M, J)
-        obs_px = tg.obs_px[rows]
-        obs_s = tg.obs_s[rows]
-        obs_px[:, c] = np.where(seen[..., None], det_px, obs_px[:, c])
-        obs_s[:, c] = np.where(seen, t, obs_s[:, c])
-        tg.obs_px[rows] = obs_px
-        tg.obs_s[rows] = obs_s
-        # Eq. (6): the new point plus the last point of every other camera, not older than the age limit.
-        # Only the joints the new detection holds change; only cameras that see them take part.
-        # Flat list of the (target, joint, camera) observations that take part, sorted by (target, joint).
-        with np.errstate(invalid="ignore"):
-            fresh = (t - obs_s <= cfg.max_observation_age_s).transpose(0, 2, 1) & seen[..., None]  # (M, J, C)
-        m_obs, j_obs, c_obs = np.nonzero(fresh)
-        M, J = seen.shape
-        velocities = tg.vel[rows].reshape(M * J, 3) if cfg.triangulation is Triangulation.VELOCITY else None
-        plain, compensated = triangulate_observations_robust(
-            self._P, m_obs * J + j_obs, c_obs, obs_px[m_obs, c_obs, j_obs], obs_s[m_obs, c_obs, j_obs], M * J, t,
-            cfg.lambda_t_per_s, velocities, cfg.min_views, self._quadrics, cfg.reject_factor, cfg.reject_floor_px)
-        X = plain.reshape(M, J, 3)  # NaN for joints not seen now (no observation takes part)
-        update = seen & np.isfinite(X[..., 0])  # (M, J)
-        samples = X  # the velocity fit always uses the eq. (10)-(11) estimates
-        if compensated is not None:
-            # The compensated estimate is not fed back into the velocity fit: a velocity error would move
-            # the stale points, whose shifted estimate would grow the velocity error (a positive loop).
-            Xv = compensated.reshape(M, J, 3)
-            X = np.where(np.isfinite(Xv), Xv, X)
-        pos = tg.pos[rows]
-        update &= ~self._breaks_bones(pos, X, update)
-        pos[update] = X[update]
-        joint_s = tg.joint_s[rows]
-        joint_s[update] = t
-        seen_s = tg.seen_s[rows]
-        seen_s[update] = t
-        tg.pos[rows] = pos
-        tg.joint_s[rows] = joint_s
-        tg.seen_s[rows] = seen_s
-        self._update_velocity(rows, samples, update, t)
-        tg.last_update_s[rows] = t
-        tg.num_updates[rows] += 1
-        tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, cfg)
+    def _update_targets(self, c: int, rows: np.ndarray, cols: np.ndarray, det_px: np.ndarray, t: float) -> None:
+        """Incremental 3D reconstruction (eq. 6-11) of the matched targets, then velocity and lifecycle.
 
-    def _breaks_bones(self, old: np.ndarray, new: np.ndarray, update: np.ndarray) -> np.ndarray:
-        """(M, J) joints whose new estimate would make a bone longer than `max_bone_m` that was not already.
-
-        A gross 2D error seen in two views triangulates far off; a joint of the face seen by few cameras may
-        then keep that value for seconds. The gate keeps the previous estimate instead (beyond the paper).
+        `kernels.update_matched` does it in place: the detection's joints become the camera's latest points;
+        each joint it holds is triangulated from the latest point of every camera not older than
+        `max_observation_age_s`; an estimate that would make a bone longer than `max_bone_m` is not taken (a
+        gross 2D error seen in two views, beyond the paper); the paper's estimates feed the least-squares
+        velocity of eq. (5); a joint unseen for `stale_after_s` moves with the body (beyond the paper).
 
         Args:
-            old: (M, J, 3) current joints; new: (M, J, 3) new estimates; update: (M, J) which would change.
+            rows: (M,) matched targets; cols: (M,) their detections in det_px (D, J, 2).
         """
-        if self._bones.size == 0:
-            return np.zeros_like(update)
-        a, b = self._bones[:, 0], self._bones[:, 1]
-        cand = np.where(update[..., None], new, old)
-        with np.errstate(invalid="ignore"):
-            long_new = np.linalg.norm(cand[:, a] - cand[:, b], axis=-1) > self.config.max_bone_m  # (M, B)
-            long_old = np.linalg.norm(old[:, a] - old[:, b], axis=-1) > self.config.max_bone_m
-        broken = long_new & ~long_old
-        hits = (broken & update[:, a]) @ self._bone_ends[0] + (broken & update[:, b]) @ self._bone_ends[1]  # (M, J)
-        return hits > 0
-
-    def _update_velocity(self, rows: np.ndarray, samples: np.ndarray, update: np.ndarray, t: float) -> None:
-        """Eq. (5)'s V: linear least squares of joint position on time over the recent history.
-
-        Args:
-            rows: (M,) matched targets; samples: (M, J, 3) their new joint estimates; update: (M, J) which are new.
-        """
-        tg, cfg = self._targets, self.config
-        slot = tg.hist_next[rows]
-        hp = tg.hist_pos[rows]
-        hs = tg.hist_s[rows]
-        m = np.arange(rows.size)
-        hp[m, slot] = np.where(update[..., None], samples, np.nan)
-        hs[m, slot] = np.where(update, t, np.nan)
-        tg.hist_pos[rows] = hp
-        tg.hist_s[rows] = hs
-        tg.hist_next[rows] = (slot + 1) % cfg.velocity_history
-        with np.errstate(invalid="ignore"):
-            use = t - hs <= cfg.velocity_window_s  # (M, H, J); False for empty slots (NaN)
-        n = use.sum(axis=1)  # (M, J)
-        ts = np.where(use, hs, 0.0)
-        tmean = ts.sum(axis=1) / np.maximum(n, 1)
-        dt = np.where(use, ts - tmean[:, None, :], 0.0)  # (M, H, J)
-        xs = np.where(use[..., None], hp, 0.0)  # (M, H, J, 3)
-        xmean = xs.sum(axis=1) / np.maximum(n, 1)[..., None]
-        sxx = np.einsum("mhj,mhj->mj", dt, dt)  # (M, J)
-        # Σ dt (x - x̄) = Σ dt x - x̄ Σ dt, the second sum zero up to rounding (kept for equivalence).
-        sxy = np.einsum("mhj,mhjk->mjk", dt, xs) - xmean * dt.sum(axis=1)[..., None]  # (M, J, 3)
-        span = np.where(use, hs, -np.inf).max(axis=1) - np.where(use, hs, np.inf).min(axis=1)
-        ok = (n >= 2) & (span >= _MIN_VELOCITY_SPAN_S) & (sxx > 0)
-        v = np.where(ok[..., None], sxy / np.where(sxx > 0, sxx, 1.0)[..., None], 0.0)
-        speed = np.linalg.norm(v, axis=-1, keepdims=True)
-        v = np.where(speed > cfg.max_speed_m_per_s, v * cfg.max_speed_m_per_s / np.maximum(speed, 1e-12), v)
-        vel = tg.vel[rows]
-        vel[update] = v[update]
-        tg.vel[rows] = vel
-        # A joint nobody has seen for `stale_after_s` (a face turned away, a hand behind the body) moves with
-        # the body (beyond the paper): at each update of its target it is carried forward with the median
-        # velocity of the target's fresh joints, so that it follows the body's path, turns included.
-        fresh = (t - tg.seen_s[rows]) <= cfg.stale_after_s  # (M, J)
-        stale = ~fresh & np.isfinite(tg.pos[rows, :, 0])
-        if stale.any():
-            with warnings.catch_warnings():  # a target with no fresh joint: all-NaN median, handled below
-                warnings.simplefilter("ignore", RuntimeWarning)
-                body = np.nanmedian(np.where(fresh[..., None], vel, np.nan), axis=1)  # (M, 3)
-            body = np.where(np.isfinite(body), body, 0.0)[:, None, :]
-            pos, joint_s = tg.pos[rows], tg.joint_s[rows]
-            dt = np.clip(t - joint_s, 0.0, cfg.max_predict_s)[..., None]
-            tg.pos[rows] = np.where(stale[..., None], pos + body * dt, pos)
-            tg.joint_s[rows] = np.where(stale, t, joint_s)
-            tg.vel[rows] = np.where(stale[..., None], body, vel)
+        tg = self._targets
+        update_matched(rows, cols, det_px, c, t, tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s,
+                       tg.hist_pos, tg.hist_s, tg.hist_next, tg.last_update_s, tg.num_updates, self._P,
+                       self._quadrics, self._quadric_traces, self._bones, *self._update_params)
+        tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, self.config)
 
     def _set_pool(self, c: int, px: np.ndarray, frame_index: np.ndarray, t: float) -> None:
         self._pool_px[c] = px
@@ -448,12 +354,11 @@ class Tracker:
         return int(lost[best]) if np.isfinite(dist[best]) else None
 
     def _emit(self, t: float, camera: str, assigned: np.ndarray) -> list[Target]:
-        tg, cfg = self._targets, self.config
+        tg = self._targets
         confirmed = np.flatnonzero(tg.state == lifecycle.CONFIRMED)
         targets = []
         if confirmed.size:
-            poses = aff.predict_positions(tg.pos[confirmed], tg.vel[confirmed], tg.joint_s[confirmed], t,
-                                          cfg.max_predict_s)
+            poses = predict_rows(tg.pos, tg.vel, tg.joint_s, confirmed, t, self._update_params[-1])  # eq. (5)
             state = lifecycle.to_state(lifecycle.CONFIRMED)
             targets = [Target(id=target_id, pose=pose, stamp_s=t, state=state)
                        for target_id, pose in zip(tg.ids[confirmed].tolist(), poses)]

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from tracker.jit import jit
+
 
 def dlt_rows(P: np.ndarray, points_px: np.ndarray) -> np.ndarray:
     """Eq. (9): the two rows x p3ᵀ - p1ᵀ and y p3ᵀ - p2ᵀ of each view.
@@ -197,7 +199,7 @@ def triangulate_observations(
     """Eq. (6)-(11) for many points at once, from a flat list of their observations (no missing entries).
 
     Each observation adds its two weighted rows' outer products to its point's 4x4 normal matrix (eq. 8, 10),
-    written as a weighted sum of per-camera constant matrices (`camera_quadrics`).
+    written as a weighted sum of per-camera constant matrices (`camera_quadrics`); see `triangulate_point`.
 
     Args:
         P: (C, 3, 4) projection matrices.
@@ -216,54 +218,8 @@ def triangulate_observations(
         (paper estimate (N, 3), velocity-compensated estimate (N, 3) or None without velocities); NaN for a
         point with fewer than `min_views` observations.
     """
-    plain = np.full((num_groups, 3), np.nan)
-    compensated = None if velocities is None else np.full((num_groups, 3), np.nan)
-    counts = np.bincount(group, minlength=num_groups)
-    ok = counts >= min_views
-    if not ok.any():
-        return plain, compensated
-    keep = ok[group]
-    if not keep.all():
-        group, cam, points_px, stamps_s = group[keep], cam[keep], points_px[keep], stamps_s[keep]
-    targets = np.flatnonzero(ok)
-    slot = (np.cumsum(ok) - 1)[group]  # (K,) row of each observation's point among `targets`
-    Q = camera_quadrics(P) if quadrics is None else quadrics  # (C, 5, 4, 4)
-    C = Q.shape[0]
-    dt = np.maximum(stamp_s - stamps_s, 0.0)  # (K,)
-    x0, x1 = points_px[:, 0], points_px[:, 1]
-    # Eq. (9) row r = x_r p3 - p_r, so rᵀr = x_r² p3ᵀp3 - 2 x_r sym(p_rᵀp3) + p_rᵀp_r and ||r||² is the same
-    # combination of the quadrics' traces. Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||².
-    tr = np.trace(Q, axis1=2, axis2=3)[cam]  # (K, 5)
-    decay = np.exp(-2.0 * lambda_t_per_s * dt)
-    w0 = decay / (x0 * x0 * tr[:, 0] - 2.0 * x0 * tr[:, 1] + tr[:, 3])
-    w1 = decay / (x1 * x1 * tr[:, 0] - 2.0 * x1 * tr[:, 2] + tr[:, 4])
-    coef = np.stack([w0 * x0 * x0 + w1 * x1 * x1, -2.0 * w0 * x0, -2.0 * w1 * x1, w0, w1], axis=-1)  # (K, 5)
-    # Sum over each point's observations (eq. 8, 10): one dense product (points, cameras x 5) @ (cameras x 5, 16).
-    moments = 1 if velocities is None else 3
-    table = np.zeros((moments, targets.size, C, 5))
-    table[0, slot, cam] = coef
-    if velocities is not None:
-        table[1, slot, cam] = coef * dt[:, None]
-        table[2, slot, cam] = coef * (dt * dt)[:, None]
-    sums = (table.reshape(moments * targets.size, C * 5) @ Q.reshape(C * 5, 16)).reshape(moments, -1, 4, 4)
-    M = sums[0]
-    if velocities is None:
-        plain[targets] = _smallest_eigenvector(M)
-        return plain, None
-    # Beyond the paper: row·[X - V dt_i; 1] = 0, i.e. rows r T_i with T_i = [[I, -V dt_i], [0, 1]], so the
-    # normal matrix Σ T_iᵀ A_i T_i follows from the moments Σ A_i, Σ dt_i A_i and Σ dt_i² A_i.
-    V = velocities[targets]  # (N', 3)
-    M1, M2 = sums[1], sums[2]
-    Mv = M.copy()
-    col = M[:, :3, 3] - np.einsum("nij,nj->ni", M1[:, :3, :3], V)
-    Mv[:, :3, 3] = col
-    Mv[:, 3, :3] = col
-    Mv[:, 3, 3] = (M[:, 3, 3] - 2.0 * np.einsum("ni,ni->n", M1[:, :3, 3], V)
-                   + np.einsum("ni,nij,nj->n", V, M2[:, :3, :3], V))
-    both = _smallest_eigenvector(np.concatenate([M, Mv]))
-    plain[targets] = both[: targets.size]
-    compensated[targets] = both[targets.size:]
-    return plain, compensated
+    return triangulate_observations_robust(P, group, cam, points_px, stamps_s, num_groups, stamp_s, lambda_t_per_s,
+                                           velocities, min_views, quadrics, 0.0, 1.0)
 
 
 def triangulate_observations_robust(
@@ -288,37 +244,208 @@ def triangulate_observations_robust(
     velocity when velocities are given. A point keeps its first estimate if fewer than `min_views` views
     would remain. Arguments as `triangulate_observations`; reject_factor 0 disables the second pass.
     """
-    args = (num_groups, stamp_s, lambda_t_per_s, velocities, min_views, quadrics)
-    plain, compensated = triangulate_observations(P, group, cam, points_px, stamps_s, *args)
-    if reject_factor <= 0 or group.size == 0:
-        return plain, compensated
-    X = (plain if compensated is None else compensated)[group]  # (K, 3)
-    if velocities is not None:
-        X = X - velocities[group] * np.maximum(stamp_s - stamps_s, 0.0)[:, None]
-    Pc = P[cam]  # (K, 3, 4)
-    proj = np.einsum("kij,kj->ki", Pc[:, :, :3], X) + Pc[:, :, 3]  # (K, 3)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        err = np.linalg.norm(proj[:, :2] / proj[:, 2:3] - points_px, axis=-1)  # (K,) pixels
-    err = np.where(np.isfinite(err), err, 0.0)
-    order = np.lexsort((err, group))  # by point, then error
-    counts = np.bincount(group, minlength=num_groups)
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    median = np.zeros(num_groups)
-    has = counts > 0
-    median[has] = err[order][starts[has] + (counts[has] - 1) // 2]  # lower median
-    drop = (err > reject_floor_px) & (err > reject_factor * median[group])
-    if not drop.any():
-        return plain, compensated
-    keep = ~drop
-    plain2, compensated2 = triangulate_observations(P, group[keep], cam[keep], points_px[keep], stamps_s[keep],
-                                                    *args)
-    redo = np.zeros(num_groups, dtype=bool)
-    redo[group[drop]] = True
-    redo &= np.isfinite(plain2[:, 0])
-    plain[redo] = plain2[redo]
-    if compensated is not None:
-        compensated[redo] = compensated2[redo]
-    return plain, compensated
+    P = np.ascontiguousarray(P, dtype=np.float64)
+    Q = camera_quadrics(P) if quadrics is None else quadrics
+    group = np.asarray(group, dtype=np.int64)
+    order = np.argsort(group, kind="stable")
+    starts = np.zeros(num_groups + 1, dtype=np.int64)
+    np.cumsum(np.bincount(group, minlength=num_groups), out=starts[1:])
+    points = np.array(np.asarray(points_px, dtype=np.float64)[order], order="C")
+    dts = np.maximum(stamp_s - np.asarray(stamps_s, dtype=np.float64)[order], 0.0)
+    use_velocity = velocities is not None
+    V = np.array(velocities, dtype=np.float64, order="C") if use_velocity else np.zeros((num_groups, 3))
+    plain = np.empty((num_groups, 3))
+    compensated = np.empty((num_groups, 3))
+    _triangulate_groups(P, np.ascontiguousarray(Q), quadric_traces(Q), starts, np.asarray(cam, dtype=np.int64)[order],
+                        points, dts, V, use_velocity, int(min_views), float(lambda_t_per_s), float(reject_factor),
+                        float(reject_floor_px), plain, compensated)
+    return plain, compensated if use_velocity else None
+
+
+@jit
+def _triangulate_groups(P, Q, Q_trace, starts, cam, points_px, dts, V, use_velocity, min_views, lambda_t_per_s,
+                        reject_factor, reject_floor_px, plain, compensated):
+    """`triangulate_point` for each group of observations cam/points_px/dts[starts[n]:starts[n + 1]]."""
+    work = np.empty((3, 4, 4))
+    size = 1
+    for n in range(starts.size - 1):
+        size = max(size, starts[n + 1] - starts[n])
+    cam_n, points_n, dts_n = np.empty(size, dtype=np.int64), np.empty((size, 2)), np.empty(size)
+    V_n, plain_n, compensated_n = np.empty(3), np.empty(3), np.empty(3)
+    for n in range(starts.size - 1):
+        a, num = starts[n], starts[n + 1] - starts[n]
+        for i in range(num):
+            cam_n[i], points_n[i, 0], points_n[i, 1], dts_n[i] = cam[a + i], points_px[a + i, 0], \
+                points_px[a + i, 1], dts[a + i]
+        V_n[0], V_n[1], V_n[2] = V[n, 0], V[n, 1], V[n, 2]
+        triangulate_point(P, Q, Q_trace, cam_n, points_n, dts_n, num, V_n, use_velocity, min_views, lambda_t_per_s,
+                          reject_factor, reject_floor_px, plain_n, compensated_n, work)
+        for k in range(3):
+            plain[n, k], compensated[n, k] = plain_n[k], compensated_n[k]
+
+
+@jit
+def triangulate_point(P, Q, Q_trace, cam, points_px, dts, num, V, use_velocity, min_views, lambda_t_per_s,
+                      reject_factor, reject_floor_px, plain, compensated, work):
+    """Eq. (6)-(11) for one point from its `num` observations, with the robust second pass (compiled kernel).
+
+    Args:
+        P: (C, 3, 4) projection matrices; Q: (C, 5, 4, 4) `camera_quadrics(P)`; Q_trace: (C, 5) their traces.
+        cam: (≥num,) camera of each observation; points_px: (≥num, 2) undistorted pixels; dts: (≥num,) t - t_i ≥ 0, s.
+        V: (3,) the point's velocity, m/s (read only when use_velocity).
+        use_velocity: also compute the velocity-compensated estimate.
+        min_views, lambda_t_per_s, reject_factor, reject_floor_px: as `triangulate_observations_robust`.
+        plain, compensated: (3,) outputs, NaN when not determined (compensated untouched without velocity).
+        work: (3, 4, 4) scratch.
+    """
+    _solve_observations(Q, Q_trace, cam, points_px, dts, num, V, use_velocity, min_views, lambda_t_per_s, plain,
+                        compensated, work)
+    if reject_factor <= 0.0 or num == 0:
+        return
+    X = compensated if use_velocity else plain
+    if not (np.isfinite(X[0]) and np.isfinite(X[1]) and np.isfinite(X[2])):
+        return  # no estimate: every error counts zero, nothing is dropped
+    err = np.empty(num)
+    for i in range(num):
+        k = cam[i]
+        Xi0, Xi1, Xi2 = X[0], X[1], X[2]
+        if use_velocity:  # the estimate moved back to the observation's time t_i
+            Xi0, Xi1, Xi2 = Xi0 - V[0] * dts[i], Xi1 - V[1] * dts[i], Xi2 - V[2] * dts[i]
+        u = P[k, 0, 0] * Xi0 + P[k, 0, 1] * Xi1 + P[k, 0, 2] * Xi2 + P[k, 0, 3]
+        v = P[k, 1, 0] * Xi0 + P[k, 1, 1] * Xi1 + P[k, 1, 2] * Xi2 + P[k, 1, 3]
+        w = P[k, 2, 0] * Xi0 + P[k, 2, 1] * Xi1 + P[k, 2, 2] * Xi2 + P[k, 2, 3]
+        du, dv = u / w - points_px[i, 0], v / w - points_px[i, 1]
+        e = np.sqrt(du * du + dv * dv)
+        err[i] = e if np.isfinite(e) else 0.0
+    median = np.sort(err)[(num - 1) // 2]  # lower median
+    keep = np.empty(num, dtype=np.int64)
+    kept = 0
+    for i in range(num):
+        if not (err[i] > reject_floor_px and err[i] > reject_factor * median):
+            keep[kept] = i
+            kept += 1
+    if kept == num or kept < min_views:
+        return
+    cam2, points2, dts2 = np.empty(kept, dtype=np.int64), np.empty((kept, 2)), np.empty(kept)
+    for i in range(kept):
+        cam2[i], points2[i, 0], points2[i, 1], dts2[i] = cam[keep[i]], points_px[keep[i], 0], points_px[keep[i], 1], \
+            dts[keep[i]]
+    plain2 = np.empty(3)
+    compensated2 = np.empty(3)
+    _solve_observations(Q, Q_trace, cam2, points2, dts2, kept, V, use_velocity, min_views, lambda_t_per_s, plain2,
+                        compensated2, work)
+    if np.isfinite(plain2[0]):
+        plain[:] = plain2
+        if use_velocity:
+            compensated[:] = compensated2
+
+
+@jit
+def _solve_observations(Q, Q_trace, cam, points_px, dts, num, V, use_velocity, min_views, lambda_t_per_s, plain,
+                        compensated, work):
+    """The normal matrices of eq. (8), (10) with the weights of eq. (11), and their smallest eigenvectors."""
+    plain[:] = np.nan
+    if use_velocity:
+        compensated[:] = np.nan
+    if num < min_views:
+        return
+    work[:] = 0.0
+    for i in range(num):
+        k = cam[i]
+        x0, x1, dt = points_px[i, 0], points_px[i, 1], dts[i]
+        # Eq. (9) row r = x_r p3 - p_r, so rᵀr = x_r² p3ᵀp3 - 2 x_r sym(p_rᵀp3) + p_rᵀp_r and ||r||² is the same
+        # combination of the quadrics' traces. Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||².
+        decay = np.exp(-2.0 * lambda_t_per_s * dt)
+        w0 = decay / (x0 * x0 * Q_trace[k, 0] - 2.0 * x0 * Q_trace[k, 1] + Q_trace[k, 3])
+        w1 = decay / (x1 * x1 * Q_trace[k, 0] - 2.0 * x1 * Q_trace[k, 2] + Q_trace[k, 4])
+        c0, c1, c2 = w0 * x0 * x0 + w1 * x1 * x1, -2.0 * w0 * x0, -2.0 * w1 * x1
+        for r in range(4):
+            for s in range(4):
+                a = (c0 * Q[k, 0, r, s] + c1 * Q[k, 1, r, s] + c2 * Q[k, 2, r, s] + w0 * Q[k, 3, r, s]
+                     + w1 * Q[k, 4, r, s])
+                work[0, r, s] += a
+                if use_velocity:  # the moments Σ dt_i A_i and Σ dt_i² A_i
+                    work[1, r, s] += a * dt
+                    work[2, r, s] += a * (dt * dt)
+    smallest_eigenvector_point(work[0], plain)
+    if not use_velocity:
+        return
+    # Beyond the paper: row·[X - V dt_i; 1] = 0, i.e. rows r T_i with T_i = [[I, -V dt_i], [0, 1]], so the
+    # normal matrix Σ T_iᵀ A_i T_i follows from the moments Σ A_i, Σ dt_i A_i and Σ dt_i² A_i.
+    M, M1, M2 = work[0], work[1], work[2]
+    corner = M[3, 3]
+    for r in range(3):
+        corner -= 2.0 * M1[r, 3] * V[r]
+        for s in range(3):
+            corner += V[r] * M2[r, s] * V[s]
+    for r in range(3):
+        col = M[r, 3] - (M1[r, 0] * V[0] + M1[r, 1] * V[1] + M1[r, 2] * V[2])
+        M1[r, 3] = col  # M1 is free now: it holds the compensated matrix
+        M1[3, r] = col
+        for s in range(3):
+            M1[r, s] = M[r, s]
+    M1[3, 3] = corner
+    smallest_eigenvector_point(M1, compensated)
+
+
+@jit
+def smallest_eigenvector_point(M, out):
+    """`_smallest_eigenvector` of one 4x4 normal matrix M into out (3,) (compiled kernel).
+
+    The inverse of the regularised M by Gauss-Jordan elimination with partial pivoting.
+    """
+    scale = M[0, 0] + M[1, 1] + M[2, 2] + M[3, 3]
+    out[:] = np.nan
+    if not np.isfinite(scale):
+        return
+    a = np.empty((4, 8))
+    for r in range(4):
+        for s in range(4):
+            a[r, s] = M[r, s]
+            a[r, 4 + s] = 0.0
+        a[r, r] += 1e-13 * scale
+        a[r, 4 + r] = 1.0
+    for col in range(4):
+        pivot = col
+        for r in range(col + 1, 4):
+            if abs(a[r, col]) > abs(a[pivot, col]):
+                pivot = r
+        if a[pivot, col] == 0.0:
+            return  # only for M = 0 (no weight): M + 1e-13 trace(M) I is positive definite otherwise
+        if pivot != col:
+            for s in range(8):
+                a[col, s], a[pivot, s] = a[pivot, s], a[col, s]
+        inv_p = 1.0 / a[col, col]
+        for s in range(8):
+            a[col, s] *= inv_p
+        for r in range(4):
+            if r != col and a[r, col] != 0.0:
+                f = a[r, col]
+                for s in range(8):
+                    a[r, s] -= f * a[col, s]
+    v = np.empty(4)
+    for r in range(4):
+        v[r] = a[r, 7]  # the last column of M⁻¹ (the start [-a⁻¹b; 1] up to a scale)
+    w = np.empty(4)
+    for it in range(_INVERSE_ITERATIONS + 1):
+        norm = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + v[3] * v[3])
+        for r in range(4):
+            v[r] /= norm
+        if it == _INVERSE_ITERATIONS:
+            break
+        for r in range(4):
+            w[r] = a[r, 4] * v[0] + a[r, 5] * v[1] + a[r, 6] * v[2] + a[r, 7] * v[3]
+        v[:] = w
+    if abs(v[3]) < 1e-12:
+        return
+    x0, x1, x2 = v[0] / v[3], v[1] / v[3], v[2] / v[3]
+    if np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2):
+        out[0], out[1], out[2] = x0, x1, x2
+
+
+def quadric_traces(quadrics: np.ndarray) -> np.ndarray:
+    """(C, 5) traces of `camera_quadrics` (the squared row norms of eq. 11 are combinations of them)."""
+    return np.ascontiguousarray(np.trace(quadrics, axis1=2, axis2=3))
 
 
 def camera_quadrics(P: np.ndarray) -> np.ndarray:

@@ -1,0 +1,220 @@
+"""Compiled in-place updates of the tracker's target arrays: Algorithm 1's update of the matched targets.
+
+`Tracker` (tracker/tracker.py) holds the arrays and calls these once per frame; each does in one pass what
+would otherwise be a few hundred small numpy calls. The maths is that of `tracker.triangulation` (eq. 6-11),
+the bone gate, the velocity fit of eq. (5) and the carrying of stale joints, documented at `Tracker`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tracker.jit import jit
+from tracker.triangulation import triangulate_point
+
+MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
+
+
+@jit
+def update_matched(
+    rows, cols, det_px, camera, stamp_s,
+    pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
+    P, Q, Q_trace, bones,
+    max_observation_age_s, lambda_t_per_s, use_velocity, min_views, reject_factor, reject_floor_px, max_bone_m,
+    velocity_window_s, max_speed_m_per_s, stale_after_s, max_predict_s,
+):
+    """Updates the matched targets in place: eq. (6)-(11) per joint, bone gate, eq. (5) velocity, stale joints.
+
+    For each matched pair (rows[m], cols[m]):
+    1. the detection's joints become the target's latest points of `camera` (eq. 6);
+    2. each joint the detection holds is triangulated from the latest point of every camera not older than
+       `max_observation_age_s` (eq. 6-11, `triangulation.triangulate_point`; with `use_velocity` the
+       velocity-compensated estimate is taken where it exists, the paper's one otherwise);
+    3. a joint whose new estimate would make one of its bones longer than `max_bone_m` that was not already
+       keeps its previous estimate (beyond the paper: a gross 2D error seen in two views);
+    4. the paper's estimates (never the compensated ones: a velocity error would move the stale points, whose
+       shifted estimate would grow the velocity error) enter the history, and the joint velocity is the linear
+       least-squares slope over the samples of the last `velocity_window_s` (eq. 5), clipped in speed;
+    5. a joint not seen for `stale_after_s` moves with the median velocity of the target's fresh joints.
+
+    Args:
+        rows: (M,) matched target rows; cols: (M,) their detections in det_px (D, J, 2) undistorted pixels.
+        camera: the frame's camera index; stamp_s: its stamp t, s.
+        pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates: the
+            target arrays of `tracker._Targets` (updated in place).
+        P: (C, 3, 4); Q: (C, 5, 4, 4) `triangulation.camera_quadrics(P)`; Q_trace: (C, 5) their traces.
+        bones: (B, 2) joint pairs.
+        The rest: `TrackerConfig` fields.
+    """
+    C, J = obs_s.shape[1], obs_s.shape[2]
+    H = hist_s.shape[1]
+    cams = np.empty(C, dtype=np.int64)
+    points = np.empty((C, 2))
+    dts = np.empty(C)
+    work = np.empty((3, 4, 4))
+    V = np.empty(3)
+    plain = np.empty(3)
+    compensated = np.empty(3)
+    samples = np.empty((J, 3))  # the paper's estimates (eq. 10-11)
+    X = np.empty((J, 3))  # the estimates taken
+    update = np.empty(J, dtype=np.bool_)
+    hit = np.empty(J, dtype=np.bool_)
+    values = np.empty(J)
+    for m in range(rows.size):
+        r, d = rows[m], cols[m]
+        # 1. Eq. (6): the new points replace this camera's latest points.
+        for j in range(J):
+            if np.isfinite(det_px[d, j, 0]):
+                obs_px[r, camera, j, 0] = det_px[d, j, 0]
+                obs_px[r, camera, j, 1] = det_px[d, j, 1]
+                obs_s[r, camera, j] = stamp_s
+        # 2. Eq. (6)-(11) for the joints the detection holds.
+        for j in range(J):
+            update[j] = False
+            if not np.isfinite(det_px[d, j, 0]):
+                continue
+            num = 0
+            for k in range(C):
+                if stamp_s - obs_s[r, k, j] <= max_observation_age_s:  # False for NaN (no point)
+                    cams[num] = k
+                    points[num, 0] = obs_px[r, k, j, 0]
+                    points[num, 1] = obs_px[r, k, j, 1]
+                    dts[num] = max(stamp_s - obs_s[r, k, j], 0.0)
+                    num += 1
+            V[0], V[1], V[2] = vel[r, j, 0], vel[r, j, 1], vel[r, j, 2]
+            triangulate_point(P, Q, Q_trace, cams, points, dts, num, V, use_velocity, min_views, lambda_t_per_s,
+                              reject_factor, reject_floor_px, plain, compensated, work)
+            update[j] = np.isfinite(plain[0])
+            use_compensated = use_velocity and np.isfinite(compensated[0])
+            for k in range(3):
+                samples[j, k] = plain[k]
+                X[j, k] = compensated[k] if use_compensated else plain[k]
+        # 3. The bone gate (beyond the paper).
+        for j in range(J):
+            hit[j] = False
+        for b in range(bones.shape[0]):
+            a, e = bones[b, 0], bones[b, 1]
+            if not (update[a] or update[e]):
+                continue
+            if _distance(pos, r, a, e) > max_bone_m:
+                continue  # already long: the gate only keeps bones from becoming long
+            new_sq = 0.0
+            for k in range(3):
+                xa = X[a, k] if update[a] else pos[r, a, k]
+                xe = X[e, k] if update[e] else pos[r, e, k]
+                new_sq += (xa - xe) * (xa - xe)
+            if np.sqrt(new_sq) > max_bone_m:
+                hit[a] = hit[a] or update[a]
+                hit[e] = hit[e] or update[e]
+        for j in range(J):
+            update[j] = update[j] and not hit[j]
+            if update[j]:
+                for k in range(3):
+                    pos[r, j, k] = X[j, k]
+                joint_s[r, j] = stamp_s
+                seen_s[r, j] = stamp_s
+        # 4. Eq. (5)'s V: history ring buffer, then the least-squares slope of each updated joint.
+        slot = hist_next[r]
+        for j in range(J):
+            hist_s[r, slot, j] = stamp_s if update[j] else np.nan
+            for k in range(3):
+                hist_pos[r, slot, j, k] = samples[j, k] if update[j] else np.nan
+        hist_next[r] = (slot + 1) % H
+        for j in range(J):
+            if update[j]:
+                _fit_velocity(hist_pos, hist_s, r, j, stamp_s, velocity_window_s, max_speed_m_per_s, vel)
+        # 5. Joints nobody has seen for `stale_after_s` move with the body (beyond the paper).
+        _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, stale_after_s, max_predict_s, values)
+        last_update_s[r] = stamp_s
+        num_updates[r] += 1
+
+
+@jit
+def _distance(pos, r, a, e):
+    """|pos[r, a] - pos[r, e]|, NaN when either joint is unknown."""
+    sq = 0.0
+    for k in range(3):
+        sq += (pos[r, a, k] - pos[r, e, k]) * (pos[r, a, k] - pos[r, e, k])
+    return np.sqrt(sq)
+
+
+@jit
+def _fit_velocity(hist_pos, hist_s, r, j, stamp_s, window_s, max_speed, vel):
+    """vel[r, j] = slope of the linear least-squares fit of position on time over the window's samples."""
+    H = hist_s.shape[1]
+    n = 0
+    t_sum = 0.0
+    x_sum = np.zeros(3)
+    first, last = np.inf, -np.inf
+    for h in range(H):
+        s = hist_s[r, h, j]
+        if stamp_s - s <= window_s:  # False for empty slots (NaN)
+            n += 1
+            t_sum += s
+            first, last = min(first, s), max(last, s)
+            for k in range(3):
+                x_sum[k] += hist_pos[r, h, j, k]
+    t_mean = t_sum / max(n, 1)
+    sxx = 0.0
+    dt_sum = 0.0
+    sxy = np.zeros(3)
+    for h in range(H):
+        s = hist_s[r, h, j]
+        if stamp_s - s <= window_s:
+            dt = s - t_mean
+            sxx += dt * dt
+            dt_sum += dt
+            for k in range(3):
+                sxy[k] += dt * hist_pos[r, h, j, k]
+    v = np.zeros(3)
+    if n >= 2 and last - first >= MIN_VELOCITY_SPAN_S and sxx > 0.0:
+        for k in range(3):
+            # Σ dt (x - x̄) = Σ dt x - x̄ Σ dt, the second sum zero up to rounding.
+            v[k] = (sxy[k] - x_sum[k] / max(n, 1) * dt_sum) / sxx
+    speed = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    for k in range(3):
+        vel[r, j, k] = v[k] * max_speed / max(speed, 1e-12) if speed > max_speed else v[k]
+
+
+@jit
+def _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, stale_after_s, max_predict_s, values):
+    """Moves the known joints of target r not seen for `stale_after_s` with the median velocity of its fresh
+    joints (zero without any), over the time since their last estimate (at most `max_predict_s`)."""
+    J = pos.shape[1]
+    any_stale = False
+    for j in range(J):
+        if not stamp_s - seen_s[r, j] <= stale_after_s and np.isfinite(pos[r, j, 0]):
+            any_stale = True
+    if not any_stale:
+        return
+    body = np.zeros(3)
+    for k in range(3):
+        n = 0
+        for j in range(J):
+            if stamp_s - seen_s[r, j] <= stale_after_s and not np.isnan(vel[r, j, k]):
+                values[n] = vel[r, j, k]
+                n += 1
+        if n:
+            ordered = np.sort(values[:n])
+            body[k] = (ordered[(n - 1) // 2] + ordered[n // 2]) / 2.0
+    for j in range(J):
+        if not stamp_s - seen_s[r, j] <= stale_after_s and np.isfinite(pos[r, j, 0]):
+            dt = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
+            for k in range(3):
+                pos[r, j, k] = pos[r, j, k] + body[k] * dt
+                vel[r, j, k] = body[k]
+            joint_s[r, j] = stamp_s
+
+
+@jit
+def predict_rows(pos, vel, joint_s, rows, stamp_s, max_predict_s):
+    """Eq. (5) for the targets `rows` (K,): (K, J, 3) poses X_t' + V_t' (t - t'), horizon in [0, max_predict_s]."""
+    J = pos.shape[1]
+    out = np.empty((rows.size, J, 3))
+    for i in range(rows.size):
+        r = rows[i]
+        for j in range(J):
+            horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
+            for k in range(3):
+                out[i, j, k] = pos[r, j, k] + vel[r, j, k] * horizon
+    return out
