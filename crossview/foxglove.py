@@ -513,12 +513,65 @@ def _bone_table(bones: tuple) -> tuple[np.ndarray, np.ndarray]:
 
 
 def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> bytes:
-    """`image_annotations` as its wire bytes, built without protobuf objects (what the recording writes)."""
+    """`image_annotations` as its wire bytes, written by a compiled loop (what the recording writes)."""
+    from crossview import wire  # (numba: loaded for writing only)
+
     frame, truth = camera_frame.frame, camera_frame.truth
-    kp = np.asarray(frame.keypoints_px, dtype=np.float64)  # (D, J, 2)
+    kp = np.ascontiguousarray(frame.keypoints_px, dtype=np.float64)  # (D, J, 2)
     D = kp.shape[0]
     if D == 0:
         return b""
+    person_ids = np.asarray(truth.person_ids).tolist()
+    rows = np.array([_style_row(max(person_ids[d], -1) if d < len(person_ids) else -1) for d in range(D)],
+                    dtype=np.int64)
+    stamp_field = np.frombuffer(_length_delimited(_STAMP_FIELD, _timestamp_bytes(t_ns)), dtype=np.uint8)
+    bones = _bone_table(tuple(skeleton.bones))[0]
+    table, sizes = _STYLES["table"], _STYLES["sizes"]
+    out = _annotation_buffer(wire.image_annotations_capacity(D, kp.shape[1], len(bones), table.shape[1],
+                                                             stamp_field.size))
+    size = wire.image_annotations(out, kp, bones, rows, table, sizes, stamp_field, _ANNOTATIONS_KEY, _POINTS_KEY)
+    if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: such rare messages go through it
+        return ImageAnnotations.FromString(_image_annotations_numpy(kp, truth.person_ids, skeleton, t_ns)
+                                           ).SerializeToString()
+    return out[:size].tobytes()
+
+
+_ANNOTATIONS_KEY = np.frombuffer(_SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2], dtype=np.uint8)
+_POINTS_KEY = (_POINTS_FIELD << 3) | 2
+if _POINTS_KEY >= 128:
+    raise RuntimeError("PointsAnnotation.points: the compiled encoder expects a one-byte field tag")
+# Detection styles as rows of one table for the compiled encoder: per person id (-1: false positives) the
+# four pieces of `_detection_styles` back to back, and their sizes.
+_STYLES: dict = {"rows": {}, "table": np.zeros((0, 0), dtype=np.uint8), "sizes": np.zeros((0, 4), dtype=np.int64)}
+_ANNOTATION_BUFFER = [np.empty(1 << 16, dtype=np.uint8)]
+
+
+def _style_row(person_id: int) -> int:
+    row = _STYLES["rows"].get(person_id)
+    if row is None:
+        pieces = _detection_styles(person_id)[:4]
+        blob = b"".join(pieces)
+        table, sizes = _STYLES["table"], _STYLES["sizes"]
+        width = max(table.shape[1], len(blob))
+        grown = np.zeros((table.shape[0] + 1, width), dtype=np.uint8)
+        grown[:-1, :table.shape[1]] = table
+        grown[-1, :len(blob)] = np.frombuffer(blob, dtype=np.uint8)
+        _STYLES["table"] = grown
+        _STYLES["sizes"] = np.vstack([sizes, [[len(p) for p in pieces]]]).astype(np.int64)
+        row = _STYLES["rows"][person_id] = table.shape[0]
+    return row
+
+
+def _annotation_buffer(size: int) -> np.ndarray:
+    if _ANNOTATION_BUFFER[0].size < size:
+        _ANNOTATION_BUFFER[0] = np.empty(2 * size, dtype=np.uint8)
+    return _ANNOTATION_BUFFER[0]
+
+
+def _image_annotations_numpy(kp: np.ndarray, person_ids, skeleton: Skeleton, t_ns: int) -> bytes:
+    """The bytes of `image_annotations_bytes` with +0.0 coordinates written (protobuf leaves them out), built
+    with numpy: what protobuf parses and writes again on the rare frames that hold such a coordinate."""
+    D = kp.shape[0]
     bones, bone_ends = _bone_table(tuple(skeleton.bones))
     known = np.isfinite(kp).all(axis=2)  # (D, J)
     ends_known = np.repeat(known[:, bones[:, 0]] & known[:, bones[:, 1]], 2, axis=1)  # (D, 2 * bones)
@@ -528,7 +581,7 @@ def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns:
     size = _POINT2_WIRE.itemsize
     bone_end = (np.cumsum(ends_known.sum(axis=1)) * size).tolist()
     joint_end = (np.cumsum(known.sum(axis=1)) * size + bone_end[-1]).tolist()
-    person_ids = np.asarray(truth.person_ids).tolist()
+    person_ids = np.asarray(person_ids).tolist()
     stamp_field = _length_delimited(_STAMP_FIELD, _timestamp_bytes(t_ns))
     key = _SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2]
     parts = []
@@ -545,9 +598,7 @@ def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns:
             parts += (key, _varint(fixed + joints_len + j - joint_start), stamp_field, joints_type,
                       blob[joint_start:j], joints_rest)
         bone_start, joint_start = b, j
-    data = b"".join(parts)
-    # A coordinate of exactly +0.0 is left out by protobuf; such rare messages go through it once.
-    return ImageAnnotations.FromString(data).SerializeToString() if _has_zero_bits(kp) else data
+    return b"".join(parts)
 
 
 def _has_zero_bits(values: np.ndarray) -> bool:

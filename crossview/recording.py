@@ -304,10 +304,7 @@ def _skeleton_json(skeleton: Skeleton) -> dict:
 
 
 def _pose_truth_to_msg(truth: PoseTruth, msg) -> None:
-    poses = np.asarray(truth.poses, dtype=np.float64)
-    ids = np.asarray(truth.person_ids, dtype=np.int64)
-    if poses.ndim != 3 or poses.shape[2] != 3 or poses.shape[0] != ids.shape[0]:
-        raise ValueError(f"PoseTruth@{truth.t_s}: poses expected (P, J, 3) with P={ids.shape[0]}, got {poses.shape}")
+    poses, ids = _checked_poses(truth)
     msg.t_s = float(truth.t_s)
     msg.num_joints = poses.shape[1]
     msg.person_ids.extend(ids.tolist())
@@ -315,56 +312,67 @@ def _pose_truth_to_msg(truth: PoseTruth, msg) -> None:
 
 
 def pose_truth_bytes(truth: PoseTruth) -> bytes:
-    """`crossview.PoseTruth` wire bytes of `truth`, written from numpy (the same bytes as protobuf's)."""
-    poses = np.asarray(truth.poses, dtype=np.float64)
-    ids = np.asarray(truth.person_ids, dtype=np.int64)
-    if poses.ndim != 3 or poses.shape[2] != 3 or poses.shape[0] != ids.shape[0]:
+    """`crossview.PoseTruth` wire bytes of `truth`, written by a compiled loop (the same bytes as protobuf's)."""
+    from crossview import wire  # (numba: loaded for writing only)
+
+    poses, ids = _checked_poses(truth)
+    out = _scratch(wire.camera_frame_capacity(0, 0, *poses.shape[:2], 0))
+    return out[:wire.pose_truth(out, 0, float(truth.t_s), ids, poses)].tobytes()
+
+
+def _checked_poses(truth: PoseTruth) -> tuple[np.ndarray, np.ndarray]:
+    """poses (P, J, 3) float64 and person_ids (P,) int64 of `truth`, C-contiguous, shapes checked."""
+    poses = np.ascontiguousarray(truth.poses, dtype=np.float64)
+    ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
+    if poses.ndim != 3 or poses.shape[2] != 3 or ids.ndim != 1 or poses.shape[0] != ids.shape[0]:
         raise ValueError(f"PoseTruth@{truth.t_s}: poses expected (P, J, 3) with P={ids.shape[0]}, got {poses.shape}")
-    return b"".join((
-        foxglove.wire_double(1, float(truth.t_s)),
-        foxglove.wire_uint(2, poses.shape[1]),
-        foxglove.wire_packed(3, foxglove.encode_sint64s(ids)),
-        foxglove.wire_packed(4, foxglove.encode_doubles(poses)),
-    ))
+    return poses, ids
+
+
+_SCRATCH = [np.empty(1 << 16, dtype=np.uint8)]
+
+
+def _scratch(size: int) -> np.ndarray:
+    """A reusable byte buffer of at least `size` bytes for the message encoders (the writer's thread only)."""
+    if _SCRATCH[0].size < size:
+        _SCRATCH[0] = np.empty(2 * size, dtype=np.uint8)
+    return _SCRATCH[0]
 
 
 def camera_frame_bytes(cf: CameraFrame) -> bytes:
-    """`crossview.CameraFrame` wire bytes of one camera frame, written from numpy (the same bytes as
+    """`crossview.CameraFrame` wire bytes of one camera frame, written by a compiled loop (the same bytes as
     protobuf's serialisation of `_camera_frame_to_msg`, which the tests check)."""
+    from crossview import wire  # (numba: loaded for writing only)
+
     frame, truth = cf.frame, cf.truth
-    kp = np.asarray(frame.keypoints_px, dtype=np.float64)
+    kp = np.ascontiguousarray(frame.keypoints_px, dtype=np.float64)
+    if kp.ndim != 3 or kp.shape[2] != 2:
+        raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: keypoints_px expected (D, J, 2), got "
+                         f"{kp.shape}")
     D, J = kp.shape[:2]
 
     def rows(name: str, value, shape: tuple, dtype) -> np.ndarray:
-        array = np.asarray(value, dtype=dtype)
+        array = np.ascontiguousarray(value, dtype=dtype)
         if array.shape != shape:
-            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.{name} expected {shape}, got "
+            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: {name} expected {shape}, got "
                              f"{array.shape}")
         return array
 
-    scores = np.asarray(frame.scores, dtype=np.float64)
-    effects = rows("effects", truth.effects, (D,), np.int64)
+    scores = rows("scores", frame.scores, (D, J), np.float64)
+    effects = rows("truth.effects", truth.effects, (D,), np.int64)
     if effects.size and (effects.min() < 0 or effects.max() >= 1 << 32):
         raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.effects must be uint32 bit masks")
-    poses = pose_truth_bytes(cf.poses_at_capture)
-    return b"".join((
-        foxglove.wire_string(1, frame.camera),
-        foxglove.wire_double(2, float(frame.stamp_s)),
-        foxglove.wire_double(3, float(truth.capture_s)),
-        foxglove.wire_double(4, float(truth.delivery_s)),
-        foxglove.wire_uint(5, D),
-        foxglove.wire_uint(6, J),
-        foxglove.wire_packed(7, foxglove.encode_doubles(kp)),
-        foxglove.wire_packed(8, foxglove.encode_doubles(scores)),
-        foxglove.wire_packed(9, foxglove.encode_sint64s(rows("person_ids", truth.person_ids, (D,), np.int64))),
-        foxglove.wire_packed(10, foxglove.encode_doubles(rows("keypoints_px", truth.keypoints_px, (D, J, 2),
-                                                              np.float64))),
-        foxglove.wire_packed(11, foxglove.encode_bools(rows("in_image", truth.in_image, (D, J), bool))),
-        foxglove.wire_packed(12, foxglove.encode_bools(rows("occluded", truth.occluded, (D, J), bool))),
-        foxglove.wire_packed(13, foxglove.encode_bools(rows("self_occluded", truth.self_occluded, (D, J), bool))),
-        foxglove.wire_packed(14, foxglove.encode_varints(effects)),
-        foxglove._length_delimited(15, poses),
-    ))
+    poses, pose_ids = _checked_poses(cf.poses_at_capture)
+    name = np.frombuffer(frame.camera.encode(), dtype=np.uint8)
+    out = _scratch(wire.camera_frame_capacity(D, J, *poses.shape[:2], name.size))
+    size = wire.camera_frame(
+        out, name, np.array([frame.stamp_s, truth.capture_s, truth.delivery_s], dtype=np.float64), kp, scores,
+        rows("truth.person_ids", truth.person_ids, (D,), np.int64),
+        rows("truth.keypoints_px", truth.keypoints_px, (D, J, 2), np.float64),
+        rows("truth.in_image", truth.in_image, (D, J), bool), rows("truth.occluded", truth.occluded, (D, J), bool),
+        rows("truth.self_occluded", truth.self_occluded, (D, J), bool), effects,
+        float(cf.poses_at_capture.t_s), pose_ids, poses)
+    return out[:size].tobytes()
 
 
 def _pose_truth_from_msg(msg) -> PoseTruth:

@@ -222,29 +222,33 @@ def test_byte_builders_write_what_protobuf_writes():
     poses[3, 0] = 0.0
     assert foxglove.truth_skeletons_bytes(truth, COCO17, 5) == \
         foxglove.truth_skeletons(truth, COCO17, 5).SerializeToString()
-    kp = rng.uniform(0, 600, (3, 17, 2))
-    kp[0, ::3] = np.nan
-    kp[2, 4] = (0.0, 17.0)
-    scores = np.where(np.isnan(kp[..., 0]), 0.0, 0.7)
-    flags = np.zeros((3, 17), dtype=bool)
-    cf = CameraFrame(
-        Frame("cam00", 0.1, kp, scores),
-        DetectionTruth(0.1, 0.12, np.array([4, -1, 9]), kp, ~flags, flags, flags, np.zeros(3, dtype=np.int64)),
-        truth,
-    )
-    # An independent reference built point by point with protobuf objects.
-    reference = ImageAnnotations()
-    for d, pid in enumerate([4, -1, 9]):
-        rgba = foxglove.truth_color(pid) if pid >= 0 else foxglove.color(foxglove.FALSE_POSITIVE_COLOR)
-        rgba.a = 1.0
-        known = np.isfinite(kp[d]).all(axis=1)
-        ends = [e for a, b in COCO17.bones if known[a] and known[b] for e in (a, b)]
-        for kind, joints, extra in ((PointsAnnotation.LINE_LIST, ends, {}),
-                                    (PointsAnnotation.POINTS, np.nonzero(known)[0].tolist(), {"fill_color": rgba})):
-            if joints:
-                reference.points.append(PointsAnnotation(
-                    timestamp=foxglove.timestamp(120_000_000), type=kind, outline_color=rgba,
-                    thickness=foxglove.DETECTION_LINE_PX * (1 if kind == PointsAnnotation.LINE_LIST else 2),
-                    points=[Point2(x=x, y=y) for x, y in kp[d, joints].tolist()], **extra))
-    assert foxglove.image_annotations_bytes(cf, COCO17, 120_000_000) == reference.SerializeToString()
-    assert len(reference.points) == 6
+    base = rng.uniform(0, 600, (3, 17, 2))
+    base[0, ::3] = np.nan
+    # The compiled encoder's bytes, and (with a zero coordinate) protobuf's own path.
+    for zero in (False, True):
+        kp = base.copy()
+        if zero:
+            kp[2, 4] = (0.0, 17.0)
+        scores = np.where(np.isnan(kp[..., 0]), 0.0, 0.7)
+        flags = np.zeros((3, 17), dtype=bool)
+        cf = CameraFrame(
+            Frame("cam00", 0.1, kp, scores),
+            DetectionTruth(0.1, 0.12, np.array([4, -1, 9]), kp, ~flags, flags, flags, np.zeros(3, dtype=np.int64)),
+            truth,
+        )
+        # An independent reference built point by point with protobuf objects.
+        reference = ImageAnnotations()
+        for d, pid in enumerate([4, -1, 9]):
+            rgba = foxglove.truth_color(pid) if pid >= 0 else foxglove.color(foxglove.FALSE_POSITIVE_COLOR)
+            rgba.a = 1.0
+            known = np.isfinite(kp[d]).all(axis=1)
+            ends = [e for a, b in COCO17.bones if known[a] and known[b] for e in (a, b)]
+            for kind, joints, extra in ((PointsAnnotation.LINE_LIST, ends, {}),
+                                        (PointsAnnotation.POINTS, np.nonzero(known)[0].tolist(), {"fill_color": rgba})):
+                if joints:
+                    reference.points.append(PointsAnnotation(
+                        timestamp=foxglove.timestamp(120_000_000), type=kind, outline_color=rgba,
+                        thickness=foxglove.DETECTION_LINE_PX * (1 if kind == PointsAnnotation.LINE_LIST else 2),
+                        points=[Point2(x=x, y=y) for x, y in kp[d, joints].tolist()], **extra))
+        assert foxglove.image_annotations_bytes(cf, COCO17, 120_000_000) == reference.SerializeToString()
+        assert len(reference.points) == 6

@@ -1,0 +1,261 @@
+"""Protobuf wire bytes of the recording's per-frame messages, written by numba-compiled loops.
+
+`crossview.recording.camera_frame_bytes` and `crossview.foxglove.image_annotations_bytes` say what the
+bytes are (and the tests check those against protobuf's own serialisation); the kernels here write the
+same bytes field by field into one buffer, which is most of what writing a recording costs per frame.
+Only the recording writer imports this module, so reading a recording never loads numba.
+
+proto3 rules kept here as there: a scalar whose value is its default (a double with all bits zero, an
+integer 0, an empty string) is left out; a packed repeated field is one length-delimited run and is left
+out when empty; sint64 is zigzag encoded; a message field is written whenever it is set.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+_jit = njit(cache=True, nogil=True, error_model="numpy")
+
+_VARINT, _FIXED64, _LEN = 0, 1, 2  # wire types
+_POINT2_BYTES = 20  # one Point2 element: tag, length (18), then x and y as fixed64 fields 1 and 2
+
+
+@_jit
+def _varint_size(value):
+    n = 1
+    while value >= 128:
+        value >>= 7
+        n += 1
+    return n
+
+
+@_jit
+def _put_varint(out, pos, value):
+    while value >= 128:
+        out[pos] = (value & 0x7F) | 0x80
+        value >>= 7
+        pos += 1
+    out[pos] = value
+    return pos + 1
+
+
+@_jit
+def _put_key(out, pos, field, wire_type):
+    return _put_varint(out, pos, (field << 3) | wire_type)
+
+
+@_jit
+def _put_f8(out, pos, value):
+    """Eight little-endian bytes of a float64 (the buffer's `view` gives its bits)."""
+    bits = np.empty(1)
+    bits[0] = value
+    raw = bits.view(np.uint8)
+    for i in range(8):
+        out[pos + i] = raw[i]
+    return pos + 8
+
+
+@_jit
+def _is_zero_bits(value):
+    bits = np.empty(1)
+    bits[0] = value
+    return bits.view(np.int64)[0] == 0
+
+
+@_jit
+def _put_double_field(out, pos, field, value):
+    if _is_zero_bits(value):
+        return pos
+    pos = _put_key(out, pos, field, _FIXED64)
+    return _put_f8(out, pos, value)
+
+
+@_jit
+def _put_uint_field(out, pos, field, value):
+    if value == 0:
+        return pos
+    pos = _put_key(out, pos, field, _VARINT)
+    return _put_varint(out, pos, value)
+
+
+@_jit
+def _put_doubles(out, pos, field, values):
+    """A packed double field of `values` (any shape, C order)."""
+    flat = values.reshape(-1)
+    if flat.size == 0:
+        return pos
+    pos = _put_key(out, pos, field, _LEN)
+    pos = _put_varint(out, pos, 8 * flat.size)
+    raw = flat.view(np.uint8)
+    out[pos:pos + raw.size] = raw
+    return pos + raw.size
+
+
+@_jit
+def _put_bools(out, pos, field, values):
+    flat = values.reshape(-1)
+    if flat.size == 0:
+        return pos
+    pos = _put_key(out, pos, field, _LEN)
+    pos = _put_varint(out, pos, flat.size)
+    for i in range(flat.size):
+        out[pos + i] = 1 if flat[i] else 0
+    return pos + flat.size
+
+
+@_jit
+def _zigzag(value):
+    return 2 * value if value >= 0 else -2 * value - 1
+
+
+@_jit
+def _put_varints(out, pos, field, values, zigzag):
+    """A packed varint field: sint64 (zigzag) or unsigned values."""
+    if values.size == 0:
+        return pos
+    size = 0
+    for v in values:
+        size += _varint_size(_zigzag(v) if zigzag else v)
+    pos = _put_key(out, pos, field, _LEN)
+    pos = _put_varint(out, pos, size)
+    for v in values:
+        pos = _put_varint(out, pos, _zigzag(v) if zigzag else v)
+    return pos
+
+
+@_jit
+def pose_truth(out, pos, t_s, person_ids, poses):
+    """`crossview.PoseTruth`: t_s, num_joints, person_ids (P,), poses (P, J, 3). Returns the end position."""
+    pos = _put_double_field(out, pos, 1, t_s)
+    pos = _put_uint_field(out, pos, 2, poses.shape[1])
+    pos = _put_varints(out, pos, 3, person_ids, True)
+    return _put_doubles(out, pos, 4, poses)
+
+
+@_jit
+def _pose_truth_size(t_s, person_ids, poses):
+    size = 0 if _is_zero_bits(t_s) else 9
+    if poses.shape[1]:
+        size += 1 + _varint_size(poses.shape[1])
+    if person_ids.size:
+        ids = 0
+        for v in person_ids:
+            ids += _varint_size(_zigzag(v))
+        size += 1 + _varint_size(ids) + ids
+    if poses.size:
+        size += 1 + _varint_size(8 * poses.size) + 8 * poses.size
+    return size
+
+
+@_jit
+def camera_frame(out, camera, times, keypoints, scores, person_ids, true_keypoints, in_image, occluded,
+                 self_occluded, effects, pose_t_s, pose_ids, poses):
+    """`crossview.CameraFrame` into `out` (uint8, at least `camera_frame_capacity`); returns its size.
+
+    camera: the camera name's UTF-8 bytes; times: stamp, capture and delivery seconds; keypoints
+    (D, J, 2), scores (D, J), person_ids (D,), true_keypoints (D, J, 2), in_image, occluded, self_occluded
+    (D, J) bool, effects (D,) uint32 masks; pose_t_s, pose_ids (P,), poses (P, J', 3): the poses at capture.
+    """
+    pos = 0
+    if camera.size:
+        pos = _put_key(out, pos, 1, _LEN)
+        pos = _put_varint(out, pos, camera.size)
+        out[pos:pos + camera.size] = camera
+        pos += camera.size
+    for i in range(3):
+        pos = _put_double_field(out, pos, 2 + i, times[i])
+    pos = _put_uint_field(out, pos, 5, keypoints.shape[0])
+    pos = _put_uint_field(out, pos, 6, keypoints.shape[1])
+    pos = _put_doubles(out, pos, 7, keypoints)
+    pos = _put_doubles(out, pos, 8, scores)
+    pos = _put_varints(out, pos, 9, person_ids, True)
+    pos = _put_doubles(out, pos, 10, true_keypoints)
+    pos = _put_bools(out, pos, 11, in_image)
+    pos = _put_bools(out, pos, 12, occluded)
+    pos = _put_bools(out, pos, 13, self_occluded)
+    pos = _put_varints(out, pos, 14, effects, False)
+    pos = _put_key(out, pos, 15, _LEN)  # the poses at capture, an embedded message (always set)
+    pos = _put_varint(out, pos, _pose_truth_size(pose_t_s, pose_ids, poses))
+    return pose_truth(out, pos, pose_t_s, pose_ids, poses)
+
+
+def camera_frame_capacity(D: int, J: int, P: int, pose_joints: int, name_bytes: int) -> int:
+    """An upper bound of the bytes of `camera_frame` (varints counted at their longest)."""
+    return 128 + name_bytes + D * (43 * J + 20) + P * (24 * pose_joints + 10)
+
+
+@_jit
+def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, stamp_field, key, points_key):
+    """`foxglove.ImageAnnotations` of one frame's detections into `out`; returns the number of bytes.
+
+    Per detection (in order) a LINE_LIST PointsAnnotation of its bones whose two ends are known, then a
+    POINTS one of its known joints, each left out when empty; each is the stamp field, its style's part
+    before the points, the points, its style's part after them.
+
+    keypoints (D, J, 2), NaN where unknown; bones (B, 2) joint pairs; style_rows (D,) row of `styles`
+    per detection; styles (S, L) uint8 rows holding bones-before, bones-after, joints-before and
+    joints-after back to back, with their sizes in style_sizes (S, 4); stamp_field: the timestamp field
+    bytes; key: the varint tag of ImageAnnotations.points; points_key: that of PointsAnnotation.points
+    (one byte). Returns -1 when a coordinate is exactly +0.0 (then protobuf's own serialisation is needed).
+    """
+    D, J = keypoints.shape[0], keypoints.shape[1]
+    raw = keypoints.reshape(-1).view(np.uint8)
+    for v in keypoints.reshape(-1).view(np.int64):
+        if v == 0:
+            return -1  # a coordinate of exactly +0.0, which protobuf leaves out: the caller's slow path
+    known = np.empty(J, dtype=np.bool_)
+    pos = 0
+    for d in range(D):
+        for j in range(J):
+            known[j] = np.isfinite(keypoints[d, j, 0]) and np.isfinite(keypoints[d, j, 1])
+        n_bones = 0
+        for b in range(bones.shape[0]):
+            if known[bones[b, 0]] and known[bones[b, 1]]:
+                n_bones += 1
+        n_joints = 0
+        for j in range(J):
+            if known[j]:
+                n_joints += 1
+        row = style_rows[d]
+        for part in range(2):  # 0: bones, 1: joints
+            count = 2 * n_bones if part == 0 else n_joints
+            if count == 0:
+                continue
+            before, after = style_sizes[row, 2 * part], style_sizes[row, 2 * part + 1]
+            start = style_sizes[row, 0] + style_sizes[row, 1] if part == 1 else 0
+            out[pos:pos + key.size] = key
+            pos += key.size
+            pos = _put_varint(out, pos, stamp_field.size + before + after + _POINT2_BYTES * count)
+            out[pos:pos + stamp_field.size] = stamp_field
+            pos += stamp_field.size
+            out[pos:pos + before] = styles[row, start:start + before]
+            pos += before
+            if part == 0:
+                for b in range(bones.shape[0]):
+                    if known[bones[b, 0]] and known[bones[b, 1]]:
+                        pos = _put_point2(out, pos, points_key, raw, 16 * (d * J + bones[b, 0]))
+                        pos = _put_point2(out, pos, points_key, raw, 16 * (d * J + bones[b, 1]))
+            else:
+                for j in range(J):
+                    if known[j]:
+                        pos = _put_point2(out, pos, points_key, raw, 16 * (d * J + j))
+            out[pos:pos + after] = styles[row, start + before:start + before + after]
+            pos += after
+    return pos
+
+
+@_jit
+def _put_point2(out, pos, points_key, raw, start):
+    """A Point2 element whose x and y are the 16 bytes of `raw` from `start`."""
+    out[pos] = points_key
+    out[pos + 1] = 18
+    out[pos + 2] = 0x09
+    out[pos + 3:pos + 11] = raw[start:start + 8]
+    out[pos + 11] = 0x11
+    out[pos + 12:pos + 20] = raw[start + 8:start + 16]
+    return pos + _POINT2_BYTES
+
+
+def image_annotations_capacity(D: int, J: int, B: int, style_bytes: int, stamp_bytes: int) -> int:
+    return D * (2 * (16 + stamp_bytes) + style_bytes + (2 * B + J) * (_POINT2_BYTES + 2))
