@@ -605,11 +605,12 @@ def _parent_bodies(bodies: np.ndarray) -> np.ndarray:
 # quadratic of `mj_ray` for spheres, capsules, ellipsoids and cylinders, the slab faces for boxes) term
 # by term in the same order, so every hit distance is the one `mujoco.mj_multiRay` returns, and the
 # nearest hit is chosen as MuJoCo chooses it (geoms in model order, a later geom only when strictly
-# nearer). What differs is the culling: a whole person (a contiguous group of geoms) and then a single
-# geom are skipped when the segment from the camera to the keypoint misses its bounding sphere, which
-# never drops a hit nearer than the keypoint (the only hits the flags depend on). tests/sim checks the
-# flags and the hits against `mj_multiRay` on the store. This replaced one `mj_multiRay` call per
-# capture, whose per-call set-up (bounding angles of every geom) cost more than its rays.
+# nearer). What differs is the culling: a whole person (a contiguous group of geoms), then a single geom
+# is skipped when the box around the segment from the camera to the keypoint misses the box around it
+# (or, for a geom, the segment misses its bounding sphere), which never drops a hit nearer than the
+# keypoint (the only hits the flags depend on). tests/sim checks the flags and the hits against
+# `mj_multiRay` in the store. This replaced one `mj_multiRay` call per capture, whose per-call set-up
+# (the bounding angles of every geom) cost more than its rays.
 
 _MJ_MINVAL = 1e-15  # mjMINVAL: MuJoCo's smallest denominator
 _GEOM_SPHERE, _GEOM_CAPSULE, _GEOM_ELLIPSOID, _GEOM_CYLINDER, _GEOM_BOX = 2, 3, 4, 5, 6  # mjtGeom
@@ -744,21 +745,31 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     than the keypoint) and its distance dist (R, N).
     """
     K = groups.shape[0] - 1
-    centre = np.empty((K, 3))
-    radius = np.zeros(K)
-    for k in range(K):  # a bounding sphere per group: around its geoms' bounding spheres
-        lo = np.full(3, np.inf)
-        hi = np.full(3, -np.inf)
+    G = geom_type.shape[0]
+    # Axis-aligned boxes around every geom (a box's own corners, the bounding sphere of the others) and
+    # around every group: a ray whose segment box misses them cannot hit them before its keypoint.
+    geom_lo, geom_hi = np.empty((G, 3)), np.empty((G, 3))
+    for g in range(G):
+        for i in range(3):
+            half = geom_rbound[g]
+            if geom_type[g] == _GEOM_BOX:
+                half = (abs(geom_xmat[g, 3 * i]) * geom_size[g, 0] + abs(geom_xmat[g, 3 * i + 1]) * geom_size[g, 1]
+                        + abs(geom_xmat[g, 3 * i + 2]) * geom_size[g, 2])
+            geom_lo[g, i] = geom_xpos[g, i] - half - _CULL_SLACK_M
+            geom_hi[g, i] = geom_xpos[g, i] + half + _CULL_SLACK_M
+    group_lo, group_hi = np.full((K, 3), np.inf), np.full((K, 3), -np.inf)
+    for k in range(K):
         for g in range(groups[k], groups[k + 1]):
             for i in range(3):
-                lo[i] = min(lo[i], geom_xpos[g, i] - geom_rbound[g])
-                hi[i] = max(hi[i], geom_xpos[g, i] + geom_rbound[g])
-        for i in range(3):
-            centre[k, i] = 0.5 * (lo[i] + hi[i])
-        for g in range(groups[k], groups[k + 1]):
-            d = math.sqrt((geom_xpos[g, 0] - centre[k, 0]) ** 2 + (geom_xpos[g, 1] - centre[k, 1]) ** 2
-                          + (geom_xpos[g, 2] - centre[k, 2]) ** 2) + geom_rbound[g]
-            radius[k] = max(radius[k], d)
+                group_lo[k, i] = min(group_lo[k, i], geom_lo[g, i])
+                group_hi[k, i] = max(group_hi[k, i], geom_hi[g, i])
+    # And a sphere around each group's box.
+    group_c = 0.5 * (group_lo + group_hi)
+    group_r = np.zeros(K)
+    for k in range(K):
+        if groups[k + 1] > groups[k]:
+            group_r[k] = 0.5 * math.sqrt((group_hi[k, 0] - group_lo[k, 0]) ** 2 + (group_hi[k, 1] - group_lo[k, 1]) ** 2
+                                         + (group_hi[k, 2] - group_lo[k, 2]) ** 2)
     for r in range(points.shape[0]):
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
         for n in range(points.shape[1]):
@@ -768,21 +779,32 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
             dist[r, n] = -1.0
             if not mask[r, n]:
                 continue
-            vx, vy, vz = points[r, n, 0] - ox, points[r, n, 1] - oy, points[r, n, 2] - oz
+            px, py, pz = points[r, n, 0], points[r, n, 1], points[r, n, 2]
+            vx, vy, vz = px - ox, py - oy, pz - oz
             length = math.sqrt(vx * vx + vy * vy + vz * vz)
             ux, uy, uz = vx / length, vy / length, vz / length
-            best, best_g = -1.0, -1
+            lo_x, lo_y, lo_z = min(ox, px), min(oy, py), min(oz, pz)
+            hi_x, hi_y, hi_z = max(ox, px), max(oy, py), max(oz, pz)
+            # Only hits nearer than `reach` matter: the keypoint, then the nearest hit so far (a geom later
+            # in model order replaces it only when strictly nearer, as in MuJoCo).
+            best, best_g, reach = -1.0, -1, length
             for k in range(K):
-                if _segment_misses_sphere(centre[k, 0], centre[k, 1], centre[k, 2], radius[k], ox, oy, oz,
-                                          ux, uy, uz, length):
+                if (hi_x < group_lo[k, 0] or lo_x > group_hi[k, 0] or hi_y < group_lo[k, 1] or lo_y > group_hi[k, 1]
+                        or hi_z < group_lo[k, 2] or lo_z > group_hi[k, 2]
+                        or _segment_misses_sphere(group_c[k, 0], group_c[k, 1], group_c[k, 2], group_r[k],
+                                                  ox, oy, oz, ux, uy, uz, reach)):
                     continue
                 for g in range(groups[k], groups[k + 1]):
+                    if (hi_x < geom_lo[g, 0] or lo_x > geom_hi[g, 0] or hi_y < geom_lo[g, 1] or lo_y > geom_hi[g, 1]
+                            or hi_z < geom_lo[g, 2] or lo_z > geom_hi[g, 2]):
+                        continue
                     if _segment_misses_sphere(geom_xpos[g, 0], geom_xpos[g, 1], geom_xpos[g, 2], geom_rbound[g],
-                                              ox, oy, oz, ux, uy, uz, length):
+                                              ox, oy, oz, ux, uy, uz, reach):
                         continue
                     x = _ray_geom(geom_type[g], geom_xpos[g], geom_xmat[g], geom_size[g], ox, oy, oz, ux, uy, uz)
                     if x >= 0 and (best < 0 or x < best):
                         best, best_g = x, g
+                        reach = min(reach, best)
             if best_g < 0 or not best < length:
                 continue
             geomid[r, n] = best_g
