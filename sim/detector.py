@@ -353,35 +353,33 @@ class Detector:
         if not requests:
             return []
         cams = np.array([r[0] for r in requests], dtype=np.int64)
-        counts = [r[1].poses.shape[0] for r in requests]
+        poses = [r[1].poses for r in requests]
+        counts = [len(p) for p in poses]
         J = self.skeleton.num_joints
-        if any(np.shape(r[1].poses)[1:] != (J, 3) for r in requests):
+        if any(np.shape(p)[1:] != (J, 3) for p in poses):
             return [self.visibility(r[0], world, r[1]) for r in requests]
-        N = max(counts) * J
-        if all(c * J == N for c in counts):
-            points = np.stack([np.asarray(r[1].poses, dtype=np.float64).reshape(N, 3) for r in requests])
+        n_req, most = len(requests), max(counts)
+        N = most * J
+        if min(counts) == most:
+            points = np.stack(poses).reshape(n_req, N, 3)
+            ids = np.stack([r[1].person_ids for r in requests]).astype(np.int64, copy=False)
         else:  # someone arrived or left between two captures of the tick: pad with NaN (never in view)
-            points = np.full((len(requests), N, 3), np.nan)
+            points = np.full((n_req, N, 3), np.nan)
+            ids = np.full((n_req, most), -1, dtype=np.int64)
             for i, r in enumerate(requests):
                 points[i, :counts[i] * J] = np.asarray(r[1].poses, dtype=np.float64).reshape(-1, 3)
+                ids[i, :counts[i]] = r[1].person_ids
         px_all, in_all = in_image_many(self._R, self._t, self._K, self._dist, self._size, self._max_radius,
                                        points, cams)
-        n_req = len(requests)
-        occluded = np.zeros(in_all.shape, dtype=bool)
-        self_occluded = np.zeros(in_all.shape, dtype=bool)
         if world is not None and self.config.occlusion and in_all.any():
-            ids = np.full((n_req, N // J if J else 0), -1, dtype=np.int64)
-            for i, r in enumerate(requests):
-                ids[i, :counts[i]] = np.asarray(r[1].person_ids, dtype=np.int64)
             occluded, self_occluded, _, _ = self._cast(world, self._centre_array[cams], points, in_all, ids)
-        out = []
-        for i, camera_index in enumerate(cams.tolist()):
-            P = counts[i]
-            view = (px_all[i, :P * J].reshape(P, J, 2), in_all[i, :P * J].reshape(P, J),
-                    occluded[i, :P * J].reshape(P, J), self_occluded[i, :P * J].reshape(P, J))
-            self.visibility_counts[camera_index] += (view[1].sum(), view[2].sum(), view[3].sum())
-            out.append(view)
-        return out
+        else:
+            occluded = self_occluded = np.zeros(in_all.shape, dtype=bool)
+        np.add.at(self.visibility_counts, cams,
+                  np.stack([in_all.sum(axis=1), occluded.sum(axis=1), self_occluded.sum(axis=1)], axis=1))
+        px_all = px_all.reshape(n_req, most, J, 2)
+        in_all, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_all, occluded, self_occluded))
+        return [(px_all[i, :P], in_all[i, :P], occluded[i, :P], self_occluded[i, :P]) for i, P in enumerate(counts)]
 
     def _scene(self, world) -> tuple:
         """What the ray caster needs of `world` that does not change while it runs (cached per world):
@@ -453,8 +451,18 @@ class Detector:
 
         The error draws of all requests are made at once, which is what keeps the per-frame cost low.
         """
+        return self.frames_from_rows(requests, *self.detection_rows(requests, visibilities))
+
+    def detection_rows(self, requests, visibilities) -> tuple[list[np.ndarray], np.ndarray]:
+        """The random part of `detect_visible`: every detection of the requests as rows of a few arrays.
+
+        Returns:
+            rows: person ids (D,), keypoints (D, J, 2), scores (D, J), true pixels (D, J, 2), in_image,
+                occluded, self_occluded (D, J), effects (D,), each frame's rows together and in the order
+                they are reported; bounds (R + 1,): request i owns rows bounds[i]:bounds[i + 1].
+        """
         if not requests:
-            return []
+            return [], np.zeros(1, dtype=np.int64)
         ids = np.concatenate([np.asarray(r[1].person_ids, dtype=np.int64) for r in requests])
         group = np.concatenate([np.full(len(r[1].person_ids), i) for i, r in enumerate(requests)])
         px, in_img, occluded, self_occluded = (np.concatenate([v[k] for v in visibilities]) for k in range(4))
@@ -470,12 +478,18 @@ class Detector:
         # Each frame's rows in a random order: sort by frame, then by a uniform key.
         order = np.lexsort((self._rng.random(rows[-1].shape[0]), rows[-1]))
         rows = [r[order] for r in rows]
-        bounds = np.searchsorted(rows[-1], np.arange(len(requests) + 1))
+        return rows[:-1], np.searchsorted(rows[-1], np.arange(len(requests) + 1))
+
+    def frames_from_rows(self, requests, rows: list[np.ndarray], bounds: np.ndarray) -> list[CameraFrame]:
+        """The frames of `requests` from their `detection_rows` (no randomness: any process can do it)."""
+        if not requests:
+            return []
+        bounds = bounds.tolist()
         frames = []
         for i, (camera_index, poses, capture_s, stamp_s, delivery_s) in enumerate(requests):
-            camera = self.cameras[camera_index]
-            d_ids, kp, scores, true_px, img, occ, self_occ, effects = (r[bounds[i]:bounds[i + 1]] for r in rows[:-1])
-            frame = Frame(camera.name, float(stamp_s), kp, scores)
+            a, b = bounds[i], bounds[i + 1]
+            d_ids, kp, scores, true_px, img, occ, self_occ, effects = (r[a:b] for r in rows)
+            frame = Frame(self.cameras[camera_index].name, float(stamp_s), kp, scores)
             truth = DetectionTruth(
                 capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=d_ids, keypoints_px=true_px,
                 in_image=img, occluded=occ, self_occluded=self_occ, effects=effects,

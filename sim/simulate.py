@@ -5,6 +5,9 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
+import multiprocessing
+import os
+import signal
 from collections.abc import Iterator
 
 import numpy as np
@@ -31,16 +34,19 @@ class Simulation:
     Args:
         scenario: a loaded `sim.scenario.Scenario`.
         seed: the seed of every random stream; None uses the scenario's seed.
+        worker_process: simulate in a second process (forked; where the machine has more than one core),
+            pipelined with whatever consumes `events` here (writing the recording): the events are the same.
 
     Attributes:
         cameras: the rig, in camera-index order.
         boxes: the store's boxes (floor, walls, shelves, ...).
         skeleton: the keypoint layout of the poses.
+        world: the `sim.world.World` (advanced by `events` only when no worker process simulates).
         detector: the `sim.detector.Detector` of the latest `events` pass (its `visibility_counts` give
             the joints in the image, occluded and self-occluded per camera, over every person-view).
     """
 
-    def __init__(self, scenario, seed: int | None = None):
+    def __init__(self, scenario, seed: int | None = None, *, worker_process: bool = True):
         from sim.world import World  # MuJoCo is only needed here and below
 
         self.scenario = scenario
@@ -50,6 +56,7 @@ class Simulation:
         self.world = self._world_factory()
         self.boxes = tuple(self.world.boxes)
         self.skeleton = self.world.skeleton
+        self.worker_process = worker_process
         self._used = False
         self.detector: Detector | None = None
 
@@ -72,17 +79,36 @@ class Simulation:
         if self._used:  # a second pass starts again from the same initial state
             self.world = self._world_factory()
         self._used = True
-        world = self.world
-        detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"), self.skeleton)
-        self.detector = detector
+        self.detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"),
+                                 self.skeleton)
+        if self.worker_process and _usable_cores() > 1:
+            blocks = self._blocks_from_worker(duration)
+        else:
+            blocks = self._blocks(duration)
+        pending: list = []
+        seq = itertools.count()
+        for t, truths, requests, rows, bounds in blocks:
+            for poses in truths:
+                heapq.heappush(pending, (poses.t_s, _TRUTH_KIND, -1, poses.t_s, next(seq), poses))
+            for request, event in zip(requests, self.detector.frames_from_rows(requests, rows, bounds)):
+                heapq.heappush(pending, (request[4], _FRAME_KIND, request[0], request[2], next(seq), event))
+            # Everything later has a log time > t (a later capture is after t, and delivered after it).
+            while pending and pending[0][0] <= t:
+                yield heapq.heappop(pending)[-1]
+        while pending:
+            yield heapq.heappop(pending)[-1]
+
+    def _blocks(self, duration: float) -> Iterator[tuple]:
+        """The simulation proper, one block of `_DETECT_BLOCK_TICKS` truth ticks at a time: (the block's
+        last tick time, its truths, its capture requests, their `Detector.detection_rows`)."""
+        world, detector = self.world, self.detector
         captures = clock_mod.schedule([c.name for c in self.cameras], self.scenario.clock, duration,
                                       child_rng(self.seed, "clock"))
         # Truth ticks cover [0, duration] and the last capture.
         n_truth = int(np.ceil(duration * TRUTH_RATE_HZ - 1e-9)) + 1
-        pending: list = []
-        seq = itertools.count()
         next_capture = 0
         previous: PoseTruth | None = None
+        truths: list = []
         requests: list = []
         visibilities: list = []
         for k in range(n_truth):
@@ -100,18 +126,95 @@ class Simulation:
             if batch:  # occlusion needs this tick's bodies; the error draws wait for the block
                 requests += batch
                 visibilities += detector.visibility_many(world, batch)
-            heapq.heappush(pending, (t, _TRUTH_KIND, -1, t, next(seq), poses))
+            truths.append(poses)
             previous = poses
             if (k + 1) % _DETECT_BLOCK_TICKS and k + 1 < n_truth:
                 continue
-            for request, event in zip(requests, detector.detect_visible(requests, visibilities)):
-                heapq.heappush(pending, (request[4], _FRAME_KIND, request[0], request[2], next(seq), event))
-            requests, visibilities = [], []
-            # Everything later has a log time > t (a later capture is after t, and delivered after it).
-            while pending and pending[0][0] <= t:
-                yield heapq.heappop(pending)[-1]
-        while pending:
-            yield heapq.heappop(pending)[-1]
+            yield (t, truths, requests, *detector.detection_rows(requests, visibilities))
+            truths, requests, visibilities = [], [], []
+
+    def _blocks_from_worker(self, duration: float) -> Iterator[tuple]:
+        """`_blocks` computed in a forked process and received here, block by block.
+
+        The worker ignores Ctrl-C (the whole process group gets it; this side decides) and is stopped and
+        reaped whenever this generator ends: done, failed, interrupted or dropped unfinished. Its
+        failures are raised here.
+        """
+        context = multiprocessing.get_context("fork")
+        receiver, sender = context.Pipe(duplex=False)
+        worker = context.Process(target=self._work, args=(duration, sender), name="crossview-simulation", daemon=True)
+        worker.start()
+        sender.close()
+        try:
+            while True:
+                try:
+                    kind, payload = receiver.recv()
+                except EOFError:
+                    raise RuntimeError(f"the simulation worker process stopped unexpectedly (exit code "
+                                       f"{worker.exitcode})") from None
+                if kind == "block":
+                    yield _unpack_block(payload)
+                elif kind == "error":
+                    raise payload
+                else:  # "end": the counts of the detector that ran there
+                    self.detector.visibility_counts[:] = payload
+                    return
+        finally:
+            receiver.close()
+            if worker.is_alive():
+                worker.terminate()
+            worker.join()
+
+    def _work(self, duration: float, sender) -> None:
+        """The worker process: simulates and sends every block, then the detector's counts (or its error)."""
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            for block in self._blocks(duration):
+                sender.send(("block", _pack_block(block)))
+            sender.send(("end", self.detector.visibility_counts))
+        except BrokenPipeError:  # the consumer is gone
+            pass
+        except BaseException as e:  # handed over to be raised in the consumer
+            try:
+                sender.send(("error", e))
+            except (BrokenPipeError, TypeError, ValueError, AttributeError):  # gone, or an unpicklable error
+                sender.send(("error", RuntimeError(f"simulation worker: {type(e).__name__}: {e}")))
+        finally:
+            sender.close()
+
+
+def _usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def _pack_block(block: tuple) -> tuple:
+    """A block as a few flat arrays (one pickle of a handful of arrays instead of dozens of small ones):
+    the truths' and the captures' poses concatenated, with their times and people counts."""
+    t, truths, requests, rows, bounds = block
+    poses = truths + [r[1] for r in requests]
+    times = np.array([p.t_s for p in poses])
+    counts = np.array([len(p.person_ids) for p in poses], dtype=np.int64)
+    ids = np.concatenate([np.asarray(p.person_ids, dtype=np.int64) for p in poses])
+    joints = np.concatenate([np.asarray(p.poses, dtype=np.float64).reshape(-1, 3) for p in poses])
+    shapes = [np.shape(p.poses)[1:] for p in poses]
+    meta = np.array([r[0] for r in requests], dtype=np.int64), np.array([r[2:5] for r in requests]).reshape(-1, 3)
+    return t, len(truths), times, counts, ids, joints, shapes, meta, rows, bounds
+
+
+def _unpack_block(packed: tuple) -> tuple:
+    t, n_truths, times, counts, ids, joints, shapes, (cams, capture_times), rows, bounds = packed
+    people = np.concatenate([[0], np.cumsum(counts)]).tolist()
+    rows_of = [0]
+    for n, shape in zip(counts.tolist(), shapes):
+        rows_of.append(rows_of[-1] + n * (shape[0] if shape else 0))
+    poses = [PoseTruth(t_s, ids[people[i]:people[i + 1]], joints[rows_of[i]:rows_of[i + 1]].reshape(-1, *shapes[i]))
+             for i, t_s in enumerate(times.tolist())]
+    requests = [(c, poses[n_truths + i], *times_i) for i, (c, times_i) in
+                enumerate(zip(cams.tolist(), capture_times.tolist()))]
+    return t, poses[:n_truths], requests, rows, bounds
 
 
 def interpolate_poses(before: PoseTruth | None, after: PoseTruth, t_s: float) -> PoseTruth:

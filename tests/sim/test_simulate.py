@@ -83,3 +83,46 @@ def test_interpolated_poses_are_linear_between_ticks_and_handle_arrivals():
     late = interpolate_poses(before, after, 0.008)
     assert late.person_ids.tolist() == [2, 3]
     np.testing.assert_allclose(late.poses[0], 0.8)
+
+
+def _fingerprint(event):
+    if isinstance(event, PoseTruth):
+        return ("truth", event.t_s, event.person_ids.tobytes(), event.poses.tobytes())
+    f, t = event.frame, event.truth
+    return ("frame", f.camera, f.stamp_s, f.keypoints_px.tobytes(), f.scores.tobytes(), t.capture_s, t.delivery_s,
+            t.person_ids.tobytes(), t.keypoints_px.tobytes(), t.in_image.tobytes(), t.occluded.tobytes(),
+            t.self_occluded.tobytes(), t.effects.tobytes(), event.poses_at_capture.poses.tobytes())
+
+
+def test_a_worker_process_gives_the_same_events_bit_for_bit(small):
+    """Simulating in a forked worker (the default where there are two cores) changes nothing in the stream,
+    nor in the detector's visibility counts."""
+    here = Simulation(small, seed=4, worker_process=False)
+    there = Simulation(small, seed=4, worker_process=True)
+    assert [_fingerprint(e) for e in here.events(1.5)] == [_fingerprint(e) for e in there.events(1.5)]
+    assert here.detector.visibility_counts.tolist() == there.detector.visibility_counts.tolist()
+    assert here.detector.visibility_counts.sum() > 0
+
+
+def test_the_worker_process_never_outlives_the_stream(small, monkeypatch):
+    import multiprocessing
+
+    from sim.detector import Detector
+
+    # A consumer that stops early (or is interrupted) leaves no worker behind.
+    events = Simulation(small, seed=4).events(5.0)
+    next(events)
+    with pytest.raises(KeyboardInterrupt):
+        for i, _ in enumerate(events):
+            if i == 20:
+                raise KeyboardInterrupt
+    events.close()
+    assert multiprocessing.active_children() == []
+    # A failure in the worker is raised here, as what it was, and the worker is gone.
+    def broken(self, requests, visibilities):
+        raise ArithmeticError("detector broke")
+
+    monkeypatch.setattr(Detector, "detection_rows", broken)
+    with pytest.raises(ArithmeticError, match="detector broke"):
+        list(Simulation(small, seed=4).events(1.0))
+    assert multiprocessing.active_children() == []
