@@ -19,7 +19,7 @@ MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apa
 def update_matched(
     rows, cols, det_px, camera, stamp_s,
     pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
-    P, Q, Q_trace, bones,
+    P, bones,
     max_observation_age_s, lambda_t_per_s, use_velocity, min_views, reject_factor, reject_floor_px, max_bone_m,
     velocity_window_s, max_speed_m_per_s, stale_after_s, max_predict_s,
 ):
@@ -42,8 +42,7 @@ def update_matched(
         camera: the frame's camera index; stamp_s: its stamp t, s.
         pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates: the
             target arrays of `tracker._Targets` (updated in place).
-        P: (C, 3, 4); Q: (C, 5, 4, 4) `triangulation.camera_quadrics(P)`; Q_trace: (C, 5) their traces.
-        bones: (B, 2) joint pairs.
+        P: (C, 3, 4) projection matrices; bones: (B, 2) joint pairs.
         The rest: `TrackerConfig` fields.
     """
     C, J = obs_s.shape[1], obs_s.shape[2]
@@ -51,7 +50,11 @@ def update_matched(
     cams = np.empty(C, dtype=np.int64)
     points = np.empty((C, 2))
     dts = np.empty(C)
+    decays = np.empty(C)
+    cached_s = np.empty(C)  # the stamps of a camera's points mostly agree across joints: one e^x per stamp
+    cached_decay = np.empty(C)
     work = np.empty((3, 4, 4))
+    scratch = np.empty((4, 8))
     V = np.empty(3)
     plain = np.empty(3)
     compensated = np.empty(3)
@@ -62,6 +65,7 @@ def update_matched(
     values = np.empty(J)
     for m in range(rows.size):
         r, d = rows[m], cols[m]
+        cached_s[:] = np.nan
         # 1. Eq. (6): the new points replace this camera's latest points.
         for j in range(J):
             if np.isfinite(det_px[d, j, 0]):
@@ -80,10 +84,14 @@ def update_matched(
                     points[num, 0] = obs_px[r, k, j, 0]
                     points[num, 1] = obs_px[r, k, j, 1]
                     dts[num] = max(stamp_s - obs_s[r, k, j], 0.0)
+                    if obs_s[r, k, j] != cached_s[k]:
+                        cached_s[k] = obs_s[r, k, j]
+                        cached_decay[k] = np.exp(-2.0 * lambda_t_per_s * dts[num])
+                    decays[num] = cached_decay[k]  # eq. (11): e^(-2 λt (t - t_i)), squared
                     num += 1
             V[0], V[1], V[2] = vel[r, j, 0], vel[r, j, 1], vel[r, j, 2]
-            triangulate_point(P, Q, Q_trace, cams, points, dts, num, V, use_velocity, min_views, lambda_t_per_s,
-                              reject_factor, reject_floor_px, plain, compensated, work)
+            triangulate_point(P, cams, points, dts, decays, num, V, use_velocity, min_views, reject_factor,
+                              reject_floor_px, plain, compensated, work, scratch)
             update[j] = np.isfinite(plain[0])
             use_compensated = use_velocity and np.isfinite(compensated[0])
             for k in range(3):
@@ -143,8 +151,7 @@ def _fit_velocity(hist_pos, hist_s, r, j, stamp_s, window_s, max_speed, vel):
     """vel[r, j] = slope of the linear least-squares fit of position on time over the window's samples."""
     H = hist_s.shape[1]
     n = 0
-    t_sum = 0.0
-    x_sum = np.zeros(3)
+    t_sum = x_sum = y_sum = z_sum = 0.0
     first, last = np.inf, -np.inf
     for h in range(H):
         s = hist_s[r, h, j]
@@ -152,28 +159,31 @@ def _fit_velocity(hist_pos, hist_s, r, j, stamp_s, window_s, max_speed, vel):
             n += 1
             t_sum += s
             first, last = min(first, s), max(last, s)
-            for k in range(3):
-                x_sum[k] += hist_pos[r, h, j, k]
+            x_sum += hist_pos[r, h, j, 0]
+            y_sum += hist_pos[r, h, j, 1]
+            z_sum += hist_pos[r, h, j, 2]
     t_mean = t_sum / max(n, 1)
-    sxx = 0.0
-    dt_sum = 0.0
-    sxy = np.zeros(3)
+    sxx = dt_sum = sx = sy = sz = 0.0
     for h in range(H):
         s = hist_s[r, h, j]
         if stamp_s - s <= window_s:
             dt = s - t_mean
             sxx += dt * dt
             dt_sum += dt
-            for k in range(3):
-                sxy[k] += dt * hist_pos[r, h, j, k]
-    v = np.zeros(3)
+            sx += dt * hist_pos[r, h, j, 0]
+            sy += dt * hist_pos[r, h, j, 1]
+            sz += dt * hist_pos[r, h, j, 2]
+    vx = vy = vz = 0.0
     if n >= 2 and last - first >= MIN_VELOCITY_SPAN_S and sxx > 0.0:
-        for k in range(3):
-            # Σ dt (x - x̄) = Σ dt x - x̄ Σ dt, the second sum zero up to rounding.
-            v[k] = (sxy[k] - x_sum[k] / max(n, 1) * dt_sum) / sxx
-    speed = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    for k in range(3):
-        vel[r, j, k] = v[k] * max_speed / max(speed, 1e-12) if speed > max_speed else v[k]
+        # Σ dt (x - x̄) = Σ dt x - x̄ Σ dt, the second sum zero up to rounding.
+        vx = (sx - x_sum / max(n, 1) * dt_sum) / sxx
+        vy = (sy - y_sum / max(n, 1) * dt_sum) / sxx
+        vz = (sz - z_sum / max(n, 1) * dt_sum) / sxx
+    speed = np.sqrt(vx * vx + vy * vy + vz * vz)
+    if speed > max_speed:
+        vx, vy, vz = vx * max_speed / max(speed, 1e-12), vy * max_speed / max(speed, 1e-12), \
+            vz * max_speed / max(speed, 1e-12)
+    vel[r, j, 0], vel[r, j, 1], vel[r, j, 2] = vx, vy, vz
 
 
 @jit

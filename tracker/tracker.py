@@ -31,7 +31,6 @@ from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
 from tracker.kernels import predict_rows, update_matched
-from tracker.triangulation import camera_quadrics, quadric_traces
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
@@ -98,13 +97,11 @@ class Tracker:
         self._bones = np.ascontiguousarray(np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2))
         C, J = len(self.cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))
-        # Per-camera constants of the compiled kernels: eq. (3) R^T K^-1 and centre, lens model, eq. (9) quadrics.
+        # Per-camera constants of the compiled kernels: eq. (3) R^T K^-1 and centre, lens model.
         self._world_from_pixel = np.stack([world_from_pixel_matrix(cam) for cam in self.cameras]) if C else None
         self._centers = np.stack([c.center_world for c in self.cameras]) if C else np.zeros((0, 3))
         self._K = [np.ascontiguousarray(cam.K, dtype=np.float64) for cam in self.cameras]
         self._dist = [np.ascontiguousarray(cam.dist, dtype=np.float64) for cam in self.cameras]
-        self._quadrics = camera_quadrics(self._P)  # (C, 5, 4, 4), eq. (9) normal-matrix constants
-        self._quadric_traces = quadric_traces(self._quadrics)  # (C, 5)
         cfg = config
         self._affinity_params = (float(cfg.w_2d), float(cfg.alpha_2d_px_per_s), float(cfg.alpha_2d_floor_px),
                                  float(cfg.w_3d), float(cfg.alpha_3d_m), float(cfg.lambda_a_per_s),
@@ -239,8 +236,8 @@ class Tracker:
         """
         tg = self._targets
         update_matched(rows, cols, det_px, c, t, tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s,
-                       tg.hist_pos, tg.hist_s, tg.hist_next, tg.last_update_s, tg.num_updates, self._P,
-                       self._quadrics, self._quadric_traces, self._bones, *self._update_params)
+                       tg.hist_pos, tg.hist_s, tg.hist_next, tg.last_update_s, tg.num_updates, self._P, self._bones,
+                       *self._update_params)
         tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, self.config)
 
     def _set_pool(self, c: int, px: np.ndarray, frame_index: np.ndarray, t: float) -> None:

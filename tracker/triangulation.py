@@ -194,12 +194,11 @@ def triangulate_observations(
     lambda_t_per_s: float,
     velocities: np.ndarray | None,
     min_views: int = 2,
-    quadrics: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Eq. (6)-(11) for many points at once, from a flat list of their observations (no missing entries).
 
     Each observation adds its two weighted rows' outer products to its point's 4x4 normal matrix (eq. 8, 10),
-    written as a weighted sum of per-camera constant matrices (`camera_quadrics`); see `triangulate_point`.
+    accumulated by the compiled `triangulate_point`.
 
     Args:
         P: (C, 3, 4) projection matrices.
@@ -212,14 +211,13 @@ def triangulate_observations(
         lambda_t_per_s: λt, 1/s.
         velocities: None, or (N, 3) joint velocities, m/s (see `triangulate_incremental`).
         min_views: least number of views.
-        quadrics: `camera_quadrics(P)` if already computed (a tracker keeps it), else None.
 
     Returns:
         (paper estimate (N, 3), velocity-compensated estimate (N, 3) or None without velocities); NaN for a
         point with fewer than `min_views` observations.
     """
     return triangulate_observations_robust(P, group, cam, points_px, stamps_s, num_groups, stamp_s, lambda_t_per_s,
-                                           velocities, min_views, quadrics, 0.0, 1.0)
+                                           velocities, min_views, 0.0, 1.0)
 
 
 def triangulate_observations_robust(
@@ -233,7 +231,6 @@ def triangulate_observations_robust(
     lambda_t_per_s: float,
     velocities: np.ndarray | None,
     min_views: int,
-    quadrics: np.ndarray | None,
     reject_factor: float,
     reject_floor_px: float,
 ) -> tuple[np.ndarray, np.ndarray | None]:
@@ -245,7 +242,6 @@ def triangulate_observations_robust(
     would remain. Arguments as `triangulate_observations`; reject_factor 0 disables the second pass.
     """
     P = np.ascontiguousarray(P, dtype=np.float64)
-    Q = camera_quadrics(P) if quadrics is None else quadrics
     group = np.asarray(group, dtype=np.int64)
     order = np.argsort(group, kind="stable")
     starts = np.zeros(num_groups + 1, dtype=np.int64)
@@ -256,50 +252,54 @@ def triangulate_observations_robust(
     V = np.array(velocities, dtype=np.float64, order="C") if use_velocity else np.zeros((num_groups, 3))
     plain = np.empty((num_groups, 3))
     compensated = np.empty((num_groups, 3))
-    _triangulate_groups(P, np.ascontiguousarray(Q), quadric_traces(Q), starts, np.asarray(cam, dtype=np.int64)[order],
-                        points, dts, V, use_velocity, int(min_views), float(lambda_t_per_s), float(reject_factor),
-                        float(reject_floor_px), plain, compensated)
+    _triangulate_groups(P, starts, np.asarray(cam, dtype=np.int64)[order], points, dts, V, use_velocity,
+                        int(min_views), float(lambda_t_per_s), float(reject_factor), float(reject_floor_px), plain,
+                        compensated)
     return plain, compensated if use_velocity else None
 
 
 @jit
-def _triangulate_groups(P, Q, Q_trace, starts, cam, points_px, dts, V, use_velocity, min_views, lambda_t_per_s,
-                        reject_factor, reject_floor_px, plain, compensated):
+def _triangulate_groups(P, starts, cam, points_px, dts, V, use_velocity, min_views, lambda_t_per_s, reject_factor,
+                        reject_floor_px, plain, compensated):
     """`triangulate_point` for each group of observations cam/points_px/dts[starts[n]:starts[n + 1]]."""
     work = np.empty((3, 4, 4))
-    size = 1
+    size = 4
     for n in range(starts.size - 1):
         size = max(size, starts[n + 1] - starts[n])
-    cam_n, points_n, dts_n = np.empty(size, dtype=np.int64), np.empty((size, 2)), np.empty(size)
+    cam_n, points_n = np.empty(size, dtype=np.int64), np.empty((size, 2))
+    dts_n, decays_n = np.empty(size), np.empty(size)
+    scratch = np.empty((4, 8))
     V_n, plain_n, compensated_n = np.empty(3), np.empty(3), np.empty(3)
     for n in range(starts.size - 1):
         a, num = starts[n], starts[n + 1] - starts[n]
         for i in range(num):
             cam_n[i], points_n[i, 0], points_n[i, 1], dts_n[i] = cam[a + i], points_px[a + i, 0], \
                 points_px[a + i, 1], dts[a + i]
+            decays_n[i] = np.exp(-2.0 * lambda_t_per_s * dts[a + i])
         V_n[0], V_n[1], V_n[2] = V[n, 0], V[n, 1], V[n, 2]
-        triangulate_point(P, Q, Q_trace, cam_n, points_n, dts_n, num, V_n, use_velocity, min_views, lambda_t_per_s,
-                          reject_factor, reject_floor_px, plain_n, compensated_n, work)
+        triangulate_point(P, cam_n, points_n, dts_n, decays_n, num, V_n, use_velocity, min_views, reject_factor,
+                          reject_floor_px, plain_n, compensated_n, work, scratch)
         for k in range(3):
             plain[n, k], compensated[n, k] = plain_n[k], compensated_n[k]
 
 
 @jit
-def triangulate_point(P, Q, Q_trace, cam, points_px, dts, num, V, use_velocity, min_views, lambda_t_per_s,
-                      reject_factor, reject_floor_px, plain, compensated, work):
+def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, reject_factor, reject_floor_px,
+                      plain, compensated, work, scratch):
     """Eq. (6)-(11) for one point from its `num` observations, with the robust second pass (compiled kernel).
 
     Args:
-        P: (C, 3, 4) projection matrices; Q: (C, 5, 4, 4) `camera_quadrics(P)`; Q_trace: (C, 5) their traces.
+        P: (C, 3, 4) projection matrices.
         cam: (≥num,) camera of each observation; points_px: (≥num, 2) undistorted pixels; dts: (≥num,) t - t_i ≥ 0, s.
+        decays: (≥num,) e^(-2 λt (t - t_i)), the squared time factors of the eq. (11) weights.
         V: (3,) the point's velocity, m/s (read only when use_velocity).
         use_velocity: also compute the velocity-compensated estimate.
-        min_views, lambda_t_per_s, reject_factor, reject_floor_px: as `triangulate_observations_robust`.
+        min_views, reject_factor, reject_floor_px: as `triangulate_observations_robust`.
         plain, compensated: (3,) outputs, NaN when not determined (compensated untouched without velocity).
-        work: (3, 4, 4) scratch.
+        work: (3, 4, 4) and scratch: (4, 8) work space.
     """
-    _solve_observations(Q, Q_trace, cam, points_px, dts, num, V, use_velocity, min_views, lambda_t_per_s, plain,
-                        compensated, work)
+    _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, plain, compensated, work,
+                        scratch)
     if reject_factor <= 0.0 or num == 0:
         return
     X = compensated if use_velocity else plain
@@ -326,14 +326,15 @@ def triangulate_point(P, Q, Q_trace, cam, points_px, dts, num, V, use_velocity, 
             kept += 1
     if kept == num or kept < min_views:
         return
-    cam2, points2, dts2 = np.empty(kept, dtype=np.int64), np.empty((kept, 2)), np.empty(kept)
+    cam2, points2, dts2, decays2 = np.empty(kept, dtype=np.int64), np.empty((kept, 2)), np.empty(kept), np.empty(kept)
     for i in range(kept):
         cam2[i], points2[i, 0], points2[i, 1], dts2[i] = cam[keep[i]], points_px[keep[i], 0], points_px[keep[i], 1], \
             dts[keep[i]]
+        decays2[i] = decays[keep[i]]
     plain2 = np.empty(3)
     compensated2 = np.empty(3)
-    _solve_observations(Q, Q_trace, cam2, points2, dts2, kept, V, use_velocity, min_views, lambda_t_per_s, plain2,
-                        compensated2, work)
+    _solve_observations(P, cam2, points2, dts2, decays2, kept, V, use_velocity, min_views, plain2, compensated2, work,
+                        scratch)
     if np.isfinite(plain2[0]):
         plain[:] = plain2
         if use_velocity:
@@ -341,33 +342,41 @@ def triangulate_point(P, Q, Q_trace, cam, points_px, dts, num, V, use_velocity, 
 
 
 @jit
-def _solve_observations(Q, Q_trace, cam, points_px, dts, num, V, use_velocity, min_views, lambda_t_per_s, plain,
-                        compensated, work):
+def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, plain, compensated, work,
+                        scratch):
     """The normal matrices of eq. (8), (10) with the weights of eq. (11), and their smallest eigenvectors."""
-    plain[:] = np.nan
+    plain[0] = plain[1] = plain[2] = np.nan
     if use_velocity:
-        compensated[:] = np.nan
+        compensated[0] = compensated[1] = compensated[2] = np.nan
     if num < min_views:
         return
-    work[:] = 0.0
+    # The 10 upper-triangle entries of the normal matrix and its moments stay in registers (tuples).
+    m0 = m1 = m2 = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
     for i in range(num):
         k = cam[i]
-        x0, x1, dt = points_px[i, 0], points_px[i, 1], dts[i]
-        # Eq. (9) row r = x_r p3 - p_r, so rᵀr = x_r² p3ᵀp3 - 2 x_r sym(p_rᵀp3) + p_rᵀp_r and ||r||² is the same
-        # combination of the quadrics' traces. Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||².
-        decay = np.exp(-2.0 * lambda_t_per_s * dt)
-        w0 = decay / (x0 * x0 * Q_trace[k, 0] - 2.0 * x0 * Q_trace[k, 1] + Q_trace[k, 3])
-        w1 = decay / (x1 * x1 * Q_trace[k, 0] - 2.0 * x1 * Q_trace[k, 2] + Q_trace[k, 4])
-        c0, c1, c2 = w0 * x0 * x0 + w1 * x1 * x1, -2.0 * w0 * x0, -2.0 * w1 * x1
-        for r in range(4):
-            for s in range(4):
-                a = (c0 * Q[k, 0, r, s] + c1 * Q[k, 1, r, s] + c2 * Q[k, 2, r, s] + w0 * Q[k, 3, r, s]
-                     + w1 * Q[k, 4, r, s])
-                work[0, r, s] += a
-                if use_velocity:  # the moments Σ dt_i A_i and Σ dt_i² A_i
-                    work[1, r, s] += a * dt
-                    work[2, r, s] += a * (dt * dt)
-    smallest_eigenvector_point(work[0], plain)
+        x0, x1 = points_px[i, 0], points_px[i, 1]
+        # Eq. (9): the rows a = x p3 - p1 and b = y p3 - p2.
+        a0, a1, a2, a3 = (x0 * P[k, 2, 0] - P[k, 0, 0], x0 * P[k, 2, 1] - P[k, 0, 1], x0 * P[k, 2, 2] - P[k, 0, 2],
+                          x0 * P[k, 2, 3] - P[k, 0, 3])
+        b0, b1, b2, b3 = (x1 * P[k, 2, 0] - P[k, 1, 0], x1 * P[k, 2, 1] - P[k, 1, 1], x1 * P[k, 2, 2] - P[k, 1, 2],
+                          x1 * P[k, 2, 3] - P[k, 1, 3])
+        # Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||².
+        decay = decays[i]
+        w0 = decay / (a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+        w1 = decay / (b0 * b0 + b1 * b1 + b2 * b2 + b3 * b3)
+        # Eq. (8), (10): Σ w² r rᵀ, and with velocities its moments Σ dt_i (.) and Σ dt_i² (.).
+        e = (w0 * a0 * a0 + w1 * b0 * b0, w0 * a0 * a1 + w1 * b0 * b1, w0 * a0 * a2 + w1 * b0 * b2,
+             w0 * a0 * a3 + w1 * b0 * b3, w0 * a1 * a1 + w1 * b1 * b1, w0 * a1 * a2 + w1 * b1 * b2,
+             w0 * a1 * a3 + w1 * b1 * b3, w0 * a2 * a2 + w1 * b2 * b2, w0 * a2 * a3 + w1 * b2 * b3,
+             w0 * a3 * a3 + w1 * b3 * b3)
+        m0 = _add_scaled(m0, e, 1.0)
+        if use_velocity:
+            m1 = _add_scaled(m1, e, dts[i])
+            m2 = _add_scaled(m2, e, dts[i] * dts[i])
+    _set_symmetric(work, 0, m0)
+    _set_symmetric(work, 1, m1)
+    _set_symmetric(work, 2, m2)
+    smallest_eigenvector_point(work[0], plain, scratch)
     if not use_velocity:
         return
     # Beyond the paper: row·[X - V dt_i; 1] = 0, i.e. rows r T_i with T_i = [[I, -V dt_i], [0, 1]], so the
@@ -385,25 +394,108 @@ def _solve_observations(Q, Q_trace, cam, points_px, dts, num, V, use_velocity, m
         for s in range(3):
             M1[r, s] = M[r, s]
     M1[3, 3] = corner
-    smallest_eigenvector_point(M1, compensated)
+    smallest_eigenvector_point(M1, compensated, scratch)
 
 
 @jit
-def smallest_eigenvector_point(M, out):
+def _add_scaled(s, e, f):
+    """s + f e for 10-tuples."""
+    return (s[0] + f * e[0], s[1] + f * e[1], s[2] + f * e[2], s[3] + f * e[3], s[4] + f * e[4], s[5] + f * e[5],
+            s[6] + f * e[6], s[7] + f * e[7], s[8] + f * e[8], s[9] + f * e[9])
+
+
+_UPPER_ROW = (0, 0, 0, 0, 1, 1, 1, 2, 2, 3)
+_UPPER_COL = (0, 1, 2, 3, 1, 2, 3, 2, 3, 3)
+
+
+@jit
+def _set_symmetric(work, m, upper):
+    """work[m] (4, 4) = the symmetric matrix of the 10 upper-triangle entries, row by row."""
+    for i in range(10):
+        work[m, _UPPER_ROW[i], _UPPER_COL[i]] = upper[i]
+        work[m, _UPPER_COL[i], _UPPER_ROW[i]] = upper[i]
+
+
+@jit
+def smallest_eigenvector_point(M, out, scratch):
     """`_smallest_eigenvector` of one 4x4 normal matrix M into out (3,) (compiled kernel).
 
-    The inverse of the regularised M by Gauss-Jordan elimination with partial pivoting.
+    Inverse iteration with the Cholesky factor of the regularised M (symmetric positive definite); should
+    rounding make it indefinite, its inverse by Gauss-Jordan elimination with partial pivoting in scratch (4, 8).
     """
     scale = M[0, 0] + M[1, 1] + M[2, 2] + M[3, 3]
-    out[:] = np.nan
+    out[0] = out[1] = out[2] = np.nan
     if not np.isfinite(scale):
         return
-    a = np.empty((4, 8))
+    eps = 1e-13 * scale
+    L = _cholesky(M[0, 0] + eps, M[1, 0], M[1, 1] + eps, M[2, 0], M[2, 1], M[2, 2] + eps, M[3, 0], M[3, 1], M[3, 2],
+                  M[3, 3] + eps)
+    if L[0] > 0.0:
+        v0, v1, v2, v3 = _cholesky_solve(L, 0.0, 0.0, 0.0, 1.0)  # the last column of M⁻¹
+        for _ in range(_INVERSE_ITERATIONS):
+            norm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
+            v0, v1, v2, v3 = _cholesky_solve(L, v0 / norm, v1 / norm, v2 / norm, v3 / norm)
+    else:
+        v0, v1, v2, v3 = _inverse_iteration_gauss_jordan(M, eps, scratch)
+        if not np.isfinite(v0):
+            return
+    norm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
+    v0, v1, v2, v3 = v0 / norm, v1 / norm, v2 / norm, v3 / norm
+    if abs(v3) < 1e-12:
+        return
+    x0, x1, x2 = v0 / v3, v1 / v3, v2 / v3
+    if np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2):
+        out[0], out[1], out[2] = x0, x1, x2
+
+
+@jit
+def _cholesky(a00, a10, a11, a20, a21, a22, a30, a31, a32, a33):
+    """Lower Cholesky factor of a symmetric 4x4 matrix (lower triangle given row by row), its diagonal stored
+    inverted; the first entry is not positive when the matrix is not (numerically) positive definite."""
+    fail = (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if not a00 > 0.0:
+        return fail
+    i00 = 1.0 / np.sqrt(a00)
+    l10, l20, l30 = a10 * i00, a20 * i00, a30 * i00
+    d = a11 - l10 * l10
+    if not d > 0.0:
+        return fail
+    i11 = 1.0 / np.sqrt(d)
+    l21, l31 = (a21 - l20 * l10) * i11, (a31 - l30 * l10) * i11
+    d = a22 - l20 * l20 - l21 * l21
+    if not d > 0.0:
+        return fail
+    i22 = 1.0 / np.sqrt(d)
+    l32 = (a32 - l30 * l20 - l31 * l21) * i22
+    d = a33 - l30 * l30 - l31 * l31 - l32 * l32
+    if not d > 0.0:
+        return fail
+    return (i00, l10, i11, l20, l21, i22, l30, l31, l32, 1.0 / np.sqrt(d))
+
+
+@jit
+def _cholesky_solve(L, b0, b1, b2, b3):
+    """x with L Lᵀ x = b for a `_cholesky` factor L."""
+    i00, l10, i11, l20, l21, i22, l30, l31, l32, i33 = L
+    y0 = b0 * i00
+    y1 = (b1 - l10 * y0) * i11
+    y2 = (b2 - l20 * y0 - l21 * y1) * i22
+    y3 = (b3 - l30 * y0 - l31 * y1 - l32 * y2) * i33
+    x3 = y3 * i33
+    x2 = (y2 - l32 * x3) * i22
+    x1 = (y1 - l21 * x2 - l31 * x3) * i11
+    x0 = (y0 - l10 * x1 - l20 * x2 - l30 * x3) * i00
+    return x0, x1, x2, x3
+
+
+@jit
+def _inverse_iteration_gauss_jordan(M, eps, a):
+    """The unnormalised inverse-iteration vector of M + eps I by its explicit inverse (NaN if singular)."""
     for r in range(4):
         for s in range(4):
             a[r, s] = M[r, s]
             a[r, 4 + s] = 0.0
-        a[r, r] += 1e-13 * scale
+        a[r, r] += eps
         a[r, 4 + r] = 1.0
     for col in range(4):
         pivot = col
@@ -411,7 +503,7 @@ def smallest_eigenvector_point(M, out):
             if abs(a[r, col]) > abs(a[pivot, col]):
                 pivot = r
         if a[pivot, col] == 0.0:
-            return  # only for M = 0 (no weight): M + 1e-13 trace(M) I is positive definite otherwise
+            return np.nan, np.nan, np.nan, np.nan  # only for M = 0 (no weight)
         if pivot != col:
             for s in range(8):
                 a[col, s], a[pivot, s] = a[pivot, s], a[col, s]
@@ -423,47 +515,15 @@ def smallest_eigenvector_point(M, out):
                 f = a[r, col]
                 for s in range(8):
                     a[r, s] -= f * a[col, s]
-    v = np.empty(4)
-    for r in range(4):
-        v[r] = a[r, 7]  # the last column of M⁻¹ (the start [-a⁻¹b; 1] up to a scale)
-    w = np.empty(4)
-    for it in range(_INVERSE_ITERATIONS + 1):
-        norm = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + v[3] * v[3])
-        for r in range(4):
-            v[r] /= norm
-        if it == _INVERSE_ITERATIONS:
-            break
-        for r in range(4):
-            w[r] = a[r, 4] * v[0] + a[r, 5] * v[1] + a[r, 6] * v[2] + a[r, 7] * v[3]
-        v[:] = w
-    if abs(v[3]) < 1e-12:
-        return
-    x0, x1, x2 = v[0] / v[3], v[1] / v[3], v[2] / v[3]
-    if np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2):
-        out[0], out[1], out[2] = x0, x1, x2
-
-
-def quadric_traces(quadrics: np.ndarray) -> np.ndarray:
-    """(C, 5) traces of `camera_quadrics` (the squared row norms of eq. 11 are combinations of them)."""
-    return np.ascontiguousarray(np.trace(quadrics, axis1=2, axis2=3))
-
-
-def camera_quadrics(P: np.ndarray) -> np.ndarray:
-    """Per-camera constants of the eq. (9) normal matrices: p3ᵀp3, sym(p1ᵀp3), sym(p2ᵀp3), p1ᵀp1, p2ᵀp2.
-
-    Args:
-        P: (C, 3, 4) projection matrices (rows p1, p2, p3).
-
-    Returns:
-        (C, 5, 4, 4) symmetric matrices.
-    """
-    p1, p2, p3 = P[:, 0], P[:, 1], P[:, 2]
-
-    def outer(u, v):
-        return u[:, :, None] * v[:, None, :]
-
-    return np.stack([outer(p3, p3), 0.5 * (outer(p1, p3) + outer(p3, p1)), 0.5 * (outer(p2, p3) + outer(p3, p2)),
-                     outer(p1, p1), outer(p2, p2)], axis=1)
+    v0, v1, v2, v3 = a[0, 7], a[1, 7], a[2, 7], a[3, 7]  # the last column of M⁻¹: the start [-a⁻¹b; 1] scaled
+    for _ in range(_INVERSE_ITERATIONS):
+        norm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
+        v0, v1, v2, v3 = v0 / norm, v1 / norm, v2 / norm, v3 / norm
+        v0, v1, v2, v3 = (a[0, 4] * v0 + a[0, 5] * v1 + a[0, 6] * v2 + a[0, 7] * v3,
+                          a[1, 4] * v0 + a[1, 5] * v1 + a[1, 6] * v2 + a[1, 7] * v3,
+                          a[2, 4] * v0 + a[2, 5] * v1 + a[2, 6] * v2 + a[2, 7] * v3,
+                          a[3, 4] * v0 + a[3, 5] * v1 + a[3, 6] * v2 + a[3, 7] * v3)
+    return v0, v1, v2, v3
 
 
 def reprojection_error_px(P: np.ndarray, X: np.ndarray, points_px: np.ndarray) -> np.ndarray:

@@ -127,7 +127,7 @@ def test_robust_pass_is_the_dlt_of_the_views_within_the_rejection_rule(rig):
     x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0.0, 0.5, (8, len(rig), 2))
     x[:, 2] += 30.0  # one view 30 px off for every point
     stamps = np.full((8, len(rig)), 1.0)
-    got, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 8, 1.0, 5.0, None, 2, None, 3.0, 10.0)
+    got, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 8, 1.0, 5.0, None, 2, 3.0, 10.0)
     first = np.stack([_reference_dlt(rig, p) for p in x])
     errors = np.stack([np.linalg.norm(project(rig, p)[:, :2] - xp, axis=-1) for p, xp in zip(first, x)])  # (N, C)
     median = np.sort(errors, axis=1)[:, (len(rig) - 1) // 2]  # lower median
@@ -135,5 +135,5 @@ def test_robust_pass_is_the_dlt_of_the_views_within_the_rejection_rule(rig):
     assert drop[:, 2].sum() >= 2 and drop.any(axis=1).sum() < 8  # the rule bites on some points only
     kept = np.where(drop[..., None], np.nan, x)
     np.testing.assert_allclose(got, np.stack([_reference_dlt(rig, p) for p in kept]), atol=1e-7)  # m
-    off, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 8, 1.0, 5.0, None, 2, None, 0.0, 10.0)
+    off, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 8, 1.0, 5.0, None, 2, 0.0, 10.0)
     np.testing.assert_allclose(off, first, atol=1e-8)  # m
