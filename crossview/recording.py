@@ -20,6 +20,7 @@ give the same bytes: no wall-clock time is written, chunk size and compression a
 
 from __future__ import annotations
 
+import functools
 import importlib.metadata
 import json
 import math
@@ -350,29 +351,30 @@ def camera_frame_bytes(cf: CameraFrame) -> bytes:
         raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: keypoints_px expected (D, J, 2), got "
                          f"{kp.shape}")
     D, J = kp.shape[:2]
-
-    def rows(name: str, value, shape: tuple, dtype) -> np.ndarray:
+    arrays = [kp]
+    for name, value, shape, dtype in (
+            ("scores", frame.scores, (D, J), np.float64), ("truth.person_ids", truth.person_ids, (D,), np.int64),
+            ("truth.keypoints_px", truth.keypoints_px, (D, J, 2), np.float64),
+            ("truth.in_image", truth.in_image, (D, J), bool), ("truth.occluded", truth.occluded, (D, J), bool),
+            ("truth.self_occluded", truth.self_occluded, (D, J), bool),
+            ("truth.effects", truth.effects, (D,), np.int64)):
         array = np.ascontiguousarray(value, dtype=dtype)
         if array.shape != shape:
-            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: {name} expected {shape}, got "
-                             f"{array.shape}")
-        return array
-
-    scores = rows("scores", frame.scores, (D, J), np.float64)
-    effects = rows("truth.effects", truth.effects, (D,), np.int64)
-    if effects.size and (effects.min() < 0 or effects.max() >= 1 << 32):
-        raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.effects must be uint32 bit masks")
+            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: {name} expected {shape}, got {array.shape}")
+        arrays.append(array)
     poses, pose_ids = _checked_poses(cf.poses_at_capture)
-    name = np.frombuffer(frame.camera.encode(), dtype=np.uint8)
+    name = _utf8(frame.camera)
     out = _scratch(wire.camera_frame_capacity(D, J, *poses.shape[:2], name.size))
-    size = wire.camera_frame(
-        out, name, np.array([frame.stamp_s, truth.capture_s, truth.delivery_s], dtype=np.float64), kp, scores,
-        rows("truth.person_ids", truth.person_ids, (D,), np.int64),
-        rows("truth.keypoints_px", truth.keypoints_px, (D, J, 2), np.float64),
-        rows("truth.in_image", truth.in_image, (D, J), bool), rows("truth.occluded", truth.occluded, (D, J), bool),
-        rows("truth.self_occluded", truth.self_occluded, (D, J), bool), effects,
-        float(cf.poses_at_capture.t_s), pose_ids, poses)
+    size = wire.camera_frame(out, name, float(frame.stamp_s), float(truth.capture_s), float(truth.delivery_s), *arrays,
+                             float(cf.poses_at_capture.t_s), pose_ids, poses)
+    if size < 0:
+        raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.effects must be uint32 bit masks")
     return out[:size].tobytes()
+
+
+@functools.lru_cache(maxsize=1024)
+def _utf8(text: str) -> np.ndarray:
+    return np.frombuffer(text.encode(), dtype=np.uint8)
 
 
 def _pose_truth_from_msg(msg) -> PoseTruth:

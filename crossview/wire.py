@@ -149,22 +149,27 @@ def _pose_truth_size(t_s, person_ids, poses):
 
 
 @_jit
-def camera_frame(out, camera, times, keypoints, scores, person_ids, true_keypoints, in_image, occluded,
-                 self_occluded, effects, pose_t_s, pose_ids, poses):
+def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores, person_ids, true_keypoints, in_image,
+                 occluded, self_occluded, effects, pose_t_s, pose_ids, poses):
     """`crossview.CameraFrame` into `out` (uint8, at least `camera_frame_capacity`); returns its size.
 
-    camera: the camera name's UTF-8 bytes; times: stamp, capture and delivery seconds; keypoints
+    camera: the camera name's UTF-8 bytes; stamp_s, capture_s, delivery_s: its times; keypoints
     (D, J, 2), scores (D, J), person_ids (D,), true_keypoints (D, J, 2), in_image, occluded, self_occluded
     (D, J) bool, effects (D,) uint32 masks; pose_t_s, pose_ids (P,), poses (P, J', 3): the poses at capture.
+    Returns -1 (and writes nothing useful) when an effects mask is not a uint32.
     """
+    for v in effects:
+        if v < 0 or v >= 1 << 32:
+            return -1
     pos = 0
     if camera.size:
         pos = _put_key(out, pos, 1, _LEN)
         pos = _put_varint(out, pos, camera.size)
         out[pos:pos + camera.size] = camera
         pos += camera.size
-    for i in range(3):
-        pos = _put_double_field(out, pos, 2 + i, times[i])
+    pos = _put_double_field(out, pos, 2, stamp_s)
+    pos = _put_double_field(out, pos, 3, capture_s)
+    pos = _put_double_field(out, pos, 4, delivery_s)
     pos = _put_uint_field(out, pos, 5, keypoints.shape[0])
     pos = _put_uint_field(out, pos, 6, keypoints.shape[1])
     pos = _put_doubles(out, pos, 7, keypoints)
@@ -186,7 +191,8 @@ def camera_frame_capacity(D: int, J: int, P: int, pose_joints: int, name_bytes: 
 
 
 @_jit
-def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, stamp_field, key, points_key):
+def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, t_ns, stamp_field_number, key,
+                      points_key):
     """`foxglove.ImageAnnotations` of one frame's detections into `out`; returns the number of bytes.
 
     Per detection (in order) a LINE_LIST PointsAnnotation of its bones whose two ends are known, then a
@@ -195,8 +201,9 @@ def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, st
 
     keypoints (D, J, 2), NaN where unknown; bones (B, 2) joint pairs; style_rows (D,) row of `styles`
     per detection; styles (S, L) uint8 rows holding bones-before, bones-after, joints-before and
-    joints-after back to back, with their sizes in style_sizes (S, 4); stamp_field: the timestamp field
-    bytes; key: the varint tag of ImageAnnotations.points; points_key: that of PointsAnnotation.points
+    joints-after back to back, with their sizes in style_sizes (S, 4); t_ns: the stamp (a Timestamp in
+    PointsAnnotation field `stamp_field_number`); key: the varint tag of ImageAnnotations.points; points_key:
+    that of PointsAnnotation.points
     (one byte). Returns -1 when a coordinate is exactly +0.0 (then protobuf's own serialisation is needed).
     """
     D, J = keypoints.shape[0], keypoints.shape[1]
@@ -204,6 +211,18 @@ def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, st
     for v in keypoints.reshape(-1).view(np.int64):
         if v == 0:
             return -1  # a coordinate of exactly +0.0, which protobuf leaves out: the caller's slow path
+    # The timestamp field: seconds and nanos as varints, each left out when 0.
+    seconds, nanos = t_ns // 1_000_000_000, t_ns % 1_000_000_000
+    stamp_field = np.empty(32, dtype=np.uint8)
+    n = 0
+    if seconds:
+        n = _put_uint_field(stamp_field, 2, 1, seconds)
+    if nanos:
+        n = _put_uint_field(stamp_field, n if n else 2, 2, nanos)
+    n = max(n, 2)
+    stamp_field[0] = (stamp_field_number << 3) | _LEN
+    stamp_field[1] = n - 2
+    stamp_field = stamp_field[:n]
     known = np.empty(J, dtype=np.bool_)
     pos = 0
     for d in range(D):
@@ -257,5 +276,6 @@ def _put_point2(out, pos, points_key, raw, start):
     return pos + _POINT2_BYTES
 
 
-def image_annotations_capacity(D: int, J: int, B: int, style_bytes: int, stamp_bytes: int) -> int:
-    return D * (2 * (16 + stamp_bytes) + style_bytes + (2 * B + J) * (_POINT2_BYTES + 2))
+def image_annotations_capacity(D: int, J: int, B: int, style_bytes: int) -> int:
+    """An upper bound of the bytes of `image_annotations`."""
+    return D * (2 * 48 + style_bytes + (2 * B + J) * _POINT2_BYTES)
