@@ -660,77 +660,82 @@ def _ray_sphere(cx, cy, cz, radius_sq, px, py, pz, vx, vy, vz):
 
 
 @jit
-def _ray_geom(kind, pos, mat, size, px, py, pz, vx, vy, vz):
-    """Distance along the ray (p, v) to geom `kind` at pos (3,) with rotation mat (9,) and size (3,); -1: no hit."""
+def _ray_geom(g, kinds, xpos, xmat, sizes, px, py, pz, vx, vy, vz):
+    """Distance along the ray (p, v) to geom g of type kinds[g] at xpos[g] (3,) with rotation xmat[g] (9,) and
+    size sizes[g] (3,); -1: no hit. (Scalars read once: faster than passing row views.)"""
+    kind = kinds[g]
+    p0, p1, p2 = xpos[g, 0], xpos[g, 1], xpos[g, 2]
+    m0, m1, m2, m3, m4, m5, m6, m7, m8 = (xmat[g, 0], xmat[g, 1], xmat[g, 2], xmat[g, 3], xmat[g, 4], xmat[g, 5],
+                                          xmat[g, 6], xmat[g, 7], xmat[g, 8])
+    s0, s1, s2 = sizes[g, 0], sizes[g, 1], sizes[g, 2]
     if kind == _GEOM_SPHERE:
-        return _ray_sphere(pos[0], pos[1], pos[2], size[0] * size[0], px, py, pz, vx, vy, vz)
+        return _ray_sphere(p0, p1, p2, s0 * s0, px, py, pz, vx, vy, vz)
     if kind == _GEOM_CAPSULE:
-        outer = size[0] + size[1]
-        if _ray_sphere(pos[0], pos[1], pos[2], outer * outer, px, py, pz, vx, vy, vz) < 0:
+        outer = s0 + s1
+        if _ray_sphere(p0, p1, p2, outer * outer, px, py, pz, vx, vy, vz) < 0:
             return -1.0
     elif kind == _GEOM_CYLINDER:
-        if _ray_sphere(pos[0], pos[1], pos[2], size[0] * size[0] + size[1] * size[1], px, py, pz, vx, vy, vz) < 0:
+        if _ray_sphere(p0, p1, p2, s0 * s0 + s1 * s1, px, py, pz, vx, vy, vz) < 0:
             return -1.0
     elif kind == _GEOM_BOX:
-        if _ray_sphere(pos[0], pos[1], pos[2], size[0] * size[0] + size[1] * size[1] + size[2] * size[2],
-                       px, py, pz, vx, vy, vz) < 0:
+        if _ray_sphere(p0, p1, p2, s0 * s0 + s1 * s1 + s2 * s2, px, py, pz, vx, vy, vz) < 0:
             return -1.0
     # The ray in the geom's frame: mat' (p - pos) and mat' v.
-    dx, dy, dz = px - pos[0], py - pos[1], pz - pos[2]
-    l0 = mat[0] * dx + mat[3] * dy + mat[6] * dz
-    l1 = mat[1] * dx + mat[4] * dy + mat[7] * dz
-    l2 = mat[2] * dx + mat[5] * dy + mat[8] * dz
-    w0 = mat[0] * vx + mat[3] * vy + mat[6] * vz
-    w1 = mat[1] * vx + mat[4] * vy + mat[7] * vz
-    w2 = mat[2] * vx + mat[5] * vy + mat[8] * vz
+    dx, dy, dz = px - p0, py - p1, pz - p2
+    l0 = m0 * dx + m3 * dy + m6 * dz
+    l1 = m1 * dx + m4 * dy + m7 * dz
+    l2 = m2 * dx + m5 * dy + m8 * dz
+    w0 = m0 * vx + m3 * vy + m6 * vz
+    w1 = m1 * vx + m4 * vy + m7 * vz
+    w2 = m2 * vx + m5 * vy + m8 * vz
     if kind == _GEOM_ELLIPSOID:
-        s0, s1, s2 = 1 / (size[0] * size[0]), 1 / (size[1] * size[1]), 1 / (size[2] * size[2])
-        a = s0 * w0 * w0 + s1 * w1 * w1 + s2 * w2 * w2
-        b = s0 * w0 * l0 + s1 * w1 * l1 + s2 * w2 * l2
-        c = s0 * l0 * l0 + s1 * l1 * l1 + s2 * l2 * l2 - 1
+        i0, i1, i2 = 1 / (s0 * s0), 1 / (s1 * s1), 1 / (s2 * s2)
+        a = i0 * w0 * w0 + i1 * w1 * w1 + i2 * w2 * w2
+        b = i0 * w0 * l0 + i1 * w1 * l1 + i2 * w2 * l2
+        c = i0 * l0 * l0 + i1 * l1 * l1 + i2 * l2 * l2 - 1
         return _quadratic_roots(a, b, c)[2]
     x = -1.0
     if kind == _GEOM_BOX:
         for i in range(3):
-            li, wi = (l0, w0) if i == 0 else ((l1, w1) if i == 1 else (l2, w2))
+            li, wi, si = (l0, w0, s0) if i == 0 else ((l1, w1, s1) if i == 1 else (l2, w2, s2))
             if abs(wi) <= _MJ_MINVAL:
                 continue
             # The two other axes of face i.
-            la, wa, sa = (l1, w1, size[1]) if i == 0 else (l0, w0, size[0])
-            lb, wb, sb = (l1, w1, size[1]) if i == 2 else (l2, w2, size[2])
+            la, wa, sa = (l1, w1, s1) if i == 0 else (l0, w0, s0)
+            lb, wb, sb = (l1, w1, s1) if i == 2 else (l2, w2, s2)
             for side in (-1.0, 1.0):
-                sol = (side * size[i] - li) / wi
+                sol = (side * si - li) / wi
                 if sol >= 0 and abs(la + sol * wa) <= sa and abs(lb + sol * wb) <= sb and (x < 0 or sol < x):
                     x = sol
         return x
     # Capsule and cylinder: the round side first.
     a = w0 * w0 + w1 * w1
     b = w0 * l0 + w1 * l1
-    c = l0 * l0 + l1 * l1 - size[0] * size[0]
+    c = l0 * l0 + l1 * l1 - s0 * s0
     if kind == _GEOM_CYLINDER:
         if abs(w2) > _MJ_MINVAL:  # flat ends
             for side in (-1.0, 1.0):
-                sol = (side * size[1] - l2) / w2
+                sol = (side * s1 - l2) / w2
                 if sol >= 0:
                     e0, e1 = l0 + sol * w0, l1 + sol * w1
-                    if e0 * e0 + e1 * e1 <= size[0] * size[0] and (x < 0 or sol < x):
+                    if e0 * e0 + e1 * e1 <= s0 * s0 and (x < 0 or sol < x):
                         x = sol
         sol = _quadratic_roots(a, b, c)[2]
-        if sol >= 0 and abs(l2 + sol * w2) <= size[1] and (x < 0 or sol < x):
+        if sol >= 0 and abs(l2 + sol * w2) <= s1 and (x < 0 or sol < x):
             x = sol
         return x
     sol = _quadratic_roots(a, b, c)[2]
-    if sol >= 0 and abs(l2 + sol * w2) <= size[1]:
+    if sol >= 0 and abs(l2 + sol * w2) <= s1:
         x = sol
     # The two hemispherical caps, each only on its own side of the round part.
     a = w0 * w0 + w1 * w1 + w2 * w2
     for side in (1.0, -1.0):
-        e2 = l2 - size[1] if side > 0 else l2 + size[1]
+        e2 = l2 - s1 if side > 0 else l2 + s1
         b = w0 * l0 + w1 * l1 + w2 * e2
-        c = l0 * l0 + l1 * l1 + e2 * e2 - size[0] * size[0]
+        c = l0 * l0 + l1 * l1 + e2 * e2 - s0 * s0
         r0, r1, _ = _quadratic_roots(a, b, c)
         for r in (r0, r1):
-            if r >= 0 and (l2 + r * w2 >= size[1] if side > 0 else l2 + r * w2 <= -size[1]) and (x < 0 or r < x):
+            if r >= 0 and (l2 + r * w2 >= s1 if side > 0 else l2 + r * w2 <= -s1) and (x < 0 or r < x):
                 x = r
     return x
 
@@ -815,7 +820,7 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
                     if _segment_misses_sphere(geom_xpos[g, 0], geom_xpos[g, 1], geom_xpos[g, 2], geom_rbound[g],
                                               ox, oy, oz, ux, uy, uz, reach):
                         continue
-                    x = _ray_geom(geom_type[g], geom_xpos[g], geom_xmat[g], geom_size[g], ox, oy, oz, ux, uy, uz)
+                    x = _ray_geom(g, geom_type, geom_xpos, geom_xmat, geom_size, ox, oy, oz, ux, uy, uz)
                     if x >= 0 and (best < 0 or x < best):
                         best, best_g = x, g
                         reach = min(reach, best)
