@@ -521,12 +521,16 @@ def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns:
     D = kp.shape[0]
     if D == 0:
         return b""
-    rows = _style_rows(np.asarray(truth.person_ids, dtype=np.int64), D)
+    person_ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
     bones = _bone_table(tuple(skeleton.bones))[0]
-    table, sizes = _STYLES["table"], _STYLES["sizes"]
-    out = _annotation_buffer(wire.image_annotations_capacity(D, kp.shape[1], len(bones), table.shape[1]))
-    size = wire.image_annotations(out, kp, bones, rows, table, sizes, int(t_ns), _STAMP_FIELD, _ANNOTATIONS_KEY,
-                                  _POINTS_KEY)
+    while True:  # (a person seen for the first time gets a style row, then the frame is encoded again)
+        table, sizes, lut = _STYLES["table"], _STYLES["sizes"], _STYLES["lut"]
+        out = _annotation_buffer(wire.image_annotations_capacity(D, kp.shape[1], len(bones), table.shape[1]))
+        size = wire.image_annotations(out, kp, bones, person_ids, lut, table, sizes, int(t_ns), _STAMP_FIELD,
+                                      _ANNOTATIONS_KEY, _POINTS_KEY)
+        if size != wire.NEW_STYLE:
+            break
+        _add_styles(person_ids)
     if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: such rare messages go through it
         return ImageAnnotations.FromString(_image_annotations_numpy(kp, truth.person_ids, skeleton, t_ns)
                                            ).SerializeToString()
@@ -538,26 +542,21 @@ _POINTS_KEY = (_POINTS_FIELD << 3) | 2
 if _POINTS_KEY >= 128 or _STAMP_FIELD >= 16:
     raise RuntimeError("PointsAnnotation: the compiled encoder expects one-byte field tags")
 # Detection styles as rows of one table for the compiled encoder: per person id (-1: false positives) the
-# four pieces of `_detection_styles` back to back, and their sizes; `lut` maps person id + 1 to its row.
+# four pieces of `_detection_styles` back to back, and their sizes; `lut` maps person id + 1 to its row
+# (-1: none yet).
 _STYLES: dict = {"rows": {}, "table": np.zeros((0, 0), dtype=np.uint8), "sizes": np.zeros((0, 4), dtype=np.int64),
                  "lut": np.full(0, -1, dtype=np.int64)}
 _ANNOTATION_BUFFER = [np.empty(1 << 16, dtype=np.uint8)]
 
 
-def _style_rows(person_ids: np.ndarray, D: int) -> np.ndarray:
-    """(D,) style row of each detection: its person's (-1 below zero, and for rows beyond `person_ids`)."""
-    pids = np.full(D, -1, dtype=np.int64)
-    n = min(D, person_ids.size)
-    pids[:n] = np.maximum(person_ids[:n], -1)
-    lut = _STYLES["lut"]
-    if pids.max() + 1 >= lut.size or (lut[pids + 1] < 0).any():
-        for pid in set(pids.tolist()):
-            _style_row(pid)
-        lut = _STYLES["lut"] = np.full(max(pids.max() + 2, 2 * lut.size), -1, dtype=np.int64)
-        for pid, row in _STYLES["rows"].items():
-            if pid + 1 < lut.size:
-                lut[pid + 1] = row
-    return lut[pids + 1]
+def _add_styles(person_ids: np.ndarray) -> None:
+    """Style rows for these people (and for false positives) and a `lut` that finds them."""
+    for pid in {-1, *np.maximum(person_ids, -1).tolist()}:
+        _style_row(pid)
+    lut = np.full(max(_STYLES["rows"]) + 2, -1, dtype=np.int64)
+    for pid, row in _STYLES["rows"].items():
+        lut[pid + 1] = row
+    _STYLES["lut"] = lut
 
 
 def _style_row(person_id: int) -> int:

@@ -824,7 +824,7 @@ class RecordingWriter(_WriterContext):
             if t_ns >= self._next_scene_ns:
                 out.add(self._truth_scene, t_ns, foxglove.truth_skeletons_bytes(event, self.skeleton, t_ns))
                 self._next_scene_ns = t_ns + to_ns(TRUTH_SCENE_PERIOD_S)
-            self._people.update(int(i) for i in event.person_ids)
+            self._people.update(np.asarray(event.person_ids).tolist())
             self._counts["truth"] += 1
         elif isinstance(event, CameraFrame):
             name = event.frame.camera

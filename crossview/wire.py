@@ -19,6 +19,7 @@ _jit = njit(cache=True, nogil=True, error_model="numpy")
 
 _VARINT, _FIXED64, _LEN = 0, 1, 2  # wire types
 _POINT2_BYTES = 20  # one Point2 element: tag, length (18), then x and y as fixed64 fields 1 and 2
+NEW_STYLE = -2  # what `image_annotations` returns when a person has no style row yet
 
 
 @_jit
@@ -191,22 +192,30 @@ def camera_frame_capacity(D: int, J: int, P: int, pose_joints: int, name_bytes: 
 
 
 @_jit
-def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, t_ns, stamp_field_number, key,
-                      points_key):
+def image_annotations(out, keypoints, bones, person_ids, style_lut, styles, style_sizes, t_ns, stamp_field_number,
+                      key, points_key):
     """`foxglove.ImageAnnotations` of one frame's detections into `out`; returns the number of bytes.
 
     Per detection (in order) a LINE_LIST PointsAnnotation of its bones whose two ends are known, then a
     POINTS one of its known joints, each left out when empty; each is the stamp field, its style's part
     before the points, the points, its style's part after them.
 
-    keypoints (D, J, 2), NaN where unknown; bones (B, 2) joint pairs; style_rows (D,) row of `styles`
-    per detection; styles (S, L) uint8 rows holding bones-before, bones-after, joints-before and
+    keypoints (D, J, 2), NaN where unknown; bones (B, 2) joint pairs; person_ids (D,) the person behind each
+    detection (-1, or a row beyond them: a false positive), whose style is row style_lut[id + 1] of
+    styles (S, L) uint8 rows holding bones-before, bones-after, joints-before and
     joints-after back to back, with their sizes in style_sizes (S, 4); t_ns: the stamp (a Timestamp in
     PointsAnnotation field `stamp_field_number`); key: the varint tag of ImageAnnotations.points; points_key:
     that of PointsAnnotation.points
-    (one byte). Returns -1 when a coordinate is exactly +0.0 (then protobuf's own serialisation is needed).
+    (one byte). Returns -1 when a coordinate is exactly +0.0 (then protobuf's own serialisation is needed)
+    and NEW_STYLE when someone has no style row yet.
     """
     D, J = keypoints.shape[0], keypoints.shape[1]
+    style_rows = np.empty(D, dtype=np.int64)
+    for d in range(D):
+        pid = max(person_ids[d], -1) if d < person_ids.size else -1
+        style_rows[d] = style_lut[pid + 1] if pid + 1 < style_lut.size else -1
+        if style_rows[d] < 0:
+            return NEW_STYLE
     raw = keypoints.reshape(-1).view(np.uint8)
     for v in keypoints.reshape(-1).view(np.int64):
         if v == 0:

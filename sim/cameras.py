@@ -343,7 +343,7 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
     # zeros could only turn a -0.0 into +0.0, but the results stay those of the vectorised formula).
     tangential = bool(dist[cameras][:, 2:4].any())
     skew = bool(K[cameras][:, 0, 1].any())
-    _in_image_kernel(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(t, dtype=np.float64),
+    in_image_many_kernel(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(t, dtype=np.float64),
                      np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(dist, dtype=np.float64),
                      np.ascontiguousarray(size, dtype=np.float64), np.ascontiguousarray(max_radius, dtype=np.float64),
                      points, cameras, tangential, skew, px, inside)
@@ -351,10 +351,12 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
 
 
 @jit
-def _in_image_kernel(R, t, K, dist, size, max_radius, points, cameras, tangential, skew, px, inside):
-    """The loops of `in_image_many`, written out in the order of numpy's vectorised formula (the
-    rotation as ((x R0 + y R1) + z R2) + t, which is what numpy's matmul gives, bit for bit), so that
-    every pixel is the one `in_image` computes."""
+def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tangential, skew, px, inside):
+    """The loops of `in_image_many` (its arguments, C-contiguous, then `tangential` and `skew`: whether some
+    camera of the batch has those terms, and the outputs px (S, N, 2) and inside (S, N)), for callers that
+    keep the rig's arrays ready. Written out in the order of numpy's vectorised formula (the rotation as
+    ((x R0 + y R1) + z R2) + t, which is what numpy's matmul gives, bit for bit), so that every pixel is
+    the one `in_image` computes."""
     for s in range(points.shape[0]):
         c = cameras[s]
         k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]

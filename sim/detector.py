@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.cameras import in_image, in_image_many, monotonic_radius
+from sim.cameras import in_image, in_image_many_kernel, monotonic_radius
 from sim.store import jit
 from sim.types import CameraFrame, DetectionEffect, DetectionTruth, PoseTruth
 from tracker.types import COCO17, Camera, Frame, Skeleton
@@ -312,6 +312,10 @@ class Detector:
         self._dist = np.array([c.dist for c in self.cameras], dtype=np.float64).reshape(-1, 5)
         self._size = np.array([(c.width_px, c.height_px) for c in self.cameras], dtype=np.float64).reshape(-1, 2)
         self._max_radius = np.array([monotonic_radius(c.dist) for c in self.cameras], dtype=np.float64)
+        # Which cameras have tangential distortion and skew (`in_image_many` adds those terms for a batch
+        # only when some camera of it has them).
+        self._tangential = [bool(np.any(d[2:4])) for d in self._dist]
+        self._skew = [bool(k[0, 1]) for k in self._K]
         # Per camera: joints in the image, occluded, self-occluded (all person views, detected or not).
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
 
@@ -369,14 +373,19 @@ class Detector:
             for i, r in enumerate(requests):
                 points[i, :counts[i] * J] = np.asarray(r[1].poses, dtype=np.float64).reshape(-1, 3)
                 ids[i, :counts[i]] = r[1].person_ids
-        px_all, in_all = in_image_many(self._R, self._t, self._K, self._dist, self._size, self._max_radius,
-                                       points, cams)
+        px_all = np.empty((n_req, N, 2))
+        in_all = np.empty((n_req, N), dtype=bool)
+        cam_list = cams.tolist()
+        in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points, cams,
+                         any(self._tangential[c] for c in cam_list), any(self._skew[c] for c in cam_list), px_all,
+                         in_all)
         if world is not None and self.config.occlusion and in_all.any():
             occluded, self_occluded, _, _ = self._cast(world, self._centre_array[cams], points, in_all, ids)
         else:
             occluded = self_occluded = np.zeros(in_all.shape, dtype=bool)
-        np.add.at(self.visibility_counts, cams,
-                  np.stack([in_all.sum(axis=1), occluded.sum(axis=1), self_occluded.sum(axis=1)], axis=1))
+        seen = np.stack([in_all.sum(axis=1), occluded.sum(axis=1), self_occluded.sum(axis=1)], axis=1).tolist()
+        for c, row in zip(cam_list, seen):
+            self.visibility_counts[c] += row
         px_all = px_all.reshape(n_req, most, J, 2)
         in_all, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_all, occluded, self_occluded))
         return [(px_all[i, :P], in_all[i, :P], occluded[i, :P], self_occluded[i, :P]) for i, P in enumerate(counts)]

@@ -8,6 +8,7 @@ import logging
 import multiprocessing
 import os
 import signal
+import traceback
 from collections.abc import Iterator
 
 import numpy as np
@@ -174,7 +175,8 @@ class Simulation:
             sender.send(("end", self.detector.visibility_counts))
         except BrokenPipeError:  # the consumer is gone
             pass
-        except BaseException as e:  # handed over to be raised in the consumer
+        except BaseException as e:  # handed over to be raised in the consumer, with where it happened
+            e.add_note("raised in the simulation worker process:\n" + traceback.format_exc().rstrip())
             try:
                 sender.send(("error", e))
             except (BrokenPipeError, TypeError, ValueError, AttributeError):  # gone, or an unpicklable error

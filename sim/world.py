@@ -115,6 +115,7 @@ class World:
         self.crowd = Crowd(scenario.crowd, self.store, rng)
         self._present = np.zeros(S, bool)
         self._person_ids = np.full(S, -1, dtype=np.int64)
+        self._geom_person: tuple | None = None  # (present, person ids, geom person ids) of the last call
         self._last_t = -math.inf
         self._sync_slots()
         self._prev = self._cur = self._snapshot()  # (also loads the compiled posing kernel)
@@ -253,9 +254,14 @@ class World:
         return np.concatenate([[0], np.nonzero(slot[1:] != slot[:-1])[0] + 1, [slot.size]]).astype(np.int64)
 
     def geom_person_ids(self) -> np.ndarray:
-        """(ngeom,) int64: the person each geom's body belongs to now; -1 for store geoms and parked bodies."""
-        ids = np.append(np.where(self._present, self._person_ids, -1), -1)  # index -1: store geoms
-        return ids[self._geom_slot].astype(np.int64)
+        """(ngeom,) int64: the person each geom's body belongs to now; -1 for store geoms and parked bodies.
+
+        (Kept until who is present changes, which is at most once per crowd step: do not write into it.)"""
+        cached = self._geom_person
+        if cached is None or cached[0] is not self._present or cached[1] is not self._person_ids:
+            ids = np.append(np.where(self._present, self._person_ids, -1), -1)  # index -1: store geoms
+            cached = self._geom_person = (self._present, self._person_ids, ids[self._geom_slot].astype(np.int64))
+        return cached[2]
 
     def geom_body_ids(self) -> np.ndarray:
         """(ngeom,) int64: index in `sim.humanoid.BODIES` of each geom's body, -1 for store geoms.
