@@ -4,9 +4,9 @@
 
 - grid: ticks t_k = t_0 + k / eval_rate_hz from the first to the last truth sample; ticks before the
   tracker's first output (before any camera frame was delivered) are not scored;
-- scored area: with `scored_area` (the store's floor), only people whose body root lies in it are
-  scored; a target nearest to a person outside it (walking in or out of a door, where no camera sees)
-  and within `root_threshold_m` of them is neither a hit nor a false positive;
+- scored area: with `scored_area` (the store's floor), the rest is an ignored region: only people whose
+  body root lies on the floor are scored, targets off the floor are dropped, and so is a target nearest
+  to a person off the floor (in a doorway, where no camera sees) within `root_threshold_m` of them;
 - at each tick the latest tracker output with stamp <= tick is taken (outputs sorted by stamp, on equal
   stamps the later one delivered), and its targets are compared with the truth interpolated at that
   output's stamp (a tracker output stamped at t is compared with the truth at t);
@@ -112,21 +112,26 @@ def _targets(out: TrackerOutput) -> tuple[np.ndarray, np.ndarray]:
 def _in_area(g_ids, g_poses, t_ids, t_poses, area, reach_m):
     """The people whose body root lies in `area`, and the targets that are not about anybody outside it.
 
-    A target whose root is within `reach_m` of a person outside the area, and nearer to that person than
-    to every person inside it, is dropped (a "don't care" region: somebody walking in or out of a door,
-    where no camera sees). Any other target stays, wherever it is: a ghost behind a wall is a false positive.
+    Outside the area is an ignored region, as in MOT benchmarks: people there are not scored and targets
+    there are dropped. A target inside the area is dropped too when it is within `reach_m` of a person
+    outside it and nearer to that person than to every person inside (somebody in a doorway, on the way
+    in or out). Any other target counts: a ghost on the floor with nobody near is a false positive.
     """
     x0, y0, x1, y1 = area
+
+    def inside(roots):
+        return (roots[:, 0] >= x0) & (roots[:, 0] <= x1) & (roots[:, 1] >= y0) & (roots[:, 1] <= y1)
+
     g_roots, t_roots = body_roots(g_poses), body_roots(t_poses)
-    g_in = (g_roots[:, 0] >= x0) & (g_roots[:, 0] <= x1) & (g_roots[:, 1] >= y0) & (g_roots[:, 1] <= y1)
-    t_keep = np.ones(len(t_ids), dtype=bool)
+    g_in = inside(g_roots)
+    t_keep = inside(t_roots) | ~np.isfinite(t_roots[:, 0])  # no root: cannot be placed, so it counts
     if t_roots.size and (~g_in).any():
         with np.errstate(invalid="ignore"):
             dist = np.linalg.norm(t_roots[:, None, :] - g_roots[None, :, :], axis=-1)  # (T, G), NaN: no root
         dist = np.where(np.isfinite(dist), dist, np.inf)
         near_out = np.min(np.where(~g_in[None, :], dist, np.inf), axis=1)
         near_in = np.min(np.where(g_in[None, :], dist, np.inf), axis=1, initial=np.inf)
-        t_keep = ~((near_out <= reach_m) & (near_out < near_in))
+        t_keep &= ~((near_out <= reach_m) & (near_out < near_in))
     return g_ids[g_in], g_poses[g_in], t_ids[t_keep], t_poses[t_keep]
 
 

@@ -174,10 +174,10 @@ def test_people_outside_the_scored_area_are_neither_missed_nor_matched():
     assert (r2.false_negatives, r2.mota, r2.idf1) == (0, 1.0, 1.0)
 
 
-def test_a_ghost_outside_the_scored_area_with_nobody_near_is_a_false_positive():
-    area = (-2.0, -1.0, 8.0, 10.0)  # both people stay inside
-    ghost = np.zeros((17, 3)) + [20.0, 0.0, 1.0]
-    outs = [TrackerOutput(o.stamp_s, o.camera, o.targets + [Target(99, ghost, o.stamp_s)], o.detection_target_ids)
-            for o in _outputs()]
+def test_ghosts_off_the_floor_are_ignored_and_on_the_floor_are_false_positives():
+    area = (-2.0, -1.0, 10.0, 10.0)  # both people stay inside
+    off, on = np.zeros((17, 3)) + [20.0, 0.0, 1.0], np.zeros((17, 3)) + [9.0, 9.0, 1.0]
+    outs = [TrackerOutput(o.stamp_s, o.camera, o.targets + [Target(98, off, o.stamp_s), Target(99, on, o.stamp_s)],
+                          o.detection_target_ids) for o in _outputs()]
     r = score(_truth(), outs, scored_area=area)
     assert r.false_positives == 101 and r.false_negatives == 0
