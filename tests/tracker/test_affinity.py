@@ -1,11 +1,11 @@
-"""Affinity terms with hand-computed values: eq. (1), (2), (4), (5), (S2)."""
+"""Affinity terms with hand-computed values: eq. (1), (2), (4), (5), (S2); the compiled (T, D) kernel against them."""
 
 import numpy as np
 import pytest
 
 from tests.tracker.synthetic import look_at_camera
-from tracker.affinity import affinity_2d, affinity_3d, combine, epipolar_affinity, predict_positions
-from tracker.geometry import fundamental_matrix, project
+from tracker.affinity import affinity_2d, affinity_3d, affinity_matrix, combine, epipolar_affinity, predict_positions
+from tracker.geometry import fundamental_matrix, project, ray_directions, world_from_pixel_matrix
 
 
 def test_2d_affinity_by_hand():
@@ -76,3 +76,40 @@ def test_epipolar_affinity_by_hand_on_a_rectified_pair():
     xa_missing = xa.copy()
     xa_missing[0, 1:] = np.nan
     assert epipolar_affinity(xa_missing, xb, F, 20.0, 2)[0, 0] == -np.inf
+
+
+def _target_arrays(rng, T, C, J, D, camera):
+    """Random target arrays as the tracker holds them, with unknown joints, never-seen joints and no 2D point."""
+    pos = rng.uniform([0.0, 0.0, 0.2], [4.0, 3.0, 1.8], (T, J, 3))
+    pos[rng.random((T, J)) < 0.15] = np.nan
+    vel = rng.normal(0.0, 0.5, (T, J, 3))
+    joint_s = 2.0 - rng.uniform(0.0, 0.8, (T, J))
+    seen_s = joint_s - rng.uniform(0.0, 0.3, (T, J))
+    seen_s[rng.random((T, J)) < 0.1] = -np.inf
+    prev_px = rng.uniform(0.0, 1000.0, (T, C, J, 2))
+    prev_s = 2.0 - rng.uniform(0.0, 0.5, (T, C, J))
+    prev_s[rng.random((T, C, J)) < 0.3] = np.nan
+    prev_px[np.isnan(prev_s)] = np.nan
+    det = prev_px[:D, camera] + rng.normal(0.0, 20.0, (D, J, 2)) if D <= T else rng.uniform(0, 1000, (D, J, 2))
+    det[rng.random((D, J)) < 0.2] = np.nan
+    return pos, vel, joint_s, seen_s, prev_px, prev_s, det
+
+
+@pytest.mark.parametrize("normalize", [False, True])
+def test_compiled_affinity_matrix_equals_the_per_equation_functions(normalize):
+    rng = np.random.default_rng(3)
+    T, C, J, D, c = 5, 3, 7, 4, 1
+    pos, vel, joint_s, seen_s, prev_px, prev_s, det = _target_arrays(rng, T, C, J, D, c)
+    cam = look_at_camera("a", [2.0, -3.0, 3.0], [2.0, 1.5, 1.0])
+    M = world_from_pixel_matrix(cam)
+    t, w2, a2, floor, w3, a3, lam, horizon = 2.0, 0.4, 200.0, 30.0, 0.6, 0.3, 3.0, 0.5
+    # Reference: eq. (5), (3), (4), (2), (1) one by one.
+    predicted = predict_positions(pos, vel, joint_s, t, horizon)
+    a3d = affinity_3d(predicted, seen_s, cam.center_world, ray_directions(cam, det, M), t, w3, a3, lam)
+    a2d = affinity_2d(prev_px[:, c], prev_s[:, c], det, t, w2, a2, lam, floor)
+    expected = combine(a2d, a3d, normalize)
+    for kernel in (affinity_matrix, affinity_matrix.py_func):
+        out = np.full((T, D), np.nan)
+        kernel(pos, vel, joint_s, seen_s, prev_px, prev_s, c, det, M, cam.center_world, t, w2, a2, floor, w3, a3, lam,
+               horizon, normalize, out)
+        np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12)

@@ -13,6 +13,7 @@ from tracker.geometry import (
     project,
     project_distorted,
     ray_directions,
+    undistort_detections,
     undistort_points,
 )
 
@@ -71,3 +72,26 @@ def test_fundamental_matrix_satisfies_the_epipolar_constraint(points):
     xa, xb = project(a.P, points), project(b.P, points)
     lines = np.concatenate([xa, np.ones((len(xa), 1))], axis=1) @ F.T  # eq. (S1): l_b = F x_a
     np.testing.assert_allclose(point_line_distance_px(xb, lines), 0.0, atol=1e-6)  # px
+
+
+@pytest.mark.parametrize("dist", [DIST, np.zeros(5)])
+def test_compiled_frame_undistortion_agrees_with_opencv_and_masks_unusable_joints(dist):
+    cam = look_at_camera("a", [0.0, -4.0, 3.0], [0.5, 0.5, 1.0], dist=dist)
+    rng = np.random.default_rng(4)
+    kp = rng.uniform([-100.0, -100.0], [1380.0, 820.0], (6, 5, 2))
+    scores = rng.uniform(0.0, 1.0, (6, 5))
+    kp[0, 0] = np.nan
+    kp[0, 1, 1] = np.inf
+    scores[1, :3] = [np.nan, 0.0, np.inf]
+    scores[2, 0] = 0.1  # below the threshold
+    scores[2, 1] = -np.inf
+    # Reference: the tracker's rule (score NaN -> 0, clipped to [0, 1], positive and >= 0.2) and cv2.
+    clean = np.clip(np.nan_to_num(scores, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
+    usable = np.all(np.isfinite(kp), axis=-1) & (clean >= 0.2) & (clean > 0)
+    expected = undistort_points(cam, np.where(usable[..., None], kp, np.nan))
+    for kernel in (undistort_detections, undistort_detections.py_func):
+        out = np.zeros(kp.shape)
+        counts = kernel(kp, scores, 0.2, cam.K, cam.dist, out)
+        np.testing.assert_array_equal(counts, usable.sum(axis=1))
+        np.testing.assert_array_equal(np.isnan(out), np.isnan(expected))
+        np.testing.assert_allclose(out, expected, atol=1e-9)  # px

@@ -6,6 +6,7 @@ import pytest
 from tests.tracker.synthetic import store_like
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
+from tracker.kernels import update_matched
 from tracker.tracker import Tracker
 from tracker.types import Frame, TargetState
 
@@ -144,3 +145,28 @@ def test_a_person_hidden_for_two_seconds_gets_the_old_identity_back_with_reid(la
     after = {t.id for t in tracker.last_output.targets}
     assert len(before) == len(after) == 4
     assert (after == before) is same_id
+
+
+@pytest.mark.parametrize("config", [CONFIG, CONFIG.replace(reject_factor=2.0, reject_floor_px=5.0),
+                                    CONFIG.replace(triangulation=Triangulation.PAPER)])
+def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
+    cams, _, frames, _ = layout1
+    tracker = Tracker(cams, config)
+    _run(tracker, frames[:150])
+    # The next frames' matches update copies of the target arrays, compiled and as plain Python.
+    for frame in frames[150:160]:
+        c = tracker._index[frame.camera]
+        det_px, _ = tracker._clean(frame, c)
+        rows, cols = tracker._associate(c, det_px, frame.stamp_s)
+        assert rows.size
+        tg = tracker._targets
+        names = ("pos", "vel", "joint_s", "seen_s", "obs_px", "obs_s", "hist_pos", "hist_s", "hist_next",
+                 "last_update_s", "num_updates")
+        results = []
+        for kernel in (update_matched, update_matched.py_func):
+            arrays = [getattr(tg, name).copy() for name in names]
+            kernel(rows, cols, det_px, c, frame.stamp_s, *arrays, tracker._P, tracker._bones, *tracker._update_params)
+            results.append(arrays)
+        for name, compiled, plain in zip(names, *results):
+            np.testing.assert_allclose(compiled, plain, rtol=0, atol=1e-12, err_msg=name)
+        tracker.update(frame)

@@ -7,7 +7,10 @@ import pytest
 from tests.tracker.synthetic import ceiling_rig
 from tracker.geometry import project
 from tracker.triangulation import (
+    _inverse_iteration_gauss_jordan,
+    _triangulate_groups,
     dlt_rows,
+    smallest_eigenvector_point,
     time_weights,
     triangulate,
     triangulate_incremental,
@@ -137,3 +140,45 @@ def test_robust_pass_is_the_dlt_of_the_views_within_the_rejection_rule(rig):
     np.testing.assert_allclose(got, np.stack([_reference_dlt(rig, p) for p in kept]), atol=1e-7)  # m
     off, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 8, 1.0, 5.0, None, 2, 0.0, 10.0)
     np.testing.assert_allclose(off, first, atol=1e-8)  # m
+
+
+def test_compiled_smallest_eigenvector_matches_an_eigendecomposition_on_either_path():
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9])
+        rows = rng.normal(size=(8, 4))
+        rows -= np.outer(rows @ np.append(X, 1.0), np.append(X, 1.0)) / (np.sum(X * X) + 1.0)  # rows ⟂ [X; 1]
+        rows += rng.normal(0.0, 1e-4, rows.shape)  # noise
+        M = rows.T @ rows
+        v = np.linalg.eigh(M)[1][:, 0]
+        expected = v[:3] / v[3]
+        out = np.empty(3)
+        smallest_eigenvector_point(M, out, np.empty((4, 8)))
+        np.testing.assert_allclose(out, expected, atol=1e-9)  # m
+        # The Gauss-Jordan fallback (used when rounding makes the Cholesky factor fail) agrees.
+        fallback = np.array(_inverse_iteration_gauss_jordan(M, 1e-13 * np.trace(M), np.empty((4, 8))))
+        np.testing.assert_allclose(fallback[:3] / fallback[3], expected, atol=1e-9)  # m
+    # No weight at all: no point.
+    smallest_eigenvector_point(np.zeros((4, 4)), out, np.empty((4, 8)))
+    assert np.isnan(out).all()
+
+
+@pytest.mark.parametrize("velocity", [False, True])
+def test_compiled_triangulation_runs_the_same_as_plain_python(rig, velocity):
+    rng = np.random.default_rng(8)
+    X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (6, 3))
+    x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0.0, 1.0, (6, len(rig), 2))
+    x[:, 1] += 40.0  # one view far off, so that the robust pass drops it
+    x[rng.random((6, len(rig))) < 0.2] = np.nan
+    group, cam, px, stamps = _flat(x, 1.0 - rng.uniform(0.0, 0.2, (6, len(rig))))
+    order = np.argsort(group, kind="stable")
+    starts = np.concatenate([[0], np.cumsum(np.bincount(group, minlength=6))])
+    V = rng.normal(0.0, 1.0, (6, 3))
+    outputs = []
+    for kernel in (_triangulate_groups, _triangulate_groups.py_func):
+        plain, compensated = np.empty((6, 3)), np.empty((6, 3))
+        kernel(rig, starts, cam[order], px[order], np.maximum(1.0 - stamps[order], 0.0), V, velocity, 2, 5.0, 3.0,
+               10.0, plain, compensated)
+        outputs.append(plain if not velocity else compensated)
+    np.testing.assert_allclose(outputs[0], outputs[1], atol=1e-12)  # m
+    assert np.isfinite(outputs[0]).all()
