@@ -341,8 +341,8 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
     inside = np.empty(points.shape[:2], dtype=bool)
     # The tangential and skew terms are added only when some camera of the batch has them (adding exact
     # zeros could only turn a -0.0 into +0.0, but the results stay those of the vectorised formula).
-    tangential = bool(dist[cameras][:, 2:4].any())
-    skew = bool(K[cameras][:, 0, 1].any())
+    tangential = np.full(len(cameras), dist[cameras][:, 2:4].any())
+    skew = np.full(len(cameras), K[cameras][:, 0, 1].any())
     in_image_many_kernel(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(t, dtype=np.float64),
                      np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(dist, dtype=np.float64),
                      np.ascontiguousarray(size, dtype=np.float64), np.ascontiguousarray(max_radius, dtype=np.float64),
@@ -352,9 +352,9 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
 
 @jit
 def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tangential, skew, px, inside):
-    """The loops of `in_image_many` (its arguments, C-contiguous, then `tangential` and `skew`: whether some
-    camera of the batch has those terms, and the outputs px (S, N, 2) and inside (S, N)), for callers that
-    keep the rig's arrays ready. Written out in the order of numpy's vectorised formula (the rotation as
+    """The loops of `in_image_many` (its arguments, C-contiguous, then `tangential` and `skew` (S,): whether
+    a camera of each set's batch has those terms, and the outputs px (S, N, 2) and inside (S, N)), for
+    callers that keep the rig's arrays ready. Written out in the order of numpy's vectorised formula (the rotation as
     ((x R0 + y R1) + z R2) + t, which is what numpy's matmul gives, bit for bit), so that every pixel is
     the one `in_image` computes."""
     for s in range(points.shape[0]):
@@ -373,11 +373,11 @@ def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tange
             r2 = xn * xn + yn * yn
             radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
             xd, yd = xn * radial, yn * radial
-            if tangential:
+            if tangential[s]:
                 xd, yd = (xd + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
                           yd + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
             u = K[c, 0, 0] * xd
-            if skew:
+            if skew[s]:
                 u += K[c, 0, 1] * yd
             u += K[c, 0, 2]
             v = K[c, 1, 1] * yd + K[c, 1, 2]

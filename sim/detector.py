@@ -345,7 +345,7 @@ class Detector:
 
     def visibility_many(self, world, requests) -> list[tuple]:
         """`visibility` of several captures whose bodies are all in `world`'s data (one truth tick): the
-        projections in one vectorised pass, then every ray of the tick in one compiled pass.
+        projections and every ray of the tick in one compiled pass each.
 
         Args:
             world: the world (or None to skip ray casting).
@@ -356,39 +356,81 @@ class Detector:
         """
         if not requests:
             return []
-        cams = np.array([r[0] for r in requests], dtype=np.int64)
-        poses = [r[1].poses for r in requests]
-        counts = [len(p) for p in poses]
         J = self.skeleton.num_joints
-        if any(np.shape(p)[1:] != (J, 3) for p in poses):
+        if any(np.shape(r[1].poses)[1:] != (J, 3) for r in requests):
             return [self.visibility(r[0], world, r[1]) for r in requests]
-        n_req, most = len(requests), max(counts)
+        scenes = [self.scene_now(world, copy=False)] if world is not None else None
+        px, in_img, occluded, self_occluded = self.block_visibility(requests, scenes, [0] * len(requests))
+        bounds = np.cumsum([0] + [len(r[1].person_ids) for r in requests]).tolist()
+        return [(px[a:b], in_img[a:b], occluded[a:b], self_occluded[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+
+    def scene_now(self, world, copy: bool = True) -> tuple | None:
+        """What rays need of `world`'s bodies now (None when occlusion is off): geom positions (G, 3),
+        rotations (G, 9), sizes (G, 3), bounding radii (G,) and owners (G,), copied unless `copy` is False."""
+        if world is None or not self.config.occlusion:
+            return None
+        self._scene(world)
+        model, data = world.model, world.data
+        parts = (data.geom_xpos, data.geom_xmat, model.geom_size, model.geom_rbound,
+                 np.asarray(world.geom_person_ids(), dtype=np.int64))
+        return tuple(np.array(p) for p in parts) if copy else parts
+
+    def block_visibility(self, requests, scenes: list | None, scene_of: list[int]) -> tuple:
+        """Projection and occlusion of the captures of several truth ticks, in two compiled passes.
+
+        Args:
+            requests: (camera_index, poses, ...) per capture; every pose (P, J, 3).
+            scenes: `scene_now` of each tick (None: no ray casting), the world of the latest `_scene` call.
+            scene_of: per request, the index of its tick in `scenes`; requests of one tick are one batch
+                (the tangential and skew terms of the lens are added for a batch when a camera of it has them).
+
+        Returns:
+            Every request's people in turn: px (sum P, J, 2), in_img, occluded, self_occluded (sum P, J).
+        """
+        J = self.skeleton.num_joints
+        n_req = len(requests)
+        cams = np.array([r[0] for r in requests], dtype=np.int64)
+        counts = [len(r[1].person_ids) for r in requests]
+        most = max(counts)
         N = most * J
         if min(counts) == most:
-            points = np.stack(poses).reshape(n_req, N, 3)
-            ids = np.stack([r[1].person_ids for r in requests]).astype(np.int64, copy=False)
-        else:  # someone arrived or left between two captures of the tick: pad with NaN (never in view)
+            points = np.stack([r[1].poses for r in requests]).reshape(n_req, N, 3)
+            ids = np.stack([r[1].person_ids for r in requests]).astype(np.int64, copy=False).reshape(n_req, most)
+        else:  # someone arrived or left between two captures: pad with NaN (never in view)
             points = np.full((n_req, N, 3), np.nan)
             ids = np.full((n_req, most), -1, dtype=np.int64)
             for i, r in enumerate(requests):
                 points[i, :counts[i] * J] = np.asarray(r[1].poses, dtype=np.float64).reshape(-1, 3)
                 ids[i, :counts[i]] = r[1].person_ids
-        px_all = np.empty((n_req, N, 2))
-        in_all = np.empty((n_req, N), dtype=bool)
         cam_list = cams.tolist()
+        batch_tangential, batch_skew = {}, {}
+        for c, k in zip(cam_list, scene_of):
+            batch_tangential[k] = batch_tangential.get(k, False) or self._tangential[c]
+            batch_skew[k] = batch_skew.get(k, False) or self._skew[c]
+        px = np.empty((n_req, N, 2))
+        in_img = np.empty((n_req, N), dtype=bool)
         in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points, cams,
-                         any(self._tangential[c] for c in cam_list), any(self._skew[c] for c in cam_list), px_all,
-                         in_all)
-        if world is not None and self.config.occlusion and in_all.any():
-            occluded, self_occluded, _, _ = self._cast(world, self._centre_array[cams], points, in_all, ids)
-        else:
-            occluded = self_occluded = np.zeros(in_all.shape, dtype=bool)
-        seen = np.stack([in_all.sum(axis=1), occluded.sum(axis=1), self_occluded.sum(axis=1)], axis=1).tolist()
+                             np.array([batch_tangential[k] for k in scene_of]),
+                             np.array([batch_skew[k] for k in scene_of]), px, in_img)
+        occluded = np.zeros((n_req, N), dtype=bool)
+        self_occluded = np.zeros((n_req, N), dtype=bool)
+        if scenes is not None and in_img.any():
+            kp_bodies, geom_body, geom_type, groups = self._scene_cache
+            xpos, xmat, size, rbound, owner = (np.stack([scene[i] for scene in scenes]) for i in range(5))
+            _cast_keypoint_rays(self._centre_array[cams], points, in_img, ids, J, kp_bodies, geom_type, geom_body,
+                                groups, xpos, xmat.reshape(len(scenes), -1, 9), size, rbound, owner,
+                                np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
+                                self_occluded, np.empty((n_req, N), dtype=np.int32), np.empty((n_req, N)))
+        seen = np.stack([in_img.sum(axis=1), occluded.sum(axis=1), self_occluded.sum(axis=1)], axis=1).tolist()
         for c, row in zip(cam_list, seen):
             self.visibility_counts[c] += row
-        px_all = px_all.reshape(n_req, most, J, 2)
-        in_all, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_all, occluded, self_occluded))
-        return [(px_all[i, :P], in_all[i, :P], occluded[i, :P], self_occluded[i, :P]) for i, P in enumerate(counts)]
+        px = px.reshape(n_req, most, J, 2)
+        in_img, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_img, occluded, self_occluded))
+        if min(counts) == most:
+            return (px.reshape(-1, J, 2), in_img.reshape(-1, J), occluded.reshape(-1, J),
+                    self_occluded.reshape(-1, J))
+        return tuple(np.concatenate([a[i, :P] for i, P in enumerate(counts)])
+                     for a in (px, in_img, occluded, self_occluded))
 
     def _scene(self, world) -> tuple:
         """What the ray caster needs of `world` that does not change while it runs (cached per world):
@@ -421,16 +463,16 @@ class Detector:
         where mask (R, N); person (R, N // J) is the person id of each row of J keypoints. Also the nearest
         geom hit before each keypoint (R, N) (-1: none) and its distance."""
         kp_bodies, geom_body, geom_type, groups = self._scene(world)
-        model, data = world.model, world.data
+        xpos, xmat, size, rbound, owner = self.scene_now(world, copy=False)
         shape = mask.shape
         occluded, self_occluded = np.empty(shape, dtype=bool), np.empty(shape, dtype=bool)
         geomid, dist = np.empty(shape, dtype=np.int32), np.empty(shape)
         _cast_keypoint_rays(
             np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(points, dtype=np.float64),
             np.ascontiguousarray(mask), np.ascontiguousarray(person, dtype=np.int64), self.skeleton.num_joints,
-            kp_bodies, geom_type, data.geom_xpos, data.geom_xmat, model.geom_size, model.geom_rbound,
-            np.asarray(world.geom_person_ids(), dtype=np.int64), geom_body, groups,
-            float(self.config.self_hit_margin_m), occluded, self_occluded, geomid, dist)
+            kp_bodies, geom_type, geom_body, groups, xpos[None], xmat[None], size[None], rbound[None], owner[None],
+            np.zeros(shape[0], dtype=np.int64), float(self.config.self_hit_margin_m), occluded, self_occluded, geomid,
+            dist)
         return occluded, self_occluded, geomid, dist
 
     def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
@@ -472,9 +514,15 @@ class Detector:
         """
         if not requests:
             return [], np.zeros(1, dtype=np.int64)
-        ids = np.concatenate([np.asarray(r[1].person_ids, dtype=np.int64) for r in requests])
-        group = np.concatenate([np.full(len(r[1].person_ids), i) for i, r in enumerate(requests)])
-        px, in_img, occluded, self_occluded = (np.concatenate([v[k] for v in visibilities]) for k in range(4))
+        return self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities]) for k in range(4)))
+
+    def detection_rows_of(self, requests, px, in_img, occluded, self_occluded) -> tuple[list[np.ndarray], np.ndarray]:
+        """`detection_rows` from the requests' visibility as `block_visibility` returns it (every request's
+        people in turn)."""
+        if not requests:
+            return [], np.zeros(1, dtype=np.int64)
+        ids = np.concatenate([r[1].person_ids for r in requests]).astype(np.int64, copy=False)
+        group = np.repeat(np.arange(len(requests)), [len(r[1].person_ids) for r in requests])
         rows = self._detections(ids, px, in_img, occluded, self_occluded, group)
         # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
         n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
@@ -761,44 +809,60 @@ def _segment_misses_sphere(cx, cy, cz, radius, ox, oy, oz, ux, uy, uz, length):
 
 
 @jit
-def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_xpos, geom_xmat, geom_size,
-                        geom_rbound, geom_person, geom_body, groups, margin, occluded, self_occluded, geomid, dist):
-    """Occlusion flags of keypoints seen from camera centres (see the section comment).
-
-    origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
-    cast, person (R, N // J) person id of each row of J keypoints; kp_bodies (J, 2) body and parent body
-    of each keypoint; geom_* (G, ...) the scene's geoms (xmat rows of 9); groups (K + 1,) starts of
-    contiguous geom groups (a person's geoms, the store's) for the culling; margin: self_hit_margin_m.
-    Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
-    than the keypoint) and its distance dist (R, N).
-    """
-    K = groups.shape[0] - 1
-    G = geom_type.shape[0]
-    # Axis-aligned boxes around every geom (a box's own corners, the bounding sphere of the others) and
-    # around every group: a ray whose segment box misses them cannot hit them before its keypoint.
-    geom_lo, geom_hi = np.empty((G, 3)), np.empty((G, 3))
+def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rbound, bounds, spheres):
+    """Boxes (lo, hi) around every geom (a box's own corners, the bounding sphere of the others), then
+    around every group, into bounds (G + K, 6); a sphere (centre, radius) around each group's box into
+    spheres (K, 4): a ray whose segment misses them cannot hit them before its keypoint."""
+    K, G = groups.shape[0] - 1, geom_type.shape[0]
     for g in range(G):
         for i in range(3):
             half = geom_rbound[g]
             if geom_type[g] == _GEOM_BOX:
                 half = (abs(geom_xmat[g, 3 * i]) * geom_size[g, 0] + abs(geom_xmat[g, 3 * i + 1]) * geom_size[g, 1]
                         + abs(geom_xmat[g, 3 * i + 2]) * geom_size[g, 2])
-            geom_lo[g, i] = geom_xpos[g, i] - half - _CULL_SLACK_M
-            geom_hi[g, i] = geom_xpos[g, i] + half + _CULL_SLACK_M
-    group_lo, group_hi = np.full((K, 3), np.inf), np.full((K, 3), -np.inf)
+            bounds[g, i] = geom_xpos[g, i] - half - _CULL_SLACK_M
+            bounds[g, 3 + i] = geom_xpos[g, i] + half + _CULL_SLACK_M
     for k in range(K):
+        for i in range(3):
+            bounds[G + k, i], bounds[G + k, 3 + i] = np.inf, -np.inf
         for g in range(groups[k], groups[k + 1]):
             for i in range(3):
-                group_lo[k, i] = min(group_lo[k, i], geom_lo[g, i])
-                group_hi[k, i] = max(group_hi[k, i], geom_hi[g, i])
-    # And a sphere around each group's box.
-    group_c = 0.5 * (group_lo + group_hi)
-    group_r = np.zeros(K)
-    for k in range(K):
-        if groups[k + 1] > groups[k]:
-            group_r[k] = 0.5 * math.sqrt((group_hi[k, 0] - group_lo[k, 0]) ** 2 + (group_hi[k, 1] - group_lo[k, 1]) ** 2
-                                         + (group_hi[k, 2] - group_lo[k, 2]) ** 2)
+                bounds[G + k, i] = min(bounds[G + k, i], bounds[g, i])
+                bounds[G + k, 3 + i] = max(bounds[G + k, 3 + i], bounds[g, 3 + i])
+        extent = 0.0
+        for i in range(3):
+            spheres[k, i] = 0.5 * (bounds[G + k, i] + bounds[G + k, 3 + i])
+            extent += (bounds[G + k, 3 + i] - bounds[G + k, i]) ** 2
+        spheres[k, 3] = 0.5 * math.sqrt(extent) if groups[k + 1] > groups[k] else 0.0
+
+
+@jit
+def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_body, groups, scene_xpos,
+                        scene_xmat, scene_size, scene_rbound, scene_person, scene_of, margin, occluded, self_occluded,
+                        geomid, dist):
+    """Occlusion flags of keypoints seen from camera centres (see the section comment).
+
+    origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
+    cast, person (R, N // J) person id of each row of J keypoints; kp_bodies (J, 2) body and parent body
+    of each keypoint; geom_type, geom_body (G,); groups (K + 1,) starts of contiguous geom groups (a
+    person's geoms, the store's) for the culling; scene_* (T, G, ...) the geoms' positions, rotations (rows
+    of 9), sizes, bounding radii and owners at T instants, scene_of (R,) the instant of each capture;
+    margin: self_hit_margin_m.
+    Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
+    than the keypoint) and its distance dist (R, N).
+    """
+    K = groups.shape[0] - 1
+    T, G = scene_xpos.shape[0], geom_type.shape[0]
+    bounds = np.empty((T, G + K, 6))
+    spheres = np.empty((T, K, 4))
+    for s in range(T):
+        _scene_bounds(geom_type, groups, scene_xpos[s], scene_xmat[s], scene_size[s], scene_rbound[s], bounds[s],
+                      spheres[s])
     for r in range(points.shape[0]):
+        s = scene_of[r]
+        geom_xpos, geom_xmat, geom_size, geom_rbound = scene_xpos[s], scene_xmat[s], scene_size[s], scene_rbound[s]
+        geom_person, geom_box, group_box = scene_person[s], bounds[s, :G], bounds[s, G:]
+        group_sphere = spheres[s]
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
         for n in range(points.shape[1]):
             occluded[r, n] = False
@@ -817,14 +881,14 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
             # in model order replaces it only when strictly nearer, as in MuJoCo).
             best, best_g, reach = -1.0, -1, length
             for k in range(K):
-                if (hi_x < group_lo[k, 0] or lo_x > group_hi[k, 0] or hi_y < group_lo[k, 1] or lo_y > group_hi[k, 1]
-                        or hi_z < group_lo[k, 2] or lo_z > group_hi[k, 2]
-                        or _segment_misses_sphere(group_c[k, 0], group_c[k, 1], group_c[k, 2], group_r[k],
-                                                  ox, oy, oz, ux, uy, uz, reach)):
+                if (hi_x < group_box[k, 0] or lo_x > group_box[k, 3] or hi_y < group_box[k, 1]
+                        or lo_y > group_box[k, 4] or hi_z < group_box[k, 2] or lo_z > group_box[k, 5]
+                        or _segment_misses_sphere(group_sphere[k, 0], group_sphere[k, 1], group_sphere[k, 2],
+                                                  group_sphere[k, 3], ox, oy, oz, ux, uy, uz, reach)):
                     continue
                 for g in range(groups[k], groups[k + 1]):
-                    if (hi_x < geom_lo[g, 0] or lo_x > geom_hi[g, 0] or hi_y < geom_lo[g, 1] or lo_y > geom_hi[g, 1]
-                            or hi_z < geom_lo[g, 2] or lo_z > geom_hi[g, 2]):
+                    if (hi_x < geom_box[g, 0] or lo_x > geom_box[g, 3] or hi_y < geom_box[g, 1]
+                            or lo_y > geom_box[g, 4] or hi_z < geom_box[g, 2] or lo_z > geom_box[g, 5]):
                         continue
                     if _segment_misses_sphere(geom_xpos[g, 0], geom_xpos[g, 1], geom_xpos[g, 2], geom_rbound[g],
                                               ox, oy, oz, ux, uy, uz, reach):

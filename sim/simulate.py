@@ -111,7 +111,8 @@ class Simulation:
         previous: PoseTruth | None = None
         truths: list = []
         requests: list = []
-        visibilities: list = []
+        scenes: list = []  # what rays need of the bodies at each tick with captures (None: no ray casting)
+        scene_of: list = []  # per request, its tick in `scenes`
         for k in range(n_truth):
             t = k / TRUTH_RATE_HZ
             poses = world.advance(t)
@@ -124,15 +125,21 @@ class Simulation:
                 at_capture = interpolate_poses(previous, poses, capture.capture_s)
                 batch.append((capture.camera_index, at_capture, capture.capture_s, capture.stamp_s,
                               capture.delivery_s))
-            if batch:  # occlusion needs this tick's bodies; the error draws wait for the block
+            if batch:  # occlusion needs this tick's bodies; the rays and the error draws wait for the block
+                scene = detector.scene_now(world)
+                scene_of += [len(scenes)] * len(batch)
+                scenes.append(scene)
                 requests += batch
-                visibilities += detector.visibility_many(world, batch)
             truths.append(poses)
             previous = poses
             if (k + 1) % _DETECT_BLOCK_TICKS and k + 1 < n_truth:
                 continue
-            yield (t, truths, requests, *detector.detection_rows(requests, visibilities))
-            truths, requests, visibilities = [], [], []
+            rows, bounds = [], np.zeros(1, dtype=np.int64)
+            if requests:
+                visible = detector.block_visibility(requests, None if scenes[0] is None else scenes, scene_of)
+                rows, bounds = detector.detection_rows_of(requests, *visible)
+            yield t, truths, requests, rows, bounds
+            truths, requests, scenes, scene_of = [], [], [], []
 
     def _blocks_from_worker(self, duration: float) -> Iterator[tuple]:
         """`_blocks` computed in a forked process and received here, block by block.

@@ -119,10 +119,10 @@ def test_the_worker_process_never_outlives_the_stream(small, monkeypatch):
     events.close()
     assert multiprocessing.active_children() == []
     # A failure in the worker is raised here, as what it was, and the worker is gone.
-    def broken(self, requests, visibilities):
+    def broken(self, requests, *visibility):
         raise ArithmeticError("detector broke")
 
-    monkeypatch.setattr(Detector, "detection_rows", broken)
+    monkeypatch.setattr(Detector, "detection_rows_of", broken)
     with pytest.raises(ArithmeticError, match="detector broke"):
         list(Simulation(small, seed=4).events(1.0))
     assert multiprocessing.active_children() == []
