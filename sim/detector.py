@@ -575,38 +575,26 @@ class Detector:
         take = np.nonzero((n_in > 0) & (n_visible >= p.min_visible_joints) & ~miss)[0]
         D = take.size
         true_px, img, occ, self_occ = px[take], in_img[take], occluded[take], self_occluded[take]
-        size = person_size_px(true_px)
-        effects = np.zeros(D, dtype=np.int64)
-        drop_prob = np.where(occ, p.occluded_drop_prob, np.where(self_occ, p.self_occluded_drop_prob,
-                                                                  p.joint_drop_prob))
-        reported = img & (rng.random((D, J)) >= drop_prob)
-        # Fragments keep one body part (if it holds a reported joint).
-        fragment = rng.random(D) < p.fragment_prob
-        part = self._fragment_masks[rng.integers(len(self._fragment_masks), size=D)]
-        fragment &= (reported & part).any(axis=1)
-        reported = np.where(fragment[:, None], reported & part, reported)
-        effects |= np.where(fragment, int(DetectionEffect.FRAGMENT), 0)
-        # Heavy-tailed noise: a Student-t vector, its scale relative to the person's image size.
-        scale = p.noise_frac * size[:, None] * self._joint_noise
-        scale = scale * np.where(occ, p.occluded_noise_scale, np.where(self_occ, p.self_occluded_noise_scale, 1.0))
+        # Every draw of the detections, in a fixed order, then what they do (`_apply_draws`, compiled).
+        u_drop = rng.random((D, J))
+        u_fragment = rng.random(D)
+        part = rng.integers(len(self._fragment_masks), size=D)
         z = rng.standard_normal((D, J, 2))
-        if math.isfinite(p.noise_tail_dof):
-            z *= np.sqrt(p.noise_tail_dof / rng.chisquare(p.noise_tail_dof, (D, J)))[..., None]
-        kp = true_px + scale[..., None] * z
-        gross = reported & (rng.random((D, J)) < p.gross_error_prob)
+        heavy = math.isfinite(p.noise_tail_dof)
+        chi2 = rng.chisquare(p.noise_tail_dof, (D, J)) if heavy else np.ones((D, J))
+        u_gross = rng.random((D, J))
         angle = rng.uniform(0, 2 * np.pi, (D, J))
-        jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC, (D, J)) * size[:, None]
-        kp += np.where(gross[..., None], jump[..., None] * np.stack([np.cos(angle), np.sin(angle)], axis=-1), 0.0)
-        effects |= np.where(gross.any(axis=1), int(DetectionEffect.GROSS_ERROR), 0)
-        scores = np.clip(np.where(occ, p.score_occluded, p.score_visible) + p.score_std * rng.standard_normal((D, J)),
-                         _MIN_SCORE, 1.0)
-        swap = rng.random(D) < p.swap_prob
-        kp[swap] = kp[swap][:, self._swap]
-        scores[swap] = scores[swap][:, self._swap]
-        reported[swap] = reported[swap][:, self._swap]
-        effects |= np.where(swap, int(DetectionEffect.LEFT_RIGHT_SWAP), 0)
-        kp[~reported] = np.nan
-        scores[~reported] = 0.0
+        u_jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC, (D, J))
+        score_noise = rng.standard_normal((D, J))
+        u_swap = rng.random(D)
+        kp, scores = np.empty((D, J, 2)), np.empty((D, J))
+        reported, effects, size = np.empty((D, J), dtype=bool), np.empty(D, dtype=np.int64), np.empty(D)
+        _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy, chi2, u_gross, np.cos(angle),
+                     np.sin(angle), u_jump, score_noise, u_swap, self._fragment_masks, self._joint_noise, self._swap,
+                     np.array([p.occluded_drop_prob, p.self_occluded_drop_prob, p.joint_drop_prob, p.fragment_prob,
+                               p.noise_frac, p.occluded_noise_scale, p.self_occluded_noise_scale, p.noise_tail_dof,
+                               p.gross_error_prob, p.score_occluded, p.score_visible, p.score_std, p.swap_prob]),
+                     kp, scores, reported, effects, size)
         keep = reported.any(axis=1)
         rows = [person_ids[take], kp, scores, true_px, img, occ, self_occ, effects, group[take]]
         rows = [r[keep] for r in rows]
@@ -909,3 +897,75 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
                 j = n % J
                 near = (body == kp_bodies[j, 0] or body == kp_bodies[j, 1]) and length - best <= margin
                 self_occluded[r, n] = not near
+
+
+_FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP = (int(e) for e in (DetectionEffect.FRAGMENT, DetectionEffect.GROSS_ERROR,
+                                                               DetectionEffect.LEFT_RIGHT_SWAP))
+
+
+@jit
+def _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy, chi2, u_gross, cos_angle, sin_angle,
+                 u_jump, score_noise, u_swap, fragment_masks, joint_noise, swap_order, params, kp, scores, reported,
+                 effects, size):
+    """What the draws of `Detector._detections` do to the D people detected, element by element in the
+    order of the vectorised formulas it replaced (so the same keypoints, bit for bit): joint drops,
+    fragments, Student-t noise scaled by the person's size in the image, gross errors, scores, left/right
+    swaps, and NaN / zero score where a joint is not reported.
+
+    params: occluded, self-occluded and joint drop probabilities, fragment probability, noise fraction,
+    occluded and self-occluded noise scales, tail degrees of freedom, gross error probability, occluded
+    and visible scores, score std, swap probability. Writes kp (D, J, 2), scores (D, J), reported (D, J),
+    effects (D,) and size (D,) (`person_size_px` of the true pixels).
+    """
+    (drop_occluded, drop_self, drop_joint, fragment_prob, noise_frac, scale_occluded, scale_self, dof, gross_prob,
+     score_occluded, score_visible, score_std, swap_prob) = params
+    D, J = img.shape
+    flipped = np.empty(J, dtype=np.bool_)
+    for d in range(D):
+        high0 = high1 = -np.inf
+        low0 = low1 = np.inf
+        for j in range(J):
+            x, y = true_px[d, j, 0], true_px[d, j, 1]
+            if not np.isnan(x):
+                high0, low0 = max(high0, x), min(low0, x)
+            if not np.isnan(y):
+                high1, low1 = max(high1, y), min(low1, y)
+        extent = max(-np.inf, high0 - low0, high1 - low1)
+        size[d] = extent if np.isfinite(extent) else np.nan
+        effects[d] = 0
+        any_part = False
+        for j in range(J):
+            drop = drop_occluded if occ[d, j] else (drop_self if self_occ[d, j] else drop_joint)
+            reported[d, j] = img[d, j] and u_drop[d, j] >= drop
+            any_part = any_part or (reported[d, j] and fragment_masks[part[d], j])
+        # Fragments keep one body part (if it holds a reported joint).
+        if u_fragment[d] < fragment_prob and any_part:
+            for j in range(J):
+                reported[d, j] = reported[d, j] and fragment_masks[part[d], j]
+            effects[d] |= _FRAGMENT
+        gross_any = False
+        for j in range(J):
+            scale = noise_frac * size[d] * joint_noise[j]
+            scale = scale * (scale_occluded if occ[d, j] else (scale_self if self_occ[d, j] else 1.0))
+            gross = reported[d, j] and u_gross[d, j] < gross_prob
+            gross_any = gross_any or gross
+            jump = u_jump[d, j] * size[d]
+            for c in range(2):
+                noise = z[d, j, c] * math.sqrt(dof / chi2[d, j]) if heavy else z[d, j, c]
+                value = true_px[d, j, c] + scale * noise
+                kp[d, j, c] = value + ((jump * (cos_angle[d, j] if c == 0 else sin_angle[d, j])) if gross else 0.0)
+            base = score_occluded if occ[d, j] else score_visible
+            scores[d, j] = min(max(base + score_std * score_noise[d, j], _MIN_SCORE), 1.0)
+        if gross_any:
+            effects[d] |= _GROSS_ERROR
+        if u_swap[d] < swap_prob:
+            for j in range(J):
+                flipped[j] = reported[d, swap_order[j]]
+            kp[d] = kp[d][swap_order]
+            scores[d] = scores[d][swap_order]
+            reported[d] = flipped
+            effects[d] |= _LEFT_RIGHT_SWAP
+        for j in range(J):
+            if not reported[d, j]:
+                kp[d, j, 0] = kp[d, j, 1] = np.nan
+                scores[d, j] = 0.0
