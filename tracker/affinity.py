@@ -236,16 +236,39 @@ def epipolar_affinity_matrix(
     Returns:
         (n, n) symmetric affinity matrix.
     """
-    h = np.concatenate([points, np.ones(points.shape[:-1] + (1,))], axis=-1)  # (n, J, 3)
-    Fp = F[cameras[:, None], cameras[None, :]]  # (n, n, 3, 3)
-    lines_b = np.einsum("abik,ajk->abji", Fp, h)  # l_b = F x_a, (n, n, J, 3)
-    lines_a = np.einsum("abki,bjk->abji", Fp, h)  # l_a = F^T x_b
-    with np.errstate(invalid="ignore", divide="ignore"):
-        d_b = np.abs(np.einsum("abji,bji->abj", lines_b, h)) / np.hypot(lines_b[..., 0], lines_b[..., 1])
-        d_a = np.abs(np.einsum("abji,aji->abj", lines_a, h)) / np.hypot(lines_a[..., 0], lines_a[..., 1])
-    per_joint = 1.0 - (d_a + d_b) / (2.0 * alpha_px)
-    common = np.isfinite(per_joint).sum(axis=-1)
-    mean = np.nansum(per_joint, axis=-1) / np.maximum(common, 1)
-    A = np.where(common >= min_common_joints, mean, -np.inf)
-    A[cameras[:, None] == cameras[None, :]] = -np.inf
+    n = points.shape[0]
+    A = np.empty((n, n))
+    _epipolar_matrix(np.ascontiguousarray(points, dtype=np.float64), np.asarray(cameras, dtype=np.int64),
+                     np.ascontiguousarray(F, dtype=np.float64), float(alpha_px), int(min_common_joints), A)
     return A
+
+
+@jit
+def _epipolar_matrix(points, cameras, F, alpha_px, min_common_joints, out):
+    """`epipolar_affinity_matrix` into out (n, n) (compiled kernel; `epipolar_affinity` per pair of detections)."""
+    n, J = points.shape[0], points.shape[1]
+    for a in range(n):
+        for b in range(n):
+            ka, kb = cameras[a], cameras[b]
+            out[a, b] = -np.inf
+            if ka == kb:
+                continue
+            total = 0.0
+            common = 0
+            for j in range(J):
+                xa, ya, xb, yb = points[a, j, 0], points[a, j, 1], points[b, j, 0], points[b, j, 1]
+                # l_b = F x_a and l_a = F^T x_b (eq. S1), and each point's distance to the other's line.
+                lb0 = F[ka, kb, 0, 0] * xa + F[ka, kb, 0, 1] * ya + F[ka, kb, 0, 2]
+                lb1 = F[ka, kb, 1, 0] * xa + F[ka, kb, 1, 1] * ya + F[ka, kb, 1, 2]
+                lb2 = F[ka, kb, 2, 0] * xa + F[ka, kb, 2, 1] * ya + F[ka, kb, 2, 2]
+                la0 = F[ka, kb, 0, 0] * xb + F[ka, kb, 1, 0] * yb + F[ka, kb, 2, 0]
+                la1 = F[ka, kb, 0, 1] * xb + F[ka, kb, 1, 1] * yb + F[ka, kb, 2, 1]
+                la2 = F[ka, kb, 0, 2] * xb + F[ka, kb, 1, 2] * yb + F[ka, kb, 2, 2]
+                d_b = abs(lb0 * xb + lb1 * yb + lb2) / np.sqrt(lb0 * lb0 + lb1 * lb1)
+                d_a = abs(la0 * xa + la1 * ya + la2) / np.sqrt(la0 * la0 + la1 * la1)
+                a_j = 1.0 - (d_a + d_b) / (2.0 * alpha_px)  # eq. (S2) per joint
+                if not np.isnan(a_j):
+                    total += a_j
+                    common += np.isfinite(a_j)
+            if common >= min_common_joints:
+                out[a, b] = total / max(common, 1)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracker.jit import jit
+from tracker.jit import jit, sort_prefix
 from tracker.triangulation import triangulate_point
 
 MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
@@ -205,8 +205,8 @@ def _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, stale_after_s, max_predi
                 values[n] = vel[r, j, k]
                 n += 1
         if n:
-            ordered = np.sort(values[:n])
-            body[k] = (ordered[(n - 1) // 2] + ordered[n // 2]) / 2.0
+            sort_prefix(values, n)
+            body[k] = (values[(n - 1) // 2] + values[n // 2]) / 2.0
     for j in range(J):
         if not stamp_s - seen_s[r, j] <= stale_after_s and np.isfinite(pos[r, j, 0]):
             dt = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracker.jit import jit
+from tracker.jit import jit, sort_prefix
 
 
 def dlt_rows(P: np.ndarray, points_px: np.ndarray) -> np.ndarray:
@@ -317,7 +317,9 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
         du, dv = u / w - points_px[i, 0], v / w - points_px[i, 1]
         e = np.sqrt(du * du + dv * dv)
         err[i] = e if np.isfinite(e) else 0.0
-    median = np.sort(err)[(num - 1) // 2]  # lower median
+    ordered = err.copy()
+    sort_prefix(ordered, num)
+    median = ordered[(num - 1) // 2]  # lower median
     keep = np.empty(num, dtype=np.int64)
     kept = 0
     for i in range(num):

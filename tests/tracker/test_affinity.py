@@ -4,7 +4,15 @@ import numpy as np
 import pytest
 
 from tests.tracker.synthetic import look_at_camera
-from tracker.affinity import affinity_2d, affinity_3d, affinity_matrix, combine, epipolar_affinity, predict_positions
+from tracker.affinity import (
+    affinity_2d,
+    affinity_3d,
+    affinity_matrix,
+    combine,
+    epipolar_affinity,
+    epipolar_affinity_matrix,
+    predict_positions,
+)
 from tracker.geometry import fundamental_matrix, project, ray_directions, world_from_pixel_matrix
 
 
@@ -113,3 +121,27 @@ def test_compiled_affinity_matrix_equals_the_per_equation_functions(normalize):
         kernel(pos, vel, joint_s, seen_s, prev_px, prev_s, c, det, M, cam.center_world, t, w2, a2, floor, w3, a3, lam,
                horizon, normalize, out)
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12)
+
+
+def test_pool_affinity_matrix_equals_the_pairwise_epipolar_affinity():
+    rng = np.random.default_rng(5)
+    cams = [look_at_camera(f"c{k}", [4.0 * np.cos(k), 4.0 * np.sin(k), 3.0], [0.0, 0.0, 1.0]) for k in range(3)]
+    X = rng.uniform([-1.0, -1.0, 0.0], [1.0, 1.0, 1.8], (2, 6, 3))  # 2 people, 6 joints
+    cameras = np.array([0, 0, 1, 1, 2])
+    people = np.array([0, 1, 0, 1, 1])
+    points = np.stack([project(cams[k].P, X[p]) for k, p in zip(cameras, people)]) + rng.normal(0, 2.0, (5, 6, 2))
+    points[rng.random((5, 6)) < 0.25] = np.nan
+    F = np.zeros((3, 3, 3, 3))
+    for a in range(3):
+        for b in range(3):
+            if a != b:
+                F[a, b] = fundamental_matrix(cams[a], cams[b])
+    A = epipolar_affinity_matrix(points, cameras, F, 30.0, 2)
+    for a in range(5):
+        for b in range(5):
+            if cameras[a] == cameras[b]:
+                assert A[a, b] == -np.inf
+            else:
+                pair = epipolar_affinity(points[a:a + 1], points[b:b + 1], F[cameras[a], cameras[b]], 30.0, 2)[0, 0]
+                assert A[a, b] == pytest.approx(pair, rel=1e-12, abs=1e-12)
+    assert np.isfinite(A).sum() >= 8
