@@ -425,7 +425,9 @@ def _truth_entity_parts(person_id: int) -> tuple[bytes, bytes, bytes, bytes, byt
 
 
 _ORIENTATION_IDENTITY = Pose(orientation=Quaternion(w=1.0)).SerializeToString()
+_ORIENTATION_IDENTITY_BYTES = np.frombuffer(_ORIENTATION_IDENTITY, dtype=np.uint8)
 _LINE_POINTS_FIELD = LinePrimitive.DESCRIPTOR.fields_by_name["points"].number
+_LINE_POINTS_KEY = (_LINE_POINTS_FIELD << 3) | 2
 
 
 def _pose_bytes(x: float, y: float, z: float) -> bytes:
@@ -435,7 +437,33 @@ def _pose_bytes(x: float, y: float, z: float) -> bytes:
 
 
 def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
-    """`truth_skeletons(...)` as its wire bytes, built from cached pieces (what the recording writes)."""
+    """`truth_skeletons(...)` as its wire bytes, written by a compiled loop from cached pieces (what the
+    recording writes)."""
+    from crossview import wire  # (numba: loaded for writing only)
+
+    poses = np.ascontiguousarray(truth.poses, dtype=np.float64)
+    ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
+    head = np.frombuffer(_length_delimited(1, _timestamp_bytes(t_ns)) + wire_string(2, WORLD_FRAME), dtype=np.uint8)
+    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
+    deletion = np.frombuffer(_length_delimited(1, deletion), dtype=np.uint8)
+    bones = _bone_table(tuple(skeleton.bones))[0]
+    pieces = _TRUTH_PIECES
+    while True:  # (a person seen for the first time gets a row of pieces, then the instant is encoded again)
+        capacity = deletion.size + len(ids) * (head.size + pieces.table.shape[1] + len(bones) * 60 + 160)
+        out = _annotation_buffer(capacity)
+        size = wire.truth_skeletons(out, poses, ids, pieces.lut, pieces.table, pieces.sizes, bones, head, deletion,
+                                    _ORIENTATION_IDENTITY_BYTES, _LINE_POINTS_KEY)
+        if size != wire.NEW_STYLE:
+            break
+        pieces.add(ids)
+    if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out
+        return _truth_skeletons_numpy(truth, skeleton, t_ns)
+    return out[:size].tobytes()
+
+
+def _truth_skeletons_numpy(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
+    """`truth_skeletons(...)` as its wire bytes, built from cached pieces with numpy: the path of the rare
+    instants that hold a coordinate of exactly +0.0."""
     head = _length_delimited(1, _timestamp_bytes(t_ns)) + wire_string(2, WORLD_FRAME)
     deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
     parts = [_length_delimited(1, deletion)]
@@ -523,14 +551,14 @@ def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns:
         return b""
     person_ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
     bones = _bone_table(tuple(skeleton.bones))[0]
+    styles = _DETECTION_STYLES
     while True:  # (a person seen for the first time gets a style row, then the frame is encoded again)
-        table, sizes, lut = _STYLES["table"], _STYLES["sizes"], _STYLES["lut"]
-        out = _annotation_buffer(wire.image_annotations_capacity(D, kp.shape[1], len(bones), table.shape[1]))
-        size = wire.image_annotations(out, kp, bones, person_ids, lut, table, sizes, int(t_ns), _STAMP_FIELD,
-                                      _ANNOTATIONS_KEY, _POINTS_KEY)
+        out = _annotation_buffer(wire.image_annotations_capacity(D, kp.shape[1], len(bones), styles.table.shape[1]))
+        size = wire.image_annotations(out, kp, bones, person_ids, styles.lut, styles.table, styles.sizes, int(t_ns),
+                                      _STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)
         if size != wire.NEW_STYLE:
             break
-        _add_styles(person_ids)
+        styles.add(person_ids)
     if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: such rare messages go through it
         return ImageAnnotations.FromString(_image_annotations_numpy(kp, truth.person_ids, skeleton, t_ns)
                                            ).SerializeToString()
@@ -541,38 +569,42 @@ _ANNOTATIONS_KEY = np.frombuffer(_SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2], 
 _POINTS_KEY = (_POINTS_FIELD << 3) | 2
 if _POINTS_KEY >= 128 or _STAMP_FIELD >= 16:
     raise RuntimeError("PointsAnnotation: the compiled encoder expects one-byte field tags")
-# Detection styles as rows of one table for the compiled encoder: per person id (-1: false positives) the
-# four pieces of `_detection_styles` back to back, and their sizes; `lut` maps person id + 1 to its row
-# (-1: none yet).
-_STYLES: dict = {"rows": {}, "table": np.zeros((0, 0), dtype=np.uint8), "sizes": np.zeros((0, 4), dtype=np.int64),
-                 "lut": np.full(0, -1, dtype=np.int64)}
+
+
+class _PieceTable:
+    """Constant wire pieces per person id (-1: false positives) for a compiled encoder: the pieces of each
+    id back to back in a row of one uint8 `table`, their `sizes` (rows, pieces), and `lut`, which maps
+    id + 1 to the row (-1: none yet; `add` makes them)."""
+
+    def __init__(self, pieces, count: int):
+        self._pieces = pieces  # person id -> `count` byte strings
+        self._rows: dict[int, int] = {}
+        self.table = np.zeros((0, 0), dtype=np.uint8)
+        self.sizes = np.zeros((0, count), dtype=np.int64)
+        self.lut = np.full(0, -1, dtype=np.int64)
+
+    def add(self, person_ids: np.ndarray) -> None:
+        for pid in {-1, *np.maximum(person_ids, -1).tolist()}:
+            if pid in self._rows:
+                continue
+            pieces = self._pieces(pid)
+            blob = b"".join(pieces)
+            width = max(self.table.shape[1], len(blob))
+            grown = np.zeros((self.table.shape[0] + 1, width), dtype=np.uint8)
+            grown[:-1, :self.table.shape[1]] = self.table
+            grown[-1, :len(blob)] = np.frombuffer(blob, dtype=np.uint8)
+            self._rows[pid] = self.table.shape[0]
+            self.table = grown
+            self.sizes = np.vstack([self.sizes, [[len(p) for p in pieces]]]).astype(np.int64)
+        lut = np.full(max(self._rows) + 2, -1, dtype=np.int64)
+        for pid, row in self._rows.items():
+            lut[pid + 1] = row
+        self.lut = lut
+
+
+_DETECTION_STYLES = _PieceTable(lambda pid: _detection_styles(pid)[:4], 4)
+_TRUTH_PIECES = _PieceTable(_truth_entity_parts, 5)
 _ANNOTATION_BUFFER = [np.empty(1 << 16, dtype=np.uint8)]
-
-
-def _add_styles(person_ids: np.ndarray) -> None:
-    """Style rows for these people (and for false positives) and a `lut` that finds them."""
-    for pid in {-1, *np.maximum(person_ids, -1).tolist()}:
-        _style_row(pid)
-    lut = np.full(max(_STYLES["rows"]) + 2, -1, dtype=np.int64)
-    for pid, row in _STYLES["rows"].items():
-        lut[pid + 1] = row
-    _STYLES["lut"] = lut
-
-
-def _style_row(person_id: int) -> int:
-    row = _STYLES["rows"].get(person_id)
-    if row is None:
-        pieces = _detection_styles(person_id)[:4]
-        blob = b"".join(pieces)
-        table, sizes = _STYLES["table"], _STYLES["sizes"]
-        width = max(table.shape[1], len(blob))
-        grown = np.zeros((table.shape[0] + 1, width), dtype=np.uint8)
-        grown[:-1, :table.shape[1]] = table
-        grown[-1, :len(blob)] = np.frombuffer(blob, dtype=np.uint8)
-        _STYLES["table"] = grown
-        _STYLES["sizes"] = np.vstack([sizes, [[len(p) for p in pieces]]]).astype(np.int64)
-        row = _STYLES["rows"][person_id] = table.shape[0]
-    return row
 
 
 def _annotation_buffer(size: int) -> np.ndarray:

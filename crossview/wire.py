@@ -288,3 +288,116 @@ def _put_point2(out, pos, points_key, raw, start):
 def image_annotations_capacity(D: int, J: int, B: int, style_bytes: int) -> int:
     """An upper bound of the bytes of `image_annotations`."""
     return D * (2 * 48 + style_bytes + (2 * B + J) * _POINT2_BYTES)
+
+
+@_jit
+def _ld_size(n):
+    """Bytes of a length-delimited field with a one-byte tag and an n-byte payload."""
+    return 1 + _varint_size(n) + n
+
+
+@_jit
+def _put_ld_head(out, pos, field, n):
+    pos = _put_key(out, pos, field, _LEN)
+    return _put_varint(out, pos, n)
+
+
+@_jit
+def _put_bytes(out, pos, data):
+    out[pos:pos + data.size] = data
+    return pos + data.size
+
+
+@_jit
+def _vector3_size(x, y, z):
+    return (0 if _is_zero_bits(x) else 9) + (0 if _is_zero_bits(y) else 9) + (0 if _is_zero_bits(z) else 9)
+
+
+@_jit
+def _put_pose(out, pos, x, y, z, orientation):
+    """A foxglove.Pose: position (x, y, z), then the (constant) orientation field's bytes."""
+    pos = _put_ld_head(out, pos, 1, _vector3_size(x, y, z))
+    pos = _put_double_field(out, pos, 1, x)
+    pos = _put_double_field(out, pos, 2, y)
+    pos = _put_double_field(out, pos, 3, z)
+    return _put_bytes(out, pos, orientation)
+
+
+@_jit
+def truth_skeletons(out, poses, person_ids, piece_lut, pieces, piece_sizes, bones, head, deletion, orientation,
+                    points_key):
+    """`foxglove.truth_skeletons` (a SceneUpdate) into `out`; returns the number of bytes.
+
+    poses (P, J, 3), person_ids (P,); per person, row piece_lut[id + 1] of pieces (uint8 rows) holds its id
+    field, the bone line before and after its points, and what follows the pose in its label and in its top
+    sphere (sizes in piece_sizes (rows, 5)); bones (B, 2); head: the entities' timestamp and frame id
+    fields; deletion: the deletions field; orientation: the identity orientation field of a Pose;
+    points_key: the one-byte tag of LinePrimitive.points. Per person (in order) an entity: head, id, a
+    sphere and a label (at the highest known joint, the label 0.25 m above) when a joint is known, and
+    the line of the bones whose two ends are known. Returns -1 when a coordinate is exactly +0.0 (then
+    protobuf's own serialisation is needed) and NEW_STYLE when someone has no row of pieces yet.
+    """
+    P, J = poses.shape[0], poses.shape[1]
+    for v in poses.reshape(-1).view(np.int64):
+        if v == 0:
+            return -1
+    rows = np.empty(P, dtype=np.int64)
+    for i in range(P):
+        pid = max(person_ids[i], -1)
+        rows[i] = piece_lut[pid + 1] if pid + 1 < piece_lut.size else -1
+        if rows[i] < 0:
+            return NEW_STYLE
+    raw = poses.reshape(-1).view(np.uint8)
+    known = np.empty(J, dtype=np.bool_)
+    pos = _put_bytes(out, 0, deletion)
+    for i in range(P):
+        row = rows[i]
+        sizes = piece_sizes[row]
+        starts = np.zeros(6, dtype=np.int64)
+        for k in range(5):
+            starts[k + 1] = starts[k] + sizes[k]
+        top, top_z = -1, -np.inf
+        for j in range(J):
+            known[j] = np.isfinite(poses[i, j, 0]) and np.isfinite(poses[i, j, 1]) and np.isfinite(poses[i, j, 2])
+            if known[j] and (top < 0 or poses[i, j, 2] > top_z):
+                top, top_z = j, poses[i, j, 2]
+        ends = 0
+        for b in range(bones.shape[0]):
+            if known[bones[b, 0]] and known[bones[b, 1]]:
+                ends += 2
+        line = sizes[1] + 29 * ends + sizes[2]
+        entity = head.size + sizes[0] + _ld_size(line)
+        if top >= 0:
+            x, y, z = poses[i, top, 0], poses[i, top, 1], poses[i, top, 2]
+            sphere_pose = _ld_size(_vector3_size(x, y, z)) + orientation.size
+            text_pose = _ld_size(_vector3_size(x, y, z + 0.25)) + orientation.size
+            sphere = _ld_size(sphere_pose) + sizes[4]
+            text = _ld_size(text_pose) + sizes[3]
+            entity += _ld_size(sphere) + _ld_size(text)
+        pos = _put_ld_head(out, pos, 2, entity)
+        pos = _put_bytes(out, pos, head)
+        pos = _put_bytes(out, pos, pieces[row, starts[0]:starts[1]])
+        if top >= 0:
+            pos = _put_ld_head(out, pos, 9, sphere)
+            pos = _put_ld_head(out, pos, 1, sphere_pose)
+            pos = _put_pose(out, pos, x, y, z, orientation)
+            pos = _put_bytes(out, pos, pieces[row, starts[4]:starts[5]])
+        pos = _put_ld_head(out, pos, 11, line)
+        pos = _put_bytes(out, pos, pieces[row, starts[1]:starts[2]])
+        for b in range(bones.shape[0]):
+            if known[bones[b, 0]] and known[bones[b, 1]]:
+                for end in range(2):
+                    start = 24 * (i * J + bones[b, end])
+                    out[pos] = points_key
+                    out[pos + 1] = 27
+                    for c in range(3):
+                        out[pos + 2 + 9 * c] = ((c + 1) << 3) | _FIXED64
+                        out[pos + 3 + 9 * c:pos + 11 + 9 * c] = raw[start + 8 * c:start + 8 * c + 8]
+                    pos += 29
+        pos = _put_bytes(out, pos, pieces[row, starts[2]:starts[3]])
+        if top >= 0:
+            pos = _put_ld_head(out, pos, 13, text)
+            pos = _put_ld_head(out, pos, 1, text_pose)
+            pos = _put_pose(out, pos, x, y, z + 0.25, orientation)
+            pos = _put_bytes(out, pos, pieces[row, starts[3]:starts[4]])
+    return pos
