@@ -526,27 +526,26 @@ class _AtomicMcapWriter:
         # What `Writer.add_message` does, without building a Message record object and packing it field by
         # field (most of the writer's cost per message); the bytes are the same (tests compare files).
         stats, chunk, finalize, chunk_size = fast
-        if stats.message_count == 0:
+        if stats.message_count == 0 or log_time_ns < stats.message_start_time:
             stats.message_start_time = log_time_ns
-        else:
-            stats.message_start_time = min(log_time_ns, stats.message_start_time)
-        stats.message_end_time = max(log_time_ns, stats.message_end_time)
+        if log_time_ns > stats.message_end_time:
+            stats.message_end_time = log_time_ns
         stats.channel_message_counts[channel_id] += 1
         stats.message_count += 1
-        if chunk.num_messages == 0:
+        if chunk.num_messages == 0 or log_time_ns < chunk.message_start_time:
             chunk.message_start_time = log_time_ns
-        else:
-            chunk.message_start_time = min(chunk.message_start_time, log_time_ns)
-        chunk.message_end_time = max(chunk.message_end_time, log_time_ns)
+        if log_time_ns > chunk.message_end_time:
+            chunk.message_end_time = log_time_ns
         index = chunk.message_indices.get(channel_id)
         if index is None:
             index = chunk.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
         buffer = chunk.record_writer._buffer
-        index.records.append((log_time_ns, buffer.tell()))
+        offset = buffer.tell()
+        index.records.append((log_time_ns, offset))
         chunk.num_messages += 1
-        buffer.write(_MESSAGE_HEAD.pack(Opcode.MESSAGE, 22 + len(data), channel_id, 0, log_time_ns, log_time_ns))
+        buffer.write(_MESSAGE_HEAD.pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, log_time_ns, log_time_ns))
         buffer.write(data)
-        if buffer.tell() > chunk_size:
+        if offset + _MESSAGE_HEAD.size + len(data) > chunk_size:
             finalize()
 
     def close(self, summary_metadata: dict[str, str]) -> None:
@@ -694,6 +693,7 @@ class _Stopped(Exception):
 
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
+_OPCODE_MESSAGE = int(Opcode.MESSAGE)
 
 
 def _fast_path(writer: Writer, chunk_size: int):
