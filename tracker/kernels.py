@@ -63,6 +63,7 @@ def update_matched(
     update = np.empty(J, dtype=np.bool_)
     hit = np.empty(J, dtype=np.bool_)
     values = np.empty(J)
+    sums = np.empty((J, 11))
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
@@ -128,9 +129,7 @@ def update_matched(
             for k in range(3):
                 hist_pos[r, slot, j, k] = samples[j, k] if update[j] else np.nan
         hist_next[r] = (slot + 1) % H
-        for j in range(J):
-            if update[j]:
-                _fit_velocity(hist_pos, hist_s, r, j, stamp_s, velocity_window_s, max_speed_m_per_s, vel)
+        _fit_velocities(hist_pos, hist_s, r, update, stamp_s, velocity_window_s, max_speed_m_per_s, vel, sums)
         # 5. Joints nobody has seen for `stale_after_s` move with the body (beyond the paper).
         _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, stale_after_s, max_predict_s, values)
         last_update_s[r] = stamp_s
@@ -147,43 +146,45 @@ def _distance(pos, r, a, e):
 
 
 @jit
-def _fit_velocity(hist_pos, hist_s, r, j, stamp_s, window_s, max_speed, vel):
-    """vel[r, j] = slope of the linear least-squares fit of position on time over the window's samples."""
-    H = hist_s.shape[1]
-    n = 0
-    t_sum = x_sum = y_sum = z_sum = 0.0
-    first, last = np.inf, -np.inf
+def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, vel, sums):
+    """vel[r, j] of each updated joint j = slope of the linear least-squares fit of position on time over the
+    history samples of the last `window_s`, clipped to `max_speed` (eq. 5's V).
+
+    One pass over target r's history accumulates, per joint, the count, the first and last sample time and
+    the sums of u, u², x, u x with u = t_i - t (times relative to now keep the sums well conditioned);
+    sums (J, 11) is scratch.
+    """
+    H, J = hist_s.shape[1], hist_s.shape[2]
+    for j in range(J):
+        sums[j, :] = 0.0
+        sums[j, 9], sums[j, 10] = np.inf, -np.inf
     for h in range(H):
-        s = hist_s[r, h, j]
-        if stamp_s - s <= window_s:  # False for empty slots (NaN)
-            n += 1
-            t_sum += s
-            first, last = min(first, s), max(last, s)
-            x_sum += hist_pos[r, h, j, 0]
-            y_sum += hist_pos[r, h, j, 1]
-            z_sum += hist_pos[r, h, j, 2]
-    t_mean = t_sum / max(n, 1)
-    sxx = dt_sum = sx = sy = sz = 0.0
-    for h in range(H):
-        s = hist_s[r, h, j]
-        if stamp_s - s <= window_s:
-            dt = s - t_mean
-            sxx += dt * dt
-            dt_sum += dt
-            sx += dt * hist_pos[r, h, j, 0]
-            sy += dt * hist_pos[r, h, j, 1]
-            sz += dt * hist_pos[r, h, j, 2]
-    vx = vy = vz = 0.0
-    if n >= 2 and last - first >= MIN_VELOCITY_SPAN_S and sxx > 0.0:
-        # Σ dt (x - x̄) = Σ dt x - x̄ Σ dt, the second sum zero up to rounding.
-        vx = (sx - x_sum / max(n, 1) * dt_sum) / sxx
-        vy = (sy - y_sum / max(n, 1) * dt_sum) / sxx
-        vz = (sz - z_sum / max(n, 1) * dt_sum) / sxx
-    speed = np.sqrt(vx * vx + vy * vy + vz * vz)
-    if speed > max_speed:
-        vx, vy, vz = vx * max_speed / max(speed, 1e-12), vy * max_speed / max(speed, 1e-12), \
-            vz * max_speed / max(speed, 1e-12)
-    vel[r, j, 0], vel[r, j, 1], vel[r, j, 2] = vx, vy, vz
+        for j in range(J):
+            s = hist_s[r, h, j]
+            if update[j] and stamp_s - s <= window_s:  # False for empty slots (NaN)
+                u = s - stamp_s
+                sums[j, 0] += 1.0
+                sums[j, 1] += u
+                sums[j, 2] += u * u
+                for k in range(3):
+                    x = hist_pos[r, h, j, k]
+                    sums[j, 3 + k] += x
+                    sums[j, 6 + k] += u * x
+                sums[j, 9], sums[j, 10] = min(sums[j, 9], s), max(sums[j, 10], s)
+    for j in range(J):
+        if not update[j]:
+            continue
+        n = sums[j, 0]
+        sxx = sums[j, 2] - sums[j, 1] * sums[j, 1] / max(n, 1.0)  # Σ (u - ū)²
+        v0 = v1 = v2 = 0.0
+        if n >= 2 and sums[j, 10] - sums[j, 9] >= MIN_VELOCITY_SPAN_S and sxx > 0.0:
+            # Σ (u - ū)(x - x̄) = Σ u x - ū Σ x
+            v0 = (sums[j, 6] - sums[j, 1] / n * sums[j, 3]) / sxx
+            v1 = (sums[j, 7] - sums[j, 1] / n * sums[j, 4]) / sxx
+            v2 = (sums[j, 8] - sums[j, 1] / n * sums[j, 5]) / sxx
+        speed = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        scale = max_speed / max(speed, 1e-12) if speed > max_speed else 1.0
+        vel[r, j, 0], vel[r, j, 1], vel[r, j, 2] = v0 * scale, v1 * scale, v2 * scale
 
 
 @jit
@@ -217,8 +218,30 @@ def _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, stale_after_s, max_predi
 
 
 @jit
-def predict_rows(pos, vel, joint_s, rows, stamp_s, max_predict_s):
-    """Eq. (5) for the targets `rows` (K,): (K, J, 3) poses X_t' + V_t' (t - t'), horizon in [0, max_predict_s]."""
+def split_detections(usable, min_joints, rows, cols, ids):
+    """Where the frame's detections went: (D,) id of each one's matched target (-1: none), and the indices of
+    the unmatched ones with at least `min_joints` usable joints (the candidates for initialisation).
+
+    Args:
+        usable: (D,) usable joints per detection; rows, cols: (M,) matched targets and detections; ids: (T,).
+    """
+    assigned = np.full(usable.size, -1, dtype=np.int64)
+    for m in range(rows.size):
+        assigned[cols[m]] = ids[rows[m]]
+    unmatched = np.empty(usable.size, dtype=np.int64)
+    n = 0
+    for d in range(usable.size):
+        if assigned[d] < 0 and usable[d] >= min_joints:
+            unmatched[n] = d
+            n += 1
+    return assigned, unmatched[:n].copy()
+
+
+@jit
+def poses_in_state(state, code, ids, pos, vel, joint_s, stamp_s, max_predict_s):
+    """The ids (K,) of the targets in lifecycle state `code` and their poses (K, J, 3) predicted to stamp_s by
+    eq. (5): X_t' + V_t' (t - t'), the horizon clipped to [0, max_predict_s]."""
+    rows = np.flatnonzero(state == code)
     J = pos.shape[1]
     out = np.empty((rows.size, J, 3))
     for i in range(rows.size):
@@ -227,4 +250,4 @@ def predict_rows(pos, vel, joint_s, rows, stamp_s, max_predict_s):
             horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
             for k in range(3):
                 out[i, j, k] = pos[r, j, k] + vel[r, j, k] * horizon
-    return out
+    return ids[rows], out

@@ -30,7 +30,7 @@ from tracker.association import associate
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.kernels import predict_rows, update_matched
+from tracker.kernels import poses_in_state, split_detections, update_matched
 from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
@@ -103,6 +103,7 @@ class Tracker:
         self._K = [np.ascontiguousarray(cam.K, dtype=np.float64) for cam in self.cameras]
         self._dist = [np.ascontiguousarray(cam.dist, dtype=np.float64) for cam in self.cameras]
         cfg = config
+        self._init_min_joints = int(cfg.init_min_joints)
         self._affinity_params = (float(cfg.w_2d), float(cfg.alpha_2d_px_per_s), float(cfg.alpha_2d_floor_px),
                                  float(cfg.w_3d), float(cfg.alpha_3d_m), float(cfg.lambda_a_per_s),
                                  float(cfg.max_predict_s), bool(cfg.normalize_affinity))
@@ -148,29 +149,27 @@ class Tracker:
         if D and frame.keypoints_px.shape[1] != J:
             raise ValueError(f"Frame {frame.camera}@{frame.stamp_s}: {frame.keypoints_px.shape[1]} joints, "
                              f"the tracker's skeleton {self.skeleton.name} has {J}")
-        assigned = np.full(D, -1, dtype=np.int64)
         t = float(frame.stamp_s)
         reason = self._reject_reason(frame, t)
         if reason is not None:
             logger.warning("dropping frame %s@%s: %s", frame.camera, frame.stamp_s, reason)
             out_t = t if np.isfinite(t) else max(self._newest_s, 0.0)
-            return self._emit(out_t, frame.camera, assigned)
+            return self._emit(out_t, frame.camera, np.full(D, -1, dtype=np.int64))
         c = self._index[frame.camera]
         self._camera_last_s[c] = t
         self._newest_s = max(self._newest_s, t)
         self._advance_lifecycle(t)
         if D == 0:
             self._set_pool(c, np.zeros((0, J, 2)), np.zeros(0, dtype=np.int64), t)
-            return self._emit(t, frame.camera, assigned)
+            return self._emit(t, frame.camera, np.zeros(0, dtype=np.int64))
 
         det_px, usable = self._clean(frame, c)  # (D, J, 2) undistorted, NaN for unusable joints; (D,) counts
         matched_rows, matched_cols = self._associate(c, det_px, t)
         if matched_rows.size:
             self._update_targets(c, matched_rows, matched_cols, det_px, t)
-            assigned[matched_cols] = self._targets.ids[matched_rows]
-        enough = usable >= self.config.init_min_joints
-        enough[matched_cols] = False
-        unmatched = np.flatnonzero(enough)
+        # (D,) matched target ids, and the unmatched detections with enough joints to start a target
+        assigned, unmatched = split_detections(usable, self._init_min_joints, matched_rows, matched_cols,
+                                               self._targets.ids)
         self._set_pool(c, det_px[unmatched], unmatched, t)
         if unmatched.size:
             for new_id, frame_index in self._initialize(c, t):
@@ -352,12 +351,9 @@ class Tracker:
 
     def _emit(self, t: float, camera: str, assigned: np.ndarray) -> list[Target]:
         tg = self._targets
-        confirmed = np.flatnonzero(tg.state == lifecycle.CONFIRMED)
-        targets = []
-        if confirmed.size:
-            poses = predict_rows(tg.pos, tg.vel, tg.joint_s, confirmed, t, self._update_params[-1])  # eq. (5)
-            state = lifecycle.to_state(lifecycle.CONFIRMED)
-            targets = [Target(id=target_id, pose=pose, stamp_s=t, state=state)
-                       for target_id, pose in zip(tg.ids[confirmed].tolist(), poses)]
+        ids, poses = poses_in_state(tg.state, lifecycle.CONFIRMED, tg.ids, tg.pos, tg.vel, tg.joint_s, t,
+                                    self._update_params[-1])  # eq. (5)
+        state = lifecycle.to_state(lifecycle.CONFIRMED)
+        targets = [Target(target_id, pose, t, state) for target_id, pose in zip(ids.tolist(), poses)]
         self.last_output = TrackerOutput(stamp_s=t, camera=camera, targets=targets, detection_target_ids=assigned)
         return targets
