@@ -378,8 +378,8 @@ def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, mi
     _set_symmetric(work, 0, m0)
     _set_symmetric(work, 1, m1)
     _set_symmetric(work, 2, m2)
-    smallest_eigenvector_point(work[0], plain, scratch)
     if not use_velocity:
+        smallest_eigenvector_point(work[0], plain, scratch)
         return
     # Beyond the paper: row·[X - V dt_i; 1] = 0, i.e. rows r T_i with T_i = [[I, -V dt_i], [0, 1]], so the
     # normal matrix Σ T_iᵀ A_i T_i follows from the moments Σ A_i, Σ dt_i A_i and Σ dt_i² A_i.
@@ -396,7 +396,7 @@ def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, mi
         for s in range(3):
             M1[r, s] = M[r, s]
     M1[3, 3] = corner
-    smallest_eigenvector_point(M1, compensated, scratch)
+    _smallest_eigenvector_pair(M, M1, plain, compensated, scratch)
 
 
 @jit
@@ -425,27 +425,60 @@ def smallest_eigenvector_point(M, out, scratch):
     Inverse iteration with the Cholesky factor of the regularised M (symmetric positive definite); should
     rounding make it indefinite, its inverse by Gauss-Jordan elimination with partial pivoting in scratch (4, 8).
     """
-    scale = M[0, 0] + M[1, 1] + M[2, 2] + M[3, 3]
     out[0] = out[1] = out[2] = np.nan
-    if not np.isfinite(scale):
-        return
-    eps = 1e-13 * scale
-    L = _cholesky(M[0, 0] + eps, M[1, 0], M[1, 1] + eps, M[2, 0], M[2, 1], M[2, 2] + eps, M[3, 0], M[3, 1], M[3, 2],
-                  M[3, 3] + eps)
+    L = _regularised_cholesky(M)
     if L[0] > 0.0:
-        v0, v1, v2, v3 = _cholesky_solve(L, 0.0, 0.0, 0.0, 1.0)  # the last column of M⁻¹
+        v = _cholesky_solve(L, 0.0, 0.0, 0.0, 1.0)  # the last column of M⁻¹
         for _ in range(_INVERSE_ITERATIONS):
-            norm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
-            v0, v1, v2, v3 = _cholesky_solve(L, v0 / norm, v1 / norm, v2 / norm, v3 / norm)
+            v = _cholesky_solve(L, *_normalised(v))
+    elif np.isfinite(M[0, 0] + M[1, 1] + M[2, 2] + M[3, 3]):
+        v = _inverse_iteration_gauss_jordan(M, 1e-13 * (M[0, 0] + M[1, 1] + M[2, 2] + M[3, 3]), scratch)
     else:
-        v0, v1, v2, v3 = _inverse_iteration_gauss_jordan(M, eps, scratch)
-        if not np.isfinite(v0):
-            return
-    norm = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2 + v3 * v3)
-    v0, v1, v2, v3 = v0 / norm, v1 / norm, v2 / norm, v3 / norm
-    if abs(v3) < 1e-12:
         return
-    x0, x1, x2 = v0 / v3, v1 / v3, v2 / v3
+    _dehomogenise(_normalised(v), out)
+
+
+@jit
+def _smallest_eigenvector_pair(M, N, out_m, out_n, scratch):
+    """`smallest_eigenvector_point` of M and of N, the two inverse iterations interleaved (two independent
+    chains of dependent operations keep the processor busy)."""
+    Lm, Ln = _regularised_cholesky(M), _regularised_cholesky(N)
+    if not (Lm[0] > 0.0 and Ln[0] > 0.0):
+        smallest_eigenvector_point(M, out_m, scratch)
+        smallest_eigenvector_point(N, out_n, scratch)
+        return
+    a, b = _cholesky_solve(Lm, 0.0, 0.0, 0.0, 1.0), _cholesky_solve(Ln, 0.0, 0.0, 0.0, 1.0)
+    for _ in range(_INVERSE_ITERATIONS):
+        a, b = _cholesky_solve(Lm, *_normalised(a)), _cholesky_solve(Ln, *_normalised(b))
+    out_m[0] = out_m[1] = out_m[2] = out_n[0] = out_n[1] = out_n[2] = np.nan
+    _dehomogenise(_normalised(a), out_m)
+    _dehomogenise(_normalised(b), out_n)
+
+
+@jit
+def _regularised_cholesky(M):
+    """`_cholesky` of M + 1e-13 trace(M) I (failed for a non-finite M)."""
+    scale = M[0, 0] + M[1, 1] + M[2, 2] + M[3, 3]
+    if not np.isfinite(scale):
+        return (-1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    eps = 1e-13 * scale
+    return _cholesky(M[0, 0] + eps, M[1, 0], M[1, 1] + eps, M[2, 0], M[2, 1], M[2, 2] + eps, M[3, 0], M[3, 1],
+                     M[3, 2], M[3, 3] + eps)
+
+
+@jit
+def _normalised(v):
+    """v / ||v|| for a 4-tuple."""
+    norm = np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2] + v[3] * v[3])
+    return v[0] / norm, v[1] / norm, v[2] / norm, v[3] / norm
+
+
+@jit
+def _dehomogenise(v, out):
+    """out = v[:3] / v[3] unless v[3] ≈ 0 or the result is not finite (out untouched)."""
+    if abs(v[3]) < 1e-12:
+        return
+    x0, x1, x2 = v[0] / v[3], v[1] / v[3], v[2] / v[3]
     if np.isfinite(x0) and np.isfinite(x1) and np.isfinite(x2):
         out[0], out[1], out[2] = x0, x1, x2
 
