@@ -63,7 +63,6 @@ def update_matched(
     update = np.empty(J, dtype=np.bool_)
     hit = np.empty(J, dtype=np.bool_)
     values = np.empty(J)
-    sums = np.empty((J, 11))
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
@@ -129,7 +128,7 @@ def update_matched(
             for k in range(3):
                 hist_pos[r, slot, j, k] = samples[j, k] if update[j] else np.nan
         hist_next[r] = (slot + 1) % H
-        _fit_velocities(hist_pos, hist_s, r, update, stamp_s, velocity_window_s, max_speed_m_per_s, vel, sums)
+        _fit_velocities(hist_pos, hist_s, r, update, stamp_s, velocity_window_s, max_speed_m_per_s, vel)
         # 5. Joints nobody has seen for `stale_after_s` move with the body (beyond the paper).
         _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, stale_after_s, max_predict_s, values)
         last_update_s[r] = stamp_s
@@ -146,42 +145,41 @@ def _distance(pos, r, a, e):
 
 
 @jit
-def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, vel, sums):
+def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, vel):
     """vel[r, j] of each updated joint j = slope of the linear least-squares fit of position on time over the
     history samples of the last `window_s`, clipped to `max_speed` (eq. 5's V).
 
-    One pass over target r's history accumulates, per joint, the count, the first and last sample time and
-    the sums of u, u², x, u x with u = t_i - t (times relative to now keep the sums well conditioned);
-    sums (J, 11) is scratch.
+    One pass over the joint's history accumulates the count, the first and last sample time and the sums of
+    u, u², x, u x with u = t_i - t (times relative to now keep the sums well conditioned).
     """
     H, J = hist_s.shape[1], hist_s.shape[2]
     for j in range(J):
-        sums[j, :] = 0.0
-        sums[j, 9], sums[j, 10] = np.inf, -np.inf
-    for h in range(H):
-        for j in range(J):
-            s = hist_s[r, h, j]
-            if update[j] and stamp_s - s <= window_s:  # False for empty slots (NaN)
-                u = s - stamp_s
-                sums[j, 0] += 1.0
-                sums[j, 1] += u
-                sums[j, 2] += u * u
-                for k in range(3):
-                    x = hist_pos[r, h, j, k]
-                    sums[j, 3 + k] += x
-                    sums[j, 6 + k] += u * x
-                sums[j, 9], sums[j, 10] = min(sums[j, 9], s), max(sums[j, 10], s)
-    for j in range(J):
         if not update[j]:
             continue
-        n = sums[j, 0]
-        sxx = sums[j, 2] - sums[j, 1] * sums[j, 1] / max(n, 1.0)  # Σ (u - ū)²
+        n = su = suu = sx0 = sx1 = sx2 = sux0 = sux1 = sux2 = 0.0
+        first, last = np.inf, -np.inf
+        for h in range(H):
+            s = hist_s[r, h, j]
+            if stamp_s - s <= window_s:  # False for empty slots (NaN)
+                u = s - stamp_s
+                x0, x1, x2 = hist_pos[r, h, j, 0], hist_pos[r, h, j, 1], hist_pos[r, h, j, 2]
+                n += 1.0
+                su += u
+                suu += u * u
+                sx0 += x0
+                sx1 += x1
+                sx2 += x2
+                sux0 += u * x0
+                sux1 += u * x1
+                sux2 += u * x2
+                first, last = min(first, s), max(last, s)
+        sxx = suu - su * su / max(n, 1.0)  # Σ (u - ū)²
         v0 = v1 = v2 = 0.0
-        if n >= 2 and sums[j, 10] - sums[j, 9] >= MIN_VELOCITY_SPAN_S and sxx > 0.0:
+        if n >= 2 and last - first >= MIN_VELOCITY_SPAN_S and sxx > 0.0:
             # Σ (u - ū)(x - x̄) = Σ u x - ū Σ x
-            v0 = (sums[j, 6] - sums[j, 1] / n * sums[j, 3]) / sxx
-            v1 = (sums[j, 7] - sums[j, 1] / n * sums[j, 4]) / sxx
-            v2 = (sums[j, 8] - sums[j, 1] / n * sums[j, 5]) / sxx
+            v0 = (sux0 - su / n * sx0) / sxx
+            v1 = (sux1 - su / n * sx1) / sxx
+            v2 = (sux2 - su / n * sx2) / sxx
         speed = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
         scale = max_speed / max(speed, 1e-12) if speed > max_speed else 1.0
         vel[r, j, 0], vel[r, j, 1], vel[r, j, 2] = v0 * scale, v1 * scale, v2 * scale
