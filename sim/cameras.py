@@ -15,6 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from llvmlite import ir as llvm_ir
+from numba import types
+from numba.extending import intrinsic
 
 from sim.store import jit
 from tracker.types import Camera
@@ -350,13 +353,26 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
     return px, inside
 
 
+@intrinsic
+def _fma(typingctx, a, b, c):
+    """a * b + c rounded once (LLVM's fma intrinsic), as the BLAS kernels behind numpy's matmul compute."""
+    signature = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, sig, args):
+        double = llvm_ir.DoubleType()
+        fma = builder.module.declare_intrinsic("llvm.fma", [double], llvm_ir.FunctionType(double, [double] * 3))
+        return builder.call(fma, args)
+
+    return signature, codegen
+
+
 @jit
 def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tangential, skew, px, inside):
     """The loops of `in_image_many` (its arguments, C-contiguous, then `tangential` and `skew` (S,): whether
     a camera of each set's batch has those terms, and the outputs px (S, N, 2) and inside (S, N)), for
-    callers that keep the rig's arrays ready. Written out in the order of numpy's vectorised formula (the rotation as
-    ((x R0 + y R1) + z R2) + t, which is what numpy's matmul gives, bit for bit), so that every pixel is
-    the one `in_image` computes."""
+    callers that keep the rig's arrays ready. Written out in the order of the vectorised numpy formula it
+    replaced, so that every pixel is the same bit for bit: numpy's matmul (OpenBLAS) rotates as
+    fma(z, R2, fma(y, R1, x R0)), fused multiply-adds rounded once, and so does this loop."""
     for s in range(points.shape[0]):
         c = cameras[s]
         k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]
@@ -364,9 +380,9 @@ def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tange
         w, h = size[c, 0] - 0.5, size[c, 1] - 0.5
         for n in range(points.shape[1]):
             x, y, z = points[s, n, 0], points[s, n, 1], points[s, n, 2]
-            cx = (x * R[c, 0, 0] + y * R[c, 0, 1] + z * R[c, 0, 2]) + t[c, 0]
-            cy = (x * R[c, 1, 0] + y * R[c, 1, 1] + z * R[c, 1, 2]) + t[c, 1]
-            cz = (x * R[c, 2, 0] + y * R[c, 2, 1] + z * R[c, 2, 2]) + t[c, 2]
+            cx = _fma(z, R[c, 0, 2], _fma(y, R[c, 0, 1], x * R[c, 0, 0])) + t[c, 0]
+            cy = _fma(z, R[c, 1, 2], _fma(y, R[c, 1, 1], x * R[c, 1, 0])) + t[c, 1]
+            cz = _fma(z, R[c, 2, 2], _fma(y, R[c, 2, 1], x * R[c, 2, 0])) + t[c, 2]
             in_front = cz > _MIN_DEPTH_M
             inv_z = 1.0 / cz if in_front else np.nan
             xn, yn = cx * inv_z, cy * inv_z
