@@ -1,8 +1,9 @@
 """Compiled in-place updates of the tracker's target arrays: Algorithm 1's update of the matched targets.
 
 `Tracker` (tracker/tracker.py) holds the arrays and calls these once per frame; each does in one pass what
-would otherwise be a few hundred small numpy calls. The maths is that of `tracker.triangulation` (eq. 6-11),
-the bone gate, the velocity fit of eq. (5) and the carrying of stale joints, documented at `Tracker`.
+would otherwise be a few hundred small numpy calls: `update_matched` (eq. 6-11 through
+`triangulation.triangulate_point`, the bone gate, the velocity fit of eq. 5, the stale joints),
+`split_detections` and `poses_in_state` (the frame's output).
 """
 
 from __future__ import annotations
