@@ -24,8 +24,8 @@ log = logging.getLogger(__name__)
 TRUTH_RATE_HZ = 100.0
 # Order of events that share a log time: the truth first, then frames by camera index.
 _TRUTH_KIND, _FRAME_KIND = 0, 1
-# The detector's error draws are made for the captures of this many truth ticks at once (0.1 s): the
-# per-call cost of the draws is then shared by about 28 frames of store_layout2 instead of about 3.
+# The captures of this many truth ticks (0.1 s) are projected, ray cast and given their detector errors
+# together: the per-call costs are then shared by about 28 frames of store_layout2 instead of about 3.
 _DETECT_BLOCK_TICKS = 10
 
 
@@ -82,7 +82,7 @@ class Simulation:
         self._used = True
         self.detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"),
                                  self.skeleton)
-        if self.worker_process and _usable_cores() > 1:
+        if self.worker_process and _usable_cores() > 1 and "fork" in multiprocessing.get_all_start_methods():
             blocks = self._blocks_from_worker(duration)
         else:
             blocks = self._blocks(duration)
