@@ -5,9 +5,11 @@ bottom-up 2D pose detector (OpenPose-like) would deliver, plus the truth behind 
 
 1. project every keypoint with the camera's lens model; joints behind the camera or outside the
    image are not detectable;
-2. cast one ray per remaining keypoint from the camera centre (`mujoco.mj_multiRay`, one batch per
-   frame): the first surface it meets tells whether the joint is visible, occluded (a shelf, a wall,
-   another person) or self-occluded (another limb of the same person);
+2. cast one ray per remaining keypoint from the camera centre against the MuJoCo bodies (compiled
+   loops with MuJoCo's own ray formulas, the hits bit for bit those of `mujoco.mj_multiRay`, which
+   `cast_visibility` still calls as the reference): the first surface it meets tells whether the joint
+   is visible, occluded (a shelf, a wall, another person) or self-occluded (another limb of the same
+   person);
 3. miss whole people (more often the more they are occluded), drop occluded joints, add noise
    scaled by the person's size in the image (heavy tailed, larger on occluded joints), gross errors,
    left/right swaps and fragments, then add duplicates and phantom skeletons.
@@ -223,7 +225,8 @@ def left_right_permutation(skeleton: Skeleton) -> np.ndarray:
 def cast_visibility(model, data, origin: np.ndarray, points: np.ndarray, point_person: np.ndarray,
                     point_bodies: np.ndarray, geom_person: np.ndarray, geom_body: np.ndarray,
                     self_hit_margin_m: float):
-    """Occlusion of keypoints seen from one point, one `mj_multiRay` batch.
+    """Occlusion of keypoints seen from one point, one `mj_multiRay` batch (the reference the detector's
+    compiled ray caster is tested against).
 
     Args:
         model, data: the MuJoCo model and data holding the bodies at the capture time.
