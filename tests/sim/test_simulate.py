@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sim import scenario as scenario_mod
-from sim.simulate import Simulation, interpolate_poses
+from sim.simulate import Simulation, interpolate_many, interpolate_poses
 from sim.types import CameraFrame, PoseTruth
 
 
@@ -83,6 +83,18 @@ def test_interpolated_poses_are_linear_between_ticks_and_handle_arrivals():
     late = interpolate_poses(before, after, 0.008)
     assert late.person_ids.tolist() == [2, 3]
     np.testing.assert_allclose(late.poses[0], 0.8)
+
+
+def test_interpolating_several_captures_at_once_gives_each_one_bit_for_bit():
+    rng = np.random.default_rng(5)
+    before = PoseTruth(0.03, np.array([4, 7]), rng.normal(size=(2, 17, 3)))
+    after = PoseTruth(0.04, np.array([4, 7]), rng.normal(size=(2, 17, 3)))
+    arrival = PoseTruth(0.04, np.array([4, 7, 9]), rng.normal(size=(3, 17, 3)))
+    times = [0.0312, 0.0371, 0.04]
+    for b, a in ((before, after), (before, arrival), (None, after)):
+        for one, many in zip([interpolate_poses(b, a, t) for t in times], interpolate_many(b, a, times)):
+            assert one.t_s == many.t_s and one.person_ids.tolist() == many.person_ids.tolist()
+            assert one.poses.tobytes() == many.poses.tobytes()
 
 
 def _fingerprint(event):
