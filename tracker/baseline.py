@@ -111,7 +111,10 @@ class BaselineTracker:
         return targets
 
     def _link(self, poses: list[np.ndarray], t: float) -> list[int]:
-        """Identity of each pose: Hungarian match to the recent previous poses on mean joint distance."""
+        """Identity of each pose: Hungarian match to the recent previous poses on mean joint distance.
+
+        Fills, in place, the joints of a linked pose that are NaN with that identity's previous estimate.
+        """
         recent = (t - self._prev_s) <= self.config.lost_after_s
         prev_ids, prev_poses, prev_s = self._prev_ids[recent], self._prev_poses[recent], self._prev_s[recent]
         ids = [-1] * len(poses)
@@ -124,6 +127,9 @@ class BaselineTracker:
             for r, col in zip(rows, cols):
                 if cost[r, col] < _LINK_DISTANCE_M:
                     ids[r] = int(prev_ids[col])
+                    # A joint this frame's clusters did not triangulate keeps its last estimate, as the
+                    # cross-view tracker's joints do (a once-known joint never turns NaN).
+                    poses[r] = np.where(np.isfinite(poses[r]), poses[r], prev_poses[col])
         for i, value in enumerate(ids):
             if value < 0:
                 ids[i] = self._next_id
