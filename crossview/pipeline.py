@@ -170,6 +170,7 @@ def track(
         software_version=recording.software_version(),
         format_version=recording.FORMAT_VERSION,
     )
+    _compile_kernels(method, rec, preset, config_path, skeleton)
     updates = 0
     tracker_s = 0.0
     with recording.TracksWriter(out, header, rec.cameras) as writer:
@@ -181,6 +182,23 @@ def track(
             writer.write(tracker.last_output)
         writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras)})
     return TrackResult(out, updates, tracker_s, len(rec.cameras))
+
+
+WARM_UP_S = 2.0
+"""Stamps of the frames a throwaway tracker sees before timing starts (see `_compile_kernels`), seconds."""
+
+
+def _compile_kernels(method: str, rec, preset: str, config_path: Path | None, skeleton) -> None:
+    """Runs a throwaway tracker over the first `WARM_UP_S` of frames, untimed.
+
+    The tracker's numba kernels compile on first use (tens of seconds on a fresh install, then loaded from
+    the on-disk cache in under a second); that is not tracking time and must not enter the FPS figure.
+    """
+    tracker, _ = make_tracker(method, rec.cameras, preset, config_path, skeleton)
+    for camera_frame in rec.frames():
+        if camera_frame.frame.stamp_s > WARM_UP_S:
+            break
+        tracker.update(camera_frame.frame)
 
 
 def _jsonable(value):
