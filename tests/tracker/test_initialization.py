@@ -4,8 +4,16 @@ import itertools
 
 import numpy as np
 import pytest
+from scipy.sparse.csgraph import connected_components
 
-from tracker.initialization import PlausibilityLimits, _partition_greedy, check_plausible, partition_graph
+from tracker.initialization import (
+    PlausibilityLimits,
+    _component_labels,
+    _partition_greedy,
+    _partition_milp,
+    check_plausible,
+    partition_graph,
+)
 from tracker.types import COCO17
 
 
@@ -41,8 +49,30 @@ def test_exact_partition_matches_brute_force_optimum():
     for _ in range(20):
         A = _random_problem(rng, 6, 3)
         best = max(_objective(A, p) for p in _set_partitions(list(range(6))))
-        got = partition_graph(A, max_exact_nodes=10)
+        got = partition_graph(A, max_exact_nodes=10)  # connected parts enumerated
         assert _objective(A, got) == pytest.approx(best)
+        assert _objective(A, _partition_milp(A)) == pytest.approx(best)  # the solver used above six nodes
+
+
+def test_mostly_positive_problems_and_their_all_positive_components_stay_exact():
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        A = _random_problem(rng, 6, 4) + 1.2  # most pairs positive: many components are all-positive cliques
+        best = max(_objective(A, p) for p in _set_partitions(list(range(6))))
+        assert _objective(A, partition_graph(A, max_exact_nodes=10)) == pytest.approx(best)
+
+
+def test_component_labels_agree_with_scipy():
+    rng = np.random.default_rng(2)
+    for n in (1, 2, 5, 12, 30):
+        for density in (0.0, 0.05, 0.2):
+            upper = np.triu(rng.random((n, n)) < density, 1)
+            adjacency = upper | upper.T
+            count, expected = connected_components(adjacency.astype(int), directed=False)
+            got = _component_labels(adjacency)
+            assert np.unique(got).size == count
+            # Same partition: the labels map one to one.
+            assert len({(int(a), int(b)) for a, b in zip(got, expected)}) == count
 
 
 def test_greedy_fallback_is_feasible_and_never_better_than_exact():
