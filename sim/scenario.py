@@ -17,13 +17,14 @@ import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import scenarios
 from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
 from sim.crowd import CrowdConfig
 from sim.detector import DetectorConfig
 from sim.store import StoreConfig
 
-SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
+SCENARIO_DIR = Path(scenarios.__file__).resolve().parent  # the shipped files, installed as package data
 DEFAULT_SCENARIO = "store_layout1"
 
 
@@ -75,7 +76,7 @@ class Scenario:
 
 
 def scenario_dirs() -> list[Path]:
-    """Where shipped scenarios are looked up: `./scenarios`, then the source checkout's."""
+    """Where shipped scenarios are looked up: `./scenarios`, then the installed `scenarios` package."""
     return [Path("scenarios"), SCENARIO_DIR]
 
 
