@@ -19,7 +19,7 @@ from tracker import affinity as aff
 from tracker.config import TrackerConfig
 from tracker.geometry import fundamental_matrix, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TargetState, TrackerOutput
+from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TargetState, TrackerOutput, camera_index
 
 logger = logging.getLogger(__name__)
 
@@ -37,13 +37,10 @@ class BaselineTracker:
 
     def __init__(self, cameras: Sequence[Camera], config: TrackerConfig = _DEFAULT_CONFIG,
                  skeleton: Skeleton = COCO17):
-        names = [c.name for c in cameras]
-        if len(set(names)) != len(names):
-            raise ValueError(f"BaselineTracker: camera names must be unique, got {names}")
+        self._index = camera_index(cameras, "BaselineTracker")
         self.cameras = list(cameras)
         self.config = config
         self.skeleton = skeleton
-        self._index = {n: i for i, n in enumerate(names)}
         C, J = len(cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in cameras]) if C else np.zeros((0, 3, 4))
         self._F = {(a, b): fundamental_matrix(cameras[a], cameras[b]) for a in range(C) for b in range(C) if a != b}

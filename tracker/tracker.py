@@ -31,7 +31,7 @@ from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
 from tracker.kernels import poses_in_state, split_detections, update_matched
-from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput
+from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput, camera_index
 
 logger = logging.getLogger(__name__)
 
@@ -87,13 +87,10 @@ class Tracker:
 
     def __init__(self, cameras: Sequence[Camera], config: TrackerConfig = _DEFAULT_CONFIG,
                  skeleton: Skeleton = COCO17):
-        names = [c.name for c in cameras]
-        if len(set(names)) != len(names):
-            raise ValueError(f"Tracker: camera names must be unique, got {names}")
+        self._index = camera_index(cameras, "Tracker")
         self.cameras = list(cameras)
         self.config = config
         self.skeleton = skeleton
-        self._index = {name: i for i, name in enumerate(names)}
         self._bones = np.ascontiguousarray(np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2))
         C, J = len(self.cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in self.cameras]) if C else np.zeros((0, 3, 4))

@@ -128,6 +128,14 @@ class Camera:
         return -self.R_cam_from_world.T @ self.t_cam_from_world
 
 
+def camera_index(cameras, owner: str) -> dict[str, int]:
+    """Camera name -> position in `cameras`; ValueError naming `owner` when two cameras share a name."""
+    names = [c.name for c in cameras]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{owner}: camera names must be unique, got {names}")
+    return {name: i for i, name in enumerate(names)}
+
+
 @dataclass(frozen=True, eq=False)
 class Frame:
     """One camera's 2D detections at one stamp, as a live detector would deliver them.

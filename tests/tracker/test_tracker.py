@@ -170,3 +170,10 @@ def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
         for name, compiled, plain in zip(names, *results):
             np.testing.assert_allclose(compiled, plain, rtol=0, atol=1e-12, err_msg=name)
         tracker.update(frame)
+
+
+@pytest.mark.parametrize("tracker_type", [Tracker, BaselineTracker])
+def test_two_cameras_with_one_name_are_refused(tracker_type):
+    cams = store_like("layout1", 0.2, seed=0)[0]
+    with pytest.raises(ValueError, match=f"{tracker_type.__name__}: camera names must be unique"):
+        tracker_type([cams[0], cams[1], cams[0]])
