@@ -24,7 +24,6 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from tracker.triangulation import reprojection_error_px, triangulate_incremental
 from tracker.types import Skeleton
@@ -143,9 +142,10 @@ def _partition_milp(a: np.ndarray) -> list[np.ndarray] | None:
                        n, result.message)
         return None
     y = result.x > 0.5
-    adjacency = coo_matrix((np.ones(int(y.sum())), (iu[y], ju[y])), shape=(n, n))
-    count, labels = connected_components(adjacency, directed=False)
-    return [np.flatnonzero(labels == c) for c in range(count)]
+    together = np.zeros((n, n), dtype=bool)
+    together[iu[y], ju[y]] = True
+    labels = _component_labels(together | together.T)
+    return [np.flatnonzero(labels == c) for c in np.unique(labels)]
 
 
 def _partition_greedy(a: np.ndarray) -> list[np.ndarray]:
