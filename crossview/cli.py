@@ -192,7 +192,7 @@ def _cmd_detector_stats(args) -> None:
     from crossview.detector_stats import detector_stats, format_detector_stats
 
     rec = recording.open_recording(args.recording)
-    print(format_detector_stats(detector_stats(rec.frames(), rec.cameras)))
+    print(format_detector_stats(detector_stats(rec.frames(with_poses=True), rec.cameras)))
 
 
 def _cmd_world_stats(args) -> None:

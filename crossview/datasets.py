@@ -264,7 +264,6 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
     if truth and skeleton.num_joints != 14:
         truth = []  # the 14-joint truth cannot be stored with COCO-17 frames in one recording
     truth.sort(key=lambda entry: entry[0])
-    truth_stamps = np.array([entry[0] for entry in truth])
     digest = hashlib.sha256()
     for name in ("calibration.json", _source_path(dataset_dir, source).name, "annotation_3d.json"):
         if (dataset_dir / name).is_file():
@@ -274,7 +273,6 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
                              scenario_digest=digest.hexdigest(), seed=0, duration_s=float(end_s),
                              skeleton_name=skeleton.name)
     J = skeleton.num_joints
-    empty_truth = PoseTruth(0.0, np.zeros(0, dtype=np.int64), np.zeros((0, J, 3)))
     events = [(t, 0, i) for i, (t, _, _) in enumerate(truth)] + [(f.stamp_s, 1, i) for i, (f, _) in enumerate(frames)]
     events.sort()
     with RecordingWriter(out_mcap, header, cameras, ()) as writer:
@@ -291,9 +289,6 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
             det_truth = DetectionTruth(capture_s=frame.stamp_s, delivery_s=frame.stamp_s, person_ids=ids,
                                        keypoints_px=keypoints, in_image=in_image, occluded=none,
                                        self_occluded=none, effects=np.zeros(D, dtype=np.int64))
-            poses = empty_truth
-            if truth:
-                k = int(np.argmin(np.abs(truth_stamps - frame.stamp_s)))
-                poses = PoseTruth(float(truth_stamps[k]), truth[k][1], truth[k][2])
-            writer.write(CameraFrame(frame=frame, truth=det_truth, poses_at_capture=poses))
+            # (The poses at capture are not stored: a reader derives them from the truth written here.)
+            writer.write(CameraFrame(frame=frame, truth=det_truth, poses_at_capture=None))
     return len(frames)

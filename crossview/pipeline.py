@@ -103,7 +103,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
         recording.RecordingWriter(out, header, sim.cameras, sim.boxes) as writer,
         tqdm(total=scenario.duration_s, unit="sim s", desc="generate", disable=not progress, leave=False) as bar,
     ):
-        for event in sim.events(scenario.duration_s):
+        for event in sim.events(scenario.duration_s, with_poses=False):  # the reader derives them
             writer.write(event)
             if isinstance(event, CameraFrame):
                 frames += 1

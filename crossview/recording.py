@@ -20,6 +20,7 @@ give the same bytes: no wall-clock time is written, chunk size and compression a
 
 from __future__ import annotations
 
+import bisect
 import functools
 import importlib.metadata
 import json
@@ -45,10 +46,12 @@ from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, IndexType, Writer
 
 from crossview import foxglove
+from sim.poses import interpolate_poses
 from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import SKELETONS, Camera, Frame, Skeleton, Target, TargetState, TrackerOutput
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+OLDEST_RECORDING_VERSION = 2  # format 1 stored every frame's poses at capture; this reader derives them
 MAGIC = b"\x89MCAP0\r\n"
 CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: the unit of reading and of CRC checks
 COMPRESSION = CompressionType.LZ4  # lz4 ships with the mcap package; zstandard would be one more dependency
@@ -137,8 +140,9 @@ def _project_file() -> descriptor_pb2.FileDescriptorProto:
         ("occluded", _F.TYPE_BOOL, True),  # (D, J)
         ("self_occluded", _F.TYPE_BOOL, True),  # (D, J)
         ("effects", _F.TYPE_UINT32, True),  # (D,) sim.types.DetectionEffect bit mask
-        ("poses_at_capture", _F.TYPE_MESSAGE, False, ".crossview.PoseTruth"),
     ])
+    f.message_type[-1].reserved_range.add(start=15, end=16)  # format 1's poses_at_capture
+    f.message_type[-1].reserved_name.append("poses_at_capture")
     message("Target", [
         ("id", _F.TYPE_INT64, False),
         ("stamp_s", _F.TYPE_DOUBLE, False),
@@ -317,7 +321,7 @@ def pose_truth_bytes(truth: PoseTruth) -> bytes:
     from crossview import wire  # (numba: loaded for writing only)
 
     poses, ids = _checked_poses(truth)
-    out = _scratch(wire.camera_frame_capacity(0, 0, *poses.shape[:2], 0))
+    out = _scratch(wire.pose_truth_capacity(*poses.shape[:2]))
     return out[:wire.pose_truth(out, 0, float(truth.t_s), ids, poses)].tobytes()
 
 
@@ -362,11 +366,9 @@ def camera_frame_bytes(cf: CameraFrame) -> bytes:
         if array.shape != shape:
             raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: {name} expected {shape}, got {array.shape}")
         arrays.append(array)
-    poses, pose_ids = _checked_poses(cf.poses_at_capture)
     name = _utf8(frame.camera)
-    out = _scratch(wire.camera_frame_capacity(D, J, *poses.shape[:2], name.size))
-    size = wire.camera_frame(out, name, float(frame.stamp_s), float(truth.capture_s), float(truth.delivery_s), *arrays,
-                             float(cf.poses_at_capture.t_s), pose_ids, poses)
+    out = _scratch(wire.camera_frame_capacity(D, J, name.size))
+    size = wire.camera_frame(out, name, float(frame.stamp_s), float(truth.capture_s), float(truth.delivery_s), *arrays)
     if size < 0:
         raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.effects must be uint32 bit masks")
     return out[:size].tobytes()
@@ -410,11 +412,10 @@ def _camera_frame_to_msg(cf: CameraFrame):
     msg.occluded.extend(rows("occluded", truth.occluded, (D, J), bool))
     msg.self_occluded.extend(rows("self_occluded", truth.self_occluded, (D, J), bool))
     msg.effects.extend(rows("effects", truth.effects, (D,), np.int64))
-    _pose_truth_to_msg(cf.poses_at_capture, msg.poses_at_capture)
     return msg
 
 
-def _camera_frame_from_msg(msg) -> CameraFrame:
+def _camera_frame_from_msg(msg, poses_at_capture: PoseTruth | None = None) -> CameraFrame:
     D, J = msg.num_detections, msg.num_joints
     frame = Frame(
         camera=msg.camera,
@@ -432,7 +433,7 @@ def _camera_frame_from_msg(msg) -> CameraFrame:
         self_occluded=np.array(msg.self_occluded, dtype=bool).reshape(D, J),
         effects=np.array(msg.effects, dtype=np.int64),
     )
-    return CameraFrame(frame=frame, truth=truth, poses_at_capture=_pose_truth_from_msg(msg.poses_at_capture))
+    return CameraFrame(frame=frame, truth=truth, poses_at_capture=poses_at_capture)
 
 
 def _tracker_output_to_msg(output: TrackerOutput, num_joints: int):
@@ -997,6 +998,11 @@ class _Container:
             wanted = "a recording (made by `crossview generate`)" if self.kind == KIND_RECORDING else \
                 "a tracks file (made by `crossview track`)"
             raise RecordingError(f"{self.path}: this is a {kind} file, but {wanted} is expected here")
+        if kind == KIND_RECORDING and version < OLDEST_RECORDING_VERSION:
+            raise RecordingError(
+                f"{self.path}: format version {version} is older than this software reads (recordings: "
+                f"{OLDEST_RECORDING_VERSION} to {FORMAT_VERSION}); generate it again with `crossview generate`"
+            )
         if version > FORMAT_VERSION:
             raise RecordingError(
                 f"{self.path}: format version {version} is newer than this software reads ({FORMAT_VERSION}); "
@@ -1067,27 +1073,82 @@ class Recording(_Container):
         except (KeyError, TypeError, ValueError) as e:
             raise RecordingError(f"{self.path}: unreadable recording header ({e})") from None
 
-    def _events(self, names: set[str]) -> Iterator[PoseTruth | CameraFrame]:
+    def _events(self, names: set[str], with_poses: bool = False) -> Iterator[PoseTruth | CameraFrame]:
+        window = _TruthWindow(self.truth, self.skeleton.num_joints) if with_poses else None
         for name, record in self._messages(names):
             if name == "crossview.PoseTruth":
                 event = self._decode(lambda b: _pose_truth_from_msg(PoseTruthMsg.FromString(b)), record.data)
             else:
-                event = self._decode(lambda b: _camera_frame_from_msg(CameraFrameMsg.FromString(b)), record.data)
+                event = self._decode(lambda b: CameraFrameMsg.FromString(b), record.data)
+                if event is not None:
+                    event = _camera_frame_from_msg(event, window.at(event.capture_s) if window else None)
             if event is None:
                 return
             yield event
 
-    def events(self) -> Iterator[PoseTruth | CameraFrame]:
-        """Truth and camera frames in log-time order (the order they were written)."""
-        return self._events({"crossview.PoseTruth", "crossview.CameraFrame"})
+    def events(self, with_poses: bool = False) -> Iterator[PoseTruth | CameraFrame]:
+        """Truth and camera frames in log-time order (the order they were written).
 
-    def frames(self) -> Iterator[CameraFrame]:
-        """Camera frames in delivery order."""
-        return self._events({"crossview.CameraFrame"})
+        Args:
+            with_poses: give each frame its `poses_at_capture`, derived from the truth ticks (read in a
+                second pass over the file); else None.
+        """
+        return self._events({"crossview.PoseTruth", "crossview.CameraFrame"}, with_poses)
+
+    def frames(self, with_poses: bool = False) -> Iterator[CameraFrame]:
+        """Camera frames in delivery order (`with_poses` as in `events`)."""
+        return self._events({"crossview.CameraFrame"}, with_poses)
 
     def truth(self) -> Iterator[PoseTruth]:
         """The 100 Hz ground truth in time order."""
         return self._events({"crossview.PoseTruth"})
+
+
+class _TruthWindow:
+    """Everybody's true pose at any capture time of a recording, derived from its truth ticks by
+    `sim.poses.interpolate_poses`: the rule and the arithmetic the simulator used for the frames'
+    `poses_at_capture`, so the same bits.
+
+    The ticks stream from a second pass over the file. Captures come nearly in time order (frames are in
+    delivery order), so only the ticks of the last `KEEP_S` seconds are kept; a capture older than that
+    reads the ticks again from the start.
+    """
+
+    KEEP_S = 10.0
+
+    def __init__(self, open_ticks, num_joints: int):
+        self._open = open_ticks
+        self._empty = np.zeros((0, num_joints, 3))
+        self._start()
+
+    def _start(self) -> None:
+        self._ticks = self._open()
+        self._times: list[float] = []
+        self._poses: list[PoseTruth] = []
+        self._trimmed = False
+        self._ended = False
+
+    def at(self, t_s: float) -> PoseTruth:
+        if self._trimmed and t_s <= self._times[0]:
+            self._start()
+        while not self._ended and (not self._times or self._times[-1] < t_s):
+            tick = next(self._ticks, None)
+            if tick is None:
+                self._ended = True
+            else:
+                self._times.append(tick.t_s)
+                self._poses.append(tick)
+        i = bisect.bisect_left(self._times, t_s)
+        before = self._poses[i - 1] if i > 0 else None
+        after = self._poses[i] if i < len(self._poses) else None
+        if before is None and after is None:  # a recording without truth
+            return PoseTruth(float(t_s), np.zeros(0, dtype=np.int64), self._empty)
+        poses = interpolate_poses(before, after, t_s)
+        old = bisect.bisect_left(self._times, t_s - self.KEEP_S) - 1
+        if old > 0:
+            del self._times[:old], self._poses[:old]
+            self._trimmed = True
+        return poses
 
 
 class Tracks(_Container):

@@ -135,28 +135,13 @@ def pose_truth(out, pos, t_s, person_ids, poses):
 
 
 @_jit
-def _pose_truth_size(t_s, person_ids, poses):
-    size = 0 if _is_zero_bits(t_s) else 9
-    if poses.shape[1]:
-        size += 1 + _varint_size(poses.shape[1])
-    if person_ids.size:
-        ids = 0
-        for v in person_ids:
-            ids += _varint_size(_zigzag(v))
-        size += 1 + _varint_size(ids) + ids
-    if poses.size:
-        size += 1 + _varint_size(8 * poses.size) + 8 * poses.size
-    return size
-
-
-@_jit
 def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores, person_ids, true_keypoints, in_image,
-                 occluded, self_occluded, effects, pose_t_s, pose_ids, poses):
+                 occluded, self_occluded, effects):
     """`crossview.CameraFrame` into `out` (uint8, at least `camera_frame_capacity`); returns its size.
 
     camera: the camera name's UTF-8 bytes; stamp_s, capture_s, delivery_s: its times; keypoints
     (D, J, 2), scores (D, J), person_ids (D,), true_keypoints (D, J, 2), in_image, occluded, self_occluded
-    (D, J) bool, effects (D,) uint32 masks; pose_t_s, pose_ids (P,), poses (P, J', 3): the poses at capture.
+    (D, J) bool, effects (D,) uint32 masks.
     Returns -1 (and writes nothing useful) when an effects mask is not a uint32.
     """
     for v in effects:
@@ -180,15 +165,17 @@ def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores,
     pos = _put_bools(out, pos, 11, in_image)
     pos = _put_bools(out, pos, 12, occluded)
     pos = _put_bools(out, pos, 13, self_occluded)
-    pos = _put_varints(out, pos, 14, effects, False)
-    pos = _put_key(out, pos, 15, _LEN)  # the poses at capture, an embedded message (always set)
-    pos = _put_varint(out, pos, _pose_truth_size(pose_t_s, pose_ids, poses))
-    return pose_truth(out, pos, pose_t_s, pose_ids, poses)
+    return _put_varints(out, pos, 14, effects, False)
 
 
-def camera_frame_capacity(D: int, J: int, P: int, pose_joints: int, name_bytes: int) -> int:
+def camera_frame_capacity(D: int, J: int, name_bytes: int) -> int:
     """An upper bound of the bytes of `camera_frame` (varints counted at their longest)."""
-    return 128 + name_bytes + D * (43 * J + 20) + P * (24 * pose_joints + 10)
+    return 128 + name_bytes + D * (43 * J + 20)
+
+
+def pose_truth_capacity(P: int, J: int) -> int:
+    """An upper bound of the bytes of `pose_truth`."""
+    return 64 + P * (24 * J + 10)
 
 
 @_jit

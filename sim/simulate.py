@@ -16,6 +16,7 @@ import numpy as np
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
 from sim.detector import Detector
+from sim.poses import interpolate_many
 from sim.rng import child_rng
 from sim.types import CameraFrame, PoseTruth
 
@@ -61,7 +62,7 @@ class Simulation:
         self._used = False
         self.detector: Detector | None = None
 
-    def events(self, duration_s: float | None = None) -> Iterator[PoseTruth | CameraFrame]:
+    def events(self, duration_s: float | None = None, *, with_poses: bool = True) -> Iterator[PoseTruth | CameraFrame]:
         """Everything a recording holds, in log-time order.
 
         PoseTruth at 100 Hz (log time `t_s`) and CameraFrame (log time `truth.delivery_s`). Ties
@@ -73,6 +74,8 @@ class Simulation:
 
         Args:
             duration_s: simulated duration; None uses the scenario's.
+            with_poses: give each CameraFrame its `poses_at_capture` (False: None, which is all a recording
+                writer needs: a recording stores the truth ticks, from which its reader derives them).
         """
         duration = self.scenario.duration_s if duration_s is None else float(duration_s)
         if not duration > 0:
@@ -83,9 +86,12 @@ class Simulation:
         self.detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"),
                                  self.skeleton)
         if self.worker_process and _usable_cores() > 1 and "fork" in multiprocessing.get_all_start_methods():
-            blocks = self._blocks_from_worker(duration)
+            blocks = self._blocks_from_worker(duration, with_poses)
         else:
             blocks = self._blocks(duration)
+            if not with_poses:
+                blocks = ((t, truths, [(r[0], None, *r[2:]) for r in requests], rows, bounds)
+                          for t, truths, requests, rows, bounds in blocks)
         pending: list = []
         seq = itertools.count()
         for t, truths, requests, rows, bounds in blocks:
@@ -141,8 +147,10 @@ class Simulation:
             yield t, truths, requests, rows, bounds
             truths, requests, scenes, scene_of = [], [], [], []
 
-    def _blocks_from_worker(self, duration: float) -> Iterator[tuple]:
-        """`_blocks` computed in a forked process and received here, block by block.
+    def _blocks_from_worker(self, duration: float, with_poses: bool) -> Iterator[tuple]:
+        """`_blocks` computed in a forked process and received here, block by block. The captures' poses
+        do not travel: they are derived here again from the truth ticks (`sim.poses`, the same arithmetic),
+        and only when `with_poses` (else None).
 
         The worker ignores Ctrl-C (the whole process group gets it; this side decides) and is stopped and
         reaped whenever this generator ends: done, failed, interrupted or dropped unfinished. Its
@@ -153,6 +161,7 @@ class Simulation:
         worker = context.Process(target=self._work, args=(duration, sender), name="crossview-simulation", daemon=True)
         worker.start()
         sender.close()
+        previous = None  # the last truth tick of the previous block
         try:
             while True:
                 try:
@@ -161,7 +170,9 @@ class Simulation:
                     raise RuntimeError(f"the simulation worker process stopped unexpectedly (exit code "
                                        f"{worker.exitcode})") from None
                 if kind == "block":
-                    yield _unpack_block(payload)
+                    block = _unpack_block(payload, previous, with_poses)
+                    previous = block[1][-1] if block[1] else previous
+                    yield block
                 elif kind == "error":
                     raise payload
                 else:  # "end": the counts of the detector that ran there
@@ -201,67 +212,36 @@ def _usable_cores() -> int:
 
 def _pack_block(block: tuple) -> tuple:
     """A block as a few flat arrays (one pickle of a handful of arrays instead of dozens of small ones):
-    the truths' and the captures' poses concatenated, with their times and people counts."""
+    the truths' poses concatenated, with their times and people counts, and the captures' times (their
+    poses are left out: `_unpack_block` derives them from the truths)."""
     t, truths, requests, rows, bounds = block
-    poses = truths + [r[1] for r in requests]
-    times = np.array([p.t_s for p in poses])
-    counts = np.array([len(p.person_ids) for p in poses], dtype=np.int64)
-    ids = np.concatenate([np.asarray(p.person_ids, dtype=np.int64) for p in poses])
-    joints = np.concatenate([np.asarray(p.poses, dtype=np.float64).reshape(-1, 3) for p in poses])
-    shapes = [np.shape(p.poses)[1:] for p in poses]
+    times = np.array([p.t_s for p in truths])
+    counts = np.array([len(p.person_ids) for p in truths], dtype=np.int64)
+    ids = np.concatenate([np.asarray(p.person_ids, dtype=np.int64) for p in truths])
+    joints = np.concatenate([np.asarray(p.poses, dtype=np.float64).reshape(-1, 3) for p in truths])
+    shapes = [np.shape(p.poses)[1:] for p in truths]
     meta = np.array([r[0] for r in requests], dtype=np.int64), np.array([r[2:5] for r in requests]).reshape(-1, 3)
-    return t, len(truths), times, counts, ids, joints, shapes, meta, rows, bounds
+    return t, times, counts, ids, joints, shapes, meta, rows, bounds
 
 
-def _unpack_block(packed: tuple) -> tuple:
-    t, n_truths, times, counts, ids, joints, shapes, (cams, capture_times), rows, bounds = packed
+def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -> tuple:
+    """`_pack_block` undone; each capture's poses interpolated between the tick it was taken at (the
+    first at or after its capture time) and the tick before (`previous`: the previous block's last)."""
+    t, times, counts, ids, joints, shapes, (cams, capture_times), rows, bounds = packed
     people = np.concatenate([[0], np.cumsum(counts)]).tolist()
     rows_of = [0]
     for n, shape in zip(counts.tolist(), shapes):
         rows_of.append(rows_of[-1] + n * (shape[0] if shape else 0))
-    poses = [PoseTruth(t_s, ids[people[i]:people[i + 1]], joints[rows_of[i]:rows_of[i + 1]].reshape(-1, *shapes[i]))
-             for i, t_s in enumerate(times.tolist())]
-    requests = [(c, poses[n_truths + i], *times_i) for i, (c, times_i) in
-                enumerate(zip(cams.tolist(), capture_times.tolist()))]
-    return t, poses[:n_truths], requests, rows, bounds
-
-
-def interpolate_many(before: PoseTruth | None, after: PoseTruth, times_s: list[float]) -> list[PoseTruth]:
-    """`interpolate_poses` at several times between the same two ticks (the same poses, bit for bit: the
-    same arithmetic per element, with the difference of the two ticks taken once)."""
-    if not times_s:
-        return []
-    if before is None or after.t_s <= before.t_s or not np.array_equal(before.person_ids, after.person_ids):
-        return [interpolate_poses(before, after, t_s) for t_s in times_s]
-    a = np.array([(t_s - before.t_s) / (after.t_s - before.t_s) for t_s in times_s])
-    poses = before.poses + (after.poses - before.poses) * a.reshape(-1, *(1,) * after.poses.ndim)
-    return [PoseTruth(float(t_s), after.person_ids, p) for t_s, p in zip(times_s, poses)]
-
-
-def interpolate_poses(before: PoseTruth | None, after: PoseTruth, t_s: float) -> PoseTruth:
-    """Everybody's pose at `t_s` between two truth ticks, linear in time.
-
-    People present at both ticks are interpolated; someone present at only one tick is taken from it
-    when `t_s` lies in that tick's half of the interval.
-
-    Args:
-        before: the truth at the earlier tick (None: only `after` is known).
-        after: the truth at the later tick, `after.t_s >= t_s`.
-        t_s: the time wanted.
-    """
-    if before is None or after.t_s <= before.t_s:
-        return PoseTruth(float(t_s), after.person_ids, after.poses)
-    a = (t_s - before.t_s) / (after.t_s - before.t_s)
-    if np.array_equal(before.person_ids, after.person_ids):
-        return PoseTruth(float(t_s), after.person_ids, before.poses + (after.poses - before.poses) * a)
-    ids = np.union1d(before.person_ids, after.person_ids)
-    in_before = np.isin(ids, before.person_ids)
-    in_after = np.isin(ids, after.person_ids)
-    keep = (in_before & in_after) | (in_after & (a > 0.5)) | (in_before & (a <= 0.5))
-    ids = ids[keep]
-    poses = np.empty((ids.size, *after.poses.shape[1:]))
-    for i, pid in enumerate(ids):
-        b = before.poses[np.searchsorted(before.person_ids, pid)] if pid in before.person_ids else None
-        f = after.poses[np.searchsorted(after.person_ids, pid)] if pid in after.person_ids else None
-        poses[i] = b + (f - b) * a if b is not None and f is not None else (f if f is not None else b)
-    return PoseTruth(float(t_s), ids, poses)
+    truths = [PoseTruth(t_s, ids[people[i]:people[i + 1]], joints[rows_of[i]:rows_of[i + 1]].reshape(-1, *shapes[i]))
+              for i, t_s in enumerate(times.tolist())]
+    capture_list = capture_times.tolist()
+    poses: list = [None] * len(capture_list)
+    if with_poses and capture_list:
+        tick_of = np.searchsorted(times, capture_times[:, 0], side="left").tolist()
+        for k in sorted(set(tick_of)):
+            taken = [i for i, tick in enumerate(tick_of) if tick == k]
+            before = truths[k - 1] if k > 0 else previous
+            for i, p in zip(taken, interpolate_many(before, truths[k], [capture_list[i][0] for i in taken])):
+                poses[i] = p
+    requests = [(c, p, *times_i) for c, p, times_i in zip(cams.tolist(), poses, capture_list)]
+    return t, truths, requests, rows, bounds

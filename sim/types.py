@@ -99,9 +99,11 @@ class CameraFrame:
     Attributes:
         frame: the detections as the tracker receives them.
         truth: per-detection truth, rows matching `frame`.
-        poses_at_capture: everybody's true 3D pose at the true capture time.
+        poses_at_capture: everybody's true 3D pose at the true capture time (`sim.poses.interpolate_poses`
+            of the truth ticks around it); None where it was not asked for (a recording does not store it:
+            its reader derives it from the stored truth ticks on request).
     """
 
     frame: Frame
     truth: DetectionTruth
-    poses_at_capture: PoseTruth
+    poses_at_capture: PoseTruth | None

@@ -120,7 +120,7 @@ def test_convert_writes_a_recording_the_tracker_can_read(tmp_path):
     assert convert(root, tmp_path / "d.mcap") == 2
     rec = recording.open_recording(tmp_path / "d.mcap")
     assert rec.header.skeleton_name == "campus14"
-    frames = list(rec.frames())
+    frames = list(rec.frames(with_poses=True))
     assert [(cf.frame.camera, cf.frame.stamp_s) for cf in frames] == [("Camera0", 0.0), ("Camera1", 0.04)]
     assert frames[0].truth.person_ids.tolist() == [7]
     np.testing.assert_allclose(frames[0].poses_at_capture.poses[0, 0], [0.0, 5.0, 1.0])

@@ -144,7 +144,8 @@ def assert_same_event(a, b):
     for name in ("person_ids", "keypoints_px", "in_image", "occluded", "self_occluded", "effects"):
         assert_same_arrays(getattr(a.truth, name), getattr(b.truth, name))
     assert a.truth.capture_s == b.truth.capture_s and a.truth.delivery_s == b.truth.delivery_s
-    assert_same_pose_truth(a.poses_at_capture, b.poses_at_capture)
+    if b.poses_at_capture is not None:  # (derived from the truth ticks when the reader is asked for them)
+        assert_same_pose_truth(a.poses_at_capture, b.poses_at_capture)
 
 
 def test_recording_round_trip_is_bit_exact(tmp_path, world):
@@ -164,6 +165,7 @@ def test_recording_round_trip_is_bit_exact(tmp_path, world):
     assert len(read) == len(events)
     for a, b in zip(events, read):
         assert_same_event(a, b)
+    assert all(e.poses_at_capture is None for e in read if isinstance(e, CameraFrame))  # not stored
     # The filtered streams are the two halves of it.
     assert len(list(rec.truth())) == sum(isinstance(e, PoseTruth) for e in events)
     frames = list(rec.frames())
@@ -404,6 +406,34 @@ def test_newer_format_version_is_refused(tmp_path, world):
         open_recording(path)
 
 
+def test_a_format_1_recording_is_refused_with_what_to_do(tmp_path, world):
+    cameras, events = world
+    path = write_recording(tmp_path / "old.mcap", cameras, events[:5], make_header(format_version=1))
+    with pytest.raises(RecordingError, match=r"old\.mcap: format version 1 is older than this software reads "
+                                             r"\(recordings: 2 to .*crossview generate"):
+        open_recording(path)
+
+
+def test_poses_at_capture_far_behind_the_window_read_the_ticks_again():
+    """Captures come nearly in time order; one older than the kept window restarts the tick stream and
+    still gets the exact poses."""
+    ticks = [PoseTruth(k / 100, np.array([3]), np.full((1, 17, 3), float(k))) for k in range(3001)]
+    opened = []
+
+    def open_ticks():
+        opened.append(1)
+        return iter(ticks)
+
+    window = recording._TruthWindow(open_ticks, 17)
+    assert window.at(25.005).poses[0, 0, 0] == pytest.approx(2500.5)
+    assert window.at(0.0).poses[0, 0, 0] == 0.0  # 25 s back: read again
+    assert len(opened) == 2
+    assert window.at(30.0).poses[0, 0, 0] == 3000.0  # a tick's own time: that tick exactly
+    assert window.at(31.0).poses[0, 0, 0] == 3000.0  # after the last tick: the last tick
+    empty = recording._TruthWindow(lambda: iter(()), 17).at(1.0)
+    assert empty.person_ids.size == 0 and empty.poses.shape == (0, 17, 3)
+
+
 def test_wrong_kind_is_refused_both_ways(tmp_path, world):
     cameras, events = world
     rec_path = write_recording(tmp_path / "rec.mcap", cameras, events[:5])
@@ -525,10 +555,15 @@ def test_a_real_simulation_gives_identical_bytes_and_reads_back_exactly(tmp_path
     events = simulate_into(tmp_path / "a.mcap", 0.5)
     simulate_into(tmp_path / "b.mcap", 0.5)
     assert (tmp_path / "a.mcap").read_bytes() == (tmp_path / "b.mcap").read_bytes()
-    # What comes back is what the simulator produced, bit for bit.
-    read = list(open_recording(tmp_path / "a.mcap").events())
+    # What comes back is what the simulator produced, bit for bit, the poses at capture included: the
+    # reader derives them from the stored truth ticks with the simulator's own rule and arithmetic.
+    read = list(open_recording(tmp_path / "a.mcap").events(with_poses=True))
     assert len(read) == len(events) and any(isinstance(e, CameraFrame) for e in events)
     for a, b in zip(events, read):
+        assert isinstance(b, PoseTruth) or b.poses_at_capture is not None
+        assert_same_event(a, b)
+    frames = list(open_recording(tmp_path / "a.mcap").frames(with_poses=True))
+    for a, b in zip([e for e in events if isinstance(e, CameraFrame)], frames, strict=True):
         assert_same_event(a, b)
     # And the mcap package's own reader decodes every message with its declared schema.
     seen = read_independently(tmp_path / "a.mcap")

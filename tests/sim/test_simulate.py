@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from sim import scenario as scenario_mod
-from sim.simulate import Simulation, interpolate_many, interpolate_poses
+from sim.simulate import Simulation
 from sim.types import CameraFrame, PoseTruth
 
 
@@ -49,6 +49,15 @@ def test_same_seed_same_stream_other_seed_other_stream(small):
     assert digest(5) != digest(6)
 
 
+def test_frames_without_poses_are_the_same_frames(small):
+    """`with_poses=False` (what a recording writer asks for) changes nothing but leaving the poses out."""
+    sim = Simulation(small, seed=2)
+    full = [e for e in sim.events(0.6) if isinstance(e, CameraFrame)]
+    bare = [e for e in sim.events(0.6, with_poses=False) if isinstance(e, CameraFrame)]
+    assert all(f.poses_at_capture is None for f in bare) and len(bare) == len(full) > 0
+    assert [f.frame.keypoints_px.tobytes() for f in bare] == [f.frame.keypoints_px.tobytes() for f in full]
+
+
 def test_a_second_pass_replays_the_same_events(small):
     sim = Simulation(small, seed=1)
     first = [_log_time(e) for e in sim.events(0.5)]
@@ -72,29 +81,6 @@ def test_frames_project_the_poses_at_capture(small):
                 np.testing.assert_allclose(event.frame.keypoints_px[row][ok], px[ok], atol=1e-9)  # px
                 checked += 1
     assert checked > 10
-
-
-def test_interpolated_poses_are_linear_between_ticks_and_handle_arrivals():
-    before = PoseTruth(0.0, np.array([1, 2]), np.zeros((2, 17, 3)))
-    after = PoseTruth(0.01, np.array([2, 3]), np.ones((2, 17, 3)))
-    early = interpolate_poses(before, after, 0.002)
-    assert early.person_ids.tolist() == [1, 2]
-    np.testing.assert_allclose(early.poses[1], 0.2)  # person 2 moved a fifth of the way
-    late = interpolate_poses(before, after, 0.008)
-    assert late.person_ids.tolist() == [2, 3]
-    np.testing.assert_allclose(late.poses[0], 0.8)
-
-
-def test_interpolating_several_captures_at_once_gives_each_one_bit_for_bit():
-    rng = np.random.default_rng(5)
-    before = PoseTruth(0.03, np.array([4, 7]), rng.normal(size=(2, 17, 3)))
-    after = PoseTruth(0.04, np.array([4, 7]), rng.normal(size=(2, 17, 3)))
-    arrival = PoseTruth(0.04, np.array([4, 7, 9]), rng.normal(size=(3, 17, 3)))
-    times = [0.0312, 0.0371, 0.04]
-    for b, a in ((before, after), (before, arrival), (None, after)):
-        for one, many in zip([interpolate_poses(b, a, t) for t in times], interpolate_many(b, a, times)):
-            assert one.t_s == many.t_s and one.person_ids.tolist() == many.person_ids.tolist()
-            assert one.poses.tobytes() == many.poses.tobytes()
 
 
 def _fingerprint(event):

@@ -1,0 +1,56 @@
+"""Everybody's true pose between two truth ticks: the one rule the simulator uses for the poses at a
+camera's capture time and a recording's reader uses to derive them again from the stored ticks.
+
+The rule: at a tick's own time, that tick's poses exactly; strictly between two ticks, linear in time
+for the people present at both, and someone present at only one tick is taken from it when the time lies
+in that tick's half of the interval; before the first tick or after the last, the nearest tick's poses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.types import PoseTruth
+
+
+def interpolate_poses(before: PoseTruth | None, after: PoseTruth | None, t_s: float) -> PoseTruth:
+    """Everybody's pose at `t_s`, with `before.t_s < t_s <= after.t_s` (see the module docstring).
+
+    Args:
+        before: the truth at the earlier tick (None: only `after` is known).
+        after: the truth at the later tick (None: only `before` is known).
+        t_s: the time wanted.
+    """
+    if after is None:
+        if before is None:
+            raise ValueError("interpolate_poses: no tick given")
+        return PoseTruth(float(t_s), before.person_ids, before.poses)
+    if before is None or after.t_s <= before.t_s or t_s >= after.t_s:
+        return PoseTruth(float(t_s), after.person_ids, after.poses)
+    a = (t_s - before.t_s) / (after.t_s - before.t_s)
+    if np.array_equal(before.person_ids, after.person_ids):
+        return PoseTruth(float(t_s), after.person_ids, before.poses + (after.poses - before.poses) * a)
+    ids = np.union1d(before.person_ids, after.person_ids)
+    in_before = np.isin(ids, before.person_ids)
+    in_after = np.isin(ids, after.person_ids)
+    keep = (in_before & in_after) | (in_after & (a > 0.5)) | (in_before & (a <= 0.5))
+    ids = ids[keep]
+    poses = np.empty((ids.size, *after.poses.shape[1:]))
+    for i, pid in enumerate(ids):
+        b = before.poses[np.searchsorted(before.person_ids, pid)] if pid in before.person_ids else None
+        f = after.poses[np.searchsorted(after.person_ids, pid)] if pid in after.person_ids else None
+        poses[i] = b + (f - b) * a if b is not None and f is not None else (f if f is not None else b)
+    return PoseTruth(float(t_s), ids, poses)
+
+
+def interpolate_many(before: PoseTruth | None, after: PoseTruth, times_s: list[float]) -> list[PoseTruth]:
+    """`interpolate_poses` at several times between the same two ticks (the same poses, bit for bit: the
+    same arithmetic per element, with the difference of the two ticks taken once)."""
+    if not times_s:
+        return []
+    if (before is None or after.t_s <= before.t_s or not np.array_equal(before.person_ids, after.person_ids)
+            or max(times_s) >= after.t_s):
+        return [interpolate_poses(before, after, t_s) for t_s in times_s]
+    a = np.array([(t_s - before.t_s) / (after.t_s - before.t_s) for t_s in times_s])
+    poses = before.poses + (after.poses - before.poses) * a.reshape(-1, *(1,) * after.poses.ndim)
+    return [PoseTruth(float(t_s), after.person_ids, p) for t_s, p in zip(times_s, poses)]
