@@ -182,6 +182,7 @@ _FRAGMENTS_COCO17 = (
     (0, 5, 6), (13, 14, 15, 16),
 )
 _GROSS_MIN_FRAC, _GROSS_MAX_FRAC = 0.2, 0.5
+_SCENE_ROWS = 64  # ticks per buffer of `Detector.scene_now` (about 7 blocks of store_layout2)
 _DUPLICATE_OFFSET_FRAC = 0.05
 _DUPLICATE_KEEP = 0.6  # share of its joints a duplicate repeats
 _DUPLICATE_SCORE = 0.6  # its scores, relative to the original's
@@ -307,6 +308,7 @@ class Detector:
             self._fragment_masks[i, list(part)] = True
         self._template = _TEMPLATE_COCO17 if coco else None
         self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
+        self._scene_rows: tuple | None = None  # `scene_now`'s buffer: positions, rotations, rows handed out
         self._centre_array = np.array(self._centres, dtype=np.float64).reshape(-1, 3)
         # Per-camera constants stacked for projecting the captures of one truth tick at once.
         self._R = np.array([c.R_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
@@ -369,14 +371,68 @@ class Detector:
 
     def scene_now(self, world, copy: bool = True) -> tuple | None:
         """What rays need of `world`'s bodies now (None when occlusion is off): geom positions (G, 3),
-        rotations (G, 9), sizes (G, 3), bounding radii (G,) and owners (G,), copied unless `copy` is False."""
+        rotations (G, 9), sizes (G, 3), bounding radii (G,) and owners (G,), copied unless `copy` is False.
+
+        The copies are cheap: the positions and rotations go to the next rows of a buffer (consecutive
+        ticks' rows are then one slice for `block_visibility`, no stacking), and the sizes, radii and
+        owners are `World.ray_geom_constants`'s read-only snapshots, shared by every tick until they
+        change. Treat every array returned as read-only."""
         if world is None or not self.config.occlusion:
             return None
         self._scene(world)
         model, data = world.model, world.data
-        parts = (data.geom_xpos, data.geom_xmat, model.geom_size, model.geom_rbound,
-                 np.asarray(world.geom_person_ids(), dtype=np.int64))
-        return tuple(np.array(p) for p in parts) if copy else parts
+        if not copy:
+            return (data.geom_xpos, data.geom_xmat, model.geom_size, model.geom_rbound,
+                    np.asarray(world.geom_person_ids(), dtype=np.int64))
+        constants = getattr(world, "ray_geom_constants", None)
+        if constants is not None:
+            size, rbound, owner = constants()
+        else:
+            size, rbound = np.array(model.geom_size), np.array(model.geom_rbound)
+            owner = np.array(world.geom_person_ids(), dtype=np.int64)
+        xpos, xmat = data.geom_xpos, data.geom_xmat
+        rows = self._scene_rows
+        if rows is None or len(rows[2]) == _SCENE_ROWS or rows[0].shape[1] != xpos.shape[0]:
+            G = xpos.shape[0]
+            rows = self._scene_rows = (np.empty((_SCENE_ROWS, G, 3)), np.empty((_SCENE_ROWS, G, 9)), [], {})
+        buf_pos, buf_mat, handed, row_of = rows
+        i = len(handed)
+        buf_pos[i] = xpos
+        buf_mat[i] = xmat.reshape(-1, 9)
+        pos_row = buf_pos[i]
+        handed.append(pos_row)  # (kept: the ids in row_of stay unique)
+        row_of[id(pos_row)] = i
+        return pos_row, buf_mat[i], size, rbound, owner
+
+    def _scene_arrays(self, scenes: list) -> tuple:
+        """The `scene_now` snapshots of several ticks as the ray caster takes them: positions (T, G, 3) and
+        rotations (T, G, 9) (a slice of the buffer when `scene_now` wrote them to consecutive rows), the
+        distinct sizes (U, G, 3), radii (U, G) and owners (U, G), and per tick its index in those (T,)."""
+        T = len(scenes)
+        xpos = xmat = None
+        rows = self._scene_rows
+        if rows is not None:
+            buf_pos, buf_mat, handed, row_of = rows
+            first = row_of.get(id(scenes[0][0]), -1)
+            if (first >= 0 and first + T <= len(handed)
+                    and all(scene[0] is handed[first + i] for i, scene in enumerate(scenes))):
+                xpos, xmat = buf_pos[first:first + T], buf_mat[first:first + T]
+                if first + T == len(handed) and len(handed) > _SCENE_ROWS - 16:
+                    self._scene_rows = None  # the next block starts a new buffer rather than straddle two
+        if xpos is None:
+            xpos = np.stack([scene[0] for scene in scenes])
+            xmat = np.stack([scene[1] for scene in scenes]).reshape(T, -1, 9)
+        # The constant parts, once per distinct (sizes, radii, owners) triple (alive here, so ids are unique).
+        distinct: dict = {}
+        const_of = np.empty(T, dtype=np.int64)
+        for i, scene in enumerate(scenes):
+            const_of[i] = distinct.setdefault((id(scene[2]), id(scene[3]), id(scene[4])), len(distinct))
+        if len(distinct) == 1:
+            size, rbound, owner = (np.asarray(scenes[0][k])[None] for k in (2, 3, 4))
+        else:
+            firsts = [const_of.tolist().index(u) for u in range(len(distinct))]
+            size, rbound, owner = (np.stack([scenes[f][k] for f in firsts]) for k in (2, 3, 4))
+        return xpos, xmat, size, rbound, owner.astype(np.int64, copy=False), const_of
 
     def block_visibility(self, requests, scenes: list | None, scene_of: list[int]) -> tuple:
         """Projection and occlusion of the captures of several truth ticks, in two compiled passes.
@@ -419,9 +475,9 @@ class Detector:
         self_occluded = np.zeros((n_req, N), dtype=bool)
         if scenes is not None and in_img.any():
             kp_bodies, geom_body, geom_type, groups = self._scene_cache
-            xpos, xmat, size, rbound, owner = (np.stack([scene[i] for scene in scenes]) for i in range(5))
+            xpos, xmat, size, rbound, owner, const_of = self._scene_arrays(scenes)
             _cast_keypoint_rays(self._centre_array[cams], points, in_img, ids, J, kp_bodies, geom_type, geom_body,
-                                groups, xpos, xmat.reshape(len(scenes), -1, 9), size, rbound, owner,
+                                groups, xpos, xmat, size, rbound, owner, const_of,
                                 np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
                                 self_occluded, np.empty((n_req, N), dtype=np.int32), np.empty((n_req, N)))
         seen = np.stack([in_img.sum(axis=1), occluded.sum(axis=1), self_occluded.sum(axis=1)], axis=1).tolist()
@@ -474,8 +530,8 @@ class Detector:
             np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(points, dtype=np.float64),
             np.ascontiguousarray(mask), np.ascontiguousarray(person, dtype=np.int64), self.skeleton.num_joints,
             kp_bodies, geom_type, geom_body, groups, xpos[None], xmat[None], size[None], rbound[None], owner[None],
-            np.zeros(shape[0], dtype=np.int64), float(self.config.self_hit_margin_m), occluded, self_occluded, geomid,
-            dist)
+            np.zeros(1, dtype=np.int64), np.zeros(shape[0], dtype=np.int64), float(self.config.self_hit_margin_m),
+            occluded, self_occluded, geomid, dist)
         return occluded, self_occluded, geomid, dist
 
     def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
@@ -829,15 +885,16 @@ def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rboun
 
 @jit
 def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_body, groups, scene_xpos,
-                        scene_xmat, scene_size, scene_rbound, scene_person, scene_of, margin, occluded, self_occluded,
-                        geomid, dist):
+                        scene_xmat, scene_size, scene_rbound, scene_person, const_of, scene_of, margin, occluded,
+                        self_occluded, geomid, dist):
     """Occlusion flags of keypoints seen from camera centres (see the section comment).
 
     origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
     cast, person (R, N // J) person id of each row of J keypoints; kp_bodies (J, 2) body and parent body
     of each keypoint; geom_type, geom_body (G,); groups (K + 1,) starts of contiguous geom groups (a
     person's geoms, the store's) for the culling; scene_* (T, G, ...) the geoms' positions, rotations (rows
-    of 9), sizes, bounding radii and owners at T instants, scene_of (R,) the instant of each capture;
+    of 9) at T instants, scene_size, scene_rbound, scene_person (U, G, ...) their sizes, bounding radii and owners
+    (U sets, const_of (T,) the set of each instant), scene_of (R,) the instant of each capture;
     margin: self_hit_margin_m.
     Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
     than the keypoint) and its distance dist (R, N).
@@ -847,12 +904,14 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     bounds = np.empty((T, G + K, 6))
     spheres = np.empty((T, K, 4))
     for s in range(T):
-        _scene_bounds(geom_type, groups, scene_xpos[s], scene_xmat[s], scene_size[s], scene_rbound[s], bounds[s],
+        u = const_of[s]
+        _scene_bounds(geom_type, groups, scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u], bounds[s],
                       spheres[s])
     for r in range(points.shape[0]):
         s = scene_of[r]
-        geom_xpos, geom_xmat, geom_size, geom_rbound = scene_xpos[s], scene_xmat[s], scene_size[s], scene_rbound[s]
-        geom_person, geom_box, group_box = scene_person[s], bounds[s, :G], bounds[s, G:]
+        u = const_of[s]
+        geom_xpos, geom_xmat, geom_size, geom_rbound = scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u]
+        geom_person, geom_box, group_box = scene_person[u], bounds[s, :G], bounds[s, G:]
         group_sphere = spheres[s]
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
         for n in range(points.shape[1]):

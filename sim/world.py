@@ -116,6 +116,7 @@ class World:
         self._present = np.zeros(S, bool)
         self._person_ids = np.full(S, -1, dtype=np.int64)
         self._geom_person: tuple | None = None  # (present, person ids, geom person ids) of the last call
+        self._ray_constants: tuple | None = None  # `ray_geom_constants`'s snapshots and what they were made of
         self._last_t = -math.inf
         self._sync_slots()
         self._prev = self._cur = self._snapshot()  # (also loads the compiled posing kernel)
@@ -262,6 +263,29 @@ class World:
             ids = np.append(np.where(self._present, self._person_ids, -1), -1)  # index -1: store geoms
             cached = self._geom_person = (self._present, self._person_ids, ids[self._geom_slot].astype(np.int64))
         return cached[2]
+
+    def ray_geom_constants(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """What rays need of the geoms that changes only when a slot is resized or who is present changes:
+        sizes (ngeom, 3), bounding radii (ngeom,) and owners (ngeom,) int64 (`geom_person_ids`).
+
+        Read-only snapshots, the same objects until one of them changes (then new ones): a caller may keep
+        them, and tell by identity that two ticks share them."""
+        cached = self._ray_constants
+        owner = self.geom_person_ids()
+        if cached is not None and cached[0] == self._sizes_version and (
+                cached[4] is owner or np.array_equal(cached[3], owner)):
+            if cached[4] is not owner:
+                cached = self._ray_constants = (*cached[:4], owner)
+            return cached[1], cached[2], cached[3]
+        if cached is not None and cached[0] == self._sizes_version:
+            size, rbound = cached[1], cached[2]
+        else:
+            size, rbound = self.model.geom_size.copy(), self.model.geom_rbound.copy()
+            size.flags.writeable = rbound.flags.writeable = False
+        frozen = owner.copy()
+        frozen.flags.writeable = False
+        cached = self._ray_constants = (self._sizes_version, size, rbound, frozen, owner)
+        return cached[1], cached[2], cached[3]
 
     def geom_body_ids(self) -> np.ndarray:
         """(ngeom,) int64: index in `sim.humanoid.BODIES` of each geom's body, -1 for store geoms.

@@ -274,3 +274,30 @@ def test_keypoints_are_mujocos_sites_after_its_own_kinematics():
         reference = data.site_xpos[world._kp_sites[slots]].reshape(-1, 17, 3)
         worst = max(worst, float(np.abs(reference - truth.poses).max()) if slots else 0.0)
     assert worst < 1e-12
+
+
+def test_ray_geom_constants_are_snapshots_shared_until_they_change():
+    """`ray_geom_constants` equals the model's sizes, radii and the geom owners at every tick, cannot be
+    written, and stays the same objects until a slot is resized or who is present changes."""
+    world = _world("store_layout1", mean_visit_s=4.0, mean_arrival_gap_s=0.5)
+    seen = []
+    changes = 0
+    for k in range(400):
+        world.advance(k / 20.0)
+        size, rbound, owner = world.ray_geom_constants()
+        np.testing.assert_array_equal(size, world.model.geom_size)
+        np.testing.assert_array_equal(rbound, world.model.geom_rbound)
+        np.testing.assert_array_equal(owner, world.geom_person_ids())
+        assert owner.dtype == np.int64 and not (size.flags.writeable or rbound.flags.writeable or owner.flags.writeable)
+        if seen:
+            same = np.array_equal(seen[-1][0], size) and np.array_equal(seen[-1][2], owner)
+            assert same == all(a is b for a, b in zip(seen[-1], (size, rbound, owner)))
+            changes += not same
+        seen.append((size, rbound, owner))
+    # Earlier snapshots keep their values through later resizes.
+    assert changes >= 5 and len({id(s[0]) for s in seen}) > 1
+    first = seen[0]
+    world2 = _world("store_layout1", mean_visit_s=4.0, mean_arrival_gap_s=0.5)
+    world2.advance(0.0)
+    np.testing.assert_array_equal(first[0], world2.model.geom_size)
+    np.testing.assert_array_equal(first[2], world2.geom_person_ids())
