@@ -158,6 +158,7 @@ class Simulation:
         """
         context = multiprocessing.get_context("fork")
         receiver, sender = context.Pipe(duplex=False)
+        _widen_pipe(sender)
         worker = context.Process(target=self._work, args=(duration, sender), name="crossview-simulation", daemon=True)
         worker.start()
         sender.close()
@@ -201,6 +202,23 @@ class Simulation:
                 sender.send(("error", RuntimeError(f"simulation worker: {type(e).__name__}: {e}")))
         finally:
             sender.close()
+
+
+# A block is about 130 kB on the wire (store_layout2): a pipe of the default 64 kB makes the worker wait
+# for the consumer's next `recv` after every block, so any hiccup on either side stalls both. A pipe that
+# holds several blocks lets the two run apart (the system's limit, usually 1 MiB, is enough).
+_PIPE_BYTES = 1 << 20
+
+
+def _widen_pipe(connection) -> None:
+    """Asks for a pipe of `_PIPE_BYTES` behind `connection` (Linux; elsewhere, or when refused, as is)."""
+    try:
+        import fcntl
+
+        limit = int(open("/proc/sys/fs/pipe-max-size").read())
+        fcntl.fcntl(connection.fileno(), fcntl.F_SETPIPE_SZ, min(_PIPE_BYTES, limit))
+    except (ImportError, AttributeError, OSError, ValueError):
+        pass
 
 
 def _usable_cores() -> int:
