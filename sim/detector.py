@@ -480,9 +480,7 @@ class Detector:
                                 groups, xpos, xmat, size, rbound, owner, const_of,
                                 np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
                                 self_occluded, np.empty((n_req, N), dtype=np.int32), np.empty((n_req, N)))
-        seen = np.stack([in_img.sum(axis=1), occluded.sum(axis=1), self_occluded.sum(axis=1)], axis=1).tolist()
-        for c, row in zip(cam_list, seen):
-            self.visibility_counts[c] += row
+        _count_views(cams, in_img, occluded, self_occluded, self.visibility_counts)
         px = px.reshape(n_req, most, J, 2)
         in_img, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_img, occluded, self_occluded))
         if min(counts) == most:
@@ -627,13 +625,12 @@ class Detector:
         rng = self._rng
         p = self.params
         P, J = in_img.shape
-        n_in = in_img.sum(axis=1)
-        n_visible = (in_img & ~occluded).sum(axis=1)
-        occluded_share = occluded.sum(axis=1) / np.maximum(n_in, 1)
+        n_in, n_visible, n_occluded = (np.empty(P, dtype=np.int64) for _ in range(3))
+        _count_joints(in_img, occluded, n_in, n_visible, n_occluded)
+        occluded_share = n_occluded / np.maximum(n_in, 1)
         miss = rng.random(P) < p.miss_prob + p.miss_occlusion_gain * occluded_share
         take = np.nonzero((n_in > 0) & (n_visible >= p.min_visible_joints) & ~miss)[0]
         D = take.size
-        true_px, img, occ, self_occ = px[take], in_img[take], occluded[take], self_occluded[take]
         # Every draw of the detections, in a fixed order, then what they do (`_apply_draws`, compiled).
         u_drop = rng.random((D, J))
         u_fragment = rng.random(D)
@@ -648,15 +645,17 @@ class Detector:
         u_swap = rng.random(D)
         kp, scores = np.empty((D, J, 2)), np.empty((D, J))
         reported, effects, size = np.empty((D, J), dtype=bool), np.empty(D, dtype=np.int64), np.empty(D)
-        _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy, chi2, u_gross, np.cos(angle),
-                     np.sin(angle), u_jump, score_noise, u_swap, self._fragment_masks, self._joint_noise, self._swap,
+        keep = np.empty(D, dtype=bool)
+        _apply_draws(px, in_img, occluded, self_occluded, take, u_drop, u_fragment, part, z, heavy, chi2, u_gross,
+                     np.cos(angle), np.sin(angle), u_jump, score_noise, u_swap, self._fragment_masks, self._joint_noise,
+                     self._swap,
                      np.array([p.occluded_drop_prob, p.self_occluded_drop_prob, p.joint_drop_prob, p.fragment_prob,
                                p.noise_frac, p.occluded_noise_scale, p.self_occluded_noise_scale, p.noise_tail_dof,
                                p.gross_error_prob, p.score_occluded, p.score_visible, p.score_std, p.swap_prob]),
-                     kp, scores, reported, effects, size)
-        keep = reported.any(axis=1)
-        rows = [person_ids[take], kp, scores, true_px, img, occ, self_occ, effects, group[take]]
-        rows = [r[keep] for r in rows]
+                     kp, scores, reported, effects, size, keep)
+        kept = take[keep]
+        rows = [person_ids[kept], kp[keep], scores[keep], px[kept], in_img[kept], occluded[kept], self_occluded[kept],
+                effects[keep], group[kept]]
         # Duplicates: a second, partial, shifted and less confident copy of a detection.
         dup = rng.random(keep.sum()) < p.duplicate_prob
         dup_keep = rng.random((keep.sum(), J)) < _DUPLICATE_KEEP
@@ -961,15 +960,40 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
                 self_occluded[r, n] = not near
 
 
+@jit
+def _count_views(cams, in_img, occluded, self_occluded, counts):
+    """Adds each capture's joints in the image, occluded and self-occluded ((R, N) bool) to its camera's row
+    of counts (C, 3); cams (R,) the camera of each capture."""
+    for r in range(in_img.shape[0]):
+        c = cams[r]
+        for n in range(in_img.shape[1]):
+            counts[c, 0] += in_img[r, n]
+            counts[c, 1] += occluded[r, n]
+            counts[c, 2] += self_occluded[r, n]
+
+
+@jit
+def _count_joints(in_img, occluded, n_in, n_visible, n_occluded):
+    """Per person (row of (P, J) bool): joints in the image, in it and not occluded, and occluded, into (P,)."""
+    for p in range(in_img.shape[0]):
+        a = b = c = 0
+        for j in range(in_img.shape[1]):
+            a += in_img[p, j]
+            b += in_img[p, j] and not occluded[p, j]
+            c += occluded[p, j]
+        n_in[p], n_visible[p], n_occluded[p] = a, b, c
+
+
 _FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP = (int(e) for e in (DetectionEffect.FRAGMENT, DetectionEffect.GROSS_ERROR,
                                                                DetectionEffect.LEFT_RIGHT_SWAP))
 
 
 @jit
-def _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy, chi2, u_gross, cos_angle, sin_angle,
-                 u_jump, score_noise, u_swap, fragment_masks, joint_noise, swap_order, params, kp, scores, reported,
-                 effects, size):
-    """What the draws of `Detector._detections` do to the D people detected, element by element in the
+def _apply_draws(px, in_img, occluded, self_occluded, take, u_drop, u_fragment, part, z, heavy, chi2, u_gross,
+                 cos_angle, sin_angle, u_jump, score_noise, u_swap, fragment_masks, joint_noise, swap_order, params, kp,
+                 scores, reported, effects, size, keep):
+    """What the draws of `Detector._detections` do to the D people detected (rows take (D,) of px (P, J, 2),
+    in_img, occluded, self_occluded (P, J)), element by element in the
     order of the vectorised formulas it replaced (so the same keypoints, bit for bit): joint drops,
     fragments, Student-t noise scaled by the person's size in the image, gross errors, scores, left/right
     swaps, and NaN / zero score where a joint is not reported.
@@ -977,17 +1001,18 @@ def _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy
     params: occluded, self-occluded and joint drop probabilities, fragment probability, noise fraction,
     occluded and self-occluded noise scales, tail degrees of freedom, gross error probability, occluded
     and visible scores, score std, swap probability. Writes kp (D, J, 2), scores (D, J), reported (D, J),
-    effects (D,) and size (D,) (`person_size_px` of the true pixels).
+    effects (D,), size (D,) (`person_size_px` of the true pixels) and keep (D,) (some joint reported).
     """
     (drop_occluded, drop_self, drop_joint, fragment_prob, noise_frac, scale_occluded, scale_self, dof, gross_prob,
      score_occluded, score_visible, score_std, swap_prob) = params
-    D, J = img.shape
+    D, J = take.shape[0], in_img.shape[1]
     flipped = np.empty(J, dtype=np.bool_)
     for d in range(D):
+        t = take[d]
         high0 = high1 = -np.inf
         low0 = low1 = np.inf
         for j in range(J):
-            x, y = true_px[d, j, 0], true_px[d, j, 1]
+            x, y = px[t, j, 0], px[t, j, 1]
             if not np.isnan(x):
                 high0, low0 = max(high0, x), min(low0, x)
             if not np.isnan(y):
@@ -997,8 +1022,8 @@ def _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy
         effects[d] = 0
         any_part = False
         for j in range(J):
-            drop = drop_occluded if occ[d, j] else (drop_self if self_occ[d, j] else drop_joint)
-            reported[d, j] = img[d, j] and u_drop[d, j] >= drop
+            drop = drop_occluded if occluded[t, j] else (drop_self if self_occluded[t, j] else drop_joint)
+            reported[d, j] = in_img[t, j] and u_drop[d, j] >= drop
             any_part = any_part or (reported[d, j] and fragment_masks[part[d], j])
         # Fragments keep one body part (if it holds a reported joint).
         if u_fragment[d] < fragment_prob and any_part:
@@ -1008,15 +1033,15 @@ def _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy
         gross_any = False
         for j in range(J):
             scale = noise_frac * size[d] * joint_noise[j]
-            scale = scale * (scale_occluded if occ[d, j] else (scale_self if self_occ[d, j] else 1.0))
+            scale = scale * (scale_occluded if occluded[t, j] else (scale_self if self_occluded[t, j] else 1.0))
             gross = reported[d, j] and u_gross[d, j] < gross_prob
             gross_any = gross_any or gross
             jump = u_jump[d, j] * size[d]
             for c in range(2):
                 noise = z[d, j, c] * math.sqrt(dof / chi2[d, j]) if heavy else z[d, j, c]
-                value = true_px[d, j, c] + scale * noise
+                value = px[t, j, c] + scale * noise
                 kp[d, j, c] = value + ((jump * (cos_angle[d, j] if c == 0 else sin_angle[d, j])) if gross else 0.0)
-            base = score_occluded if occ[d, j] else score_visible
+            base = score_occluded if occluded[t, j] else score_visible
             scores[d, j] = min(max(base + score_std * score_noise[d, j], _MIN_SCORE), 1.0)
         if gross_any:
             effects[d] |= _GROSS_ERROR
@@ -1031,3 +1056,4 @@ def _apply_draws(true_px, img, occ, self_occ, u_drop, u_fragment, part, z, heavy
             if not reported[d, j]:
                 kp[d, j, 0] = kp[d, j, 1] = np.nan
                 scores[d, j] = 0.0
+        keep[d] = reported[d].any()
