@@ -722,12 +722,14 @@ def _parent_bodies(bodies: np.ndarray) -> np.ndarray:
 # quadratic of `mj_ray` for spheres, capsules, ellipsoids and cylinders, the slab faces for boxes) term
 # by term in the same order, so every hit distance is the one `mujoco.mj_multiRay` returns, and the
 # nearest hit is chosen as MuJoCo chooses it (geoms in model order, a later geom only when strictly
-# nearer). What differs is the culling: a whole person (a contiguous group of geoms), then a single geom
-# is skipped when the box around the segment from the camera to the keypoint misses the box around it
-# (or, for a geom, the segment misses its bounding sphere), which never drops a hit nearer than the
-# keypoint (the only hits the flags depend on). tests/sim checks the flags and the hits against
-# `mj_multiRay` in the store. This replaced one `mj_multiRay` call per capture, whose per-call set-up
-# (the bounding angles of every geom) cost more than its rays.
+# nearer). What differs is the culling, which never drops a geom that has a hit nearer than the keypoint
+# (the only hits the flags depend on), so the nearest hit and its ties come out the same: per capture and
+# person, the geoms whose box meets the box around the camera centre and that person's keypoints (whole
+# groups of geoms first: a person's, the store's) are the candidates of the person's rays; per ray, a
+# candidate is skipped when the segment from the camera to the keypoint (to the nearest hit so far) misses
+# its bounding sphere, a box geom also when the box around the segment misses its box. tests/sim checks the
+# flags and the hits against `mj_multiRay` in the store. This replaced one `mj_multiRay` call per capture,
+# whose per-call set-up (the bounding angles of every geom) cost more than its rays.
 
 _MJ_MINVAL = 1e-15  # mjMINVAL: MuJoCo's smallest denominator
 _GEOM_SPHERE, _GEOM_CAPSULE, _GEOM_ELLIPSOID, _GEOM_CYLINDER, _GEOM_BOX = 2, 3, 4, 5, 6  # mjtGeom
@@ -844,21 +846,10 @@ def _ray_geom(g, kinds, xpos, xmat, sizes, px, py, pz, vx, vy, vz):
 
 
 @jit
-def _segment_misses_sphere(cx, cy, cz, radius, ox, oy, oz, ux, uy, uz, length):
-    """Whether the segment o + s u, 0 <= s <= length (u a unit vector), stays clear of a sphere."""
-    dx, dy, dz = cx - ox, cy - oy, cz - oz
-    along = dx * ux + dy * uy + dz * uz
-    r = radius + _CULL_SLACK_M
-    if along + r < 0 or along - r > length:
-        return True
-    return dx * dx + dy * dy + dz * dz - along * along > r * r
-
-
-@jit
-def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rbound, bounds, spheres):
+def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rbound, bounds):
     """Boxes (lo, hi) around every geom (a box's own corners, the bounding sphere of the others), then
-    around every group, into bounds (G + K, 6); a sphere (centre, radius) around each group's box into
-    spheres (K, 4): a ray whose segment misses them cannot hit them before its keypoint."""
+    around every group, into bounds (G + K, 6): a ray whose segment misses them cannot hit them before
+    its keypoint."""
     K, G = groups.shape[0] - 1, geom_type.shape[0]
     for g in range(G):
         for i in range(3):
@@ -875,11 +866,6 @@ def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rboun
             for i in range(3):
                 bounds[G + k, i] = min(bounds[G + k, i], bounds[g, i])
                 bounds[G + k, 3 + i] = max(bounds[G + k, 3 + i], bounds[g, 3 + i])
-        extent = 0.0
-        for i in range(3):
-            spheres[k, i] = 0.5 * (bounds[G + k, i] + bounds[G + k, 3 + i])
-            extent += (bounds[G + k, 3 + i] - bounds[G + k, i]) ** 2
-        spheres[k, 3] = 0.5 * math.sqrt(extent) if groups[k + 1] > groups[k] else 0.0
 
 
 @jit
@@ -891,9 +877,10 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
     cast, person (R, N // J) person id of each row of J keypoints; kp_bodies (J, 2) body and parent body
     of each keypoint; geom_type, geom_body (G,); groups (K + 1,) starts of contiguous geom groups (a
-    person's geoms, the store's) for the culling; scene_* (T, G, ...) the geoms' positions, rotations (rows
-    of 9) at T instants, scene_size, scene_rbound, scene_person (U, G, ...) their sizes, bounding radii and owners
-    (U sets, const_of (T,) the set of each instant), scene_of (R,) the instant of each capture;
+    person's geoms, the store's) for the culling; scene_xpos, scene_xmat (T, G, ...) the geoms' positions and
+    rotations (rows of 9) at T instants; scene_size, scene_rbound, scene_person (U, G, ...) their sizes,
+    bounding radii and owners (U sets; const_of (T,) the set of each instant); scene_of (R,) the instant of
+    each capture;
     margin: self_hit_margin_m.
     Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
     than the keypoint) and its distance dist (R, N).
@@ -901,63 +888,91 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     K = groups.shape[0] - 1
     T, G = scene_xpos.shape[0], geom_type.shape[0]
     bounds = np.empty((T, G + K, 6))
-    spheres = np.empty((T, K, 4))
     for s in range(T):
         u = const_of[s]
-        _scene_bounds(geom_type, groups, scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u], bounds[s],
-                      spheres[s])
+        _scene_bounds(geom_type, groups, scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u], bounds[s])
+    # One person's candidates: geom ids, and centre minus camera centre, its squared norm, radius plus slack.
+    cand = np.empty(G, dtype=np.int64)
+    cand_sphere = np.empty((G, 5))
     for r in range(points.shape[0]):
         s = scene_of[r]
         u = const_of[s]
         geom_xpos, geom_xmat, geom_size, geom_rbound = scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u]
         geom_person, geom_box, group_box = scene_person[u], bounds[s, :G], bounds[s, G:]
-        group_sphere = spheres[s]
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
         for n in range(points.shape[1]):
             occluded[r, n] = False
             self_occluded[r, n] = False
             geomid[r, n] = -1
             dist[r, n] = -1.0
-            if not mask[r, n]:
+        for q in range(points.shape[1] // J):
+            # The box around the camera centre and the person's keypoints cast holds every ray's segment.
+            c_lo_x = c_hi_x = ox
+            c_lo_y = c_hi_y = oy
+            c_lo_z = c_hi_z = oz
+            cast = False
+            for n in range(q * J, q * J + J):
+                if mask[r, n]:
+                    cast = True
+                    c_lo_x, c_hi_x = min(c_lo_x, points[r, n, 0]), max(c_hi_x, points[r, n, 0])
+                    c_lo_y, c_hi_y = min(c_lo_y, points[r, n, 1]), max(c_hi_y, points[r, n, 1])
+                    c_lo_z, c_hi_z = min(c_lo_z, points[r, n, 2]), max(c_hi_z, points[r, n, 2])
+            if not cast:
                 continue
-            px, py, pz = points[r, n, 0], points[r, n, 1], points[r, n, 2]
-            vx, vy, vz = px - ox, py - oy, pz - oz
-            length = math.sqrt(vx * vx + vy * vy + vz * vz)
-            ux, uy, uz = vx / length, vy / length, vz / length
-            lo_x, lo_y, lo_z = min(ox, px), min(oy, py), min(oz, pz)
-            hi_x, hi_y, hi_z = max(ox, px), max(oy, py), max(oz, pz)
-            # Only hits nearer than `reach` matter: the keypoint, then the nearest hit so far (a geom later
-            # in model order replaces it only when strictly nearer, as in MuJoCo).
-            best, best_g, reach = -1.0, -1, length
+            nc = 0
             for k in range(K):
-                if (hi_x < group_box[k, 0] or lo_x > group_box[k, 3] or hi_y < group_box[k, 1]
-                        or lo_y > group_box[k, 4] or hi_z < group_box[k, 2] or lo_z > group_box[k, 5]
-                        or _segment_misses_sphere(group_sphere[k, 0], group_sphere[k, 1], group_sphere[k, 2],
-                                                  group_sphere[k, 3], ox, oy, oz, ux, uy, uz, reach)):
+                if (c_hi_x < group_box[k, 0] or c_lo_x > group_box[k, 3] or c_hi_y < group_box[k, 1]
+                        or c_lo_y > group_box[k, 4] or c_hi_z < group_box[k, 2] or c_lo_z > group_box[k, 5]):
                     continue
                 for g in range(groups[k], groups[k + 1]):
-                    if (hi_x < geom_box[g, 0] or lo_x > geom_box[g, 3] or hi_y < geom_box[g, 1]
+                    if (c_hi_x < geom_box[g, 0] or c_lo_x > geom_box[g, 3] or c_hi_y < geom_box[g, 1]
+                            or c_lo_y > geom_box[g, 4] or c_hi_z < geom_box[g, 2] or c_lo_z > geom_box[g, 5]):
+                        continue
+                    cand[nc] = g
+                    dx, dy, dz = geom_xpos[g, 0] - ox, geom_xpos[g, 1] - oy, geom_xpos[g, 2] - oz
+                    cand_sphere[nc, 0], cand_sphere[nc, 1], cand_sphere[nc, 2] = dx, dy, dz
+                    cand_sphere[nc, 3] = dx * dx + dy * dy + dz * dz
+                    cand_sphere[nc, 4] = geom_rbound[g] + _CULL_SLACK_M
+                    nc += 1
+            for n in range(q * J, q * J + J):
+                if not mask[r, n]:
+                    continue
+                px, py, pz = points[r, n, 0], points[r, n, 1], points[r, n, 2]
+                vx, vy, vz = px - ox, py - oy, pz - oz
+                length = math.sqrt(vx * vx + vy * vy + vz * vz)
+                ux, uy, uz = vx / length, vy / length, vz / length
+                lo_x, lo_y, lo_z = min(ox, px), min(oy, py), min(oz, pz)
+                hi_x, hi_y, hi_z = max(ox, px), max(oy, py), max(oz, pz)
+                # Only hits nearer than `reach` matter: the keypoint, then the nearest hit so far (a geom later
+                # in model order replaces it only when strictly nearer, as in MuJoCo).
+                best, best_g, reach = -1.0, -1, length
+                for i in range(nc):
+                    g = cand[i]
+                    # (For a geom bounded by its sphere, the box test adds nothing to the sphere test.)
+                    if geom_type[g] == _GEOM_BOX and (
+                            hi_x < geom_box[g, 0] or lo_x > geom_box[g, 3] or hi_y < geom_box[g, 1]
                             or lo_y > geom_box[g, 4] or hi_z < geom_box[g, 2] or lo_z > geom_box[g, 5]):
                         continue
-                    if _segment_misses_sphere(geom_xpos[g, 0], geom_xpos[g, 1], geom_xpos[g, 2], geom_rbound[g],
-                                              ox, oy, oz, ux, uy, uz, reach):
+                    along = cand_sphere[i, 0] * ux + cand_sphere[i, 1] * uy + cand_sphere[i, 2] * uz
+                    radius = cand_sphere[i, 4]
+                    if (along + radius < 0 or along - radius > reach
+                            or cand_sphere[i, 3] - along * along > radius * radius):
                         continue
                     x = _ray_geom(g, geom_type, geom_xpos, geom_xmat, geom_size, ox, oy, oz, ux, uy, uz)
                     if x >= 0 and (best < 0 or x < best):
                         best, best_g = x, g
                         reach = min(reach, best)
-            if best_g < 0 or not best < length:
-                continue
-            geomid[r, n] = best_g
-            dist[r, n] = best
-            own = person[r, n // J]
-            if geom_person[best_g] != own:
-                occluded[r, n] = True
-            else:
-                body = geom_body[best_g]
-                j = n % J
-                near = (body == kp_bodies[j, 0] or body == kp_bodies[j, 1]) and length - best <= margin
-                self_occluded[r, n] = not near
+                if best_g < 0 or not best < length:
+                    continue
+                geomid[r, n] = best_g
+                dist[r, n] = best
+                if geom_person[best_g] != person[r, q]:
+                    occluded[r, n] = True
+                else:
+                    body = geom_body[best_g]
+                    j = n - q * J
+                    near = (body == kp_bodies[j, 0] or body == kp_bodies[j, 1]) and length - best <= margin
+                    self_occluded[r, n] = not near
 
 
 @jit
