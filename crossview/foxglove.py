@@ -569,6 +569,22 @@ _ANNOTATIONS_KEY = np.frombuffer(_SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2], 
 _POINTS_KEY = (_POINTS_FIELD << 3) | 2
 if _POINTS_KEY >= 128 or _STAMP_FIELD >= 16:
     raise RuntimeError("PointsAnnotation: the compiled encoder expects one-byte field tags")
+ANNOTATION_FIELDS = (_STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)  # the field arguments of wire.image_annotations
+
+
+def detection_styles(person_ids: np.ndarray) -> _PieceTable:
+    """The style table of the detections' wire pieces, with a row for each of `person_ids` (for encoders
+    of many frames at once; `image_annotations_bytes` adds rows as it meets people)."""
+    styles = _DETECTION_STYLES
+    ids = np.maximum(np.asarray(person_ids, dtype=np.int64), -1) + 1
+    if ids.size and (ids.max() >= styles.lut.size or (styles.lut[ids] < 0).any()):
+        styles.add(person_ids)
+    return styles
+
+
+def bone_table(skeleton: Skeleton) -> np.ndarray:
+    """(B, 2) joint pairs of the skeleton's bones, as the encoders take them."""
+    return _bone_table(tuple(skeleton.bones))[0]
 
 
 class _PieceTable:

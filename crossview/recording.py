@@ -374,6 +374,64 @@ def camera_frame_bytes(cf: CameraFrame) -> bytes:
     return out[:size].tobytes()
 
 
+def frames_bytes(frames: Sequence[CameraFrame], skeleton: Skeleton, t_ns: Sequence[int]) -> list[tuple[bytes, bytes]]:
+    """(`camera_frame_bytes`, `foxglove.image_annotations_bytes` at t_ns[i]) of each frame, the same bytes,
+    from one compiled call for all of them (what a writer of many frames wants: the per-call costs are
+    shared). A frame the batch does not take (an unusual array, a bad effects mask, a +0.0 coordinate) goes
+    through the one-frame functions, which also raise their errors."""
+    from crossview import wire  # (numba: loaded for writing only)
+
+    def one_by_one(batch, times):
+        return [(camera_frame_bytes(cf), foxglove.image_annotations_bytes(cf, skeleton, t))
+                for cf, t in zip(batch, times)]
+
+    n = len(frames)
+    if n < 2:
+        return one_by_one(frames, t_ns)
+    try:
+        kp = [cf.frame.keypoints_px for cf in frames]
+        J = kp[0].shape[1]
+        D = [k.shape[0] for k in kp]
+        total = sum(D)
+        columns = [np.concatenate(kp, dtype=np.float64)]
+        for name, dtype, tail in (("scores", np.float64, (J,)), ("person_ids", np.int64, ()),
+                                  ("keypoints_px", np.float64, (J, 2)), ("in_image", bool, (J,)),
+                                  ("occluded", bool, (J,)), ("self_occluded", bool, (J,)), ("effects", np.int64, ())):
+            parts = [cf.frame.scores if name == "scores" else getattr(cf.truth, name) for cf in frames]
+            if any(p.shape != (d, *tail) for p, d in zip(parts, D)):
+                return one_by_one(frames, t_ns)
+            columns.append(np.concatenate(parts, dtype=dtype))
+    except (AttributeError, IndexError, TypeError, ValueError):  # not arrays of the expected kinds
+        return one_by_one(frames, t_ns)
+    if columns[0].shape != (total, J, 2):
+        return one_by_one(frames, t_ns)
+    names = [_utf8(cf.frame.camera) for cf in frames]
+    name_ends = np.cumsum([0] + [a.size for a in names])
+    times = np.array([(cf.frame.stamp_s, cf.truth.capture_s, cf.truth.delivery_s) for cf in frames], dtype=np.float64)
+    det_ends = np.cumsum([0] + D)
+    person_ids = columns[2]
+    styles = foxglove.detection_styles(person_ids)
+    bones = foxglove.bone_table(skeleton)
+    capacity = sum(wire.camera_frame_capacity(d, J, a.size) + wire.image_annotations_capacity(
+        d, J, len(bones), styles.table.shape[1]) for d, a in zip(D, names))
+    out = _scratch(capacity)
+    ends = np.empty(2 * n, dtype=np.int64)
+    status = np.empty(n, dtype=np.int64)
+    wire.frames_and_annotations(out, ends, status, np.concatenate(names), name_ends, times,
+                                np.asarray(t_ns, dtype=np.int64), det_ends, *columns, bones, styles.lut, styles.table,
+                                styles.sizes, *foxglove.ANNOTATION_FIELDS)
+    ends, status = ends.tolist(), status.tolist()
+    data = out[:ends[-1]].tobytes()
+    result, start = [], 0
+    for i, cf in enumerate(frames):
+        if status[i]:
+            result += one_by_one([cf], [t_ns[i]])
+        else:
+            result.append((data[start:ends[2 * i]], data[ends[2 * i]:ends[2 * i + 1]]))
+        start = ends[2 * i + 1]
+    return result
+
+
 @functools.lru_cache(maxsize=1024)
 def _utf8(text: str) -> np.ndarray:
     return np.frombuffer(text.encode(), dtype=np.uint8)
@@ -818,25 +876,40 @@ class RecordingWriter(_WriterContext):
 
     def write(self, event: PoseTruth | CameraFrame) -> None:
         """Appends one event: a PoseTruth (log time t_s) or a CameraFrame (log time truth.delivery_s)."""
+        self.write_many([event])
+
+    def write_many(self, events: Sequence[PoseTruth | CameraFrame]) -> None:
+        """`write` of each event in turn (the same bytes), with all the camera frames among them encoded
+        in one compiled call (`frames_bytes`): what a producer of many events at a time should use."""
+        t_ns, frames = [], []
+        for event in events:
+            if isinstance(event, PoseTruth):
+                t_ns.append(self._log_time(event.t_s, "PoseTruth"))
+            elif isinstance(event, CameraFrame):
+                if event.frame.camera not in self._frame_ch:
+                    raise ValueError(f"CameraFrame: camera {event.frame.camera!r} is not one of the recording's "
+                                     "cameras")
+                t_ns.append(self._log_time(event.truth.delivery_s, f"CameraFrame {event.frame.camera}"))
+                frames.append(event)
+            else:
+                raise TypeError(f"RecordingWriter.write: expected PoseTruth or CameraFrame, got "
+                                f"{type(event).__name__}")
+        encoded = iter(frames_bytes(frames, self.skeleton, [t for t, e in zip(t_ns, events)
+                                                            if isinstance(e, CameraFrame)]))
         out = self._out
-        if isinstance(event, PoseTruth):
-            t_ns = self._log_time(event.t_s, "PoseTruth")
-            out.add(self._truth, t_ns, pose_truth_bytes(event))
-            if t_ns >= self._next_scene_ns:
-                out.add(self._truth_scene, t_ns, foxglove.truth_skeletons_bytes(event, self.skeleton, t_ns))
-                self._next_scene_ns = t_ns + to_ns(TRUTH_SCENE_PERIOD_S)
-            self._people.update(np.asarray(event.person_ids).tolist())
-            self._counts["truth"] += 1
-        elif isinstance(event, CameraFrame):
-            name = event.frame.camera
-            if name not in self._frame_ch:
-                raise ValueError(f"CameraFrame: camera {name!r} is not one of the recording's cameras")
-            t_ns = self._log_time(event.truth.delivery_s, f"CameraFrame {name}")
-            out.add(self._frame_ch[name], t_ns, camera_frame_bytes(event))
-            out.add(self._annotation_ch[name], t_ns, foxglove.image_annotations_bytes(event, self.skeleton, t_ns))
-            self._counts["frames"] += 1
-        else:
-            raise TypeError(f"RecordingWriter.write: expected PoseTruth or CameraFrame, got {type(event).__name__}")
+        for event, t in zip(events, t_ns):
+            if isinstance(event, PoseTruth):
+                out.add(self._truth, t, pose_truth_bytes(event))
+                if t >= self._next_scene_ns:
+                    out.add(self._truth_scene, t, foxglove.truth_skeletons_bytes(event, self.skeleton, t))
+                    self._next_scene_ns = t + to_ns(TRUTH_SCENE_PERIOD_S)
+                self._people.update(np.asarray(event.person_ids).tolist())
+                self._counts["truth"] += 1
+            else:
+                frame_data, drawn = next(encoded)
+                out.add(self._frame_ch[event.frame.camera], t, frame_data)
+                out.add(self._annotation_ch[event.frame.camera], t, drawn)
+                self._counts["frames"] += 1
 
     def close(self) -> None:
         summary = {

@@ -390,3 +390,40 @@ def truth_skeletons(out, poses, person_ids, piece_lut, pieces, piece_sizes, bone
             pos = _put_pose(out, pos, x, y, z + 0.25, orientation)
             pos = _put_bytes(out, pos, pieces[row, starts[3]:starts[4]])
     return pos
+
+
+@_jit
+def frames_and_annotations(out, ends, status, names, name_ends, times, t_ns, det_ends, keypoints, scores, person_ids,
+                           true_keypoints, in_image, occluded, self_occluded, effects, bones, style_lut, styles,
+                           style_sizes, stamp_field_number, key, points_key):
+    """`camera_frame` then `image_annotations` of n frames, back to back in `out`, in one call.
+
+    The frames' rows are concatenated: frame i owns rows det_ends[i]:det_ends[i + 1] of keypoints, scores,
+    person_ids, true_keypoints, in_image, occluded, self_occluded, effects, and bytes
+    name_ends[i]:name_ends[i + 1] of names (its camera's UTF-8 name); times (n, 3): stamp, capture and
+    delivery; t_ns (n,): the annotations' stamp. The other arguments are `image_annotations`'s.
+    Writes ends (2 n,): where frame i's CameraFrame (2 i) and its annotations (2 i + 1) end, and status (n,):
+    0, or what the single-frame encoders returned instead of a size (-1 for a bad effects mask in the
+    CameraFrame, else the annotations' -1 or NEW_STYLE): the caller encodes those frames one by one.
+    """
+    pos = 0
+    for i in range(t_ns.size):
+        a, b = det_ends[i], det_ends[i + 1]
+        status[i] = 0
+        size = camera_frame(out[pos:], names[name_ends[i]:name_ends[i + 1]], times[i, 0], times[i, 1], times[i, 2],
+                            keypoints[a:b], scores[a:b], person_ids[a:b], true_keypoints[a:b], in_image[a:b],
+                            occluded[a:b], self_occluded[a:b], effects[a:b])
+        if size < 0:
+            status[i] = -1
+            size = 0
+        pos += size
+        ends[2 * i] = pos
+        if a < b and status[i] == 0:
+            size = image_annotations(out[pos:], keypoints[a:b], bones, person_ids[a:b], style_lut, styles, style_sizes,
+                                     t_ns[i], stamp_field_number, key, points_key)
+            if size < 0:
+                status[i] = size
+                size = 0
+            pos += size
+        ends[2 * i + 1] = pos
+    return pos

@@ -640,3 +640,46 @@ def test_a_failure_on_the_chunk_thread_is_raised_and_leaves_no_file(tmp_path, wo
     with pytest.raises(OSError, match="No space left"):
         write_recording(tmp_path / "rec.mcap", cameras, events, chunk_size=4096)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_frames_written_many_at_a_time_give_the_same_file(tmp_path, world):
+    """`write_many` encodes the frames between two truths in one compiled call; the file must be the one
+    `write` makes event by event, also with the frames its batch hands back to the one-frame encoders (a
+    +0.0 pixel, which protobuf leaves out; an unusual array) and empty frames."""
+    cameras, events = world
+    J = COCO17.num_joints
+    odd = []
+    for i, event in enumerate(events):
+        if isinstance(event, CameraFrame) and event.frame.num_detections and len(odd) < 3:
+            kp = event.frame.keypoints_px.copy()
+            if not odd:
+                kp[0, 0] = (0.0, 5.0)  # a +0.0 coordinate
+            scores = event.frame.scores.astype(np.float32) if len(odd) == 1 else event.frame.scores
+            frame = Frame(event.frame.camera, event.frame.stamp_s, kp, scores)
+            event = CameraFrame(frame, event.truth, None)
+            odd.append(i)
+        elif isinstance(event, CameraFrame) and i % 7 == 0:  # nobody detected
+            frame = Frame(event.frame.camera, event.frame.stamp_s, np.zeros((0, J, 2)), np.zeros((0, J)))
+            truth = DetectionTruth(event.truth.capture_s, event.truth.delivery_s, np.zeros(0, np.int64),
+                                   np.zeros((0, J, 2)), *(np.zeros((0, J), bool),) * 3, np.zeros(0, np.int64))
+            event = CameraFrame(frame, truth, None)
+        events[i] = event
+    assert len(odd) == 3
+    one = write_recording(tmp_path / "one.mcap", cameras, events).read_bytes()
+    with RecordingWriter(tmp_path / "many.mcap", make_header(), cameras, BOXES) as writer:
+        for start in range(0, len(events), 37):
+            writer.write_many(events[start:start + 37])
+    assert (tmp_path / "many.mcap").read_bytes() == one
+
+
+def test_write_many_refuses_what_write_refuses(tmp_path, world):
+    cameras, events = world
+    frames = [e for e in events if isinstance(e, CameraFrame) and e.frame.num_detections][:4]
+    bad = CameraFrame(frames[1].frame, dataclasses.replace(frames[1].truth, effects=np.full(
+        frames[1].frame.num_detections, 1 << 40)), None)
+    with RecordingWriter(tmp_path / "bad.mcap", make_header(), cameras, BOXES) as writer, \
+            pytest.raises(ValueError, match="effects must be uint32 bit masks"):
+        writer.write_many([frames[0], bad, frames[2]])
+    with RecordingWriter(tmp_path / "late.mcap", make_header(), cameras, BOXES) as writer, \
+            pytest.raises(ValueError, match="log-time order"):
+        writer.write_many([frames[2], frames[0]])
