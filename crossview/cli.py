@@ -138,7 +138,8 @@ def _cmd_run(args) -> None:
         pipeline.check_writable(path)
     progress = not args.no_progress
     gen = pipeline.generate(scenario, rec_path, progress=progress)
-    print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s")
+    print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
+          f"({_speed(gen)})")
     trk = pipeline.track(
         rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config, progress=progress
     )
@@ -156,7 +157,13 @@ def _cmd_generate(args) -> None:
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
     gen = pipeline.generate(scenario, args.output, progress=not args.no_progress)
-    print(f"{gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s")
+    print(f"{gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
+          f"({_speed(gen)})")
+
+
+def _speed(gen) -> str:
+    return (f"{gen.realtime_factor:.1f}x real time; {gen.running_realtime_factor:.1f}x after {gen.startup_s:.2f} s "
+            "of start-up")
 
 
 def _cmd_track(args) -> None:

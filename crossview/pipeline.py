@@ -75,10 +75,25 @@ def check_writable(path: Path) -> None:
 
 @dataclass(frozen=True)
 class GenerateResult:
+    """What `generate` made and how long it took: `wall_s` in all, of which `startup_s` before the first
+    event was written (building the world, loading the compiled kernels, the worker's first block)."""
+
     path: Path
     num_cameras: int
     num_frames: int
     wall_s: float
+    startup_s: float = math.nan
+    duration_s: float = math.nan
+
+    @property
+    def realtime_factor(self) -> float:
+        """Simulated seconds per wall-clock second, everything included."""
+        return self.duration_s / self.wall_s
+
+    @property
+    def running_realtime_factor(self) -> float:
+        """The same once running: simulated seconds per wall-clock second after the start-up."""
+        return self.duration_s / (self.wall_s - self.startup_s)
 
 
 _WRITE_BATCH = 64  # events handed to the writer at once
@@ -106,8 +121,11 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
         recording.RecordingWriter(out, header, sim.cameras, sim.boxes) as writer,
         tqdm(total=scenario.duration_s, unit="sim s", desc="generate", disable=not progress, leave=False) as bar,
     ):
-        batch: list = []  # written many at a time: the frames between two truths are encoded together
+        batch: list = []  # written many at a time: the frames among them are encoded together
+        started = math.nan
         for event in sim.events(scenario.duration_s, with_poses=False):  # (the reader derives the poses)
+            if not batch and math.isnan(started):
+                started = time.perf_counter() - start
             batch.append(event)
             if isinstance(event, CameraFrame):
                 frames += 1
@@ -116,7 +134,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
                 batch = []
                 bar.update(max(0.0, min(event.t_s, scenario.duration_s) - bar.n))
         writer.write_many(batch)
-    return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start)
+    return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start, started, scenario.duration_s)
 
 
 def make_tracker(method: str, cameras, preset: str, config_path: Path | None, skeleton):
