@@ -573,18 +573,22 @@ class Detector:
             return [], np.zeros(1, dtype=np.int64)
         return self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities]) for k in range(4)))
 
-    def detection_rows_of(self, requests, px, in_img, occluded, self_occluded) -> tuple[list[np.ndarray], np.ndarray]:
+    def detection_rows_of(self, requests, px, in_img, occluded, self_occluded,
+                          person_ids: list | None = None) -> tuple[list[np.ndarray], np.ndarray]:
         """`detection_rows` from the requests' visibility as `block_visibility` returns it (every request's
-        people in turn)."""
+        people in turn); person_ids: each request's people (None: its poses' ids), where the requests
+        came without their poses."""
         if not requests:
             return [], np.zeros(1, dtype=np.int64)
-        ids = np.concatenate([r[1].person_ids for r in requests]).astype(np.int64, copy=False)
-        group = np.repeat(np.arange(len(requests)), [len(r[1].person_ids) for r in requests])
+        if person_ids is None:
+            person_ids = [r[1].person_ids for r in requests]
+        ids = np.concatenate(person_ids).astype(np.int64, copy=False)
+        group = np.repeat(np.arange(len(requests)), [len(p) for p in person_ids])
         rows = self._detections(ids, px, in_img, occluded, self_occluded, group)
         # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
         n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
         phantoms = [(i, ph) for i in np.repeat(np.arange(len(requests)), n_phantoms)
-                    for ph in [self._phantom(self.cameras[requests[i][0]])] if ph is not None]
+                    for ph in [self._phantom(requests[i][0])] if ph is not None]
         if phantoms:
             extra = [np.stack([ph[k] for _, ph in phantoms]) for k in range(8)]
             extra.append(np.array([i for i, _ in phantoms], dtype=rows[-1].dtype))
@@ -670,24 +674,30 @@ class Detector:
             rows = [np.concatenate([r, d]) for r, d in zip(rows, dups)]
         return rows
 
-    def _phantom(self, camera: Camera):
-        """A false-positive skeleton: a person template standing somewhere on the floor in view."""
+    def _phantom(self, camera_index: int):
+        """A false-positive skeleton: a person template standing somewhere on the floor in view of a camera."""
         rng = self._rng
         p = self.params
         J = self.skeleton.num_joints
         if self._template is None:
             return None
+        camera = self.cameras[camera_index]
         # Pick a pixel, follow its ray to the floor and stand the template there.
         pixel = np.array([rng.uniform(0, camera.width_px), rng.uniform(0, camera.height_px), 1.0])
         ray = camera.R_cam_from_world.T @ np.linalg.solve(camera.K, pixel)
-        centre = camera.center_world
+        centre = self._centres[camera_index]
         if ray[2] >= -1e-6:
             return None
         foot = centre - ray * (centre[2] / ray[2])
         yaw = rng.uniform(0, 2 * np.pi)
         rot = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
         points = self._template * rng.uniform(0.85, 1.1) @ rot.T + foot
-        px, inside = in_image(camera, points)
+        # `in_image` of the camera, by the compiled projection (the same pixels; far less overhead).
+        px, inside = np.empty((1, J, 2)), np.empty((1, J), dtype=bool)
+        in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points[None],
+                             np.array([camera_index]), np.array([self._tangential[camera_index]]),
+                             np.array([self._skew[camera_index]]), px, inside)
+        px, inside = px[0], inside[0]
         keep = inside & (rng.random(J) < 0.7)
         if keep.sum() < 3:
             return None
