@@ -105,9 +105,13 @@ class Simulation:
         while pending:
             yield heapq.heappop(pending)[-1]
 
-    def _blocks(self, duration: float) -> Iterator[tuple]:
+    def _blocks(self, duration: float, draws: bool = True) -> Iterator[tuple]:
         """The simulation proper, one block of `_DETECT_BLOCK_TICKS` truth ticks at a time: (the block's
-        last tick time, its truths, its capture requests, their `Detector.detection_rows`)."""
+        last tick time, its truths, its capture requests, their `Detector.detection_rows` and bounds).
+
+        With `draws` False the last two are the requests' visibility (`Detector.block_visibility`) and
+        None: the error draws are left to the consumer (`_with_draws`), with the same detector state.
+        """
         world, detector = self.world, self.detector
         captures = clock_mod.schedule([c.name for c in self.cameras], self.scenario.clock, duration,
                                       child_rng(self.seed, "clock"))
@@ -143,7 +147,7 @@ class Simulation:
             rows, bounds = [], np.zeros(1, dtype=np.int64)
             if requests:
                 visible = detector.block_visibility(requests, None if scenes[0] is None else scenes, scene_of)
-                rows, bounds = detector.detection_rows_of(requests, *visible)
+                rows, bounds = detector.detection_rows_of(requests, *visible) if draws else (visible, None)
             yield t, truths, requests, rows, bounds
             truths, requests, scenes, scene_of = [], [], [], []
 
@@ -171,9 +175,14 @@ class Simulation:
                     raise RuntimeError(f"the simulation worker process stopped unexpectedly (exit code "
                                        f"{worker.exitcode})") from None
                 if kind == "block":
-                    block = _unpack_block(payload, previous, with_poses)
-                    previous = block[1][-1] if block[1] else previous
-                    yield block
+                    t, truths, requests, visible, people = _unpack_block(payload, previous, with_poses)
+                    previous = truths[-1] if truths else previous
+                    # The detector's draws are made here: the worker only does geometry (the two processes
+                    # then take about the same time per block). The same draws, in the same order.
+                    rows, bounds = [], np.zeros(1, dtype=np.int64)
+                    if requests:
+                        rows, bounds = self.detector.detection_rows_of(requests, *visible, person_ids=people)
+                    yield t, truths, requests, rows, bounds
                 elif kind == "error":
                     raise payload
                 else:  # "end": the counts of the detector that ran there
@@ -189,7 +198,7 @@ class Simulation:
         """The worker process: simulates and sends every block, then the detector's counts (or its error)."""
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
-            for block in self._blocks(duration):
+            for block in self._blocks(duration, draws=False):
                 sender.send(("block", _pack_block(block)))
             sender.send(("end", self.detector.visibility_counts))
         except BrokenPipeError:  # the consumer is gone
@@ -229,23 +238,27 @@ def _usable_cores() -> int:
 
 
 def _pack_block(block: tuple) -> tuple:
-    """A block as a few flat arrays (one pickle of a handful of arrays instead of dozens of small ones):
-    the truths' poses concatenated, with their times and people counts, and the captures' times (their
-    poses are left out: `_unpack_block` derives them from the truths)."""
-    t, truths, requests, rows, bounds = block
+    """A block of `_blocks(draws=False)` as a few flat arrays (one pickle of a handful of arrays instead of
+    dozens of small ones): the truths' poses concatenated, with their times and people counts; the
+    captures' cameras, times, people and visibility (their poses are left out: `_unpack_block` derives
+    them from the truths)."""
+    t, truths, requests, visible, _ = block
+    people = [np.asarray(r[1].person_ids, dtype=np.int64) for r in requests]
+    people = (np.concatenate(people) if people else np.zeros(0, dtype=np.int64)), np.array([p.size for p in people])
     times = np.array([p.t_s for p in truths])
     counts = np.array([len(p.person_ids) for p in truths], dtype=np.int64)
     ids = np.concatenate([np.asarray(p.person_ids, dtype=np.int64) for p in truths])
     joints = np.concatenate([np.asarray(p.poses, dtype=np.float64).reshape(-1, 3) for p in truths])
     shapes = [np.shape(p.poses)[1:] for p in truths]
     meta = np.array([r[0] for r in requests], dtype=np.int64), np.array([r[2:5] for r in requests]).reshape(-1, 3)
-    return t, times, counts, ids, joints, shapes, meta, rows, bounds
+    return t, times, counts, ids, joints, shapes, meta, visible, people
 
 
 def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -> tuple:
     """`_pack_block` undone; each capture's poses interpolated between the tick it was taken at (the
     first at or after its capture time) and the tick before (`previous`: the previous block's last)."""
-    t, times, counts, ids, joints, shapes, (cams, capture_times), rows, bounds = packed
+    t, times, counts, ids, joints, shapes, (cams, capture_times), visible, (seen, sizes) = packed
+    seen = np.split(seen, np.cumsum(sizes)[:-1]) if sizes.size else []
     people = np.concatenate([[0], np.cumsum(counts)]).tolist()
     rows_of = [0]
     for n, shape in zip(counts.tolist(), shapes):
@@ -262,4 +275,4 @@ def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -
             for i, p in zip(taken, interpolate_many(before, truths[k], [capture_list[i][0] for i in taken])):
                 poses[i] = p
     requests = [(c, p, *times_i) for c, p, times_i in zip(cams.tolist(), poses, capture_list)]
-    return t, truths, requests, rows, bounds
+    return t, truths, requests, visible, seen

@@ -117,10 +117,11 @@ def test_the_worker_process_never_outlives_the_stream(small, monkeypatch):
     events.close()
     assert multiprocessing.active_children() == []
     # A failure in the worker is raised here, as what it was, and the worker is gone.
-    def broken(self, requests, *visibility):
+    def broken(self, *args):
         raise ArithmeticError("detector broke")
 
-    monkeypatch.setattr(Detector, "detection_rows_of", broken)
-    with pytest.raises(ArithmeticError, match="detector broke"):
+    monkeypatch.setattr(Detector, "block_visibility", broken)  # (the worker's part: projection and rays)
+    with pytest.raises(ArithmeticError, match="detector broke") as failure:
         list(Simulation(small, seed=4).events(1.0))
+    assert any("raised in the simulation worker process" in note for note in failure.value.__notes__)
     assert multiprocessing.active_children() == []
