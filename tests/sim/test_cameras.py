@@ -257,3 +257,33 @@ def test_in_image_many_agrees_with_in_image_per_camera(layout):
         np.testing.assert_array_equal(inside[i], ref_inside)
         np.testing.assert_array_equal(px[i], ref_px)
     assert inside.any() and not inside.all()
+
+
+def test_in_image_many_kernel_agrees_with_in_image_on_single_skeletons():
+    """The detector projects each phantom skeleton (17 points, one camera) with the compiled kernel: the
+    pixels and flags are `in_image`'s bit for bit, whatever the camera's lens terms."""
+    from sim.cameras import in_image_many_kernel, monotonic_radius
+    from sim.detector import _TEMPLATE_COCO17
+
+    for layout in ("store_layout2", "store_layout1"):
+        rig = build_rig(scenario_mod.load(layout), np.random.default_rng(0))
+        R = np.array([c.R_cam_from_world for c in rig])
+        t = np.array([c.t_cam_from_world for c in rig])
+        K = np.array([c.K for c in rig])
+        dist = np.array([c.dist for c in rig])
+        size = np.array([(c.width_px, c.height_px) for c in rig], dtype=float)
+        radius = np.array([monotonic_radius(c.dist) for c in rig])
+        rng = np.random.default_rng(5)
+        seen = 0
+        for _ in range(300):
+            c = int(rng.integers(len(rig)))
+            yaw = rng.uniform(0, 2 * np.pi)
+            rot = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+            points = _TEMPLATE_COCO17 * rng.uniform(0.85, 1.1) @ rot.T + [rng.uniform(-1, 9), rng.uniform(-1, 7), 0]
+            px, inside = np.empty((1, 17, 2)), np.empty((1, 17), dtype=bool)
+            in_image_many_kernel(R, t, K, dist, size, radius, points[None], np.array([c]),
+                                 np.array([bool(dist[c, 2:4].any())]), np.array([bool(K[c, 0, 1])]), px, inside)
+            ref_px, ref_inside = in_image(rig[c], points)
+            assert px[0].tobytes() == ref_px.tobytes() and inside[0].tobytes() == ref_inside.tobytes()
+            seen += int(ref_inside.sum())
+        assert seen > 300  # plenty of the joints land in the image
