@@ -7,6 +7,7 @@ replaced on its own, and `run` is nothing more than the three in a row.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import logging
 import math
@@ -123,7 +124,8 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
     ):
         batch: list = []  # written many at a time: the frames among them are encoded together
         started = math.nan
-        for event in sim.events(scenario.duration_s, with_poses=False):  # (the reader derives the poses)
+        warm = functools.partial(recording.warm_up, sim.skeleton)  # (while the simulation worker starts)
+        for event in sim.events(scenario.duration_s, with_poses=False, while_starting=warm):
             if not batch and math.isnan(started):
                 started = time.perf_counter() - start
             batch.append(event)

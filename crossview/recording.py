@@ -432,6 +432,21 @@ def frames_bytes(frames: Sequence[CameraFrame], skeleton: Skeleton, t_ns: Sequen
     return result
 
 
+def warm_up(skeleton: Skeleton) -> None:
+    """Loads the writer's compiled encoders (the first use of each costs tens of milliseconds) by encoding
+    a made-up instant: call it where the time is free, e.g. while a simulation worker starts."""
+    J = skeleton.num_joints
+    ids = np.array([3], dtype=np.int64)
+    truth = PoseTruth(0.5, ids, np.ones((1, J, 3)))
+    seen = np.ones((1, J), dtype=bool)
+    frame = CameraFrame(Frame("warm", 0.5, np.ones((1, J, 2)), np.ones((1, J))),
+                        DetectionTruth(0.5, 0.5, ids, np.ones((1, J, 2)), seen, ~seen, ~seen,
+                                       np.zeros(1, dtype=np.int64)), None)
+    pose_truth_bytes(truth)
+    foxglove.truth_skeletons_bytes(truth, skeleton, 1)
+    frames_bytes([frame, frame], skeleton, [1, 1])
+
+
 @functools.lru_cache(maxsize=1024)
 def _utf8(text: str) -> np.ndarray:
     return np.frombuffer(text.encode(), dtype=np.uint8)

@@ -19,6 +19,7 @@ from sim.detector import Detector
 from sim.poses import interpolate_many
 from sim.rng import child_rng
 from sim.types import CameraFrame, PoseTruth
+from tracker.types import COCO17
 
 log = logging.getLogger(__name__)
 
@@ -43,26 +44,38 @@ class Simulation:
         cameras: the rig, in camera-index order.
         boxes: the store's boxes (floor, walls, shelves, ...).
         skeleton: the keypoint layout of the poses.
-        world: the `sim.world.World` (advanced by `events` only when no worker process simulates).
+        world: the `sim.world.World`, built on first use (advanced by `events` only when no worker process
+            simulates: a worker builds its own, so that this process meanwhile loads what it needs).
         detector: the `sim.detector.Detector` of the latest `events` pass (its `visibility_counts` give
             the joints in the image, occluded and self-occluded per camera, over every person-view).
     """
 
     def __init__(self, scenario, seed: int | None = None, *, worker_process: bool = True):
-        from sim.world import World  # MuJoCo is only needed here and below
+        from sim.crowd import validate as validate_crowd
+        from sim.store import StoreGeometry
 
         self.scenario = scenario
         self.seed = scenario.seed if seed is None else int(seed)
         self.cameras = cameras_mod.build_rig(scenario, child_rng(self.seed, "cameras"))
-        self._world_factory = lambda: World(scenario, child_rng(self.seed, "crowd"))
-        self.world = self._world_factory()
-        self.boxes = tuple(self.world.boxes)
-        self.skeleton = self.world.skeleton
+        store = StoreGeometry(scenario.store, name=scenario.where)  # (what World checks first, without MuJoCo)
+        validate_crowd(scenario.crowd, store, scenario.where)
+        self.boxes = tuple(store.boxes)
+        self.skeleton = COCO17
+        self._world = None
         self.worker_process = worker_process
         self._used = False
         self.detector: Detector | None = None
 
-    def events(self, duration_s: float | None = None, *, with_poses: bool = True) -> Iterator[PoseTruth | CameraFrame]:
+    @property
+    def world(self):
+        if self._world is None:
+            from sim.world import World  # MuJoCo is only needed here and below
+
+            self._world = World(self.scenario, child_rng(self.seed, "crowd"))
+        return self._world
+
+    def events(self, duration_s: float | None = None, *, with_poses: bool = True,
+               while_starting=None) -> Iterator[PoseTruth | CameraFrame]:
         """Everything a recording holds, in log-time order.
 
         PoseTruth at 100 Hz (log time `t_s`) and CameraFrame (log time `truth.delivery_s`). Ties
@@ -76,18 +89,22 @@ class Simulation:
             duration_s: simulated duration; None uses the scenario's.
             with_poses: give each CameraFrame its `poses_at_capture` (False: None, which is all a recording
                 writer needs: a recording stores the truth ticks, from which its reader derives them).
+            while_starting: a function called once the worker process has started, while it builds its
+                world (e.g. to load what the consumer will need); with no worker, at the start.
         """
         duration = self.scenario.duration_s if duration_s is None else float(duration_s)
         if not duration > 0:
             raise ValueError(f"duration_s: {duration} must be > 0")
         if self._used:  # a second pass starts again from the same initial state
-            self.world = self._world_factory()
+            self._world = None
         self._used = True
         self.detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"),
                                  self.skeleton)
         if self.worker_process and _usable_cores() > 1 and "fork" in multiprocessing.get_all_start_methods():
-            blocks = self._blocks_from_worker(duration, with_poses)
+            blocks = self._blocks_from_worker(duration, with_poses, while_starting)
         else:
+            if while_starting is not None:
+                while_starting()
             blocks = self._blocks(duration)
             if not with_poses:
                 blocks = ((t, truths, [(r[0], None, *r[2:]) for r in requests], rows, bounds)
@@ -151,7 +168,7 @@ class Simulation:
             yield t, truths, requests, rows, bounds
             truths, requests, scenes, scene_of = [], [], [], []
 
-    def _blocks_from_worker(self, duration: float, with_poses: bool) -> Iterator[tuple]:
+    def _blocks_from_worker(self, duration: float, with_poses: bool, while_starting=None) -> Iterator[tuple]:
         """`_blocks` computed in a forked process and received here, block by block. The captures' poses
         do not travel: they are derived here again from the truth ticks (`sim.poses`, the same arithmetic),
         and only when `with_poses` (else None).
@@ -168,6 +185,9 @@ class Simulation:
         sender.close()
         previous = None  # the last truth tick of the previous block
         try:
+            _load_draw_kernels(self.detector)
+            if while_starting is not None:
+                while_starting()
             while True:
                 try:
                     kind, payload = receiver.recv()
@@ -228,6 +248,15 @@ def _widen_pipe(connection) -> None:
         fcntl.fcntl(connection.fileno(), fcntl.F_SETPIPE_SZ, min(_PIPE_BYTES, limit))
     except (ImportError, AttributeError, OSError, ValueError):
         pass
+
+
+def _load_draw_kernels(detector: Detector) -> None:
+    """Loads the compiled kernels of the detector's draws (while the worker builds its world) by drawing one
+    made-up detection with a throwaway copy of `detector`: its own state is left as it is."""
+    spare = Detector(detector.config, detector.cameras, np.random.default_rng(0), detector.skeleton)
+    J = detector.skeleton.num_joints
+    seen = np.ones((1, J), dtype=bool)
+    spare.detection_rows_of([(0, None)], np.ones((1, J, 2)), seen, ~seen, ~seen, person_ids=[np.zeros(1, np.int64)])
 
 
 def _usable_cores() -> int:
