@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -309,6 +310,8 @@ class Detector:
         self._template = _TEMPLATE_COCO17 if coco else None
         self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
         self._scene_rows: tuple | None = None  # `scene_now`'s buffer: positions, rotations, rows handed out
+        self._scene_pool: list = []  # retired buffers, reused once no row of them is referenced
+        self._scene_retire = False
         self._centre_array = np.array(self._centres, dtype=np.float64).reshape(-1, 3)
         # Per-camera constants stacked for projecting the captures of one truth tick at once.
         self._R = np.array([c.R_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
@@ -392,9 +395,8 @@ class Detector:
             owner = np.array(world.geom_person_ids(), dtype=np.int64)
         xpos, xmat = data.geom_xpos, data.geom_xmat
         rows = self._scene_rows
-        if rows is None or len(rows[2]) == _SCENE_ROWS or rows[0].shape[1] != xpos.shape[0]:
-            G = xpos.shape[0]
-            rows = self._scene_rows = (np.empty((_SCENE_ROWS, G, 3)), np.empty((_SCENE_ROWS, G, 9)), [], {})
+        if rows is None or len(rows[2]) == _SCENE_ROWS or rows[0].shape[1] != xpos.shape[0] or self._scene_retire:
+            rows = self._new_scene_rows(xpos.shape[0])
         buf_pos, buf_mat, handed, row_of = rows
         i = len(handed)
         buf_pos[i] = xpos
@@ -403,6 +405,28 @@ class Detector:
         handed.append(pos_row)  # (kept: the ids in row_of stay unique)
         row_of[id(pos_row)] = i
         return pos_row, buf_mat[i], size, rbound, owner
+
+    def _new_scene_rows(self, G: int) -> tuple:
+        """A buffer for `scene_now`: one retired earlier that nothing refers to any more (no row of it is
+        alive anywhere: writing into fresh memory costs page faults), else a new one. The current buffer
+        is retired."""
+        pool = self._scene_pool
+        if self._scene_rows is not None:
+            pool.append([self._scene_rows[0], self._scene_rows[1]])
+        self._scene_rows, self._scene_retire = None, False
+        fresh = None
+        probe = [np.empty(0)]  # held as the pool holds its buffers: the reference count of an unused one
+        for i, entry in enumerate(pool):
+            free = sys.getrefcount(probe[0])
+            if (entry[0].shape[1] == G and sys.getrefcount(entry[0]) == free
+                    and sys.getrefcount(entry[1]) == free):
+                fresh = pool.pop(i)
+                break
+        del pool[:-2]
+        if fresh is None:
+            fresh = [np.empty((_SCENE_ROWS, G, 3)), np.empty((_SCENE_ROWS, G, 9))]
+        self._scene_rows = (fresh[0], fresh[1], [], {})
+        return self._scene_rows
 
     def _scene_arrays(self, scenes: list) -> tuple:
         """The `scene_now` snapshots of several ticks as the ray caster takes them: positions (T, G, 3) and
@@ -418,7 +442,7 @@ class Detector:
                     and all(scene[0] is handed[first + i] for i, scene in enumerate(scenes))):
                 xpos, xmat = buf_pos[first:first + T], buf_mat[first:first + T]
                 if first + T == len(handed) and len(handed) > _SCENE_ROWS - 16:
-                    self._scene_rows = None  # the next block starts a new buffer rather than straddle two
+                    self._scene_retire = True  # the next block starts a new buffer rather than straddle two
         if xpos is None:
             xpos = np.stack([scene[0] for scene in scenes])
             xmat = np.stack([scene[1] for scene in scenes]).reshape(T, -1, 9)

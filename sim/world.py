@@ -174,7 +174,8 @@ class World:
 
     def _sync_slots(self):
         """Rescales slots whose person changed in the latest crowd step."""
-        for s in np.nonzero(self.crowd.person_id != self._person_ids)[0]:
+        changed = np.nonzero(self.crowd.person_id != self._person_ids)[0]
+        for s in changed:
             pid = int(self.crowd.person_id[s])
             if pid >= 0:
                 h = float(self.crowd.height[s])
@@ -182,7 +183,8 @@ class World:
                 if h != self._slot_height[s]:
                     self._resize(int(s), h)
                     self._body_constants()
-        self._person_ids = self.crowd.person_id.copy()
+        if changed.size:  # (kept otherwise: `geom_person_ids` recomputes when this object changes)
+            self._person_ids = self.crowd.person_id.copy()
 
     # -- public ------------------------------------------------------------------------------------
 
@@ -214,6 +216,12 @@ class World:
             # and at the latest step, in ascending person id order.
             self._orders = []
             for present in ((cur.person_id >= 0) & (prev.person_id == cur.person_id), cur.person_id >= 0):
+                # The same object as long as the same slots are present: `geom_person_ids` (and the ray
+                # scene's owners) are then recomputed only when someone arrives or leaves.
+                if np.array_equal(present, self._present):
+                    present = self._present
+                elif self._orders and np.array_equal(present, self._orders[0][0]):
+                    present = self._orders[0][0]
                 order = np.nonzero(present)[0]
                 self._orders.append((present, order[np.argsort(cur.person_id[order], kind="stable")]))
         exact = cur.time_s <= t_s or prev is cur

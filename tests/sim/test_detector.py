@@ -369,3 +369,32 @@ def test_block_visibility_of_snapshots_equals_visibility_at_each_tick():
             assert a.tobytes() == b.tobytes()
         flagged += int(got[2].sum() + got[3].sum())
     assert flagged > 100
+
+
+def test_scene_now_reuses_a_buffer_only_when_no_snapshot_of_it_is_alive():
+    """`scene_now` writes into recycled buffers, but never into one a kept snapshot (or a view of it) still
+    points into: every kept snapshot keeps the values it was taken with."""
+    from sim import scenario as scenario_mod
+    from sim.detector import _SCENE_ROWS
+    from sim.rng import child_rng
+    from sim.world import World
+
+    scenario = scenario_mod.load("store_layout1")
+    world = World(scenario, child_rng(0, "crowd"))
+    detector = Detector(DetectorConfig(), build_rig(scenario, child_rng(0, "cameras")), np.random.default_rng(0))
+    kept, buffers = [], set()
+    block = []
+    for k in range(6 * _SCENE_ROWS):
+        world.advance(k * 0.01)
+        scene = detector.scene_now(world)
+        buffers.add(id(detector._scene_rows[0]))
+        block.append(scene)
+        if k % 37 == 0:  # a snapshot kept, one through a view of a view
+            kept.append((scene[0][1:], scene[1], world.data.geom_xpos[1:].copy(), world.data.geom_xmat.copy()))
+        if len(block) == 10:
+            detector._scene_arrays(block)
+            block = []
+    for pos, mat, want_pos, want_mat in kept:
+        assert pos.tobytes() == want_pos.tobytes() and mat.tobytes() == want_mat.tobytes()
+    # Kept snapshots pin their buffers; the others are reused.
+    assert len(buffers) <= len({id(pos.base) for pos, *_ in kept}) + 3
