@@ -48,9 +48,10 @@ def interpolate_many(before: PoseTruth | None, after: PoseTruth, times_s: list[f
     same arithmetic per element, with the difference of the two ticks taken once)."""
     if not times_s:
         return []
-    if (before is None or after.t_s <= before.t_s or not np.array_equal(before.person_ids, after.person_ids)
-            or max(times_s) >= after.t_s):
+    if (before is None or after.t_s <= before.t_s or max(times_s) >= after.t_s
+            or not (before.person_ids is after.person_ids or np.array_equal(before.person_ids, after.person_ids))):
         return [interpolate_poses(before, after, t_s) for t_s in times_s]
-    a = np.array([(t_s - before.t_s) / (after.t_s - before.t_s) for t_s in times_s])
-    poses = before.poses + (after.poses - before.poses) * a.reshape(-1, *(1,) * after.poses.ndim)
+    t0, span = before.t_s, after.t_s - before.t_s
+    a = np.array([(t_s - t0) / span for t_s in times_s]).reshape(-1, *(1,) * after.poses.ndim)
+    poses = before.poses + (after.poses - before.poses) * a
     return [PoseTruth(float(t_s), after.person_ids, p) for t_s, p in zip(times_s, poses)]
