@@ -77,3 +77,24 @@ def test_the_watched_floor_is_the_floor_box_footprint_walls_included():
     turned = Box(BoxKind.FLOOR, (1.0, 2.0, 0.0), (4.0, 2.0, 0.1), np.pi / 2)
     assert pipeline.watched_floor([turned]) == pytest.approx((0.0, 0.0, 2.0, 4.0))
     assert pipeline.watched_floor([Box(BoxKind.SHELF, (0, 0, 0), (1, 1, 1))]) is None
+
+
+def test_generate_gives_the_bytes_of_a_plain_one_process_write(tmp_path):
+    """`generate` runs the geometry in a worker process, draws and encodes in batches and loads kernels
+    while the worker starts; none of it may change a byte: twice the same file, and the file that one
+    process writes event by event from a simulation that keeps the captures' poses."""
+    from crossview import recording
+    from sim.simulate import Simulation
+
+    scenario = pipeline.load_scenario("store_layout2", duration_s=0.8, seed=5)
+    a = pipeline.generate(scenario, tmp_path / "a.mcap", progress=False)
+    pipeline.generate(scenario, tmp_path / "b.mcap", progress=False)
+    assert a.num_frames > 100 and 0 < a.startup_s < a.wall_s
+    sim = Simulation(scenario, scenario.seed, worker_process=False)
+    header = recording.RecordingHeader(scenario.name, scenario.source_text, scenario.digest, scenario.seed,
+                                       scenario.duration_s, sim.skeleton.name)
+    with recording.RecordingWriter(tmp_path / "plain.mcap", header, sim.cameras, sim.boxes) as writer:
+        for event in sim.events():
+            writer.write(event)
+    assert (tmp_path / "a.mcap").read_bytes() == (tmp_path / "b.mcap").read_bytes()
+    assert (tmp_path / "a.mcap").read_bytes() == (tmp_path / "plain.mcap").read_bytes()
