@@ -287,7 +287,8 @@ def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -
     """`_pack_block` undone; each capture's poses interpolated between the tick it was taken at (the
     first at or after its capture time) and the tick before (`previous`: the previous block's last)."""
     t, times, counts, ids, joints, shapes, (cams, capture_times), visible, (seen, sizes) = packed
-    seen = np.split(seen, np.cumsum(sizes)[:-1]) if sizes.size else []
+    ends = np.cumsum(sizes).tolist()
+    seen = [seen[end - size:end] for end, size in zip(ends, sizes.tolist())]
     people = np.concatenate([[0], np.cumsum(counts)]).tolist()
     rows_of = [0]
     for n, shape in zip(counts.tolist(), shapes):
