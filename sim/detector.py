@@ -312,6 +312,7 @@ class Detector:
         self._scene_rows: tuple | None = None  # `scene_now`'s buffer: positions, rotations, rows handed out
         self._scene_pool: list = []  # retired buffers, reused once no row of them is referenced
         self._scene_retire = False
+        self._points_buf: np.ndarray | None = None  # `block_visibility`'s keypoints, reused block to block
         self._centre_array = np.array(self._centres, dtype=np.float64).reshape(-1, 3)
         # Per-camera constants stacked for projecting the captures of one truth tick at once.
         self._R = np.array([c.R_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
@@ -477,8 +478,13 @@ class Detector:
         most = max(counts)
         N = most * J
         if min(counts) == most:
-            points = np.stack([r[1].poses for r in requests]).reshape(n_req, N, 3)
-            ids = np.stack([r[1].person_ids for r in requests]).astype(np.int64, copy=False).reshape(n_req, most)
+            # Into a buffer kept between blocks (the points never leave this call): a new array each block
+            # cost page faults.
+            if self._points_buf is None or self._points_buf.shape[0] < n_req or self._points_buf.shape[1] != N:
+                self._points_buf = np.empty((max(n_req, 64), N, 3))
+            points = self._points_buf[:n_req]
+            np.concatenate([r[1].poses for r in requests], out=points.reshape(n_req * most, J, 3))
+            ids = np.concatenate([r[1].person_ids for r in requests]).astype(np.int64, copy=False).reshape(n_req, most)
         else:  # someone arrived or left between two captures: pad with NaN (never in view)
             points = np.full((n_req, N, 3), np.nan)
             ids = np.full((n_req, most), -1, dtype=np.int64)
@@ -503,8 +509,10 @@ class Detector:
             _cast_keypoint_rays(self._centre_array[cams], points, in_img, ids, J, kp_bodies, geom_type, geom_body,
                                 groups, xpos, xmat, size, rbound, owner, const_of,
                                 np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
-                                self_occluded, np.empty((n_req, N), dtype=np.int32), np.empty((n_req, N)))
-        _count_views(cams, in_img, occluded, self_occluded, self.visibility_counts)
+                                self_occluded, np.empty((n_req, N), dtype=np.int32), np.empty((n_req, N)), cams,
+                                self.visibility_counts)
+        else:
+            _count_views(cams, in_img, occluded, self_occluded, self.visibility_counts)
         px = px.reshape(n_req, most, J, 2)
         in_img, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_img, occluded, self_occluded))
         if min(counts) == most:
@@ -553,7 +561,7 @@ class Detector:
             np.ascontiguousarray(mask), np.ascontiguousarray(person, dtype=np.int64), self.skeleton.num_joints,
             kp_bodies, geom_type, geom_body, groups, xpos[None], xmat[None], size[None], rbound[None], owner[None],
             np.zeros(1, dtype=np.int64), np.zeros(shape[0], dtype=np.int64), float(self.config.self_hit_margin_m),
-            occluded, self_occluded, geomid, dist)
+            occluded, self_occluded, geomid, dist, np.zeros(shape[0], dtype=np.int64), np.zeros((1, 3), dtype=np.int64))
         return occluded, self_occluded, geomid, dist
 
     def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
@@ -905,7 +913,7 @@ def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rboun
 @jit
 def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_body, groups, scene_xpos,
                         scene_xmat, scene_size, scene_rbound, scene_person, const_of, scene_of, margin, occluded,
-                        self_occluded, geomid, dist):
+                        self_occluded, geomid, dist, cams, counts):
     """Occlusion flags of keypoints seen from camera centres (see the section comment).
 
     origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
@@ -917,7 +925,8 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     each capture;
     margin: self_hit_margin_m.
     Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
-    than the keypoint) and its distance dist (R, N).
+    than the keypoint) and its distance dist (R, N); adds each capture's keypoints cast, occluded and
+    self-occluded to its camera's row cams[r] of counts (C, 3).
     """
     K = groups.shape[0] - 1
     T, G = scene_xpos.shape[0], geom_type.shape[0]
@@ -934,11 +943,13 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
         geom_xpos, geom_xmat, geom_size, geom_rbound = scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u]
         geom_person, geom_box, group_box = scene_person[u], bounds[s, :G], bounds[s, G:]
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
+        cast_here = occluded_here = self_occluded_here = 0
         for n in range(points.shape[1]):
             occluded[r, n] = False
             self_occluded[r, n] = False
             geomid[r, n] = -1
             dist[r, n] = -1.0
+            cast_here += mask[r, n]
         for q in range(points.shape[1] // J):
             # The box around the camera centre and the person's keypoints cast holds every ray's segment.
             c_lo_x = c_hi_x = ox
@@ -1002,11 +1013,17 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
                 dist[r, n] = best
                 if geom_person[best_g] != person[r, q]:
                     occluded[r, n] = True
+                    occluded_here += 1
                 else:
                     body = geom_body[best_g]
                     j = n - q * J
                     near = (body == kp_bodies[j, 0] or body == kp_bodies[j, 1]) and length - best <= margin
                     self_occluded[r, n] = not near
+                    self_occluded_here += not near
+        c = cams[r]
+        counts[c, 0] += cast_here
+        counts[c, 1] += occluded_here
+        counts[c, 2] += self_occluded_here
 
 
 @jit
