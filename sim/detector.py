@@ -313,6 +313,7 @@ class Detector:
         self._scene_pool: list = []  # retired buffers, reused once no row of them is referenced
         self._scene_retire = False
         self._points_buf: np.ndarray | None = None  # `block_visibility`'s keypoints, reused block to block
+        self._ray_held: tuple | None = None  # `_ray_scratch`'s arrays
         self._centre_array = np.array(self._centres, dtype=np.float64).reshape(-1, 3)
         # Per-camera constants stacked for projecting the captures of one truth tick at once.
         self._R = np.array([c.R_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
@@ -459,6 +460,17 @@ class Detector:
             size, rbound, owner = (np.stack([scenes[f][k] for f in firsts]) for k in (2, 3, 4))
         return xpos, xmat, size, rbound, owner.astype(np.int64, copy=False), const_of
 
+    def _ray_scratch(self, R: int, N: int, T: int, K: int) -> tuple:
+        """Scratch arrays for the ray caster, kept between blocks (new ones of this size each block cost
+        page faults): hit geoms (R, N) int32 and distances (R, N) (written, not read here), and the geom
+        and group boxes (T, G + K, 6)."""
+        G = len(self._scene_cache[2])
+        held = self._ray_held
+        if held is None or held[0].size < R * N or held[2].shape[0] < T or held[2].shape[1] != G + K:
+            size = max(R * N, 64 * 32 * 17)
+            held = self._ray_held = (np.empty(size, dtype=np.int32), np.empty(size), np.empty((max(T, 16), G + K, 6)))
+        return held[0][:R * N].reshape(R, N), held[1][:R * N].reshape(R, N), held[2][:T]
+
     def block_visibility(self, requests, scenes: list | None, scene_of: list[int]) -> tuple:
         """Projection and occlusion of the captures of several truth ticks, in two compiled passes.
 
@@ -506,11 +518,11 @@ class Detector:
         if scenes is not None and in_img.any():
             kp_bodies, geom_body, geom_type, groups = self._scene_cache
             xpos, xmat, size, rbound, owner, const_of = self._scene_arrays(scenes)
+            geomid, dist, bounds = self._ray_scratch(n_req, N, len(scenes), len(groups) - 1)
             _cast_keypoint_rays(self._centre_array[cams], points, in_img, ids, J, kp_bodies, geom_type, geom_body,
                                 groups, xpos, xmat, size, rbound, owner, const_of,
                                 np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
-                                self_occluded, np.empty((n_req, N), dtype=np.int32), np.empty((n_req, N)), cams,
-                                self.visibility_counts)
+                                self_occluded, geomid, dist, cams, self.visibility_counts, bounds)
         else:
             _count_views(cams, in_img, occluded, self_occluded, self.visibility_counts)
         px = px.reshape(n_req, most, J, 2)
@@ -561,7 +573,8 @@ class Detector:
             np.ascontiguousarray(mask), np.ascontiguousarray(person, dtype=np.int64), self.skeleton.num_joints,
             kp_bodies, geom_type, geom_body, groups, xpos[None], xmat[None], size[None], rbound[None], owner[None],
             np.zeros(1, dtype=np.int64), np.zeros(shape[0], dtype=np.int64), float(self.config.self_hit_margin_m),
-            occluded, self_occluded, geomid, dist, np.zeros(shape[0], dtype=np.int64), np.zeros((1, 3), dtype=np.int64))
+            occluded, self_occluded, geomid, dist, np.zeros(shape[0], dtype=np.int64), np.zeros((1, 3), dtype=np.int64),
+            np.empty((1, len(geom_type) + len(groups) - 1, 6)))
         return occluded, self_occluded, geomid, dist
 
     def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
@@ -913,7 +926,7 @@ def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rboun
 @jit
 def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_body, groups, scene_xpos,
                         scene_xmat, scene_size, scene_rbound, scene_person, const_of, scene_of, margin, occluded,
-                        self_occluded, geomid, dist, cams, counts):
+                        self_occluded, geomid, dist, cams, counts, bounds):
     """Occlusion flags of keypoints seen from camera centres (see the section comment).
 
     origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
@@ -926,11 +939,10 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     margin: self_hit_margin_m.
     Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
     than the keypoint) and its distance dist (R, N); adds each capture's keypoints cast, occluded and
-    self-occluded to its camera's row cams[r] of counts (C, 3).
+    self-occluded to its camera's row cams[r] of counts (C, 3). bounds: scratch, (T, G + K, 6) at least.
     """
     K = groups.shape[0] - 1
     T, G = scene_xpos.shape[0], geom_type.shape[0]
-    bounds = np.empty((T, G + K, 6))
     for s in range(T):
         u = const_of[s]
         _scene_bounds(geom_type, groups, scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u], bounds[s])
