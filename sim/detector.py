@@ -639,7 +639,8 @@ class Detector:
             extra.append(np.array([i for i, _ in phantoms], dtype=rows[-1].dtype))
             rows = [np.concatenate([r, e]) for r, e in zip(rows, extra)]
         # Each frame's rows in a random order: sort by frame, then by a uniform key.
-        order = np.lexsort((self._rng.random(rows[-1].shape[0]), rows[-1]))
+        order = np.empty(rows[-1].shape[0], dtype=np.int64)
+        _frame_order(rows[-1].astype(np.int64, copy=False), self._rng.random(rows[-1].shape[0]), len(requests), order)
         rows = [r[order] for r in rows]
         return rows[:-1], np.searchsorted(rows[-1], np.arange(len(requests) + 1))
 
@@ -1036,6 +1037,29 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
         counts[c, 0] += cast_here
         counts[c, 1] += occluded_here
         counts[c, 2] += self_occluded_here
+
+
+@jit
+def _frame_order(frame, key, n_frames, order):
+    """np.lexsort((key, frame)) into order (D,): rows by frame (0 <= frame < n_frames), each frame's by key,
+    ties in input order (a counting sort, then an insertion sort of each frame's few rows)."""
+    start = np.zeros(n_frames + 1, dtype=np.int64)
+    for d in range(frame.shape[0]):
+        start[frame[d] + 1] += 1
+    for f in range(n_frames):
+        start[f + 1] += start[f]
+    fill = start[:n_frames].copy()
+    for d in range(frame.shape[0]):
+        order[fill[frame[d]]] = d
+        fill[frame[d]] += 1
+    for f in range(n_frames):
+        for i in range(start[f] + 1, start[f + 1]):
+            d = order[i]
+            k = i - 1
+            while k >= start[f] and key[order[k]] > key[d]:
+                order[k + 1] = order[k]
+                k -= 1
+            order[k + 1] = d
 
 
 @jit

@@ -398,3 +398,16 @@ def test_scene_now_reuses_a_buffer_only_when_no_snapshot_of_it_is_alive():
         assert pos.tobytes() == want_pos.tobytes() and mat.tobytes() == want_mat.tobytes()
     # Kept snapshots pin their buffers; the others are reused.
     assert len(buffers) <= len({id(pos.base) for pos, *_ in kept}) + 3
+
+
+def test_frame_order_is_lexsort_by_frame_then_key():
+    from sim.detector import _frame_order
+
+    rng = np.random.default_rng(4)
+    for n_rows, n_frames in ((0, 3), (1, 1), (40, 7), (300, 28), (50, 60)):
+        frame = rng.integers(n_frames, size=n_rows)
+        key = rng.random(n_rows)
+        key[rng.random(n_rows) < 0.2] = 0.5  # ties keep the input order, as lexsort's
+        order = np.empty(n_rows, dtype=np.int64)
+        _frame_order(frame, key, n_frames, order)
+        np.testing.assert_array_equal(order, np.lexsort((key, frame)))
