@@ -233,21 +233,25 @@ def test_scenario_can_take_the_panoptic_dome_as_its_rig(rng):
         build_rig(missing, rng)
 
 
+def _stacked_rig(rig) -> tuple:
+    """R, t, K, dist, size, monotonic radius of every camera, stacked as the compiled projection takes them."""
+    from sim.cameras import monotonic_radius
+
+    return (np.array([c.R_cam_from_world for c in rig]), np.array([c.t_cam_from_world for c in rig]),
+            np.array([c.K for c in rig]), np.array([c.dist for c in rig]),
+            np.array([(c.width_px, c.height_px) for c in rig], dtype=float),
+            np.array([monotonic_radius(c.dist) for c in rig]))
+
+
 @pytest.mark.parametrize("layout", ["store_layout2", "store_layout1"])
 def test_in_image_many_agrees_with_in_image_per_camera(layout):
     """The compiled projection of a block's captures gives what `in_image` (numpy) gives camera by camera,
     bit for bit, for cameras straight down (store_layout2) and tilted (store_layout1)."""
-    from sim.cameras import in_image_many, monotonic_radius
+    from sim.cameras import in_image_many
 
-    scenario = scenario_mod.load(layout)
-    rig = build_rig(scenario, np.random.default_rng(0))
+    rig = build_rig(scenario_mod.load(layout), np.random.default_rng(0))
     rng = np.random.default_rng(2)
-    R = np.array([c.R_cam_from_world for c in rig])
-    t = np.array([c.t_cam_from_world for c in rig])
-    K = np.array([c.K for c in rig])
-    dist = np.array([c.dist for c in rig])
-    size = np.array([(c.width_px, c.height_px) for c in rig], dtype=float)
-    radius = np.array([monotonic_radius(c.dist) for c in rig])
+    R, t, K, dist, size, radius = _stacked_rig(rig)
     cams = np.array([0, 5, 5, len(rig) - 1, len(rig) // 2])
     points = rng.uniform([-1, -1, -0.5], [9, 7, 3.5], (len(cams), 200, 3))
     points[2, :10] = np.nan
@@ -262,17 +266,12 @@ def test_in_image_many_agrees_with_in_image_per_camera(layout):
 def test_in_image_many_kernel_agrees_with_in_image_on_single_skeletons():
     """The detector projects each phantom skeleton (17 points, one camera) with the compiled kernel: the
     pixels and flags are `in_image`'s bit for bit, whatever the camera's lens terms."""
-    from sim.cameras import in_image_many_kernel, monotonic_radius
+    from sim.cameras import in_image_many_kernel
     from sim.detector import _TEMPLATE_COCO17
 
     for layout in ("store_layout2", "store_layout1"):
         rig = build_rig(scenario_mod.load(layout), np.random.default_rng(0))
-        R = np.array([c.R_cam_from_world for c in rig])
-        t = np.array([c.t_cam_from_world for c in rig])
-        K = np.array([c.K for c in rig])
-        dist = np.array([c.dist for c in rig])
-        size = np.array([(c.width_px, c.height_px) for c in rig], dtype=float)
-        radius = np.array([monotonic_radius(c.dist) for c in rig])
+        R, t, K, dist, size, radius = _stacked_rig(rig)
         rng = np.random.default_rng(5)
         seen = 0
         for _ in range(300):
