@@ -622,6 +622,47 @@ class _AtomicMcapWriter:
         if offset + _MESSAGE_HEAD.size + len(data) > chunk_size:
             finalize()
 
+    def add_many(self, messages: Sequence[tuple[int, int, bytes]]) -> None:
+        """`add` of each (channel id, log time ns, data) in turn, the same bytes, with the records of a chunk
+        written to its buffer at once."""
+        fast = self._fast
+        if fast is None:
+            for message in messages:
+                self.add(*message)
+            return
+        stats, chunk, finalize, chunk_size = fast
+        counts, indices, head = stats.channel_message_counts, chunk.message_indices, _MESSAGE_HEAD.pack
+        buffer = chunk.record_writer._buffer
+        offset = buffer.tell()
+        parts: list = []
+        for channel_id, t, data in messages:
+            if stats.message_count == 0 or t < stats.message_start_time:
+                stats.message_start_time = t
+            if t > stats.message_end_time:
+                stats.message_end_time = t
+            counts[channel_id] += 1
+            stats.message_count += 1
+            if chunk.num_messages == 0 or t < chunk.message_start_time:
+                chunk.message_start_time = t
+            if t > chunk.message_end_time:
+                chunk.message_end_time = t
+            index = indices.get(channel_id)
+            if index is None:
+                index = indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
+            index.records.append((t, offset))
+            chunk.num_messages += 1
+            parts.append(head(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, t, t))
+            parts.append(data)
+            offset += _MESSAGE_HEAD.size + len(data)
+            if offset > chunk_size:  # (as `add`: the chunk is closed after the message that fills it)
+                buffer.write(b"".join(parts))
+                parts = []
+                finalize()
+                buffer = chunk.record_writer._buffer
+                offset = buffer.tell()
+        if parts:
+            buffer.write(b"".join(parts))
+
     def close(self, summary_metadata: dict[str, str]) -> None:
         """Finishes the file, fsyncs it and renames it onto the final path."""
         if self._done:
@@ -911,20 +952,21 @@ class RecordingWriter(_WriterContext):
                                 f"{type(event).__name__}")
         encoded = iter(frames_bytes(frames, self.skeleton, [t for t, e in zip(t_ns, events)
                                                             if isinstance(e, CameraFrame)]))
-        out = self._out
+        messages = []
         for event, t in zip(events, t_ns):
             if isinstance(event, PoseTruth):
-                out.add(self._truth, t, pose_truth_bytes(event))
+                messages.append((self._truth, t, pose_truth_bytes(event)))
                 if t >= self._next_scene_ns:
-                    out.add(self._truth_scene, t, foxglove.truth_skeletons_bytes(event, self.skeleton, t))
+                    messages.append((self._truth_scene, t, foxglove.truth_skeletons_bytes(event, self.skeleton, t)))
                     self._next_scene_ns = t + to_ns(TRUTH_SCENE_PERIOD_S)
                 self._people.update(np.asarray(event.person_ids).tolist())
                 self._counts["truth"] += 1
             else:
                 frame_data, drawn = next(encoded)
-                out.add(self._frame_ch[event.frame.camera], t, frame_data)
-                out.add(self._annotation_ch[event.frame.camera], t, drawn)
+                messages.append((self._frame_ch[event.frame.camera], t, frame_data))
+                messages.append((self._annotation_ch[event.frame.camera], t, drawn))
                 self._counts["frames"] += 1
+        self._out.add_many(messages)
 
     def close(self) -> None:
         summary = {
