@@ -38,6 +38,7 @@ def bench_tracker(
     """
     rec = recording.open_recording(rec_path)
     frames = [cf.frame for cf in rec.frames() if cf.frame.stamp_s < max_stamp_s]
+    pipeline.warm_up_tracker(method, rec, preset, None, _skeleton(rec))  # (first-use compiles stay out)
     tracker, _ = pipeline.make_tracker(method, rec.cameras, preset, None, _skeleton(rec))
     update_s = []
     for frame in frames:

@@ -197,7 +197,7 @@ def track(
         software_version=recording.software_version(),
         format_version=recording.FORMAT_VERSION,
     )
-    _compile_kernels(method, rec, preset, config_path, skeleton)
+    warm_up_tracker(method, rec, preset, config_path, skeleton)
     updates = 0
     tracker_s = 0.0
     with recording.TracksWriter(out, header, rec.cameras) as writer:
@@ -212,10 +212,10 @@ def track(
 
 
 WARM_UP_S = 2.0
-"""Stamps of the frames a throwaway tracker sees before timing starts (see `_compile_kernels`), seconds."""
+"""Stamps of the frames a throwaway tracker sees before timing starts (see `warm_up_tracker`), seconds."""
 
 
-def _compile_kernels(method: str, rec, preset: str, config_path: Path | None, skeleton) -> None:
+def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, skeleton) -> None:
     """Runs a throwaway tracker over the first `WARM_UP_S` of frames, untimed.
 
     The tracker's numba kernels compile on first use (tens of seconds on a fresh install, then loaded from
