@@ -592,39 +592,18 @@ class _AtomicMcapWriter:
         self._writer.flush()
 
     def add(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
-        fast = self._fast
-        if fast is None:
+        if self._fast is None:
             self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
                                      publish_time=log_time_ns)
             return
-        # What `Writer.add_message` does, without building a Message record object and packing it field by
-        # field (most of the writer's cost per message); the bytes are the same (tests compare files).
-        stats, chunk, finalize, chunk_size = fast
-        if stats.message_count == 0 or log_time_ns < stats.message_start_time:
-            stats.message_start_time = log_time_ns
-        if log_time_ns > stats.message_end_time:
-            stats.message_end_time = log_time_ns
-        stats.channel_message_counts[channel_id] += 1
-        stats.message_count += 1
-        if chunk.num_messages == 0 or log_time_ns < chunk.message_start_time:
-            chunk.message_start_time = log_time_ns
-        if log_time_ns > chunk.message_end_time:
-            chunk.message_end_time = log_time_ns
-        index = chunk.message_indices.get(channel_id)
-        if index is None:
-            index = chunk.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
-        buffer = chunk.record_writer._buffer
-        offset = buffer.tell()
-        index.records.append((log_time_ns, offset))
-        chunk.num_messages += 1
-        buffer.write(_MESSAGE_HEAD.pack(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, log_time_ns, log_time_ns))
-        buffer.write(data)
-        if offset + _MESSAGE_HEAD.size + len(data) > chunk_size:
-            finalize()
+        self.add_many(((channel_id, log_time_ns, data),))
 
     def add_many(self, messages: Sequence[tuple[int, int, bytes]]) -> None:
         """`add` of each (channel id, log time ns, data) in turn, the same bytes, with the records of a chunk
-        written to its buffer at once."""
+        written to its buffer at once.
+
+        What `Writer.add_message` does, without building a Message record object and packing it field by
+        field (most of the writer's cost per message); the bytes are the same (tests compare files)."""
         fast = self._fast
         if fast is None:
             for message in messages:

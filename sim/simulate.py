@@ -127,7 +127,7 @@ class Simulation:
         last tick time, its truths, its capture requests, their `Detector.detection_rows` and bounds).
 
         With `draws` False the last two are the requests' visibility (`Detector.block_visibility`) and
-        None: the error draws are left to the consumer (`_with_draws`), with the same detector state.
+        None: the error draws are left to the consumer (`_blocks_from_worker`), with the same detector state.
         """
         world, detector = self.world, self.detector
         captures = clock_mod.schedule([c.name for c in self.cameras], self.scenario.clock, duration,
@@ -244,7 +244,8 @@ def _widen_pipe(connection) -> None:
     try:
         import fcntl
 
-        limit = int(open("/proc/sys/fs/pipe-max-size").read())
+        with open("/proc/sys/fs/pipe-max-size") as f:
+            limit = int(f.read())
         fcntl.fcntl(connection.fileno(), fcntl.F_SETPIPE_SZ, min(_PIPE_BYTES, limit))
     except (ImportError, AttributeError, OSError, ValueError):
         pass
