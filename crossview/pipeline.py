@@ -77,7 +77,7 @@ def check_writable(path: Path) -> None:
 @dataclass(frozen=True)
 class GenerateResult:
     """What `generate` made and how long it took: `wall_s` in all, of which `startup_s` before the first
-    event was written (building the world, loading the compiled kernels, the worker's first block)."""
+    event came to be written (building the world, loading the compiled kernels, the worker's first block)."""
 
     path: Path
     num_cameras: int
@@ -126,7 +126,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
         started = math.nan
         warm = functools.partial(recording.warm_up, sim.skeleton)  # (while the simulation worker starts)
         for event in sim.events(scenario.duration_s, with_poses=False, while_starting=warm):
-            if not batch and math.isnan(started):
+            if math.isnan(started):  # the first event: the start-up ends
                 started = time.perf_counter() - start
             batch.append(event)
             if isinstance(event, CameraFrame):
