@@ -916,7 +916,7 @@ class RecordingWriter(_WriterContext):
     def write_many(self, events: Sequence[PoseTruth | CameraFrame]) -> None:
         """`write` of each event in turn (the same bytes), with all the camera frames among them encoded
         in one compiled call (`frames_bytes`): what a producer of many events at a time should use."""
-        t_ns, frames = [], []
+        t_ns, frames, frame_t_ns = [], [], []
         for event in events:
             if isinstance(event, PoseTruth):
                 t_ns.append(self._log_time(event.t_s, "PoseTruth"))
@@ -926,11 +926,11 @@ class RecordingWriter(_WriterContext):
                                      "cameras")
                 t_ns.append(self._log_time(event.truth.delivery_s, f"CameraFrame {event.frame.camera}"))
                 frames.append(event)
+                frame_t_ns.append(t_ns[-1])
             else:
                 raise TypeError(f"RecordingWriter.write: expected PoseTruth or CameraFrame, got "
                                 f"{type(event).__name__}")
-        encoded = iter(frames_bytes(frames, self.skeleton, [t for t, e in zip(t_ns, events)
-                                                            if isinstance(e, CameraFrame)]))
+        encoded = iter(frames_bytes(frames, self.skeleton, frame_t_ns))
         messages = []
         for event, t in zip(events, t_ns):
             if isinstance(event, PoseTruth):
