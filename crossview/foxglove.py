@@ -315,46 +315,6 @@ def wire_string(field_number: int, value: str) -> bytes:
     return _length_delimited(field_number, data) if data else b""
 
 
-def wire_packed(field_number: int, payload: bytes) -> bytes:
-    """A packed repeated field from its payload, left out when empty."""
-    return _length_delimited(field_number, payload) if payload else b""
-
-
-def encode_varints(values: np.ndarray) -> bytes:
-    """Concatenated varints of (N,) non-negative integers (uint64 semantics), as a packed field holds them."""
-    v = np.asarray(values).astype(np.uint64, copy=False).ravel()
-    if v.size == 0:
-        return b""
-    if int(v.max()) < 128:
-        return v.astype(np.uint8).tobytes()
-    n = np.ones(v.shape, dtype=np.int64)
-    for k in range(1, 10):
-        n += v >= np.uint64(1 << (7 * k))
-    out = np.empty(int(n.sum()), dtype=np.uint8)
-    starts = np.cumsum(n) - n
-    for k in range(int(n.max())):
-        sel = n > k
-        byte = ((v[sel] >> np.uint64(7 * k)) & np.uint64(0x7F)).astype(np.uint8)
-        out[starts[sel] + k] = byte | np.where(n[sel] > k + 1, 0x80, 0).astype(np.uint8)
-    return out.tobytes()
-
-
-def encode_sint64s(values: np.ndarray) -> bytes:
-    """Concatenated zigzag varints of (N,) int64 (`sint64`)."""
-    v = np.asarray(values, dtype=np.int64).ravel()
-    return encode_varints(((v << 1) ^ (v >> 63)).view(np.uint64))
-
-
-def encode_doubles(values: np.ndarray) -> bytes:
-    """Little-endian float64 bytes of `values` in C order (a packed `double` payload)."""
-    return np.ascontiguousarray(values, dtype="<f8").tobytes()
-
-
-def encode_bools(values: np.ndarray) -> bytes:
-    """One byte 0/1 per value in C order (a packed `bool` payload)."""
-    return np.ascontiguousarray(values, dtype=bool).view(np.uint8).tobytes()
-
-
 def _with_points(message, field_number: int, points: np.ndarray):
     """`message` with its repeated point field `field_number` set to `points` (parsed from wire bytes)."""
     return type(message).FromString(message.SerializeToString() + encode_points(field_number, points))
