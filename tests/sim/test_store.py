@@ -4,10 +4,13 @@ import math
 
 import numpy as np
 import pytest
+import scipy.ndimage
+import scipy.sparse
+import scipy.sparse.csgraph
 
 from sim import scenario as sc
 from sim.scenario import ScenarioError
-from sim.store import ShelfConfig, StoreConfig, StoreGeometry, rect_distance
+from sim.store import ShelfConfig, StoreConfig, StoreGeometry, _distance_to_blocked, rect_distance
 from sim.types import BoxKind
 
 SHIPPED = ("store_layout1", "store_layout2", "supermarket")
@@ -69,6 +72,47 @@ def test_exit_walled_off_by_shelves_is_an_error():
     wall = ShelfConfig((4.0, 3.0), (0.6, 6.0, 1.8))
     with pytest.raises(ScenarioError, match="cannot be reached"):
         StoreGeometry(_store(shelves=(wall,), entrance_m=(0.0, 3.0), exit_m=(8.0, 3.0)))
+
+
+def test_distance_to_blocked_cells_equals_scipys_exact_transform_bit_for_bit():
+    rng = np.random.default_rng(3)
+    grids = [StoreGeometry(sc.load(name).store, name=name).free for name in SHIPPED]
+    for _ in range(200):
+        nx, ny = rng.integers(1, 90, 2)
+        free = rng.random((nx, ny)) < rng.uniform(0.3, 0.999)
+        free[rng.integers(nx), rng.integers(ny)] = False
+        grids.append(free)
+    for free in grids:
+        np.testing.assert_array_equal(_distance_to_blocked(free), scipy.ndimage.distance_transform_edt(free))
+    assert np.isinf(_distance_to_blocked(np.ones((3, 4), bool))).all()
+
+
+def test_connected_agrees_with_shortest_paths_over_the_8_connected_free_cells():
+    """Against scipy's Dijkstra on the grid graph (an edge between free cells one step apart, diagonals too)."""
+    rng = np.random.default_rng(4)
+    store = StoreGeometry(sc.load("store_layout2").store, name="store_layout2")
+    for _ in range(5):
+        store.free = rng.random(store.free.shape) < 0.62  # (a maze of many components; `connected` reads free)
+        store._components = StoreGeometry._components_of(store.free)
+        nx, ny = store.free.shape
+        index = np.arange(nx * ny).reshape(nx, ny)
+        rows, cols = [], []
+        for dx, dy in ((1, 0), (0, 1), (1, 1), (1, -1)):
+            a = (slice(0, nx - dx), slice(max(0, -dy), ny - max(0, dy)))
+            b = (slice(dx, nx), slice(max(0, dy), ny - max(0, -dy)))
+            both = store.free[a] & store.free[b]
+            rows.append(index[a][both])
+            cols.append(index[b][both])
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        graph = scipy.sparse.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(nx * ny, nx * ny))
+        cells = rng.integers(0, [nx, ny], size=(40, 2))
+        reach = scipy.sparse.csgraph.dijkstra(graph, directed=False, indices=index[cells[:, 0], cells[:, 1]])
+        points = (cells + 0.5) * 0.1
+        for i, p in enumerate(points):
+            for k, q in enumerate(points):
+                expected = bool(store.free[tuple(cells[i])] and store.free[tuple(cells[k])]
+                                and np.isfinite(reach[i, index[tuple(cells[k])]]))
+                assert store.connected(p, q) == expected
 
 
 def test_bad_values_in_a_scenario_file_name_the_key(tmp_path):
