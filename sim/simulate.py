@@ -19,6 +19,7 @@ from sim.detector import Detector
 from sim.poses import interpolate_many
 from sim.rng import child_rng
 from sim.types import CameraFrame, PoseTruth
+from tracker import jit
 from tracker.types import COCO17
 
 log = logging.getLogger(__name__)
@@ -177,6 +178,7 @@ class Simulation:
         reaped whenever this generator ends: done, failed, interrupted or dropped unfinished. Its
         failures are raised here.
         """
+        jit.prepare()  # (once here instead of once in each process)
         context = multiprocessing.get_context("fork")
         receiver, sender = context.Pipe(duplex=False)
         _widen_pipe(sender)

@@ -13,10 +13,20 @@ try:  # numba compiles the kernels (plain Python runs the same code, slowly, wit
     def jit(function):
         """Compiles a numeric kernel once (cached on disk); the kernels are written for plain Python too."""
         return _njit(cache=True, nogil=True, error_model="numpy")(function)
+
+    def prepare() -> None:
+        """Does numba's one-time set-up of its compiler now (about a third of a second: the first kernel
+        called would do it): before a fork, so that the processes share it instead of each doing it."""
+        from numba.core.registry import cpu_target
+
+        cpu_target.target_context.refresh()
 except ImportError:  # pragma: no cover - numba is a dependency; this keeps the code importable without it
     def jit(function):
         function.py_func = function
         return function
+
+    def prepare() -> None:
+        pass
 
 
 @jit
