@@ -27,9 +27,10 @@ log = logging.getLogger(__name__)
 TRUTH_RATE_HZ = 100.0
 # Order of events that share a log time: the truth first, then frames by camera index.
 _TRUTH_KIND, _FRAME_KIND = 0, 1
-# The captures of this many truth ticks (0.1 s) are projected, ray cast and given their detector errors
-# together: the per-call costs are then shared by about 28 frames of store_layout2 instead of about 3.
-_DETECT_BLOCK_TICKS = 10
+# The captures of this many truth ticks (0.3 s) are projected, ray cast and given their detector errors
+# together: the per-call costs are then shared by about 84 frames of store_layout2 instead of about 3.
+# (Ten ticks cost about 15 % more per simulated second in both processes; fifty or a hundred, no less.)
+_DETECT_BLOCK_TICKS = 30
 
 
 class Simulation:
@@ -235,9 +236,10 @@ class Simulation:
             sender.close()
 
 
-# A block is about 130 kB on the wire (store_layout2): a pipe of the default 64 kB makes the worker wait
-# for the consumer's next `recv` after every block, so any hiccup on either side stalls both. A pipe that
-# holds several blocks lets the two run apart (the system's limit, usually 1 MiB, is enough).
+# A block is about 640 kB on the wire (store_layout2; the visibility of its 84 captures is two thirds): the
+# default 64 kB pipe makes the worker wait for ten reads of the consumer per block, so any hiccup on either
+# side stalls both. A pipe of the system's usual limit, 1 MiB, holds a block and a half: the worker can
+# finish the next block while the consumer is still reading one.
 _PIPE_BYTES = 1 << 20
 
 
