@@ -16,7 +16,7 @@ import numpy as np
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
 from sim.detector import Detector
-from sim.poses import interpolate_many
+from sim.poses import interpolate_ticks
 from sim.rng import child_rng
 from sim.types import CameraFrame, PoseTruth
 from tracker import jit
@@ -134,41 +134,40 @@ class Simulation:
         world, detector = self.world, self.detector
         captures = clock_mod.schedule([c.name for c in self.cameras], self.scenario.clock, duration,
                                       child_rng(self.seed, "clock"))
+        cams, capture_s, stamp_s, delivery_s = (
+            [getattr(c, name) for c in captures] for name in ("camera_index", "capture_s", "stamp_s", "delivery_s"))
         # Truth ticks cover [0, duration] and the last capture.
         n_truth = int(np.ceil(duration * TRUTH_RATE_HZ - 1e-9)) + 1
-        next_capture = 0
-        previous: PoseTruth | None = None
+        # Captures up to a tick see the poses interpolated between it and the tick before (10 ms apart: under
+        # a millimetre from the exact pose even for a swinging wrist) and the bodies of that tick.
+        taken_by = np.searchsorted(np.array(capture_s), np.arange(n_truth) / TRUTH_RATE_HZ, side="right").tolist()
+        previous: PoseTruth | None = None  # the previous block's last tick
+        first = 0  # the block's first capture
         truths: list = []
-        requests: list = []
         scenes: list = []  # what rays need of the bodies at each tick with captures (None: no ray casting)
-        scene_of: list = []  # per request, its tick in `scenes`
+        scene_of: list = []  # per capture of the block, its tick in `scenes`
+        tick_of: list = []  # per capture of the block, its tick in `truths`
         for k in range(n_truth):
             t = k / TRUTH_RATE_HZ
-            poses = world.advance(t)
-            # Captures up to this tick see the poses interpolated between the two ticks (10 ms apart:
-            # under a millimetre from the exact pose even for a swinging wrist) and the bodies of this tick.
-            first = next_capture
-            while next_capture < len(captures) and captures[next_capture].capture_s <= t:
-                next_capture += 1
-            taken = captures[first:next_capture]
-            batch = [(capture.camera_index, at_capture, capture.capture_s, capture.stamp_s, capture.delivery_s)
-                     for capture, at_capture in zip(taken, interpolate_many(previous, poses,
-                                                                            [c.capture_s for c in taken]))]
-            if batch:  # occlusion needs this tick's bodies; the rays and the error draws wait for the block
-                scene = detector.scene_now(world)
-                scene_of += [len(scenes)] * len(batch)
-                scenes.append(scene)
-                requests += batch
-            truths.append(poses)
-            previous = poses
+            truths.append(world.advance(t))
+            n = taken_by[k] - first - len(tick_of)
+            if n:  # occlusion needs this tick's bodies; the poses, rays and error draws wait for the block
+                scene_of += [len(scenes)] * n
+                tick_of += [len(truths) - 1] * n
+                scenes.append(detector.scene_now(world))
             if (k + 1) % _DETECT_BLOCK_TICKS and k + 1 < n_truth:
                 continue
+            end = first + len(tick_of)
+            at_capture = interpolate_ticks(previous, truths, np.array(tick_of, dtype=np.int64), capture_s[first:end])
+            requests = list(zip(cams[first:end], at_capture, capture_s[first:end], stamp_s[first:end],
+                                delivery_s[first:end]))
             rows, bounds = [], np.zeros(1, dtype=np.int64)
             if requests:
                 visible = detector.block_visibility(requests, None if scenes[0] is None else scenes, scene_of)
                 rows, bounds = detector.detection_rows_of(requests, *visible) if draws else (visible, None)
             yield t, truths, requests, rows, bounds
-            truths, requests, scenes, scene_of = [], [], [], []
+            previous, first = truths[-1], end
+            truths, scenes, scene_of, tick_of = [], [], [], []
 
     def _blocks_from_worker(self, duration: float, with_poses: bool, while_starting=None) -> Iterator[tuple]:
         """`_blocks` computed in a forked process and received here, block by block. The captures' poses
@@ -303,11 +302,7 @@ def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -
     capture_list = capture_times.tolist()
     poses: list = [None] * len(capture_list)
     if with_poses and capture_list:
-        tick_of = np.searchsorted(times, capture_times[:, 0], side="left").tolist()
-        for k in sorted(set(tick_of)):
-            taken = [i for i, tick in enumerate(tick_of) if tick == k]
-            before = truths[k - 1] if k > 0 else previous
-            for i, p in zip(taken, interpolate_many(before, truths[k], [capture_list[i][0] for i in taken])):
-                poses[i] = p
+        tick_of = np.searchsorted(times, capture_times[:, 0], side="left")
+        poses = interpolate_ticks(previous, truths, tick_of, capture_times[:, 0])
     requests = [(c, p, *times_i) for c, p, times_i in zip(cams.tolist(), poses, capture_list)]
     return t, truths, requests, visible, seen

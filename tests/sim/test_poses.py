@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sim.poses import interpolate_many, interpolate_poses
+from sim.poses import interpolate_many, interpolate_poses, interpolate_ticks
 from sim.types import PoseTruth
 
 
@@ -43,3 +43,24 @@ def test_a_tick_time_gives_that_ticks_poses_exactly_and_the_ends_the_nearest_tic
     assert interpolate_poses(before, None, 0.09).poses.tobytes() == before.poses.tobytes()
     with pytest.raises(ValueError, match="no tick"):
         interpolate_poses(None, None, 0.0)
+
+
+def test_interpolating_the_captures_of_several_ticks_at_once_gives_each_one_bit_for_bit():
+    rng = np.random.default_rng(11)
+    ids = np.array([3, 5, 8])
+    # Ticks 10 ms apart: person 9 arrives at the third, person 3 leaves at the fifth.
+    people = [ids, ids.copy(), np.array([3, 5, 8, 9]), np.array([3, 5, 8, 9]), np.array([5, 8, 9])]
+    ticks = [PoseTruth(0.01 * (k + 1), p, rng.normal(size=(len(p), 17, 3))) for k, p in enumerate(people)]
+    previous = PoseTruth(0.0, ids, rng.normal(size=(3, 17, 3)))
+    # Captures strictly between ticks, at a tick's own time, and around the arrival and the departure.
+    tick_of = np.array([0, 0, 1, 2, 2, 3, 4, 4, 4])
+    times = np.array([0.0013, 0.01, 0.0157, 0.0212, 0.0291, 0.035, 0.0401, 0.0466, 0.05])
+    for first in (previous, None):
+        chain = [first, *ticks]
+        expected = [interpolate_poses(chain[k], chain[k + 1], t) for k, t in zip(tick_of.tolist(), times.tolist())]
+        got = interpolate_ticks(first, ticks, tick_of, times)
+        assert len(got) == len(expected)
+        for one, many in zip(expected, got):
+            assert one.t_s == many.t_s and one.person_ids.tolist() == many.person_ids.tolist()
+            assert one.poses.tobytes() == many.poses.tobytes()
+    assert interpolate_ticks(previous, ticks, np.zeros(0, dtype=np.int64), np.zeros(0)) == []
