@@ -662,7 +662,8 @@ class Detector:
         return frames
 
     def _detections(self, person_ids, px, in_img, occluded, self_occluded, group):
-        """The detections of real people, all drawn at once (rows: people detected, then duplicates).
+        """The detections of real people, drawn by one compiled loop (`_draw_detections`; rows: people
+        detected, then duplicates).
 
         Args:
             person_ids: (P,) ids; px (P, J, 2); in_img, occluded, self_occluded (P, J); group (P,) the
@@ -672,53 +673,19 @@ class Detector:
             ids (D,), keypoints (D, J, 2), scores (D, J), true px (D, J, 2), in_image, occluded,
             self_occluded (D, J), effects (D,), group (D,).
         """
-        rng = self._rng
         p = self.params
         P, J = in_img.shape
-        n_in, n_visible, n_occluded = (np.empty(P, dtype=np.int64) for _ in range(3))
-        _count_joints(in_img, occluded, n_in, n_visible, n_occluded)
-        occluded_share = n_occluded / np.maximum(n_in, 1)
-        miss = rng.random(P) < p.miss_prob + p.miss_occlusion_gain * occluded_share
-        take = np.nonzero((n_in > 0) & (n_visible >= p.min_visible_joints) & ~miss)[0]
-        D = take.size
-        # Every draw of the detections, in a fixed order, then what they do (`_apply_draws`, compiled).
-        u_drop = rng.random((D, J))
-        u_fragment = rng.random(D)
-        part = rng.integers(len(self._fragment_masks), size=D)
-        z = rng.standard_normal((D, J, 2))
-        heavy = math.isfinite(p.noise_tail_dof)
-        chi2 = rng.chisquare(p.noise_tail_dof, (D, J)) if heavy else np.ones((D, J))
-        u_gross = rng.random((D, J))
-        angle = rng.uniform(0, 2 * np.pi, (D, J))
-        u_jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC, (D, J))
-        score_noise = rng.standard_normal((D, J))
-        u_swap = rng.random(D)
-        kp, scores = np.empty((D, J, 2)), np.empty((D, J))
-        reported, effects, size = np.empty((D, J), dtype=bool), np.empty(D, dtype=np.int64), np.empty(D)
-        keep = np.empty(D, dtype=bool)
-        _apply_draws(px, in_img, occluded, self_occluded, take, u_drop, u_fragment, part, z, heavy, chi2, u_gross,
-                     np.cos(angle), np.sin(angle), u_jump, score_noise, u_swap, self._fragment_masks, self._joint_noise,
-                     self._swap,
-                     np.array([p.occluded_drop_prob, p.self_occluded_drop_prob, p.joint_drop_prob, p.fragment_prob,
-                               p.noise_frac, p.occluded_noise_scale, p.self_occluded_noise_scale, p.noise_tail_dof,
-                               p.gross_error_prob, p.score_occluded, p.score_visible, p.score_std, p.swap_prob]),
-                     kp, scores, reported, effects, size, keep)
-        kept = take[keep]
-        rows = [person_ids[kept], kp[keep], scores[keep], px[kept], in_img[kept], occluded[kept], self_occluded[kept],
-                effects[keep], group[kept]]
-        # Duplicates: a second, partial, shifted and less confident copy of a detection.
-        dup = rng.random(keep.sum()) < p.duplicate_prob
-        dup_keep = rng.random((keep.sum(), J)) < _DUPLICATE_KEEP
-        shift = _DUPLICATE_OFFSET_FRAC * size[keep][:, None] * rng.standard_normal((keep.sum(), 2))
-        if dup.any():
-            d_kp = rows[1][dup] + shift[dup][:, None, :]
-            d_keep = dup_keep[dup] & ~np.isnan(d_kp[..., 0])
-            d_kp[~d_keep] = np.nan
-            d_scores = np.where(d_keep, rows[2][dup] * _DUPLICATE_SCORE, 0.0)
-            dups = [rows[0][dup], d_kp, d_scores, *(r[dup] for r in rows[3:7]),
-                    rows[7][dup] | int(DetectionEffect.DUPLICATE), rows[8][dup]]
-            rows = [np.concatenate([r, d]) for r, d in zip(rows, dups)]
-        return rows
+        rows = [np.empty(2 * P, dtype=np.int64), np.empty((2 * P, J, 2)), np.empty((2 * P, J)),
+                np.empty((2 * P, J, 2)), *(np.empty((2 * P, J), dtype=bool) for _ in range(3)),
+                np.empty(2 * P, dtype=np.int64), np.empty(2 * P, dtype=np.int64)]
+        params = np.array([p.occluded_drop_prob, p.self_occluded_drop_prob, p.joint_drop_prob, p.fragment_prob,
+                           p.noise_frac, p.occluded_noise_scale, p.self_occluded_noise_scale, p.noise_tail_dof,
+                           p.gross_error_prob, p.score_occluded, p.score_visible, p.score_std, p.swap_prob,
+                           p.miss_prob, p.miss_occlusion_gain, p.min_visible_joints, p.duplicate_prob])
+        n = _draw_detections(self._rng, np.ascontiguousarray(person_ids, dtype=np.int64), px, in_img, occluded,
+                             self_occluded, np.ascontiguousarray(group, dtype=np.int64), self._fragment_masks,
+                             self._joint_noise, self._swap, params, math.isfinite(p.noise_tail_dof), *rows)
+        return [r[:n] for r in rows]
 
     def _phantom(self, camera_index: int):
         """A false-positive skeleton: a person template standing somewhere on the floor in view of a camera."""
@@ -1074,88 +1041,133 @@ def _count_views(cams, in_img, occluded, self_occluded, counts):
             counts[c, 2] += self_occluded[r, n]
 
 
-@jit
-def _count_joints(in_img, occluded, n_in, n_visible, n_occluded):
-    """Per person (row of (P, J) bool): joints in the image, in it and not occluded, and occluded, into (P,)."""
-    for p in range(in_img.shape[0]):
-        a = b = c = 0
-        for j in range(in_img.shape[1]):
-            a += in_img[p, j]
-            b += in_img[p, j] and not occluded[p, j]
-            c += occluded[p, j]
-        n_in[p], n_visible[p], n_occluded[p] = a, b, c
-
-
-_FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP = (int(e) for e in (DetectionEffect.FRAGMENT, DetectionEffect.GROSS_ERROR,
-                                                               DetectionEffect.LEFT_RIGHT_SWAP))
+_FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP, _DUPLICATE = (int(e) for e in (
+    DetectionEffect.FRAGMENT, DetectionEffect.GROSS_ERROR, DetectionEffect.LEFT_RIGHT_SWAP, DetectionEffect.DUPLICATE))
 
 
 @jit
-def _apply_draws(px, in_img, occluded, self_occluded, take, u_drop, u_fragment, part, z, heavy, chi2, u_gross,
-                 cos_angle, sin_angle, u_jump, score_noise, u_swap, fragment_masks, joint_noise, swap_order, params, kp,
-                 scores, reported, effects, size, keep):
-    """What the draws of `Detector._detections` do to the D people detected (rows take (D,) of px (P, J, 2),
-    in_img, occluded, self_occluded (P, J)), element by element in the
-    order of the vectorised formulas it replaced (so the same keypoints, bit for bit): joint drops,
-    fragments, Student-t noise scaled by the person's size in the image, gross errors, scores, left/right
-    swaps, and NaN / zero score where a joint is not reported.
+def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group, fragment_masks, joint_noise,
+                     swap_order, params, heavy, ids, kp, scores, true_px, out_in, out_occluded, out_self, effects,
+                     out_group):
+    """The detections of real people (`Detector._detections`): every draw from `rng` (a numpy Generator,
+    whose stream numba reads and advances as numpy would) and what it does, person-view by person-view,
+    each value drawn only where it is used.
+
+    Per person-view (rows of px (P, J, 2), in_img, occluded, self_occluded (P, J), person_ids and group
+    (P,)): never detected with fewer than `min_visible` visible joints in the image, else missed with
+    probability miss + gain x its occluded share; a detection reports each joint in the image unless
+    dropped (by the joint's occlusion), may keep only one body part (fragment), has Student-t noise
+    scaled by the person's size in the image (`person_size_px`), the joint's noise factor and its
+    occlusion, gross jumps of a uniform fraction of that size in a uniform direction, clipped normal
+    scores, and may have left and right swapped; joints not reported are NaN with score 0. A detection
+    with a joint reported may come with a duplicate: a second copy shifted by a normal offset of
+    `_DUPLICATE_OFFSET_FRAC` of the size, repeating each joint with probability `_DUPLICATE_KEEP`, at
+    `_DUPLICATE_SCORE` of the scores.
 
     params: occluded, self-occluded and joint drop probabilities, fragment probability, noise fraction,
     occluded and self-occluded noise scales, tail degrees of freedom, gross error probability, occluded
-    and visible scores, score std, swap probability. Writes kp (D, J, 2), scores (D, J), reported (D, J),
-    effects (D,), size (D,) (`person_size_px` of the true pixels) and keep (D,) (some joint reported).
+    and visible scores, score std, swap probability, miss probability, miss occlusion gain, minimum
+    visible joints, duplicate probability.
+
+    Writes the rows (detections in person-view order, then their duplicates) into ids (2P,), kp
+    (2P, J, 2), scores (2P, J), true_px (2P, J, 2), out_in, out_occluded, out_self (2P, J), effects and
+    out_group (2P,), and returns how many it wrote.
     """
     (drop_occluded, drop_self, drop_joint, fragment_prob, noise_frac, scale_occluded, scale_self, dof, gross_prob,
-     score_occluded, score_visible, score_std, swap_prob) = params
-    D, J = take.shape[0], in_img.shape[1]
+     score_occluded, score_visible, score_std, swap_prob, miss_prob, miss_gain, min_visible, duplicate_prob) = params
+    P, J = in_img.shape
+    n_parts = fragment_masks.shape[0]
+    reported = np.empty(J, dtype=np.bool_)
     flipped = np.empty(J, dtype=np.bool_)
-    for d in range(D):
-        t = take[d]
+    value = np.empty((J, 2))
+    score = np.empty(J)
+    n = 0
+    originals = np.empty(P, dtype=np.int64)  # rows of the detections, for their duplicates
+    sizes = np.empty(P)
+    for p in range(P):
+        n_in = n_visible = n_occluded = 0
+        for j in range(J):
+            n_in += in_img[p, j]
+            n_visible += in_img[p, j] and not occluded[p, j]
+            n_occluded += occluded[p, j]
+        if n_in == 0 or n_visible < min_visible:
+            continue
+        if rng.random() < miss_prob + miss_gain * n_occluded / n_in:
+            continue
         high0 = high1 = -np.inf
         low0 = low1 = np.inf
         for j in range(J):
-            x, y = px[t, j, 0], px[t, j, 1]
+            x, y = px[p, j, 0], px[p, j, 1]
             if not np.isnan(x):
                 high0, low0 = max(high0, x), min(low0, x)
             if not np.isnan(y):
                 high1, low1 = max(high1, y), min(low1, y)
         extent = max(-np.inf, high0 - low0, high1 - low1)
-        size[d] = extent if np.isfinite(extent) else np.nan
-        effects[d] = 0
-        any_part = False
+        size = extent if np.isfinite(extent) else np.nan
+        effect = 0
         for j in range(J):
-            drop = drop_occluded if occluded[t, j] else (drop_self if self_occluded[t, j] else drop_joint)
-            reported[d, j] = in_img[t, j] and u_drop[d, j] >= drop
-            any_part = any_part or (reported[d, j] and fragment_masks[part[d], j])
+            drop = drop_occluded if occluded[p, j] else (drop_self if self_occluded[p, j] else drop_joint)
+            reported[j] = in_img[p, j] and rng.random() >= drop
         # Fragments keep one body part (if it holds a reported joint).
-        if u_fragment[d] < fragment_prob and any_part:
+        if rng.random() < fragment_prob:
+            part = rng.integers(0, n_parts)
+            any_part = False
             for j in range(J):
-                reported[d, j] = reported[d, j] and fragment_masks[part[d], j]
-            effects[d] |= _FRAGMENT
-        gross_any = False
+                any_part = any_part or (reported[j] and fragment_masks[part, j])
+            if any_part:
+                for j in range(J):
+                    reported[j] = reported[j] and fragment_masks[part, j]
+                effect |= _FRAGMENT
+        any_reported = False
         for j in range(J):
-            scale = noise_frac * size[d] * joint_noise[j]
-            scale = scale * (scale_occluded if occluded[t, j] else (scale_self if self_occluded[t, j] else 1.0))
-            gross = reported[d, j] and u_gross[d, j] < gross_prob
-            gross_any = gross_any or gross
-            jump = u_jump[d, j] * size[d]
-            for c in range(2):
-                noise = z[d, j, c] * math.sqrt(dof / chi2[d, j]) if heavy else z[d, j, c]
-                value = px[t, j, c] + scale * noise
-                kp[d, j, c] = value + ((jump * (cos_angle[d, j] if c == 0 else sin_angle[d, j])) if gross else 0.0)
-            base = score_occluded if occluded[t, j] else score_visible
-            scores[d, j] = min(max(base + score_std * score_noise[d, j], _MIN_SCORE), 1.0)
-        if gross_any:
-            effects[d] |= _GROSS_ERROR
-        if u_swap[d] < swap_prob:
-            for j in range(J):
-                flipped[j] = reported[d, swap_order[j]]
-            kp[d] = kp[d][swap_order]
-            scores[d] = scores[d][swap_order]
-            reported[d] = flipped
-            effects[d] |= _LEFT_RIGHT_SWAP
+            if not reported[j]:
+                value[j, 0] = value[j, 1] = np.nan
+                score[j] = 0.0
+                continue
+            any_reported = True
+            scale = noise_frac * size * joint_noise[j]
+            scale = scale * (scale_occluded if occluded[p, j] else (scale_self if self_occluded[p, j] else 1.0))
+            z0, z1 = rng.standard_normal(), rng.standard_normal()
+            if heavy:  # Student-t: the normal core over the root of a chi-square / dof
+                stretch = math.sqrt(dof / rng.chisquare(dof))
+                z0, z1 = z0 * stretch, z1 * stretch
+            value[j, 0], value[j, 1] = px[p, j, 0] + scale * z0, px[p, j, 1] + scale * z1
+            if rng.random() < gross_prob:
+                angle = rng.uniform(0.0, 2.0 * np.pi)
+                jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC) * size
+                value[j, 0] += jump * math.cos(angle)
+                value[j, 1] += jump * math.sin(angle)
+                effect |= _GROSS_ERROR
+            base = score_occluded if occluded[p, j] else score_visible
+            score[j] = min(max(base + score_std * rng.standard_normal(), _MIN_SCORE), 1.0)
+        if not any_reported:
+            continue
+        swap = rng.random() < swap_prob
+        if swap:
+            effect |= _LEFT_RIGHT_SWAP
         for j in range(J):
-            if not reported[d, j]:
-                kp[d, j, 0] = kp[d, j, 1] = np.nan
-                scores[d, j] = 0.0
-        keep[d] = reported[d].any()
+            k = swap_order[j] if swap else j
+            kp[n, j, 0], kp[n, j, 1], scores[n, j] = value[k, 0], value[k, 1], score[k]
+            true_px[n, j, 0], true_px[n, j, 1] = px[p, j, 0], px[p, j, 1]
+            out_in[n, j], out_occluded[n, j], out_self[n, j] = in_img[p, j], occluded[p, j], self_occluded[p, j]
+        ids[n], effects[n], out_group[n] = person_ids[p], effect, group[p]
+        originals[n], sizes[n] = p, size
+        n += 1
+    # Duplicates: a second, partial, shifted and less confident copy of a detection.
+    D = n
+    for d in range(D):
+        if not rng.random() < duplicate_prob:
+            continue
+        p = originals[d]
+        shift0 = _DUPLICATE_OFFSET_FRAC * sizes[d] * rng.standard_normal()
+        shift1 = _DUPLICATE_OFFSET_FRAC * sizes[d] * rng.standard_normal()
+        for j in range(J):
+            flipped[j] = not np.isnan(kp[d, j, 0]) and rng.random() < _DUPLICATE_KEEP
+            kp[n, j, 0] = kp[d, j, 0] + shift0 if flipped[j] else np.nan
+            kp[n, j, 1] = kp[d, j, 1] + shift1 if flipped[j] else np.nan
+            scores[n, j] = scores[d, j] * _DUPLICATE_SCORE if flipped[j] else 0.0
+            true_px[n, j, 0], true_px[n, j, 1] = px[p, j, 0], px[p, j, 1]
+            out_in[n, j], out_occluded[n, j], out_self[n, j] = in_img[p, j], occluded[p, j], self_occluded[p, j]
+        ids[n], effects[n], out_group[n] = ids[d], effects[d] | _DUPLICATE, out_group[d]
+        n += 1
+    return n

@@ -269,15 +269,17 @@ def test_profiles_order_from_ideal_to_harsh():
 
 
 def test_typical_on_store_layout2_looks_like_openpose_on_shelf():
-    # A short run of the real store (the closing figures use 60 s); the error figures settle fast,
-    # the miss rate needs the store to fill up and is only bounded here.
+    # A short run of the real store (the closing figures use 60 s); the error percentiles settle fast, the
+    # gross-error share (a few per thousand joints, in bursts of a person standing half hidden) needs about
+    # 6 s (over 3 s it read 0.09 % for one seed and 0.27 % for the next), and the miss rate needs the store
+    # to fill up and is only bounded here.
     from crossview.detector_stats import SHELF_OPENPOSE, detector_stats
     from sim import scenario as scenario_mod
     from sim.simulate import Simulation
     from sim.types import CameraFrame
 
     sim = Simulation(scenario_mod.load("store_layout2"), seed=0)
-    frames = [e for e in sim.events(3.0) if isinstance(e, CameraFrame)]
+    frames = [e for e in sim.events(6.0) if isinstance(e, CameraFrame)]
     stats = detector_stats(frames, sim.cameras)
     for key in ("error_median", "error_p95", "error_p99"):
         assert stats[key] == pytest.approx(SHELF_OPENPOSE[key], rel=0.25), key
