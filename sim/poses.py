@@ -93,18 +93,24 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
             out[i] = interpolate_poses(chain[k + shift - 1] if k + shift > 0 else None, after, t_s)
     if not linear:
         return out
-    # Every tick's people stacked; each linear capture's rows of its two ticks gathered from them.
+    # Every tick's people stacked, one row per person; each linear capture's rows of its two ticks gathered
+    # from them. In place, on whole rows of J * 3 (fresh temporaries of this size cost page faults, and numpy's
+    # inner loops over a short or a broadcast last axis cost more than the arithmetic).
     sizes = np.array([len(p.person_ids) for p in chain], dtype=np.int64)
     starts = np.cumsum(sizes) - sizes
-    rows = np.concatenate([p.poses for p in chain])
+    stacked = np.concatenate([p.poses for p in chain])
+    rows = stacked.reshape(len(stacked), int(np.prod(stacked.shape[1:])))
     ka = np.asarray(tick_of)[linear] + shift
     counts = sizes[ka]
     local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    after_rows = rows[np.repeat(starts[ka], counts) + local]
-    before_rows = rows[np.repeat(starts[ka - 1], counts) + local]
+    before = np.take(rows, np.repeat(starts[ka - 1], counts) + local, axis=0)
+    poses = np.take(rows, np.repeat(starts[ka], counts) + local, axis=0)
     t_chain = np.array([p.t_s for p in chain])
     a = (np.asarray(times_s, dtype=np.float64)[linear] - t_chain[ka - 1]) / (t_chain[ka] - t_chain[ka - 1])
-    poses = before_rows + (after_rows - before_rows) * np.repeat(a, counts).reshape(-1, *(1,) * (rows.ndim - 1))
+    poses -= before
+    poses *= np.repeat(a, counts * rows.shape[1]).reshape(rows.shape[1] and -1, rows.shape[1])
+    poses += before  # before + (after - before) * a, as `interpolate_poses` (a sum is the same either way round)
+    poses = poses.reshape(-1, *stacked.shape[1:])
     for i, end, n in zip(linear, np.cumsum(counts).tolist(), counts.tolist()):
         out[i] = PoseTruth(time_list[i], chain[tick_list[i] + shift].person_ids, poses[end - n:end])
     return out

@@ -121,6 +121,7 @@ class World:
         self._sync_slots()
         self._prev = self._cur = self._snapshot()  # (also loads the compiled posing kernel)
         self._orders = None
+        self._ids = np.zeros(0, dtype=np.int64)  # the person ids of the last `advance`
         self._fk_body = np.zeros((S, len(hm.BODIES)), dtype=np.int64)  # (S, 16) model body id per slot and body
         for b in range(m.nbody):
             if self._body_slot[b] >= 0:
@@ -196,6 +197,8 @@ class World:
 
         Returns:
             PoseTruth with person_ids (P,) ascending and poses (P, 17, 3) metres (COCO-17 keypoint sites).
+            The person_ids array is the same object as the previous call's while the same people are
+            present: do not write into it.
 
         Raises:
             ValueError: t_s is earlier than the previous call's or negative.
@@ -223,9 +226,16 @@ class World:
                 elif self._orders and np.array_equal(present, self._orders[0][0]):
                     present = self._orders[0][0]
                 order = np.nonzero(present)[0]
-                self._orders.append((present, order[np.argsort(cur.person_id[order], kind="stable")]))
+                order = order[np.argsort(cur.person_id[order], kind="stable")]
+                # The ids too, so that consumers tell two ticks with the same people apart by identity.
+                ids = cur.person_id[order]
+                for known in (self._ids, *(kept[2] for kept in self._orders)):
+                    if np.array_equal(ids, known):
+                        ids = known
+                        break
+                self._orders.append((present, order, ids))
         exact = cur.time_s <= t_s or prev is cur
-        present, order = self._orders[exact]
+        present, order, self._ids = self._orders[exact]
         # The keypoints by forward kinematics of the keypoint sites alone; MuJoCo's full kinematics (every
         # body, geom and site) runs when `data` or `ray_scene` is next asked for.
         poses = np.empty((len(order), 17, 3))
@@ -236,7 +246,7 @@ class World:
         if self._ray is not None:
             self._ray.stale = True
         self._present = present
-        return PoseTruth(t_s=float(t_s), person_ids=cur.person_id[order], poses=poses)
+        return PoseTruth(t_s=float(t_s), person_ids=self._ids, poses=poses)
 
     @property
     def data(self) -> mujoco.MjData:
