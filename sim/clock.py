@@ -123,10 +123,18 @@ def schedule(camera_names, config: ClockConfig, duration_s: float, rng: np.rando
     Returns:
         captures sorted by true capture time (ties by camera index).
     """
+    columns = schedule_columns(camera_names, config, duration_s, rng)
+    return [Capture(*row) for row in zip(*(column.tolist() for column in columns))]
+
+
+def schedule_columns(camera_names, config: ClockConfig, duration_s: float,
+                     rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """`schedule` as five (N,) columns in its order, one per `Capture` field: camera and frame indices (int64),
+    capture, stamp and delivery times (seconds). The same draws; no Python object per frame."""
     if not duration_s >= 0:
         raise ValueError(f"duration_s: {duration_s} must be >= 0")
     seeds = rng.integers(0, 2**63 - 1, size=len(camera_names))
-    captures = []
+    columns: list = [[], [], [], [], []]
     period = config.period_s
     for c, seed in enumerate(seeds):
         cam_rng = np.random.default_rng(int(seed))
@@ -140,9 +148,13 @@ def schedule(camera_names, config: ClockConfig, duration_s: float, rng: np.rando
         delivery = capture + delays(config, n, cam_rng)
         if config.in_order_delivery:
             delivery = np.maximum.accumulate(delivery)
-        keep = ~drop_mask(config, n, cam_rng) & (capture >= 0) & (capture < duration_s)
-        captures.extend(
-            Capture(c, int(k), float(capture[k]), float(stamp[k]), float(delivery[k])) for k in np.nonzero(keep)[0]
-        )
-    captures.sort(key=lambda cap: (cap.capture_s, cap.camera_index))
-    return captures
+        keep = np.nonzero(~drop_mask(config, n, cam_rng) & (capture >= 0) & (capture < duration_s))[0]
+        for column, values in zip(columns, (np.full(keep.size, c), keep, capture[keep], stamp[keep], delivery[keep])):
+            column.append(values)
+    camera, frame, capture, stamp, delivery = (
+        np.concatenate(column) if column else np.zeros(0, dtype=dtype)
+        for column, dtype in zip(columns, (np.int64, np.int64, float, float, float)))
+    # By capture time, ties by camera index (a stable sort: a camera's frames stay in order).
+    order = np.lexsort((camera, capture))
+    return (camera[order].astype(np.int64), frame[order].astype(np.int64), capture[order].astype(float),
+            stamp[order].astype(float), delivery[order].astype(float))

@@ -132,15 +132,14 @@ class Simulation:
         None: the error draws are left to the consumer (`_blocks_from_worker`), with the same detector state.
         """
         world, detector = self.world, self.detector
-        captures = clock_mod.schedule([c.name for c in self.cameras], self.scenario.clock, duration,
-                                      child_rng(self.seed, "clock"))
-        cams, capture_s, stamp_s, delivery_s = (
-            [getattr(c, name) for c in captures] for name in ("camera_index", "capture_s", "stamp_s", "delivery_s"))
+        cams, _, capture_times, stamp_s, delivery_s = clock_mod.schedule_columns(
+            [c.name for c in self.cameras], self.scenario.clock, duration, child_rng(self.seed, "clock"))
+        cams, capture_s, stamp_s, delivery_s = (c.tolist() for c in (cams, capture_times, stamp_s, delivery_s))
         # Truth ticks cover [0, duration] and the last capture.
         n_truth = int(np.ceil(duration * TRUTH_RATE_HZ - 1e-9)) + 1
         # Captures up to a tick see the poses interpolated between it and the tick before (10 ms apart: under
         # a millimetre from the exact pose even for a swinging wrist) and the bodies of that tick.
-        taken_by = np.searchsorted(np.array(capture_s), np.arange(n_truth) / TRUTH_RATE_HZ, side="right").tolist()
+        taken_by = np.searchsorted(capture_times, np.arange(n_truth) / TRUTH_RATE_HZ, side="right").tolist()
         previous: PoseTruth | None = None  # the previous block's last tick
         first = 0  # the block's first capture
         truths: list = []
@@ -158,7 +157,7 @@ class Simulation:
             if (k + 1) % _DETECT_BLOCK_TICKS and k + 1 < n_truth:
                 continue
             end = first + len(tick_of)
-            at_capture = interpolate_ticks(previous, truths, np.array(tick_of, dtype=np.int64), capture_s[first:end])
+            at_capture = interpolate_ticks(previous, truths, tick_of, capture_times[first:end])
             requests = list(zip(cams[first:end], at_capture, capture_s[first:end], stamp_s[first:end],
                                 delivery_s[first:end]))
             rows, bounds = [], np.zeros(1, dtype=np.int64)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from sim.clock import ClockConfig, schedule
+from sim.clock import ClockConfig, schedule, schedule_columns
 
 
 def _by_camera(captures, n):
@@ -120,3 +120,19 @@ def test_adding_a_camera_does_not_change_the_others_clocks():
 def test_bad_clock_values_name_the_key(kwargs, key):
     with pytest.raises(ValueError, match=key):
         ClockConfig(**kwargs)
+
+
+def test_simultaneous_captures_come_by_camera_index_and_the_columns_say_the_same():
+    config = ClockConfig(fps=10.0, random_phase=False, jitter_std_s=0, offset_std_s=0, stamp_noise_std_s=0,
+                         drop_prob=0.2, burst_prob=0)
+    names = [f"c{i}" for i in range(5)]
+    captures = schedule(names, config, 3.0, np.random.default_rng(6))
+    # Every camera ticks at the same instants: each instant lists its cameras in index order.
+    keys = [(c.capture_s, c.camera_index) for c in captures]
+    assert keys == sorted(keys) and len(set(keys)) == len(keys)
+    for cam in _by_camera(captures, len(names)):
+        assert [c.frame_index for c in cam] == sorted(c.frame_index for c in cam)
+    # The columns are the captures' fields, in the same order.
+    columns = schedule_columns(names, config, 3.0, np.random.default_rng(6))
+    assert [column.dtype for column in columns] == [np.int64, np.int64, float, float, float]
+    assert list(zip(*(column.tolist() for column in columns))) == [dataclasses.astuple(c) for c in captures]
