@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.types import PoseTruth
+from tracker.jit import jit
 
 
 def interpolate_poses(before: PoseTruth | None, after: PoseTruth | None, t_s: float) -> PoseTruth:
@@ -61,8 +62,8 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
                       times_s: np.ndarray) -> list[PoseTruth]:
     """`interpolate_poses` for the captures of several consecutive ticks at once: capture i at `times_s[i]`,
     between `ticks[tick_of[i]]` and the tick before it (`previous` for the first). The same poses, bit for
-    bit: where the same people are present at both ticks, the same arithmetic per element in a few numpy
-    operations for all those captures together; every other capture is `interpolate_poses`'s own.
+    bit: where the same people are present at both ticks, the same arithmetic per element in one compiled
+    pass for all those captures together; every other capture is `interpolate_poses`'s own.
 
     Args:
         previous: the tick before `ticks[0]` (None: there is none).
@@ -76,41 +77,47 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
     chain = ticks if previous is None else [previous, *ticks]
     shift = len(chain) - len(ticks)  # the index in `chain` of ticks[k] is k + shift
     tick_list, time_list = np.asarray(tick_of).tolist(), np.asarray(times_s, dtype=np.float64).tolist()
-    linear_ticks = set()  # indices in `chain` of the ticks with the same people as the one before
-    for k in set(tick_list):
-        after = chain[k + shift]
-        before = chain[k + shift - 1] if k + shift > 0 else None
-        if before is not None and after.t_s > before.t_s and (before.person_ids is after.person_ids or np.array_equal(
-                before.person_ids, after.person_ids)):
-            linear_ticks.add(k + shift)
+    same: dict[int, bool] = {}  # per tick of `chain` asked for: the same people as at the tick before
     out: list = [None] * len(time_list)
     linear = []  # the captures strictly between two ticks with the same people
     for i, (k, t_s) in enumerate(zip(tick_list, time_list)):
-        after = chain[k + shift]
-        if k + shift in linear_ticks and t_s < after.t_s:
+        k += shift
+        before, after = chain[k - 1] if k else None, chain[k]
+        if k not in same:
+            same[k] = before is not None and after.t_s > before.t_s and (
+                before.person_ids is after.person_ids or np.array_equal(before.person_ids, after.person_ids))
+        if same[k] and t_s < after.t_s:
             linear.append(i)
         else:
-            out[i] = interpolate_poses(chain[k + shift - 1] if k + shift > 0 else None, after, t_s)
+            out[i] = interpolate_poses(before, after, t_s)
     if not linear:
         return out
-    # Every tick's people stacked, one row per person; each linear capture's rows of its two ticks gathered
-    # from them. In place, on whole rows of J * 3 (fresh temporaries of this size cost page faults, and numpy's
-    # inner loops over a short or a broadcast last axis cost more than the arithmetic).
+    # Every tick's people stacked, one row of J * 3 per person; per row of the output, the rows of its two
+    # ticks and its weight, for one compiled pass (numpy took five over fresh temporaries, page faults and all).
     sizes = np.array([len(p.person_ids) for p in chain], dtype=np.int64)
     starts = np.cumsum(sizes) - sizes
-    stacked = np.concatenate([p.poses for p in chain])
+    stacked = np.concatenate([p.poses for p in chain]).astype(np.float64, copy=False)
     rows = stacked.reshape(len(stacked), int(np.prod(stacked.shape[1:])))
-    ka = np.asarray(tick_of)[linear] + shift
+    ka = np.array(tick_list)[linear] + shift
     counts = sizes[ka]
     local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    before = np.take(rows, np.repeat(starts[ka - 1], counts) + local, axis=0)
-    poses = np.take(rows, np.repeat(starts[ka], counts) + local, axis=0)
     t_chain = np.array([p.t_s for p in chain])
-    a = (np.asarray(times_s, dtype=np.float64)[linear] - t_chain[ka - 1]) / (t_chain[ka] - t_chain[ka - 1])
-    poses -= before
-    poses *= np.repeat(a, counts * rows.shape[1]).reshape(rows.shape[1] and -1, rows.shape[1])
-    poses += before  # before + (after - before) * a, as `interpolate_poses` (a sum is the same either way round)
+    a = (np.array(time_list)[linear] - t_chain[ka - 1]) / (t_chain[ka] - t_chain[ka - 1])
+    poses = np.empty((len(local), rows.shape[1]))
+    _lerp_rows(rows, np.repeat(starts[ka - 1], counts) + local, np.repeat(starts[ka], counts) + local,
+               np.repeat(a, counts), poses)
     poses = poses.reshape(-1, *stacked.shape[1:])
     for i, end, n in zip(linear, np.cumsum(counts).tolist(), counts.tolist()):
         out[i] = PoseTruth(time_list[i], chain[tick_list[i] + shift].person_ids, poses[end - n:end])
     return out
+
+
+@jit
+def _lerp_rows(rows, before, after, a, out):
+    """out[i] = rows[before[i]] + (rows[after[i]] - rows[before[i]]) * a[i] per row i of out (M, W): the
+    arithmetic of `interpolate_poses`, element by element (no fused multiply-add: numba contracts none
+    without fastmath)."""
+    for i in range(out.shape[0]):
+        b, f, w = before[i], after[i], a[i]
+        for j in range(out.shape[1]):
+            out[i, j] = rows[b, j] + (rows[f, j] - rows[b, j]) * w
