@@ -8,6 +8,8 @@ in that tick's half of the interval; before the first tick or after the last, th
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from sim.types import PoseTruth
@@ -76,48 +78,50 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
     """
     chain = ticks if previous is None else [previous, *ticks]
     shift = len(chain) - len(ticks)  # the index in `chain` of ticks[k] is k + shift
-    tick_list, time_list = np.asarray(tick_of).tolist(), np.asarray(times_s, dtype=np.float64).tolist()
+    starts = [0]  # where each tick's people start in the stack of them all
+    for p in chain:
+        starts.append(starts[-1] + len(p.person_ids))
     same: dict[int, bool] = {}  # per tick of `chain` asked for: the same people as at the tick before
-    out: list = [None] * len(time_list)
-    linear = []  # the captures strictly between two ticks with the same people
-    for i, (k, t_s) in enumerate(zip(tick_list, time_list)):
+    out: list = [None] * len(tick_of)
+    linear: list = []  # per capture strictly between two ticks with the same people: index, rows of the
+    weights: list = []  # two ticks and people count; and its weight `a` of `interpolate_poses`
+    for i, (k, t_s) in enumerate(zip(np.asarray(tick_of).tolist(), np.asarray(times_s, dtype=np.float64).tolist())):
         k += shift
         before, after = chain[k - 1] if k else None, chain[k]
         if k not in same:
             same[k] = before is not None and after.t_s > before.t_s and (
                 before.person_ids is after.person_ids or np.array_equal(before.person_ids, after.person_ids))
         if same[k] and t_s < after.t_s:
-            linear.append(i)
+            linear.append((i, t_s, k, starts[k - 1], starts[k], starts[k + 1] - starts[k]))
+            weights.append((t_s - before.t_s) / (after.t_s - before.t_s))
         else:
             out[i] = interpolate_poses(before, after, t_s)
     if not linear:
         return out
-    # Every tick's people stacked, one row of J * 3 per person; per row of the output, the rows of its two
-    # ticks and its weight, for one compiled pass (numpy took five over fresh temporaries, page faults and all).
-    sizes = np.array([len(p.person_ids) for p in chain], dtype=np.int64)
-    starts = np.cumsum(sizes) - sizes
     stacked = np.concatenate([p.poses for p in chain]).astype(np.float64, copy=False)
-    rows = stacked.reshape(len(stacked), int(np.prod(stacked.shape[1:])))
-    ka = np.array(tick_list)[linear] + shift
-    counts = sizes[ka]
-    local = np.arange(counts.sum()) - np.repeat(np.cumsum(counts) - counts, counts)
-    t_chain = np.array([p.t_s for p in chain])
-    a = (np.array(time_list)[linear] - t_chain[ka - 1]) / (t_chain[ka] - t_chain[ka - 1])
-    poses = np.empty((len(local), rows.shape[1]))
-    _lerp_rows(rows, np.repeat(starts[ka - 1], counts) + local, np.repeat(starts[ka], counts) + local,
-               np.repeat(a, counts), poses)
-    poses = poses.reshape(-1, *stacked.shape[1:])
-    for i, end, n in zip(linear, np.cumsum(counts).tolist(), counts.tolist()):
-        out[i] = PoseTruth(time_list[i], chain[tick_list[i] + shift].person_ids, poses[end - n:end])
+    index, times, ticks_of, before_row, after_row, counts = (list(column) for column in zip(*linear))
+    poses = np.empty((sum(counts), *stacked.shape[1:]))
+    width = math.prod(stacked.shape[1:])  # (a row of J * 3; not -1, which fails for nobody)
+    _lerp_rows(stacked.reshape(len(stacked), width), np.array(before_row, dtype=np.int64),
+               np.array(after_row, dtype=np.int64), np.array(counts, dtype=np.int64), np.array(weights, dtype=float),
+               poses.reshape(len(poses), width))
+    end = 0
+    for i, t_s, k, n in zip(index, times, ticks_of, counts):
+        out[i] = PoseTruth(t_s, chain[k].person_ids, poses[end:end + n])
+        end += n
     return out
 
 
 @jit
-def _lerp_rows(rows, before, after, a, out):
-    """out[i] = rows[before[i]] + (rows[after[i]] - rows[before[i]]) * a[i] per row i of out (M, W): the
-    arithmetic of `interpolate_poses`, element by element (no fused multiply-add: numba contracts none
-    without fastmath)."""
-    for i in range(out.shape[0]):
-        b, f, w = before[i], after[i], a[i]
-        for j in range(out.shape[1]):
-            out[i, j] = rows[b, j] + (rows[f, j] - rows[b, j]) * w
+def _lerp_rows(rows, before, after, counts, a, out):
+    """Per capture i, the next counts[i] rows of out (M, W): rows[before[i] + r] + (rows[after[i] + r] -
+    rows[before[i] + r]) * a[i] for r < counts[i]. The arithmetic of `interpolate_poses`, element by element
+    (no fused multiply-add: numba contracts none without fastmath)."""
+    o = 0
+    for i in range(counts.shape[0]):
+        w = a[i]
+        for r in range(counts[i]):
+            b, f = before[i] + r, after[i] + r
+            for j in range(out.shape[1]):
+                out[o, j] = rows[b, j] + (rows[f, j] - rows[b, j]) * w
+            o += 1

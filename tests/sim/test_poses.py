@@ -64,3 +64,7 @@ def test_interpolating_the_captures_of_several_ticks_at_once_gives_each_one_bit_
             assert one.t_s == many.t_s and one.person_ids.tolist() == many.person_ids.tolist()
             assert one.poses.tobytes() == many.poses.tobytes()
     assert interpolate_ticks(previous, ticks, np.zeros(0, dtype=np.int64), np.zeros(0)) == []
+    # Nobody in the store: nobody at any time.
+    empty = [PoseTruth(0.01 * k, np.zeros(0, dtype=np.int64), np.zeros((0, 17, 3))) for k in range(3)]
+    nobody = interpolate_ticks(empty[0], empty[1:], np.array([0, 1]), np.array([0.005, 0.017]))
+    assert [p.poses.shape for p in nobody] == [(0, 17, 3)] * 2 and [p.t_s for p in nobody] == [0.005, 0.017]
