@@ -275,13 +275,15 @@ def _pack_block(block: tuple) -> tuple:
     captures' cameras, times, people and visibility (their poses are left out: `_unpack_block` derives
     them from the truths)."""
     t, truths, requests, visible, _ = block
-    people = [np.asarray(r[1].person_ids, dtype=np.int64) for r in requests]
-    people = (np.concatenate(people) if people else np.zeros(0, dtype=np.int64)), np.array([p.size for p in people])
+    seen = [r[1].person_ids for r in requests]
+    people = (np.concatenate(seen).astype(np.int64, copy=False) if seen else np.zeros(0, dtype=np.int64),
+              np.array([len(p) for p in seen]))
     times = np.array([p.t_s for p in truths])
     counts = np.array([len(p.person_ids) for p in truths], dtype=np.int64)
-    ids = np.concatenate([np.asarray(p.person_ids, dtype=np.int64) for p in truths])
-    joints = np.concatenate([np.asarray(p.poses, dtype=np.float64).reshape(-1, 3) for p in truths])
-    shapes = [np.shape(p.poses)[1:] for p in truths]
+    ids = np.concatenate([p.person_ids for p in truths]).astype(np.int64, copy=False)
+    poses = [p.poses for p in truths]
+    joints = np.concatenate([p.reshape(-1, 3) for p in poses]).astype(np.float64, copy=False)
+    shapes = [p.shape[1:] for p in poses]
     meta = np.array([r[0] for r in requests], dtype=np.int64), np.array([r[2:5] for r in requests]).reshape(-1, 3)
     return t, times, counts, ids, joints, shapes, meta, visible, people
 
