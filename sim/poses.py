@@ -77,37 +77,38 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
         N PoseTruth, in the captures' order (the linear ones' poses are views of one (sum P, J, 3) array).
     """
     chain = ticks if previous is None else [previous, *ticks]
-    shift = len(chain) - len(ticks)  # the index in `chain` of ticks[k] is k + shift
-    starts = [0]  # where each tick's people start in the stack of them all
-    for p in chain:
-        starts.append(starts[-1] + len(p.person_ids))
-    same: dict[int, bool] = {}  # per tick of `chain` asked for: the same people as at the tick before
-    out: list = [None] * len(tick_of)
-    linear: list = []  # per capture strictly between two ticks with the same people: index, rows of the
-    weights: list = []  # two ticks and people count; and its weight `a` of `interpolate_poses`
-    for i, (k, t_s) in enumerate(zip(np.asarray(tick_of).tolist(), np.asarray(times_s, dtype=np.float64).tolist())):
-        k += shift
-        before, after = chain[k - 1] if k else None, chain[k]
-        if k not in same:
-            same[k] = before is not None and after.t_s > before.t_s and (
-                before.person_ids is after.person_ids or np.array_equal(before.person_ids, after.person_ids))
-        if same[k] and t_s < after.t_s:
-            linear.append((i, t_s, k, starts[k - 1], starts[k], starts[k + 1] - starts[k]))
-            weights.append((t_s - before.t_s) / (after.t_s - before.t_s))
-        else:
-            out[i] = interpolate_poses(before, after, t_s)
-    if not linear:
+    tick = np.asarray(tick_of, dtype=np.int64) + (len(chain) - len(ticks))  # (N,) index in `chain`
+    times = np.asarray(times_s, dtype=np.float64)
+    time_list = times.tolist()
+    t_chain = np.array([p.t_s for p in chain])
+    sizes = np.array([len(p.person_ids) for p in chain], dtype=np.int64)
+    # The ticks asked for with the same people as the tick before (and later than it): linear in between.
+    same = np.zeros(len(chain), dtype=bool)
+    for k in set(tick.tolist()) - {0}:
+        before, after = chain[k - 1], chain[k]
+        same[k] = after.t_s > before.t_s and (
+            before.person_ids is after.person_ids or np.array_equal(before.person_ids, after.person_ids))
+    linear = same[tick] & (times < t_chain[tick])
+    out: list = [None] * len(time_list)
+    for i in np.nonzero(~linear)[0].tolist():
+        k = int(tick[i])
+        out[i] = interpolate_poses(chain[k - 1] if k else None, chain[k], time_list[i])
+    if not linear.any():
         return out
+    # The linear captures in one compiled pass over the stack of every tick's people (rows of J * 3).
+    index = np.nonzero(linear)[0]
+    k = tick[index]
+    a = (times[index] - t_chain[k - 1]) / (t_chain[k] - t_chain[k - 1])  # `interpolate_poses`'s weight
+    counts = sizes[k]
+    starts = np.cumsum(sizes) - sizes
     stacked = np.concatenate([p.poses for p in chain]).astype(np.float64, copy=False)
-    index, times, ticks_of, before_row, after_row, counts = (list(column) for column in zip(*linear))
-    poses = np.empty((sum(counts), *stacked.shape[1:]))
-    width = math.prod(stacked.shape[1:])  # (a row of J * 3; not -1, which fails for nobody)
-    _lerp_rows(stacked.reshape(len(stacked), width), np.array(before_row, dtype=np.int64),
-               np.array(after_row, dtype=np.int64), np.array(counts, dtype=np.int64), np.array(weights, dtype=float),
+    poses = np.empty((int(counts.sum()), *stacked.shape[1:]))
+    width = math.prod(stacked.shape[1:])  # (not -1, which fails for nobody)
+    _lerp_rows(stacked.reshape(len(stacked), width), starts[k - 1], starts[k], counts, a,
                poses.reshape(len(poses), width))
     end = 0
-    for i, t_s, k, n in zip(index, times, ticks_of, counts):
-        out[i] = PoseTruth(t_s, chain[k].person_ids, poses[end:end + n])
+    for i, k_i, n in zip(index.tolist(), k.tolist(), counts.tolist()):
+        out[i] = PoseTruth(time_list[i], chain[k_i].person_ids, poses[end:end + n])
         end += n
     return out
 
