@@ -301,3 +301,19 @@ def test_ray_geom_constants_are_snapshots_shared_until_they_change():
     world2.advance(0.0)
     np.testing.assert_array_equal(first[0], world2.model.geom_size)
     np.testing.assert_array_equal(first[2], world2.geom_person_ids())
+
+
+def test_person_ids_are_one_array_while_the_same_people_are_present():
+    """`advance` hands out the same person-id array, unchanged, for as long as nobody arrives or leaves (so a
+    consumer tells two ticks with the same people by identity), and another one when someone does."""
+    world = _world("store_layout1", mean_visit_s=4.0, mean_arrival_gap_s=0.5)
+    seen = []
+    for k in range(400):
+        truth = world.advance(k / 20.0)
+        seen.append((truth.person_ids, truth.person_ids.tolist()))
+    changes = 0
+    for (ids, values), (next_ids, next_values) in zip(seen, seen[1:]):
+        assert (ids is next_ids) == (values == next_values)
+        changes += values != next_values
+    assert changes >= 5
+    assert all(ids.tolist() == values for ids, values in seen)  # nobody wrote into a shared one
