@@ -23,6 +23,7 @@ from __future__ import annotations
 import bisect
 import functools
 import importlib.metadata
+import itertools
 import json
 import math
 import os
@@ -776,7 +777,11 @@ class _ChunkThread:
         index_start = stream.tell()
         for channel_id, index in indices.items():
             chunk_index.message_index_offsets[channel_id] = index_start + records.count
-            index.write(records)
+            # `index.write(records)`, the same bytes: its loop of two struct packs per message held the GIL
+            # for about 2 ms per simulated second of store_layout2, time the caller's thread waited for.
+            n = len(index.records)
+            records.write(_MESSAGE_INDEX_HEAD.pack(_OPCODE_MESSAGE_INDEX, 6 + 16 * n, channel_id, 16 * n))
+            records.write(struct.pack(f"<{2 * n}Q", *itertools.chain.from_iterable(index.records)))
         chunk_index.message_index_length = records.count
         flush()
         w._Writer__chunk_indices.append(chunk_index)
@@ -788,6 +793,8 @@ class _Stopped(Exception):
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
 _OPCODE_MESSAGE = int(Opcode.MESSAGE)
+_MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel id, length of the records
+_OPCODE_MESSAGE_INDEX = int(Opcode.MESSAGE_INDEX)
 
 
 def _fast_path(writer: Writer, chunk_size: int):
