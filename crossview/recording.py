@@ -615,31 +615,41 @@ class _AtomicMcapWriter:
         buffer = chunk.record_writer._buffer
         offset = buffer.tell()
         parts: list = []
+        times: list = []  # of the messages since the chunk's last bookkeeping (`settle`)
+
+        def settle() -> None:
+            """The statistics' and the chunk's message counts and time range, over `times` at once."""
+            if not times:
+                return
+            first, last = min(times), max(times)
+            if stats.message_count == 0 or first < stats.message_start_time:
+                stats.message_start_time = first
+            stats.message_end_time = max(stats.message_end_time, last)
+            stats.message_count += len(times)
+            if chunk.num_messages == 0 or first < chunk.message_start_time:
+                chunk.message_start_time = first
+            chunk.message_end_time = max(chunk.message_end_time, last)
+            chunk.num_messages += len(times)
+            times.clear()
+
         for channel_id, t, data in messages:
-            if stats.message_count == 0 or t < stats.message_start_time:
-                stats.message_start_time = t
-            if t > stats.message_end_time:
-                stats.message_end_time = t
             counts[channel_id] += 1
-            stats.message_count += 1
-            if chunk.num_messages == 0 or t < chunk.message_start_time:
-                chunk.message_start_time = t
-            if t > chunk.message_end_time:
-                chunk.message_end_time = t
             index = indices.get(channel_id)
             if index is None:
                 index = indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
             index.records.append((t, offset))
-            chunk.num_messages += 1
+            times.append(t)
             parts.append(head(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, t, t))
             parts.append(data)
             offset += _MESSAGE_HEAD.size + len(data)
             if offset > chunk_size:  # (as `add`: the chunk is closed after the message that fills it)
                 buffer.write(b"".join(parts))
                 parts = []
+                settle()
                 finalize()
                 buffer = chunk.record_writer._buffer
                 offset = buffer.tell()
+        settle()
         if parts:
             buffer.write(b"".join(parts))
 
