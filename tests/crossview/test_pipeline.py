@@ -98,3 +98,29 @@ def test_generate_gives_the_bytes_of_a_plain_one_process_write(tmp_path):
             writer.write(event)
     assert (tmp_path / "a.mcap").read_bytes() == (tmp_path / "b.mcap").read_bytes()
     assert (tmp_path / "a.mcap").read_bytes() == (tmp_path / "plain.mcap").read_bytes()
+
+
+@pytest.mark.parametrize("where", ["opening", "writing"])
+def test_generate_interrupted_leaves_no_file_and_no_worker(tmp_path, monkeypatch, where):
+    """Ctrl-C while the writer is opened (beside the starting worker) or in the middle of writing: nothing
+    under the final name or left as a temporary file, and the worker process is gone."""
+    import multiprocessing
+
+    from crossview import recording
+
+    calls = []
+
+    def interrupt(*args, **kwargs):
+        calls.append(1)
+        if where == "opening" or len(calls) == 3:
+            raise KeyboardInterrupt
+
+    if where == "opening":  # (warm_up runs once the worker has started, before the first event)
+        monkeypatch.setattr(recording, "warm_up", interrupt)
+    else:
+        monkeypatch.setattr(recording.RecordingWriter, "write_many", interrupt)
+    scenario = pipeline.load_scenario("store_layout2", duration_s=3.0, seed=5)
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.generate(scenario, tmp_path / "g.mcap", progress=False)
+    assert calls and list(tmp_path.iterdir()) == []
+    assert multiprocessing.active_children() == []
