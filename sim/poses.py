@@ -46,20 +46,6 @@ def interpolate_poses(before: PoseTruth | None, after: PoseTruth | None, t_s: fl
     return PoseTruth(float(t_s), ids, poses)
 
 
-def interpolate_many(before: PoseTruth | None, after: PoseTruth, times_s: list[float]) -> list[PoseTruth]:
-    """`interpolate_poses` at several times between the same two ticks (the same poses, bit for bit: the
-    same arithmetic per element, with the difference of the two ticks taken once)."""
-    if not times_s:
-        return []
-    if (before is None or after.t_s <= before.t_s or max(times_s) >= after.t_s
-            or not (before.person_ids is after.person_ids or np.array_equal(before.person_ids, after.person_ids))):
-        return [interpolate_poses(before, after, t_s) for t_s in times_s]
-    t0, span = before.t_s, after.t_s - before.t_s
-    a = np.array([(t_s - t0) / span for t_s in times_s]).reshape(-1, *(1,) * after.poses.ndim)
-    poses = before.poses + (after.poses - before.poses) * a
-    return [PoseTruth(float(t_s), after.person_ids, p) for t_s, p in zip(times_s, poses)]
-
-
 def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_of: np.ndarray,
                       times_s: np.ndarray) -> list[PoseTruth]:
     """`interpolate_poses` for the captures of several consecutive ticks at once: capture i at `times_s[i]`,
