@@ -1078,7 +1078,6 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
     P, J = in_img.shape
     n_parts = fragment_masks.shape[0]
     reported = np.empty(J, dtype=np.bool_)
-    flipped = np.empty(J, dtype=np.bool_)
     value = np.empty((J, 2))
     score = np.empty(J)
     n = 0
@@ -1162,10 +1161,10 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
         shift0 = _DUPLICATE_OFFSET_FRAC * sizes[d] * rng.standard_normal()
         shift1 = _DUPLICATE_OFFSET_FRAC * sizes[d] * rng.standard_normal()
         for j in range(J):
-            flipped[j] = not np.isnan(kp[d, j, 0]) and rng.random() < _DUPLICATE_KEEP
-            kp[n, j, 0] = kp[d, j, 0] + shift0 if flipped[j] else np.nan
-            kp[n, j, 1] = kp[d, j, 1] + shift1 if flipped[j] else np.nan
-            scores[n, j] = scores[d, j] * _DUPLICATE_SCORE if flipped[j] else 0.0
+            repeat = not np.isnan(kp[d, j, 0]) and rng.random() < _DUPLICATE_KEEP
+            kp[n, j, 0] = kp[d, j, 0] + shift0 if repeat else np.nan
+            kp[n, j, 1] = kp[d, j, 1] + shift1 if repeat else np.nan
+            scores[n, j] = scores[d, j] * _DUPLICATE_SCORE if repeat else 0.0
             true_px[n, j, 0], true_px[n, j, 1] = px[p, j, 0], px[p, j, 1]
             out_in[n, j], out_occluded[n, j], out_self[n, j] = in_img[p, j], occluded[p, j], self_occluded[p, j]
         ids[n], effects[n], out_group[n] = ids[d], effects[d] | _DUPLICATE, out_group[d]
