@@ -144,9 +144,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
                 writer.write_many(batch)
                 batch = []
                 bar.update(max(0.0, min(event.t_s, scenario.duration_s) - bar.n))
-        if not opened:  # (no event at all: not a duration `Simulation.events` accepts)
-            open_writer()
-        opened[0].write_many(batch)
+        opened[0].write_many(batch)  # (`events` calls open_writer before its first event)
     return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start, started, scenario.duration_s)
 
 

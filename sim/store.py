@@ -17,9 +17,8 @@ import numpy as np
 from sim.types import Box, BoxKind
 from tracker.jit import jit  # numba compiles the crowd's numeric kernels (plain Python runs them without it)
 
-# Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast distance fields.
+# Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast path searches.
 GRID_CELL_M = 0.1
-# Distance fields kept per goal cell (a supermarket's is ~0.3 MB).
 # Thickness of the walls and of the floor slab (the floor's top face is z = 0).
 WALL_THICKNESS_M = 0.1
 FLOOR_THICKNESS_M = 0.1
