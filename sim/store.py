@@ -394,10 +394,6 @@ class StoreGeometry:
         j = min(max(int(point[1] / GRID_CELL_M), 0), self.ny - 1)
         return i, j
 
-    def flat_index(self, point) -> int:
-        i, j = self.cell_of(point)
-        return i * self.ny + j
-
     def nearest_free(self, point) -> np.ndarray:
         """(2,) centre of the free cell nearest to a point."""
         i, j = self.cell_of(point)
