@@ -34,6 +34,7 @@ import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import lz4.frame
 import numpy as np
@@ -375,62 +376,117 @@ def camera_frame_bytes(cf: CameraFrame) -> bytes:
     return out[:size].tobytes()
 
 
-def frames_bytes(frames: Sequence[CameraFrame], skeleton: Skeleton, t_ns: Sequence[int]) -> list[tuple[bytes, bytes]]:
-    """(`camera_frame_bytes`, `foxglove.image_annotations_bytes` at t_ns[i]) of each frame, the same bytes,
-    from one compiled call for all of them (what a writer of many frames wants: the per-call costs are
-    shared). A frame the batch does not take (an unusual array, a bad effects mask, a +0.0 coordinate) goes
-    through the one-frame functions, which also raise their errors."""
+class EncodedFrame(NamedTuple):
+    """A camera frame as the two messages a recording stores for it (`encode_frames`). A writer takes it
+    in place of the CameraFrame: a producer can encode frames as they are made and write them later, in
+    log-time order, without the CameraFrame objects in between."""
+    camera: str
+    log_time_ns: int  # its delivery time
+    frame: bytes  # crossview.CameraFrame
+    annotations: bytes  # foxglove.ImageAnnotations stamped log_time_ns
+
+
+# The detector's row arrays (`Detector.detection_rows`) in the order `encode_frames` takes them, with the
+# dtype and trailing shape (J: joints) the compiled encoder expects.
+_ROWS = (("truth", "person_ids", np.int64, 0), ("frame", "keypoints_px", np.float64, 2),
+         ("frame", "scores", np.float64, 1), ("truth", "keypoints_px", np.float64, 2),
+         ("truth", "in_image", bool, 1), ("truth", "occluded", bool, 1), ("truth", "self_occluded", bool, 1),
+         ("truth", "effects", np.int64, 0))
+
+
+def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray, rows: Sequence[np.ndarray],
+                  skeleton: Skeleton) -> list[EncodedFrame]:
+    """The EncodedFrame of n camera frames given as rows, from one compiled call (the bytes of
+    `camera_frame_bytes` and `foxglove.image_annotations_bytes` at the delivery time, which the tests check).
+
+    Args:
+        cameras: the n frames' camera names.
+        times: (n, 3) each frame's stamp, capture and delivery seconds.
+        bounds: (n + 1,) frame i owns rows bounds[i]:bounds[i + 1].
+        rows: person ids (D,), keypoints (D, J, 2), scores (D, J), true pixels (D, J, 2), in_image, occluded,
+            self_occluded (D, J), effects (D,): the detector's `detection_rows`.
+
+    A frame the batch does not take (a bad effects mask, a +0.0 coordinate, which protobuf leaves out) is
+    encoded by the one-frame functions, which also raise their errors.
+    """
     from crossview import wire  # (numba: loaded for writing only)
 
-    def one_by_one(batch, times):
-        return [(camera_frame_bytes(cf), foxglove.image_annotations_bytes(cf, skeleton, t))
-                for cf, t in zip(batch, times)]
-
-    n = len(frames)
-    if n < 2:
-        return one_by_one(frames, t_ns)
-    try:
-        kp = [cf.frame.keypoints_px for cf in frames]
-        J = kp[0].shape[1]
-        D = [k.shape[0] for k in kp]
-        total = sum(D)
-        columns = [np.concatenate(kp, dtype=np.float64)]
-        for name, dtype, tail in (("scores", np.float64, (J,)), ("person_ids", np.int64, ()),
-                                  ("keypoints_px", np.float64, (J, 2)), ("in_image", bool, (J,)),
-                                  ("occluded", bool, (J,)), ("self_occluded", bool, (J,)), ("effects", np.int64, ())):
-            parts = [cf.frame.scores if name == "scores" else getattr(cf.truth, name) for cf in frames]
-            if any(p.shape != (d, *tail) for p, d in zip(parts, D)):
-                return one_by_one(frames, t_ns)
-            columns.append(np.concatenate(parts, dtype=dtype))
-    except (AttributeError, IndexError, TypeError, ValueError):  # not arrays of the expected kinds
-        return one_by_one(frames, t_ns)
-    if columns[0].shape != (total, J, 2):
-        return one_by_one(frames, t_ns)
-    names = [_utf8(cf.frame.camera) for cf in frames]
+    times = np.ascontiguousarray(times, dtype=np.float64).reshape(-1, 3)
+    bounds = np.ascontiguousarray(bounds, dtype=np.int64)
+    n = len(cameras)
+    J = skeleton.num_joints
+    D = int(bounds[-1]) if bounds.size else 0
+    if times.shape[0] != n or bounds.shape != (n + 1,) or len(rows) != len(_ROWS):
+        raise ValueError(f"encode_frames: {n} cameras, times {times.shape}, bounds {bounds.shape} and "
+                         f"{len(rows)} row arrays; expected (n, 3) times, (n + 1,) bounds and {len(_ROWS)} arrays")
+    columns = []
+    for (owner, name, dtype, tail), array in zip(_ROWS, rows):
+        array = np.ascontiguousarray(array, dtype=dtype)
+        expected = (D, J, 2)[:1 + tail]
+        if array.shape != expected:
+            raise ValueError(f"encode_frames: {owner}.{name} rows expected {expected}, got {array.shape}")
+        columns.append(array)
+    names = [_utf8(camera) for camera in cameras]
     name_ends = np.cumsum([0] + [a.size for a in names])
-    times = np.array([(cf.frame.stamp_s, cf.truth.capture_s, cf.truth.delivery_s) for cf in frames], dtype=np.float64)
-    det_ends = np.cumsum([0] + D)
-    person_ids = columns[2]
-    styles = foxglove.detection_styles(person_ids)
+    t_ns = [to_ns(t) for t in times[:, 2].tolist()]
+    styles = foxglove.detection_styles(columns[0])
     bones = foxglove.bone_table(skeleton)
+    counts = np.diff(bounds).tolist()
     capacity = sum(wire.camera_frame_capacity(d, J, a.size) + wire.image_annotations_capacity(
-        d, J, len(bones), styles.table.shape[1]) for d, a in zip(D, names))
+        d, J, len(bones), styles.table.shape[1]) for d, a in zip(counts, names))
     out = _scratch(capacity)
     ends = np.empty(2 * n, dtype=np.int64)
     status = np.empty(n, dtype=np.int64)
-    wire.frames_and_annotations(out, ends, status, np.concatenate(names), name_ends, times,
-                                np.asarray(t_ns, dtype=np.int64), det_ends, *columns, bones, styles.lut, styles.table,
-                                styles.sizes, *foxglove.ANNOTATION_FIELDS)
-    ends, status = ends.tolist(), status.tolist()
-    data = out[:ends[-1]].tobytes()
+    ids, kp, scores, *truth = columns
+    wire.frames_and_annotations(out, ends, status, np.concatenate(names) if names else np.zeros(0, np.uint8),
+                                name_ends, times, np.asarray(t_ns, dtype=np.int64), bounds, kp, scores, ids, *truth,
+                                bones, styles.lut, styles.table, styles.sizes, *foxglove.ANNOTATION_FIELDS)
+    ends, status, bounds = ends.tolist(), status.tolist(), bounds.tolist()
+    data = out[:ends[-1] if n else 0].tobytes()
     result, start = [], 0
-    for i, cf in enumerate(frames):
-        if status[i]:
-            result += one_by_one([cf], [t_ns[i]])
+    for i, camera in enumerate(cameras):
+        if status[i]:  # the one-frame encoders' bytes (or their error)
+            a, b = bounds[i], bounds[i + 1]
+            stamp_s, capture_s, delivery_s = times[i].tolist()
+            cf = CameraFrame(Frame(camera, stamp_s, kp[a:b], scores[a:b]),
+                             DetectionTruth(capture_s, delivery_s, ids[a:b], *(c[a:b] for c in truth)), None)
+            result.append(EncodedFrame(camera, t_ns[i], camera_frame_bytes(cf),
+                                       foxglove.image_annotations_bytes(cf, skeleton, t_ns[i])))
         else:
-            result.append((data[start:ends[2 * i]], data[ends[2 * i]:ends[2 * i + 1]]))
+            result.append(EncodedFrame(camera, t_ns[i], data[start:ends[2 * i]], data[ends[2 * i]:ends[2 * i + 1]]))
         start = ends[2 * i + 1]
     return result
+
+
+def encode_camera_frames(frames: Sequence[CameraFrame], skeleton: Skeleton) -> list[EncodedFrame]:
+    """`encode_frames` of CameraFrame objects: their arrays are put together as rows. Frames with unusual
+    arrays (not of the shapes and kinds the detector makes) go through the one-frame functions."""
+
+    def one_by_one():
+        result = []
+        for cf in frames:
+            t_ns = to_ns(cf.truth.delivery_s)
+            result.append(EncodedFrame(cf.frame.camera, t_ns, camera_frame_bytes(cf),
+                                       foxglove.image_annotations_bytes(cf, skeleton, t_ns)))
+        return result
+
+    if len(frames) < 2:
+        return one_by_one()
+    J = skeleton.num_joints
+    try:
+        counts = [cf.frame.keypoints_px.shape[0] for cf in frames]
+        rows = []
+        for owner, name, dtype, tail in _ROWS:
+            parts = [getattr(getattr(cf, owner), name) for cf in frames]
+            shape = (J, 2)[:tail]
+            if any(p.shape != (d, *shape) for p, d in zip(parts, counts)):
+                return one_by_one()
+            rows.append(np.concatenate(parts, dtype=dtype))
+    except (AttributeError, IndexError, TypeError, ValueError):  # not arrays of the expected kinds
+        return one_by_one()
+    times = [(cf.frame.stamp_s, cf.truth.capture_s, cf.truth.delivery_s) for cf in frames]
+    return encode_frames([cf.frame.camera for cf in frames], np.array(times, dtype=np.float64),
+                         np.cumsum([0] + counts), rows, skeleton)
 
 
 def warm_up(skeleton: Skeleton) -> None:
@@ -445,7 +501,7 @@ def warm_up(skeleton: Skeleton) -> None:
                                        np.zeros(1, dtype=np.int64)), None)
     pose_truth_bytes(truth)
     foxglove.truth_skeletons_bytes(truth, skeleton, 1)
-    frames_bytes([frame, frame], skeleton, [1, 1])
+    encode_camera_frames([frame, frame], skeleton)
 
 
 @functools.lru_cache(maxsize=1024)
@@ -918,39 +974,36 @@ class RecordingWriter(_WriterContext):
         self._people: set[int] = set()
         self._counts = {"truth": 0, "frames": 0}
 
-    def _log_time(self, t_s: float, what: str) -> int:
-        t_ns = to_ns(t_s)
+    def _log_time(self, t_ns: int, what: str) -> int:
         if t_ns < self._last_ns:
-            raise ValueError(f"{what}: log time {t_s} s is before the previous event ({self._last_ns / 1e9} s); "
+            raise ValueError(f"{what}: log time {t_ns / 1e9} s is before the previous event ({self._last_ns / 1e9} s); "
                              "events must be written in log-time order")
         self._last_ns = t_ns
         return t_ns
 
-    def write(self, event: PoseTruth | CameraFrame) -> None:
-        """Appends one event: a PoseTruth (log time t_s) or a CameraFrame (log time truth.delivery_s)."""
+    def write(self, event: PoseTruth | CameraFrame | EncodedFrame) -> None:
+        """Appends one event: a PoseTruth (log time t_s) or a CameraFrame (log time truth.delivery_s),
+        or a camera frame already encoded (`EncodedFrame`, log time log_time_ns)."""
         self.write_many([event])
 
-    def write_many(self, events: Sequence[PoseTruth | CameraFrame]) -> None:
-        """`write` of each event in turn (the same bytes), with all the camera frames among them encoded
-        in one compiled call (`frames_bytes`): what a producer of many events at a time should use."""
-        t_ns, frames, frame_t_ns = [], [], []
-        for event in events:
-            if isinstance(event, PoseTruth):
-                t_ns.append(self._log_time(event.t_s, "PoseTruth"))
-            elif isinstance(event, CameraFrame):
-                if event.frame.camera not in self._frame_ch:
-                    raise ValueError(f"CameraFrame: camera {event.frame.camera!r} is not one of the recording's "
-                                     "cameras")
-                t_ns.append(self._log_time(event.truth.delivery_s, f"CameraFrame {event.frame.camera}"))
-                frames.append(event)
-                frame_t_ns.append(t_ns[-1])
-            else:
-                raise TypeError(f"RecordingWriter.write: expected PoseTruth or CameraFrame, got "
-                                f"{type(event).__name__}")
-        encoded = iter(frames_bytes(frames, self.skeleton, frame_t_ns))
+    def write_many(self, events: Sequence[PoseTruth | CameraFrame | EncodedFrame]) -> None:
+        """`write` of each event in turn (the same bytes), with all the CameraFrames among them encoded
+        in one compiled call (`encode_camera_frames`): what a producer of many events at a time should use."""
+        encoded = iter(encode_camera_frames([e for e in events if isinstance(e, CameraFrame)], self.skeleton))
         messages = []
-        for event, t in zip(events, t_ns):
-            if isinstance(event, PoseTruth):
+        for event in events:
+            if isinstance(event, CameraFrame):
+                event = next(encoded)
+            if isinstance(event, EncodedFrame):
+                frame_channel = self._frame_ch.get(event.camera)
+                if frame_channel is None:
+                    raise ValueError(f"CameraFrame: camera {event.camera!r} is not one of the recording's cameras")
+                t = self._log_time(event.log_time_ns, f"CameraFrame {event.camera}")
+                messages.append((frame_channel, t, event.frame))
+                messages.append((self._annotation_ch[event.camera], t, event.annotations))
+                self._counts["frames"] += 1
+            elif isinstance(event, PoseTruth):
+                t = self._log_time(to_ns(event.t_s), "PoseTruth")
                 messages.append((self._truth, t, pose_truth_bytes(event)))
                 if t >= self._next_scene_ns:
                     messages.append((self._truth_scene, t, foxglove.truth_skeletons_bytes(event, self.skeleton, t)))
@@ -958,11 +1011,15 @@ class RecordingWriter(_WriterContext):
                 self._people.update(np.asarray(event.person_ids).tolist())
                 self._counts["truth"] += 1
             else:
-                frame_data, drawn = next(encoded)
-                messages.append((self._frame_ch[event.frame.camera], t, frame_data))
-                messages.append((self._annotation_ch[event.frame.camera], t, drawn))
-                self._counts["frames"] += 1
+                raise TypeError(f"RecordingWriter.write: expected PoseTruth, CameraFrame or EncodedFrame, got "
+                                f"{type(event).__name__}")
         self._out.add_many(messages)
+
+    def encode_frames(self, cameras: Sequence[int], times: np.ndarray, bounds: np.ndarray,
+                      rows: Sequence[np.ndarray]) -> list[EncodedFrame]:
+        """`encode_frames` (the module's) of frames from this recording's cameras, given by index."""
+        names = [self.cameras[i].name for i in cameras]
+        return encode_frames(names, times, bounds, rows, self.skeleton)
 
     def close(self) -> None:
         summary = {

@@ -76,8 +76,8 @@ class Simulation:
             self._world = World(self.scenario, child_rng(self.seed, "crowd"))
         return self._world
 
-    def events(self, duration_s: float | None = None, *, with_poses: bool = True,
-               while_starting=None) -> Iterator[PoseTruth | CameraFrame]:
+    def events(self, duration_s: float | None = None, *, with_poses: bool = True, while_starting=None,
+               frames_of=None) -> Iterator[PoseTruth | CameraFrame]:
         """Everything a recording holds, in log-time order.
 
         PoseTruth at 100 Hz (log time `t_s`) and CameraFrame (log time `truth.delivery_s`). Ties
@@ -93,6 +93,10 @@ class Simulation:
                 writer needs: a recording stores the truth ticks, from which its reader derives them).
             while_starting: a function called once the worker process has started, while it builds its
                 world (e.g. to load what the consumer will need); with no worker, at the start.
+            frames_of: what stands for a block's frames, in their place in the order: a function of the
+                block's capture requests, detection rows and bounds (`Detector.detection_rows`) that gives
+                one item per request. None: the CameraFrames (`Detector.frames_from_rows`). A recording
+                writer encodes them straight from the rows (`RecordingWriter.encode_frames`).
         """
         duration = self.scenario.duration_s if duration_s is None else float(duration_s)
         if not duration > 0:
@@ -102,6 +106,7 @@ class Simulation:
         self._used = True
         self.detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"),
                                  self.skeleton)
+        frames_of = frames_of or self.detector.frames_from_rows
         if self.worker_process and _usable_cores() > 1 and "fork" in multiprocessing.get_all_start_methods():
             blocks = self._blocks_from_worker(duration, with_poses, while_starting)
         else:
@@ -116,7 +121,7 @@ class Simulation:
         for t, truths, requests, rows, bounds in blocks:
             for poses in truths:
                 heapq.heappush(pending, (poses.t_s, _TRUTH_KIND, -1, poses.t_s, next(seq), poses))
-            for request, event in zip(requests, self.detector.frames_from_rows(requests, rows, bounds)):
+            for request, event in zip(requests, frames_of(requests, rows, bounds)):
                 heapq.heappush(pending, (request[4], _FRAME_KIND, request[0], request[2], next(seq), event))
             # Everything later has a log time > t (a later capture is after t, and delivered after it).
             while pending and pending[0][0] <= t:

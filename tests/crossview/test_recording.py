@@ -683,3 +683,29 @@ def test_write_many_refuses_what_write_refuses(tmp_path, world):
     with RecordingWriter(tmp_path / "late.mcap", make_header(), cameras, BOXES) as writer, \
             pytest.raises(ValueError, match="log-time order"):
         writer.write_many([frames[2], frames[0]])
+
+
+def test_encoded_frames_are_written_as_the_frames_they_encode(tmp_path, world):
+    """A writer handed `EncodedFrame`s (what `generate` hands it, encoded from the detector's rows) writes the
+    file it writes from the CameraFrames; it refuses one of a camera the recording does not have, and rows
+    of the wrong shape are refused by name."""
+    cameras, events = world
+    frames = [e for e in events if isinstance(e, CameraFrame)]
+    encoded = dict(zip(map(id, frames), recording.encode_camera_frames(frames, COCO17)))
+    mixed = [encoded[id(e)] if isinstance(e, CameraFrame) and i % 2 else e for i, e in enumerate(events)]
+    assert any(isinstance(e, recording.EncodedFrame) for e in mixed)
+    plain = write_recording(tmp_path / "plain.mcap", cameras, events).read_bytes()
+    with RecordingWriter(tmp_path / "mixed.mcap", make_header(), cameras, BOXES) as writer:
+        writer.write_many(mixed)
+    assert (tmp_path / "mixed.mcap").read_bytes() == plain
+
+    stranger = recording.EncodedFrame("nowhere", 0, b"", b"")
+    with RecordingWriter(tmp_path / "bad.mcap", make_header(), cameras, BOXES) as writer, \
+            pytest.raises(ValueError, match="'nowhere' is not one of the recording's cameras"):
+        writer.write(stranger)
+    f = frames[0]
+    rows = [f.truth.person_ids, f.frame.keypoints_px, f.frame.scores[:, :3], f.truth.keypoints_px, f.truth.in_image,
+            f.truth.occluded, f.truth.self_occluded, f.truth.effects]
+    times = np.array([[f.frame.stamp_s, f.truth.capture_s, f.truth.delivery_s]])
+    with pytest.raises(ValueError, match=r"frame.scores rows expected \(\d+, 17\), got"):
+        recording.encode_frames([f.frame.camera], times, [0, f.frame.num_detections], rows, COCO17)
