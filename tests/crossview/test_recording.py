@@ -628,6 +628,24 @@ def test_fast_message_path_writes_what_the_mcap_writer_writes(tmp_path, world, m
     assert fast == slow
 
 
+def test_the_chunk_thread_sends_the_data_to_disk_along_the_way(tmp_path, world, monkeypatch):
+    """Every _SYNC_BYTES of chunks the chunk thread syncs the file's data (so that the closing fsync waits
+    for the tail only), with the chunks before it in the file, and the bytes are the same."""
+    cameras, events = world
+    plain = write_recording(tmp_path / "plain.mcap", cameras, events, chunk_size=4096).read_bytes()
+    synced = []
+
+    def datasync(fd):
+        synced.append(os.fstat(fd).st_size)
+        os.fsync(fd)
+
+    monkeypatch.setattr(recording, "_datasync", datasync)
+    monkeypatch.setattr(recording._ChunkThread, "_SYNC_BYTES", 3000)
+    path = write_recording(tmp_path / "synced.mcap", cameras, events, chunk_size=4096)
+    assert path.read_bytes() == plain
+    assert len(synced) > 3 and synced == sorted(synced) and synced[0] >= 3000 and synced[-1] < len(plain)
+
+
 def test_a_failure_on_the_chunk_thread_is_raised_and_leaves_no_file(tmp_path, world, monkeypatch):
     """Chunks are compressed and written on a thread; its failure (a full disk, say) reaches the caller
     as the exception it was, and the file is dropped as for any other failure."""
