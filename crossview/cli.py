@@ -262,11 +262,15 @@ COMMANDS = {
 # The tracker and the simulator work on many tiny matrices: BLAS threads only add contention there, so
 # one thread per process unless the user asked otherwise (set before numpy is first imported).
 _SINGLE_THREAD_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+# No command renders with MuJoCo: unless the user chose a backend, MuJoCo's import skips looking for one
+# (GLFW: 40 ms of the simulation worker's start-up, which the whole generation waits for).
+_NO_RENDERING_ENV = ("MUJOCO_GL", "disable")
 
 
 def main(argv: list[str] | None = None) -> int:
     for name in _SINGLE_THREAD_ENV:
         os.environ.setdefault(name, "1")
+    os.environ.setdefault(*_NO_RENDERING_ENV)
     try:
         args = build_parser().parse_args(argv)
     except SystemExit as e:  # --help (0) or a bad argument (2, message already printed)
