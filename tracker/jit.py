@@ -7,26 +7,7 @@ over preallocated arrays), so they run unchanged as plain Python; `kernel.py_fun
 
 from __future__ import annotations
 
-import contextlib
 import gc
-
-
-@contextlib.contextmanager
-def _collector_paused():
-    """Python's cyclic garbage collector off for the block, and what the block made frozen out of its sight
-    (`gc.freeze`) at the end. For numba's set-up: it makes a hundred thousand objects that live as long as
-    the process and no garbage, and the collections its allocations trigger found nothing (70 ms of it), and
-    would find nothing in them later either. Frozen before a fork, they also stay shared with the child
-    (Python's recipe: a collection there would write to their pages)."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-        gc.freeze()
-    finally:
-        if enabled:
-            gc.enable()
-
 
 try:  # numba compiles the kernels (plain Python runs the same code, slowly, without it)
     from numba import njit as _njit
@@ -37,11 +18,22 @@ try:  # numba compiles the kernels (plain Python runs the same code, slowly, wit
 
     def prepare() -> None:
         """Does numba's one-time set-up of its compiler now (about a third of a second: the first kernel
-        called would do it): before a fork, so that the processes share it instead of each doing it."""
+        called would do it): before a fork, so that the processes share it instead of each doing it.
+
+        The set-up makes about a hundred thousand objects that live as long as the process and no garbage:
+        it runs with Python's cyclic collector off (the collections it triggered found nothing and took
+        70 ms), and then every object alive is frozen out of the collector's sight (`gc.freeze`), which
+        before a fork is Python's own recipe: a collection in the child would write to their pages."""
         from numba.core.registry import cpu_target
 
-        with _collector_paused():
+        enabled = gc.isenabled()
+        gc.disable()
+        try:
             cpu_target.target_context.refresh()
+            gc.freeze()
+        finally:
+            if enabled:
+                gc.enable()
 except ImportError:  # pragma: no cover - numba is a dependency; this keeps the code importable without it
     def jit(function):
         function.py_func = function
