@@ -16,18 +16,20 @@ def test_bench_tracker_times_every_update_after_an_untimed_warm_up(tmp_path, mon
     assert result["camera_frames"] == gen.num_frames
     assert result["tracker_fps_median"] > 0 and result["tracker_fps_mean"] > 0
     assert result["update_ms_p50"] <= result["update_ms_p95"]
-    text = bench.format_results([{
+    row = {
         "scenario": "store_layout1", "num_cameras": gen.num_cameras, "num_people": 4,
         "generate_realtime_factor": gen.realtime_factor, "generate_running_realtime_factor":
             gen.running_realtime_factor, "generate_startup_s": gen.startup_s, "cold_generate_realtime_factor": 2.5,
         "cold_same_bytes": True, "people_only_realtime_factor": 100.0,
         "read_camera_frames_per_s": 1000.0, "bytes_per_camera_frame": 3000.0, "crossview": result,
-        "baseline": result}])
+        "baseline": result}
+    text = bench.format_results([row])
     assert text.splitlines()[0].split()[:6] == ["scenario", "cams", "people", "gen", "x", "RT"]
     assert text.splitlines()[1].split()[:7] == ["store_layout1", str(gen.num_cameras), "4",
                                                 f"{gen.realtime_factor:.1f}", f"{gen.running_realtime_factor:.1f}",
                                                 f"{gen.startup_s:.2f}", "2.5"]
     assert "WARNING" not in text
+    assert "WARNING: a new process wrote other bytes" in bench.format_results([{**row, "cold_same_bytes": False}])
 
 
 def test_cold_generate_times_a_new_process_that_writes_the_same_bytes(tmp_path):
