@@ -446,10 +446,7 @@ def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray,
     result, start = [], 0
     for i, camera in enumerate(cameras):
         if status[i]:  # the one-frame encoders' bytes (or their error)
-            a, b = bounds[i], bounds[i + 1]
-            stamp_s, capture_s, delivery_s = times[i].tolist()
-            cf = CameraFrame(Frame(camera, stamp_s, kp[a:b], scores[a:b]),
-                             DetectionTruth(capture_s, delivery_s, ids[a:b], *(c[a:b] for c in truth)), None)
+            cf = CameraFrame.from_rows(camera, *times[i].tolist(), columns, bounds[i], bounds[i + 1])
             result.append(EncodedFrame(camera, t_ns[i], camera_frame_bytes(cf),
                                        foxglove.image_annotations_bytes(cf, skeleton, t_ns[i])))
         else:

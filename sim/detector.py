@@ -29,8 +29,8 @@ import numpy as np
 
 from sim.cameras import in_image, in_image_many_kernel, monotonic_radius
 from sim.store import jit
-from sim.types import CameraFrame, DetectionEffect, DetectionTruth, PoseTruth
-from tracker.types import COCO17, Camera, Frame, Skeleton
+from sim.types import CameraFrame, DetectionEffect, PoseTruth
+from tracker.types import COCO17, Camera, Skeleton
 
 
 class DetectorProfile(enum.Enum):
@@ -651,14 +651,8 @@ class Detector:
         bounds = bounds.tolist()
         frames = []
         for i, (camera_index, poses, capture_s, stamp_s, delivery_s) in enumerate(requests):
-            a, b = bounds[i], bounds[i + 1]
-            d_ids, kp, scores, true_px, img, occ, self_occ, effects = (r[a:b] for r in rows)
-            frame = Frame(self.cameras[camera_index].name, float(stamp_s), kp, scores)
-            truth = DetectionTruth(
-                capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=d_ids, keypoints_px=true_px,
-                in_image=img, occluded=occ, self_occluded=self_occ, effects=effects,
-            )
-            frames.append(CameraFrame(frame, truth, poses))
+            frames.append(CameraFrame.from_rows(self.cameras[camera_index].name, stamp_s, capture_s, delivery_s,
+                                                rows, bounds[i], bounds[i + 1], poses))
         return frames
 
     def _detections(self, person_ids, px, in_img, occluded, self_occluded, group):

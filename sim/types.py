@@ -107,3 +107,16 @@ class CameraFrame:
     frame: Frame
     truth: DetectionTruth
     poses_at_capture: PoseTruth | None
+
+    @classmethod
+    def from_rows(cls, camera: str, stamp_s: float, capture_s: float, delivery_s: float, rows, start: int,
+                  end: int, poses_at_capture: PoseTruth | None = None) -> CameraFrame:
+        """The frame whose detections are rows start:end of the detector's row arrays
+        (`Detector.detection_rows`: person ids, keypoints, scores, true pixels, in_image, occluded,
+        self_occluded, effects), as views."""
+        ids, kp, scores, true_px, in_image, occluded, self_occluded, effects = (r[start:end] for r in rows)
+        return cls(Frame(camera, float(stamp_s), kp, scores),
+                   DetectionTruth(capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=ids,
+                                  keypoints_px=true_px, in_image=in_image, occluded=occluded,
+                                  self_occluded=self_occluded, effects=effects),
+                   poses_at_capture)
