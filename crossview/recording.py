@@ -715,6 +715,9 @@ class _AtomicMcapWriter:
                 self._chunks.drain()
             self._writer.add_metadata(SUMMARY_METADATA_NAME, summary_metadata)
             self._writer.finish()
+            if self._chunks is not None:  # the thread ends with the file: none is left behind (a later fork
+                self._chunks.drain()  # must not copy a process whose other threads may hold locks)
+                self._chunks.stop()
             self._file.flush()
             os.fsync(self._file.fileno())
             self._file.close()

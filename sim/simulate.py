@@ -121,7 +121,8 @@ class Simulation:
         for t, truths, requests, rows, bounds in blocks:
             for poses in truths:
                 heapq.heappush(pending, (poses.t_s, _TRUTH_KIND, -1, poses.t_s, next(seq), poses))
-            for request, event in zip(requests, frames_of(requests, rows, bounds)):
+            # A block can hold no capture at all (a short last block, a slow or dropping clock).
+            for request, event in zip(requests, frames_of(requests, rows, bounds) if requests else ()):
                 heapq.heappush(pending, (request[4], _FRAME_KIND, request[0], request[2], next(seq), event))
             # Everything later has a log time > t (a later capture is after t, and delivered after it).
             while pending and pending[0][0] <= t:
