@@ -23,9 +23,6 @@ from tracker.geometry import project
 from tracker.tracker import Tracker
 from tracker.types import CAMPUS14, Frame, Target, TrackerOutput
 
-CAMPUS = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "campus"
-LAST_TEST_FRAME_S = 751 * 0.04  # the Campus test frames end at 750
-
 
 def _tiny_dataset(root: Path) -> Path:
     """Two cameras 3 m apart looking along +y, 100x80 images, one annotated person in two frames."""
@@ -131,16 +128,17 @@ def test_convert_writes_a_recording_the_tracker_can_read(tmp_path):
 
 
 @pytest.fixture(scope="module")
-def campus():
-    frames = [f for f in load_frames(CAMPUS) if f.stamp_s <= LAST_TEST_FRAME_S]
-    return load_cameras(CAMPUS), frames
+def campus(campus_dir):
+    """The Campus dataset's cameras and 2D frames: frames 300-750 from the fixture (two seconds of run-up
+    before the first test frame), or the whole sequence with --campus-data."""
+    return campus_dir, load_cameras(campus_dir), load_frames(campus_dir)
 
 
 def test_campus_calibration_reproduces_the_2d_annotations(campus):
-    cams, frames = campus
+    root, cams, frames = campus
     by_name = {c.name: c for c in cams}
-    truth = {round(t, 2): dict(zip(ids.tolist(), poses)) for t, ids, poses in load_truth_3d(CAMPUS)}
-    ann = json.loads((CAMPUS / "annotation_2d.json").read_text())["frames"]
+    truth = {round(t, 2): dict(zip(ids.tolist(), poses)) for t, ids, poses in load_truth_3d(root)}
+    ann = json.loads((root / "annotation_2d.json").read_text())["frames"]
     errors = []
     for item in ann.values():
         people = truth.get(round(item["timestamp"], 2), {})
@@ -151,19 +149,19 @@ def test_campus_calibration_reproduces_the_2d_annotations(campus):
     assert np.median(np.concatenate(errors)) < 1.0  # px (README: 0.3 px)
 
 
-def _campus_pcp(cams, frames, tmp_path):
+def _campus_pcp(root, cams, frames, tmp_path):
     tracker = Tracker(cams, TrackerConfig.preset("campus"), CAMPUS14)
     outputs = []
     for frame in frames:
         tracker.update(frame)
         outputs.append(tracker.last_output)
     write_result_3d(outputs, tmp_path / "result_3d.json")
-    return evaluate(CAMPUS, tmp_path / "result_3d.json")
+    return evaluate(root, tmp_path / "result_3d.json")
 
 
 def test_campus_pcp_from_ground_truth_2d_joints(campus, tmp_path):
-    cams, frames = campus
-    result = _campus_pcp(cams, frames, tmp_path)
+    root, cams, frames = campus
+    result = _campus_pcp(root, cams, frames, tmp_path)
     assert result["average"] >= 0.99
 
 
@@ -190,6 +188,6 @@ def _typical_detector(frames, cams, seed):
 
 
 def test_campus_pcp_with_typical_detector_noise(campus, tmp_path):
-    cams, frames = campus
-    result = _campus_pcp(cams, _typical_detector(frames, cams, seed=0), tmp_path)
+    root, cams, frames = campus
+    result = _campus_pcp(root, cams, _typical_detector(frames, cams, seed=0), tmp_path)
     assert result["average"] >= 0.96  # the paper: 0.966 with a real detector
