@@ -19,16 +19,18 @@ from llvmlite import ir as llvm_ir
 from numba import types
 from numba.extending import intrinsic
 
-from sim.store import jit
+from sim.config import bounded, check_ranges
+from sim.store import MAX_FLOOR_M, jit
 from tracker.types import Camera
 
+MAX_GRID = 100  # cameras along one side of a grid
+MAX_IMAGE_PX = 16384
 # Points closer than this in front of the camera plane count as behind it (their projection blows up).
 _MIN_DEPTH_M = 1e-6
 # Shortest distance a camera may keep from the walls, floor and ceiling of the store.
 _WALL_CLEARANCE_M = 0.0
 # When a camera looks (almost) straight down, "up" in its image points along world +y.
 _STRAIGHT_DOWN_COS = 0.999
-_REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 @dataclass(frozen=True)
@@ -42,12 +44,13 @@ class CameraPlacement:
         roll_deg: rotation of the image about the optical axis.
     """
 
-    position_m: tuple[float, float, float] = (0.0, 0.0, 3.0)
-    look_at_m: tuple[float, float, float] = (1.0, 1.0, 0.0)
+    position_m: tuple[float, float, float] = bounded((0.0, 0.0, 3.0), -MAX_FLOOR_M, MAX_FLOOR_M)
+    look_at_m: tuple[float, float, float] = bounded((1.0, 1.0, 0.0), -MAX_FLOOR_M, MAX_FLOOR_M)
     name: str = ""
-    roll_deg: float = 0.0
+    roll_deg: float = bounded(0.0, -360.0, 360.0)
 
     def __post_init__(self):
+        check_ranges(self)
         direction = np.subtract(self.look_at_m, self.position_m)
         norm = float(np.linalg.norm(direction))
         if norm == 0:
@@ -80,49 +83,34 @@ class CameraRigConfig:
         position_jitter_m: std of a random displacement of each grid camera (x and y).
         placements: explicit cameras; when given they replace the grid.
         calibration: path of a real calibration file (the Panoptic dome format); replaces the grid.
-            Relative paths are tried from the working directory, then from the project root.
+            A relative path is taken from the scenario file's folder (from the working directory for a
+            scenario built in code).
         calibration_kind: camera type to take from the calibration file ("hd" for Panoptic).
         calibration_origin_m: where the calibration's world origin lies in the store frame.
     """
 
-    rows: int = 3
-    cols: int = 4
-    width_px: int = 1280
-    height_px: int = 720
-    hfov_deg: float = 90.0
-    k1: float = -0.05
-    k2: float = 0.01
-    p1: float = 0.0
-    p2: float = 0.0
-    k3: float = 0.0
-    margin_m: float = 0.3
-    ceiling_gap_m: float = 0.1
-    aim_height_m: float = 1.0
-    aim_inward: float = 0.3
-    position_jitter_m: float = 0.0
+    rows: int = bounded(3, 1, MAX_GRID, unit="cameras")
+    cols: int = bounded(4, 1, MAX_GRID, unit="cameras")
+    width_px: int = bounded(1280, 1, MAX_IMAGE_PX)
+    height_px: int = bounded(720, 1, MAX_IMAGE_PX)
+    hfov_deg: float = bounded(90.0, 0.0, 180.0, low_open=True, high_open=True)
+    k1: float = bounded(-0.05, -10.0, 10.0, unit="")
+    k2: float = bounded(0.01, -10.0, 10.0, unit="")
+    p1: float = bounded(0.0, -1.0, 1.0, unit="")
+    p2: float = bounded(0.0, -1.0, 1.0, unit="")
+    k3: float = bounded(0.0, -10.0, 10.0, unit="")
+    margin_m: float = bounded(0.3, 0.0, MAX_FLOOR_M)
+    ceiling_gap_m: float = bounded(0.1, 0.0, 20.0)
+    aim_height_m: float = bounded(1.0, 0.0, 20.0)
+    aim_inward: float = bounded(0.3, 0.0, 1.0, unit="fraction")
+    position_jitter_m: float = bounded(0.0, 0.0, MAX_FLOOR_M)
     placements: tuple[CameraPlacement, ...] = ()
     calibration: str = ""
     calibration_kind: str = "hd"
-    calibration_origin_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    calibration_origin_m: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), -MAX_FLOOR_M, MAX_FLOOR_M)
 
     def __post_init__(self):
-        if not self.placements and not self.calibration and (self.rows < 1 or self.cols < 1):
-            raise ValueError(
-                f"rows x cols: {self.rows} x {self.cols} gives no cameras; need rows >= 1 and cols >= 1 "
-                "(or placements, or a calibration file)"
-            )
-        if not 0 < self.hfov_deg < 180:
-            raise ValueError(f"hfov_deg: {self.hfov_deg} must be in (0, 180) degrees, exclusive")
-        if self.width_px < 1 or self.height_px < 1:
-            raise ValueError(f"width_px x height_px: {self.width_px} x {self.height_px} must both be >= 1")
-        for name in ("k1", "k2", "p1", "p2", "k3"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{name}: {getattr(self, name)} must be a finite number")
-        for name in ("margin_m", "ceiling_gap_m", "aim_height_m", "position_jitter_m"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name}: {getattr(self, name)} must be >= 0")
-        if not 0 <= self.aim_inward <= 1:
-            raise ValueError(f"aim_inward: {self.aim_inward} must be in [0, 1]")
+        check_ranges(self)
         names = [p.name for p in self.placements if p.name]
         if len(set(names)) != len(names):
             raise ValueError(f"placements.name: names {names} must be unique")
@@ -178,8 +166,8 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
     K = intrinsics(config.width_px, config.height_px, config.hfov_deg)
     if config.calibration:
         path = Path(config.calibration)
-        if not path.is_absolute() and not path.exists():
-            path = _REPO_ROOT / path
+        if not path.is_absolute() and scenario.source_path:  # relative to the scenario file
+            path = Path(scenario.source_path).parent / path
         try:
             cameras = load_panoptic(path, config.calibration_kind, origin_m=config.calibration_origin_m)
         except (OSError, ValueError, KeyError, TypeError) as e:
