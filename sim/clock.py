@@ -14,6 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.config import bounded, check_ranges
+
+MAX_FPS = 1000.0
+_MAX_CLOCK_S = 60.0  # the largest jitter, offset, noise or delay a camera's clock may have
+
 
 @dataclass(frozen=True)
 class ClockConfig:
@@ -35,36 +40,25 @@ class ClockConfig:
             cameras still interleave out of stamp order. False delivers each frame after its own delay.
     """
 
-    fps: float = 10.0
+    fps: float = bounded(10.0, 0.0, MAX_FPS, low_open=True, unit="frames per second")
     random_phase: bool = True
-    jitter_std_s: float = 0.002
-    offset_std_s: float = 0.002
-    stamp_noise_std_s: float = 0.0005
-    drop_prob: float = 0.01
-    burst_prob: float = 0.002
-    burst_mean_frames: float = 5.0
-    delay_mean_s: float = 0.05
-    delay_std_s: float = 0.02
+    jitter_std_s: float = bounded(0.002, 0.0, _MAX_CLOCK_S)
+    offset_std_s: float = bounded(0.002, 0.0, _MAX_CLOCK_S)
+    stamp_noise_std_s: float = bounded(0.0005, 0.0, _MAX_CLOCK_S)
+    drop_prob: float = bounded(0.01, 0.0, 1.0)
+    burst_prob: float = bounded(0.002, 0.0, 1.0)
+    burst_mean_frames: float = bounded(5.0, 1.0, 1e6, unit="frames")
+    delay_mean_s: float = bounded(0.05, 0.0, _MAX_CLOCK_S)
+    delay_std_s: float = bounded(0.02, 0.0, _MAX_CLOCK_S)
     in_order_delivery: bool = True
 
     def __post_init__(self):
-        if not (self.fps > 0 and math.isfinite(self.fps)):
-            raise ValueError(f"fps: {self.fps} must be a finite number > 0 (frames per second)")
-        for name in ("jitter_std_s", "offset_std_s", "stamp_noise_std_s", "delay_mean_s", "delay_std_s"):
-            value = getattr(self, name)
-            if not (value >= 0 and math.isfinite(value)):
-                raise ValueError(f"{name}: {value} must be a finite number >= 0 (seconds)")
+        check_ranges(self)
         if self.jitter_std_s > 0.25 / self.fps:
             raise ValueError(
                 f"jitter_std_s: {self.jitter_std_s} must be <= a quarter period "
                 f"({0.25 / self.fps:g} s at {self.fps} fps)"
             )
-        for name in ("drop_prob", "burst_prob"):
-            value = getattr(self, name)
-            if not 0 <= value <= 1:
-                raise ValueError(f"{name}: {value} must be in [0, 1]")
-        if not self.burst_mean_frames >= 1:
-            raise ValueError(f"burst_mean_frames: {self.burst_mean_frames} must be >= 1")
         if self.delay_std_s > 0 and self.delay_mean_s == 0:
             raise ValueError(f"delay_mean_s: 0 must be > 0 when delay_std_s ({self.delay_std_s}) is > 0")
 

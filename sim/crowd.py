@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.config import bounded, check_ranges
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
 from sim.store import StoreGeometry, _astar, _segment_free, jit
 
@@ -57,6 +58,9 @@ MAX_SPEED_M_S = 2.0
 MAX_TURN_RAD_S = 3.0
 # A walker who has not moved for this long gives up on the current goal.
 STUCK_S = 4.0
+# Bounds of the [crowd] section: people at once, and any duration of a visit or an activity (a day).
+MAX_PEOPLE = 500
+_MAX_TIME_S = 86400.0
 
 
 class Activity(enum.IntEnum):
@@ -89,41 +93,27 @@ class CrowdConfig:
         area_per_person_m2: walkable floor each person needs; more people than the floor holds is an error.
     """
 
-    people: int = 4
+    people: int = bounded(4, 0, MAX_PEOPLE, unit="people")
     start_inside: bool = True
-    height_range_m: tuple[float, float] = (1.50, 1.95)
-    heights_m: tuple[float, ...] = ()
-    speed_range_m_s: tuple[float, float] = (0.6, 1.6)
-    mean_visit_s: float = 180.0
-    mean_arrival_gap_s: float = 10.0
-    browse_share: float = 0.6
-    stand_s: tuple[float, float] = (2.0, 8.0)
-    browse_s: tuple[float, float] = (5.0, 15.0)
-    checkout_s: tuple[float, float] = (5.0, 15.0)
-    area_per_person_m2: float = 1.0
+    height_range_m: tuple[float, float] = bounded((1.50, 1.95), *SUPPORTED_HEIGHT_M)
+    heights_m: tuple[float, ...] = bounded((), *SUPPORTED_HEIGHT_M)
+    speed_range_m_s: tuple[float, float] = bounded((0.6, 1.6), 0.3, 2.0)
+    mean_visit_s: float = bounded(180.0, 0.0, _MAX_TIME_S, low_open=True)
+    mean_arrival_gap_s: float = bounded(10.0, 0.0, _MAX_TIME_S, low_open=True)
+    browse_share: float = bounded(0.6, 0.0, 1.0, unit="fraction")
+    stand_s: tuple[float, float] = bounded((2.0, 8.0), 0.0, _MAX_TIME_S, low_open=True)
+    browse_s: tuple[float, float] = bounded((5.0, 15.0), 0.0, _MAX_TIME_S, low_open=True)
+    checkout_s: tuple[float, float] = bounded((5.0, 15.0), 0.0, _MAX_TIME_S, low_open=True)
+    area_per_person_m2: float = bounded(1.0, 0.0, 100.0, low_open=True)
 
     def __post_init__(self):
-        lo, hi = SUPPORTED_HEIGHT_M
-        if not 0 <= self.people <= 500:
-            raise ValueError(f"people: {self.people} must be in [0, 500]")
-        a, b = self.height_range_m
-        if not (lo <= a < b <= hi):
-            raise ValueError(f"height_range_m: {self.height_range_m} must satisfy {lo} <= min < max <= {hi} m")
-        for i, h in enumerate(self.heights_m):
-            if not lo <= h <= hi:
-                raise ValueError(f"heights_m[{i}]: {h} m is outside the supported body heights [{lo}, {hi}] m")
-        a, b = self.speed_range_m_s
-        if not (0.3 <= a <= b <= 2.0):
-            raise ValueError(f"speed_range_m_s: {self.speed_range_m_s} must satisfy 0.3 <= min <= max <= 2.0 m/s")
-        for name in ("mean_visit_s", "mean_arrival_gap_s", "area_per_person_m2"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: {getattr(self, name)} must be > 0")
-        if not 0 <= self.browse_share <= 1:
-            raise ValueError(f"browse_share: {self.browse_share} must be in [0, 1]")
-        for name in ("stand_s", "browse_s", "checkout_s"):
+        check_ranges(self)
+        if not self.height_range_m[0] < self.height_range_m[1]:
+            raise ValueError(f"height_range_m: {self.height_range_m} must have min < max")
+        for name in ("speed_range_m_s", "stand_s", "browse_s", "checkout_s"):
             a, b = getattr(self, name)
-            if not 0 < a <= b:
-                raise ValueError(f"{name}: {getattr(self, name)} must satisfy 0 < min <= max")
+            if not a <= b:
+                raise ValueError(f"{name}: {getattr(self, name)} must have min <= max")
 
 
 def validate(config: CrowdConfig, store: StoreGeometry, name: str = "scenario") -> None:

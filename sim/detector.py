@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.cameras import in_image, in_image_many_kernel, monotonic_radius
+from sim.config import bounded, check_ranges
 from sim.store import jit
 from sim.types import CameraFrame, DetectionEffect, PoseTruth
 from tracker.types import COCO17, Camera, Skeleton
@@ -110,11 +111,7 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
     ),
 }
 
-_PROBABILITIES = (
-    "gross_error_prob", "miss_prob", "occluded_drop_prob", "self_occluded_drop_prob", "joint_drop_prob",
-    "fragment_prob", "swap_prob", "duplicate_prob", "score_visible", "score_occluded",
-)
-_NON_NEGATIVE = ("noise_frac", "miss_occlusion_gain", "phantom_rate", "score_std")
+MAX_PHANTOM_RATE = 100.0  # phantom skeletons per frame, on average
 
 
 @dataclass(frozen=True)
@@ -127,46 +124,29 @@ class DetectorConfig:
     """
 
     profile: DetectorProfile = DetectorProfile.TYPICAL
-    noise_frac: float | None = None
-    noise_tail_dof: float | None = None
-    occluded_noise_scale: float | None = None
-    self_occluded_noise_scale: float | None = None
-    gross_error_prob: float | None = None
-    miss_prob: float | None = None
-    miss_occlusion_gain: float | None = None
-    min_visible_joints: int | None = None
-    occluded_drop_prob: float | None = None
-    self_occluded_drop_prob: float | None = None
-    joint_drop_prob: float | None = None
-    fragment_prob: float | None = None
-    swap_prob: float | None = None
-    duplicate_prob: float | None = None
-    phantom_rate: float | None = None
-    score_visible: float | None = None
-    score_occluded: float | None = None
-    score_std: float | None = None
-    self_hit_margin_m: float = 0.2
+    noise_frac: float | None = bounded(None, 0.0, 1.0)
+    noise_tail_dof: float | None = bounded(None, 2.0, low_open=True, finite=False, unit="degrees of freedom")
+    occluded_noise_scale: float | None = bounded(None, 1.0, 100.0, unit="times")
+    self_occluded_noise_scale: float | None = bounded(None, 1.0, 100.0, unit="times")
+    gross_error_prob: float | None = bounded(None, 0.0, 1.0)
+    miss_prob: float | None = bounded(None, 0.0, 1.0)
+    miss_occlusion_gain: float | None = bounded(None, 0.0, 10.0, unit="probability per occluded share")
+    min_visible_joints: int | None = bounded(None, 1, 1000, unit="joints")
+    occluded_drop_prob: float | None = bounded(None, 0.0, 1.0)
+    self_occluded_drop_prob: float | None = bounded(None, 0.0, 1.0)
+    joint_drop_prob: float | None = bounded(None, 0.0, 1.0)
+    fragment_prob: float | None = bounded(None, 0.0, 1.0)
+    swap_prob: float | None = bounded(None, 0.0, 1.0)
+    duplicate_prob: float | None = bounded(None, 0.0, 1.0)
+    phantom_rate: float | None = bounded(None, 0.0, MAX_PHANTOM_RATE, unit="skeletons per frame")
+    score_visible: float | None = bounded(None, 0.0, 1.0, unit="score")
+    score_occluded: float | None = bounded(None, 0.0, 1.0, unit="score")
+    score_std: float | None = bounded(None, 0.0, 1.0, unit="score")
+    self_hit_margin_m: float = bounded(0.2, 0.0, 2.0)
     occlusion: bool = True
 
     def __post_init__(self):
-        for name in _PROBABILITIES:
-            value = getattr(self, name)
-            if value is not None and not 0 <= value <= 1:
-                raise ValueError(f"{name}: {value} must be in [0, 1]")
-        for name in _NON_NEGATIVE:
-            value = getattr(self, name)
-            if value is not None and not (value >= 0 and math.isfinite(value)):
-                raise ValueError(f"{name}: {value} must be a finite number >= 0")
-        for name in ("occluded_noise_scale", "self_occluded_noise_scale"):
-            value = getattr(self, name)
-            if value is not None and not (value >= 1 and math.isfinite(value)):
-                raise ValueError(f"{name}: {value} must be a finite number >= 1")
-        if self.noise_tail_dof is not None and not self.noise_tail_dof > 2:
-            raise ValueError(f"noise_tail_dof: {self.noise_tail_dof} must be > 2 (a large value gives Gaussian noise)")
-        if self.min_visible_joints is not None and self.min_visible_joints < 1:
-            raise ValueError(f"min_visible_joints: {self.min_visible_joints} must be >= 1")
-        if not self.self_hit_margin_m >= 0:
-            raise ValueError(f"self_hit_margin_m: {self.self_hit_margin_m} must be >= 0")
+        check_ranges(self)
 
     def params(self) -> DetectorParams:
         """The profile's parameters with every knob that was set applied."""

@@ -20,10 +20,13 @@ from pathlib import Path
 import scenarios
 from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
+from sim.config import bounded, check_ranges
 from sim.crowd import CrowdConfig
 from sim.detector import DetectorConfig
 from sim.store import StoreConfig
 
+MAX_DURATION_S = 86400.0  # a day of simulated time
+MAX_SEED = 2**63 - 1
 SCENARIO_DIR = Path(scenarios.__file__).resolve().parent  # the shipped files, installed as package data
 DEFAULT_SCENARIO = "store_layout1"
 
@@ -46,8 +49,8 @@ class Scenario:
 
     name: str
     description: str = ""
-    duration_s: float = 60.0
-    seed: int = 0
+    duration_s: float = bounded(60.0, 0.0, MAX_DURATION_S, low_open=True)
+    seed: int = bounded(0, 0, MAX_SEED)
     store: StoreConfig = field(default_factory=StoreConfig)
     crowd: CrowdConfig = field(default_factory=CrowdConfig)
     cameras: CameraRigConfig = field(default_factory=CameraRigConfig)
@@ -59,10 +62,7 @@ class Scenario:
     def __post_init__(self):
         if not self.name or not self.name.replace("_", "").replace("-", "").isalnum():
             raise ValueError(f"name: {self.name!r} must be letters, digits, '_' or '-'")
-        if not self.duration_s > 0:
-            raise ValueError(f"duration_s: {self.duration_s} must be > 0")
-        if self.seed < 0:
-            raise ValueError(f"seed: {self.seed} must be >= 0")
+        check_ranges(self)
 
     @property
     def where(self) -> str:

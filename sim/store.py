@@ -14,9 +14,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from sim.config import bounded, check_ranges
 from sim.types import Box, BoxKind
 from tracker.jit import jit  # numba compiles the crowd's numeric kernels (plain Python runs them without it)
 
+MAX_FLOOR_M = 500.0  # the largest floor side, and so any position or size on it
 # Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast path searches.
 GRID_CELL_M = 0.1
 # Thickness of the walls and of the floor slab (the floor's top face is z = 0).
@@ -34,15 +36,12 @@ INSIDE_DOOR_M = 0.8
 class ShelfConfig:
     """One shelf unit: its footprint centre, full size (x, y, height) before the yaw, and the yaw."""
 
-    center_m: tuple[float, float] = (0.0, 0.0)
-    size_m: tuple[float, float, float] = (2.0, 0.5, 1.8)
-    yaw_deg: float = 0.0
+    center_m: tuple[float, float] = bounded((0.0, 0.0), 0.0, MAX_FLOOR_M)
+    size_m: tuple[float, float, float] = bounded((2.0, 0.5, 1.8), 0.0, MAX_FLOOR_M, low_open=True)
+    yaw_deg: float = bounded(0.0, -360.0, 360.0)
 
     def __post_init__(self):
-        if not all(s > 0 for s in self.size_m):
-            raise ValueError(f"size_m: {self.size_m} must all be > 0")
-        if not -360.0 <= self.yaw_deg <= 360.0:
-            raise ValueError(f"yaw_deg: {self.yaw_deg} must be in [-360, 360]")
+        check_ranges(self)
 
 
 @dataclass(frozen=True)
@@ -61,32 +60,21 @@ class StoreConfig:
         checkout_size_m: (x, y, height) of the checkout counter.
     """
 
-    width_m: float = 4.0
-    depth_m: float = 3.0
-    ceiling_m: float = 3.0
-    wall_height_m: float = 2.2
+    width_m: float = bounded(4.0, 2.0, MAX_FLOOR_M)
+    depth_m: float = bounded(3.0, 2.0, MAX_FLOOR_M)
+    ceiling_m: float = bounded(3.0, 2.0, 20.0)  # people are up to 1.95 m tall
+    wall_height_m: float = bounded(2.2, 0.5, 20.0)
     shelves: tuple[ShelfConfig, ...] = ()
-    entrance_m: tuple[float, float] | None = None
-    exit_m: tuple[float, float] | None = None
-    door_width_m: float = 1.0
-    checkout_m: tuple[float, float] | None = None
-    checkout_size_m: tuple[float, float, float] = (1.4, 0.6, 0.9)
+    entrance_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
+    exit_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
+    door_width_m: float = bounded(1.0, 0.7, 5.0)
+    checkout_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
+    checkout_size_m: tuple[float, float, float] = bounded((1.4, 0.6, 0.9), 0.0, MAX_FLOOR_M, low_open=True)
 
     def __post_init__(self):
-        for name in ("width_m", "depth_m", "ceiling_m"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name}: {getattr(self, name)} must be > 0")
-        for name in ("width_m", "depth_m"):
-            if not 2.0 <= getattr(self, name) <= 500.0:
-                raise ValueError(f"{name}: {getattr(self, name)} must be in [2, 500] m")
-        if not 2.0 <= self.ceiling_m <= 20.0:
-            raise ValueError(f"ceiling_m: {self.ceiling_m} must be in [2, 20] m (people are up to 1.95 m tall)")
-        if not 0.5 <= self.wall_height_m <= self.ceiling_m:
-            raise ValueError(f"wall_height_m: {self.wall_height_m} must be in [0.5, ceiling_m = {self.ceiling_m}]")
-        if not 0.7 <= self.door_width_m <= 5.0:
-            raise ValueError(f"door_width_m: {self.door_width_m} must be in [0.7, 5] m")
-        if not all(s > 0 for s in self.checkout_size_m):
-            raise ValueError(f"checkout_size_m: {self.checkout_size_m} must all be > 0")
+        check_ranges(self)
+        if self.wall_height_m > self.ceiling_m:
+            raise ValueError(f"wall_height_m: {self.wall_height_m} must be <= ceiling_m = {self.ceiling_m}")
         for i, shelf in enumerate(self.shelves):
             if shelf.size_m[2] > self.ceiling_m:
                 raise ValueError(f"shelves[{i}].size_m: height {shelf.size_m[2]} is above ceiling_m = {self.ceiling_m}")

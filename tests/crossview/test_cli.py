@@ -45,7 +45,7 @@ def test_negative_duration_in_the_file_is_refused(tmp_path, capsys):
     bad = tmp_path / "neg.toml"
     bad.write_text("duration_s = -1.0\n")
     err = _run_bad(capsys, ["run", str(bad), "--out", str(tmp_path)])
-    assert "neg.toml: duration_s: -1.0 must be > 0" in err
+    assert "neg.toml: duration_s: -1.0 must be in (0, 86400] s" in err
 
 
 def test_unwritable_output_folder_is_named(tmp_path, capsys):

@@ -45,7 +45,12 @@ def _write(tmp_path: Path, text: str) -> Path:
     "text, expected",
     [
         ("[store]\nwidth_m = 4.0\ncolour = 'red'\n", r"bad\.toml: unknown key 'store\.colour'"),
-        ("duration_s = -5\n", r"bad\.toml: duration_s: -5\.0 must be > 0"),
+        ("duration_s = -5\n", r"bad\.toml: duration_s: -5\.0 must be in \(0, 86400\] s"),
+        ("[clock]\nfps = nan\n", r"bad\.toml: \[clock\] fps: nan must be in \(0, 1000\] frames per second"),
+        ("[crowd]\nspeed_range_m_s = [1.0, 9.0]\n",
+         r"\[crowd\] speed_range_m_s\[1\]: 9\.0 must be in \[0\.3, 2\] m/s"),
+        ("[cameras]\nrows = 1000\n", r"\[cameras\] rows: 1000 must be in \[1, 100\] cameras"),
+        ("[detector]\nphantom_rate = inf\n", r"\[detector\] phantom_rate: inf must be in \[0, 100\]"),
         ("[store]\nwidth_m = 'wide'\n", r"bad\.toml: store\.width_m = 'wide' must be a number"),
         ("[detector]\nprofile = 'perfect'\n", r"bad\.toml: detector\.profile = 'perfect' is not one of"),
         ("[store\nwidth_m = 4\n", r"bad\.toml: malformed TOML"),
