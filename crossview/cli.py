@@ -79,6 +79,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("recordings"), help="output folder (default recordings/)")
     p.add_argument("--json", type=Path, help="score JSON path (default OUT/NAME.score.json)")
 
+    p = sub.add_parser("scenarios", help="list the shipped scenarios, print one resolved, or the key reference")
+    show = p.add_mutually_exclusive_group()
+    show.add_argument("--show", metavar="SCENARIO", help="print a scenario with every key resolved (TOML)")
+    show.add_argument("--reference", action="store_true", help="print every key's meaning, unit, default and range "
+                      "(docs/scenarios.md)")
+
     p = sub.add_parser("generate", help="simulate a scenario into a recording")
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("-o", "--output", type=Path, required=True, help="recording to write (.mcap)")
@@ -149,6 +155,21 @@ def _cmd_run(args) -> None:
     pipeline.write_json(result, json_path)
     print(report.table())
     print(f"score JSON: {json_path}")
+
+
+def _cmd_scenarios(args) -> None:
+    from sim import scenario as scenario_mod
+
+    if args.reference:
+        print(scenario_mod.reference_markdown(), end="")
+    elif args.show:
+        print(scenario_mod.resolved_toml(scenario_mod.load(args.show)), end="")
+    else:
+        rows = [(path.stem, scenario_mod.load(path)) for path in scenario_mod.shipped()]
+        width = max(len(name) for name, _ in rows)
+        for name, scenario in rows:
+            print(f"{name:<{width}}  {scenario.description}")
+        print(f"(in {scenario_mod.SCENARIO_DIR}; `crossview scenarios --show NAME` prints one in full)")
 
 
 def _cmd_generate(args) -> None:
@@ -252,6 +273,7 @@ COMMANDS = {
     "info": _cmd_info,
     "detector-stats": _cmd_detector_stats,
     "world-stats": _cmd_world_stats,
+    "scenarios": _cmd_scenarios,
     "evaluate": _cmd_evaluate,
     "export": _cmd_export,
     "convert": _cmd_convert,

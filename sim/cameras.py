@@ -72,16 +72,22 @@ class CameraRigConfig:
     1 at the centre), so that it tilts toward its part of the floor and the views overlap.
 
     Attributes:
-        rows, cols: grid size (along y and x).
-        width_px, height_px: image size.
-        hfov_deg: horizontal field of view of the undistorted pinhole, in (0, 180).
-        k1, k2, p1, p2, k3: OpenCV lens distortion.
+        rows: cameras of the grid along y.
+        cols: cameras of the grid along x.
+        width_px: image width.
+        height_px: image height.
+        hfov_deg: horizontal field of view of the undistorted pinhole.
+        k1: OpenCV radial distortion, r² term.
+        k2: OpenCV radial distortion, r⁴ term.
+        p1: OpenCV tangential distortion, first term.
+        p2: OpenCV tangential distortion, second term.
+        k3: OpenCV radial distortion, r⁶ term.
         margin_m: inset of the outer grid cameras from the walls.
         ceiling_gap_m: distance of the cameras below the ceiling.
         aim_height_m: height of the aim points above the floor.
-        aim_inward: fraction in [0, 1] of the way from below the camera to the store centre.
+        aim_inward: fraction of the way from below the camera to the store centre.
         position_jitter_m: std of a random displacement of each grid camera (x and y).
-        placements: explicit cameras; when given they replace the grid.
+        placements: explicit cameras ([[cameras.placements]] tables); when given they replace the grid.
         calibration: path of a real calibration file (the Panoptic dome format); replaces the grid.
             A relative path is taken from the scenario file's folder (from the working directory for a
             scenario built in code).

@@ -25,15 +25,15 @@ class ClockConfig:
     """[clock]: how each camera's frames are timed.
 
     Attributes:
-        fps: nominal frame rate, > 0.
+        fps: nominal frame rate.
         random_phase: each camera starts at a uniform random phase within one period (else all at 0).
-        jitter_std_s: std of the true capture time around the nominal tick, < a quarter period.
+        jitter_std_s: std of the true capture time around the nominal tick, at most a quarter period.
         offset_std_s: std of each camera's constant offset between true time and its stamps.
         stamp_noise_std_s: std of per-frame noise on the written stamp.
-        drop_prob: probability in [0, 1] that a frame is dropped on its own.
-        burst_prob: probability in [0, 1] that a burst of drops starts at a frame.
-        burst_mean_frames: mean length of a burst of drops (geometric), >= 1.
-        delay_mean_s: mean delivery delay, >= 0.
+        drop_prob: probability that a frame is dropped on its own.
+        burst_prob: probability that a burst of drops starts at a frame.
+        burst_mean_frames: mean length of a burst of drops (geometric).
+        delay_mean_s: mean delivery delay; > 0 when delay_std_s is.
         delay_std_s: std of the delivery delay (Gamma distributed; 0 gives a constant delay).
         in_order_delivery: each camera's frames reach the tracker in the order they were taken, as over
             one stream connection (a late frame holds back the ones behind it); frames of different

@@ -48,7 +48,9 @@ class Range:
 
 
 def _number(value: float | None) -> str:
-    return "" if value is None else f"{value:g}"
+    if value is None:
+        return ""
+    return str(value) if isinstance(value, int) else f"{value:g}"
 
 
 def bounded(default, low: float | None = None, high: float | None = None, *, low_open: bool = False,

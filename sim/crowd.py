@@ -83,13 +83,15 @@ class CrowdConfig:
     Attributes:
         people: people in the store at once (the number of body slots); a leaver is replaced by a newcomer.
         start_inside: at t = 0 everybody is already inside; otherwise they arrive one by one.
-        height_range_m: (min, max) body heights drawn from an adult mixture (women and men).
+        height_range_m: (min, max) body heights drawn from an adult mixture (women and men), min < max.
         heights_m: fixed heights of the first people (ids 0, 1, ...); the rest are drawn.
-        speed_range_m_s: (min, max) preferred walking speeds.
+        speed_range_m_s: (min, max) preferred walking speeds, min <= max.
         mean_visit_s: mean time from arrival to heading for the exit.
         mean_arrival_gap_s: mean delay before a newcomer replaces a leaver.
         browse_share: chance that the next goal is a shelf (the rest are places to stand).
-        stand_s, browse_s, checkout_s: (min, max) durations of standing, browsing, paying.
+        stand_s: (min, max) time a person stands at a place, min <= max.
+        browse_s: (min, max) time a person browses a shelf, min <= max.
+        checkout_s: (min, max) time a person pays at the checkout, min <= max.
         area_per_person_m2: walkable floor each person needs; more people than the floor holds is an error.
     """
 

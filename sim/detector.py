@@ -119,8 +119,13 @@ class DetectorConfig:
     """[detector]: the error model of the 2D pose detector.
 
     `profile` picks the preset; every other key, when given, replaces that one parameter of the
-    profile (see `DetectorParams` for their meaning). Rays that end within `self_hit_margin_m` of the
-    keypoint on the keypoint's own body count as reaching it.
+    profile (see `DetectorParams` for their meaning).
+
+    Attributes:
+        profile: the preset error model: ideal (no errors), typical (calibrated to OpenPose on Shelf) or harsh.
+        self_hit_margin_m: rays that end this close to a keypoint on its own body count as reaching it.
+        occlusion: cast rays for occlusion by shelves, other people and the person's own body (false: every
+            joint inside the image counts as visible).
     """
 
     profile: DetectorProfile = DetectorProfile.TYPICAL

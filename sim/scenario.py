@@ -11,6 +11,9 @@ from __future__ import annotations
 import dataclasses
 import enum
 import hashlib
+import inspect
+import json
+import math
 import tomllib
 import types
 import typing
@@ -20,9 +23,9 @@ from pathlib import Path
 import scenarios
 from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
-from sim.config import bounded, check_ranges
+from sim.config import bounded, check_ranges, field_range, field_unit
 from sim.crowd import CrowdConfig
-from sim.detector import DetectorConfig
+from sim.detector import PROFILES, DetectorConfig, DetectorParams, DetectorProfile
 from sim.store import StoreConfig
 
 MAX_DURATION_S = 86400.0  # a day of simulated time
@@ -78,6 +81,11 @@ class Scenario:
 def scenario_dirs() -> list[Path]:
     """Where shipped scenarios are looked up: `./scenarios`, then the installed `scenarios` package."""
     return [Path("scenarios"), SCENARIO_DIR]
+
+
+def shipped() -> list[Path]:
+    """The shipped scenario files, by name."""
+    return sorted(SCENARIO_DIR.glob("*.toml"))
 
 
 def resolve_path(name_or_path: str | Path | None) -> Path:
@@ -188,3 +196,168 @@ def _convert(hint, value, file: str, key: str):
             raise ScenarioError(f"{file}: {key} = {value!r} must be a string")
         return value
     raise TypeError(f"scenario field {key} has unsupported type {hint}")
+
+
+# ---------------------------------------------------------------- the reference of every key, and resolved files
+
+# Where a section's keys are explained when its class documents them elsewhere (the detector's knobs are the
+# profile's parameters).
+_MEANINGS_FROM = {DetectorConfig: (DetectorParams,)}
+
+
+def attribute_docs(cls) -> dict[str, str]:
+    """Each field's meaning from the `Attributes:` section of `cls`'s docstring (Google style; a line may
+    document several fields, `a, b: text`), then from the classes in `_MEANINGS_FROM`."""
+    docs: dict[str, str] = {}
+    for source in (*_MEANINGS_FROM.get(cls, ()), cls):
+        lines = inspect.getdoc(source).splitlines()
+        if "Attributes:" not in lines:
+            continue
+        names: list[str] = []
+        for line in lines[lines.index("Attributes:") + 1:]:
+            if line and not line.startswith(" "):
+                break
+            head, sep, text = line.strip().partition(": ")
+            if line.startswith("    ") and not line.startswith("     ") and sep:
+                names = [n.strip() for n in head.split(",")]
+                for name in names:
+                    docs[name] = text.strip()
+            elif line.strip():
+                for name in names:
+                    docs[name] += " " + line.strip()
+    return docs
+
+
+def _sections(cls=Scenario, prefix: str = ""):
+    """(dotted section name, class, is an array of tables) of `cls` and every section below it."""
+    yield prefix, cls, False
+    hints = typing.get_type_hints(cls)
+    for f in _keys(cls):
+        hint = hints[f.name]
+        if dataclasses.is_dataclass(hint):
+            yield from _sections(hint, f"{prefix}{f.name}.")
+        elif typing.get_origin(hint) is tuple and dataclasses.is_dataclass(typing.get_args(hint)[0]):
+            yield from ((name, sub, True) for name, sub, _ in _sections(typing.get_args(hint)[0], f"{prefix}{f.name}."))
+
+
+def _keys(cls) -> list[dataclasses.Field]:
+    return [f for f in dataclasses.fields(cls) if f.init and f.name not in ("source_text", "source_path")]
+
+
+def _is_table(hint) -> bool:
+    return dataclasses.is_dataclass(hint) or (
+        typing.get_origin(hint) is tuple and dataclasses.is_dataclass(typing.get_args(hint)[0]))
+
+
+def _type_name(hint) -> str:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return _type_name(next(a for a in args if a is not type(None)))
+    if origin is tuple:
+        if len(args) == 2 and args[1] is Ellipsis:
+            return f"array of {_type_name(args[0])}"
+        return f"array of {len(args)} {_type_name(args[0])}"
+    if isinstance(hint, type) and issubclass(hint, enum.Enum):
+        return "one of " + ", ".join(f'"{m.value}"' for m in hint)
+    return {float: "number", int: "integer", bool: "true or false", str: "text"}.get(hint, str(hint))
+
+
+def _default_text(cls, f: dataclasses.Field) -> str:
+    if f.default is dataclasses.MISSING:
+        value = f.default_factory() if f.default_factory is not dataclasses.MISSING else None
+    else:
+        value = f.default
+    if cls is DetectorConfig and value is None:
+        typical = getattr(PROFILES[DetectorProfile.TYPICAL], f.name)
+        return f"the profile's (typical: {_toml_value(typical)})"
+    if cls is Scenario and f.name == "name":
+        return "the file's name"
+    if value is None:
+        return "none"
+    return f"`{_toml_value(value)}`" if value != () else "none"
+
+
+def reference_markdown() -> str:
+    """docs/scenarios.md: every key of a scenario file with its meaning, type, unit, default and valid range,
+    written from the configuration classes themselves (a test checks the committed file against it)."""
+    out = [
+        "# Scenario files: every key",
+        "",
+        "A scenario is a TOML file; every key is optional and takes the default below. `crossview scenarios` lists",
+        "the shipped scenarios and `crossview scenarios --show NAME` prints one with every key resolved, as a file",
+        "to start from. Unknown keys, wrong types and values outside the valid range are errors that name the",
+        "file and the key. Relative paths (`cameras.calibration`) are taken from the scenario file's folder.",
+        "",
+        "This page is generated from the configuration classes (`crossview scenarios --reference`); a test fails",
+        "when it is stale.",
+    ]
+    for section, cls, array in _sections():
+        title = section.rstrip(".")
+        heading = "Top level" if not title else (f"[[{title}]]" if array else f"[{title}]")
+        summary = inspect.getdoc(cls).split("\n\n")[0].replace("\n", " ")
+        summary = summary.split(": ", 1)[1] if summary.startswith("[") else summary
+        out += ["", f"## {heading}", "", summary[0].upper() + summary[1:], "",
+                "| key | meaning | type | unit | default | valid |", "|---|---|---|---|---|---|"]
+        docs = attribute_docs(cls)
+        hints = typing.get_type_hints(cls)
+        shown = "" if array else section  # keys of an array of tables are written under its [[header]]
+        for f in _keys(cls):
+            if _is_table(hints[f.name]):
+                continue
+            valid = field_range(f)
+            kind = _type_name(hints[f.name])
+            valid_text = str(valid) if valid is not None else ("see type" if kind.startswith("one of") else "any")
+            meaning = docs.get(f.name, "").replace("|", "\\|")
+            out.append(f"| `{shown}{f.name}` | {meaning} | {kind} | {field_unit(f) or '–'} | "
+                       f"{_default_text(cls, f)} | {valid_text} |")
+    return "\n".join(out) + "\n"
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, enum.Enum):
+        value = value.value
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "-inf")
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return str(value)
+
+
+def resolved_toml(scenario: Scenario) -> str:
+    """`scenario` as a TOML file with every key written out (the profile's detector parameters as comments,
+    since a key set in the file overrides the profile); loading it gives the same scenario. The name is left
+    to the new file's name, and a relative calibration path is made absolute so that the file can move."""
+    lines = [f"# {scenario.name}, every key resolved ({scenario.where}).", ""]
+    calibration = scenario.cameras.calibration
+    if calibration and scenario.source_path and not Path(calibration).is_absolute():
+        calibration = str((Path(scenario.source_path).parent / calibration).resolve())
+        scenario = dataclasses.replace(scenario, cameras=dataclasses.replace(scenario.cameras, calibration=calibration))
+
+    def table(obj, section: str, header: str | None) -> None:
+        cls = type(obj)
+        hints = typing.get_type_hints(cls)
+        if header is not None:
+            lines.extend(["", header])
+        nested = []
+        for f in _keys(cls):
+            value = getattr(obj, f.name)
+            if _is_table(hints[f.name]):
+                nested.append((f, value))
+            elif value is None and cls is DetectorConfig:
+                effective = getattr(obj.params(), f.name)
+                lines.append(f"# {f.name} = {_toml_value(effective)}  # the {obj.profile.value} profile's")
+            elif value is not None and (obj is not scenario or f.name != "name"):
+                lines.append(f"{f.name} = {_toml_value(value)}")
+        for f, value in nested:
+            if isinstance(value, tuple):
+                for item in value:
+                    table(item, f"{section}{f.name}.", f"[[{section}{f.name}]]")
+            else:
+                table(value, f"{section}{f.name}.", f"[{section}{f.name}]")
+
+    table(scenario, "", None)
+    return "\n".join(lines) + "\n"

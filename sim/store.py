@@ -34,7 +34,13 @@ INSIDE_DOOR_M = 0.8
 
 @dataclass(frozen=True)
 class ShelfConfig:
-    """One shelf unit: its footprint centre, full size (x, y, height) before the yaw, and the yaw."""
+    """[[store.shelves]]: one shelf unit, a box standing on the floor.
+
+    Attributes:
+        center_m: (x, y) centre of its footprint on the floor.
+        size_m: (x, y, height) full size before the yaw; the height at most the ceiling.
+        yaw_deg: rotation about the vertical, counter-clockwise seen from above.
+    """
 
     center_m: tuple[float, float] = bounded((0.0, 0.0), 0.0, MAX_FLOOR_M)
     size_m: tuple[float, float, float] = bounded((2.0, 0.5, 1.8), 0.0, MAX_FLOOR_M, low_open=True)
@@ -49,14 +55,16 @@ class StoreConfig:
     """[store]: the floor rectangle [0, width] x [0, depth], ceiling height and fixtures.
 
     Attributes:
-        width_m, depth_m: floor extents along world x and y.
+        width_m: floor extent along world x.
+        depth_m: floor extent along world y.
         ceiling_m: ceiling height; cameras hang below it.
-        wall_height_m: height of the walls around the floor (at most the ceiling).
+        wall_height_m: height of the walls around the floor, at most the ceiling.
         shelves: shelf units ([[store.shelves]] tables).
-        entrance_m, exit_m: (x, y) centre of each door on a wall; None puts them on the x = 0 wall at a
-            quarter and three quarters of the depth.
+        entrance_m: (x, y) centre of the entrance, on a wall; left out, it is on the x = 0 wall at a quarter
+            of the depth.
+        exit_m: (x, y) centre of the exit, on a wall; left out, on the x = 0 wall at three quarters of the depth.
         door_width_m: clear width of both doors.
-        checkout_m: (x, y) centre of the checkout counter, None for a store without one.
+        checkout_m: (x, y) centre of the checkout counter; left out, the store has none.
         checkout_size_m: (x, y, height) of the checkout counter.
     """
 

@@ -73,3 +73,25 @@ def test_geometry_errors_found_while_building_the_world_name_the_file(tmp_path, 
     err = _run_bad(capsys, ["generate", str(bad), "-o", str(out), "--duration", "1"])
     assert f"{bad}: store.shelves[1]: overlaps store.shelves[0]" in err
     assert not out.exists()
+
+
+def test_scenarios_lists_every_shipped_one_with_its_description(capsys):
+    from sim import scenario
+
+    assert main(["scenarios"]) == 0
+    out = capsys.readouterr().out
+    for path in scenario.shipped():
+        line = next(line for line in out.splitlines() if line.startswith(path.stem + " "))
+        assert scenario.load(path).description in line
+
+
+def test_scenarios_show_prints_a_file_that_loads_and_reference_is_the_docs(tmp_path, capsys):
+    from sim import scenario
+
+    assert main(["scenarios", "--show", "store_layout2"]) == 0
+    (tmp_path / "mine.toml").write_text(capsys.readouterr().out)
+    assert scenario.load(tmp_path / "mine.toml").store == scenario.load("store_layout2").store
+    assert main(["scenarios", "--reference"]) == 0
+    assert capsys.readouterr().out == scenario.reference_markdown()
+    err = _run_bad(capsys, ["scenarios", "--show", "nowhere"])
+    assert "nowhere: no such scenario file (shipped scenarios: panoptic_dome, store_layout1" in err

@@ -65,3 +65,50 @@ def test_bad_files_name_the_file_and_key(tmp_path, text, expected):
 def test_missing_file_lists_the_shipped_scenarios(tmp_path):
     with pytest.raises(scenario.ScenarioError, match="no such scenario file.*store_layout1"):
         scenario.load(tmp_path / "nope.toml")
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.stem for p in SHIPPED])
+def test_a_resolved_scenario_loads_back_as_the_same_scenario(path, tmp_path):
+    original = scenario.load(path)
+    copy = tmp_path / "elsewhere" / f"{path.stem}.toml"
+    copy.parent.mkdir()
+    copy.write_text(scenario.resolved_toml(original))
+    again = scenario.load(copy)
+    # Every section equal; a relative calibration path now points at the same file from anywhere.
+    for section in ("store", "crowd", "clock", "detector"):
+        assert getattr(again, section) == getattr(original, section), section
+    assert (again.name, again.duration_s, again.seed, again.description) == (
+        original.name, original.duration_s, original.seed, original.description)
+    if original.cameras.calibration:
+        assert Path(again.cameras.calibration).is_absolute()
+        assert Path(again.cameras.calibration).read_bytes() == (path.parent / original.cameras.calibration).read_bytes()
+    else:
+        assert again.cameras == original.cameras
+
+
+def test_docs_scenarios_md_is_the_reference_of_the_configuration_classes():
+    docs = Path(__file__).resolve().parents[2] / "docs" / "scenarios.md"
+    assert docs.read_text() == scenario.reference_markdown(), (
+        "docs/scenarios.md is stale: run `crossview scenarios --reference > docs/scenarios.md`")
+
+
+def _holds_numbers(hint) -> bool:
+    import typing
+
+    return hint in (float, int) or any(_holds_numbers(a) for a in typing.get_args(hint) if a is not Ellipsis)
+
+
+def test_every_key_has_a_meaning_and_every_number_a_range():
+    import typing
+
+    from sim.config import field_range
+
+    for section, cls, _ in scenario._sections():
+        docs = scenario.attribute_docs(cls)
+        hints = typing.get_type_hints(cls)
+        for f in scenario._keys(cls):
+            if scenario._is_table(hints[f.name]):
+                continue
+            assert docs.get(f.name), f"{section}{f.name} has no meaning in {cls.__name__}'s Attributes"
+            if _holds_numbers(hints[f.name]):
+                assert field_range(f) is not None, f"{section}{f.name} declares no range"
