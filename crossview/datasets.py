@@ -4,7 +4,7 @@ A dataset directory holds `calibration.json` (per camera `K` normalised by the i
 camera-to-world pose in centimetres, `dist_coeffs` k1 k2 p1 p2), the 2D input as `detection.json` (COCO-17
 detections, `id` -1) or `annotation_2d.json` (ground-truth joints, e.g. the 14 Campus joints), and optionally
 `annotation_3d.json` (truth, 14 joints, centimetres; the list index is the frame number). Results use the
-`annotation_3d.json` shape with COCO-17 joints. See ../shared/data/README.md.
+`annotation_3d.json` shape with COCO-17 joints (longcw/crossview_3d_pose_tracking documents the layout).
 
 Distortion: the 2D points of the published files already fit the undistorted pinhole model (Campus: median
 0.3 px without distortion), so `load_cameras` gives zero distortion unless asked for the listed coefficients.

@@ -1,6 +1,7 @@
 """Detector statistics measured from camera frames and their truth, beside OpenPose's on Shelf.
 
-The figures mirror how the real detector was measured (../shared/data/README.md): per-joint error
+The figures mirror how a real detector was measured (OpenPose BODY25 on the Shelf dataset, against its
+projected 3D truth, 301 frames of 5 cameras): per-joint error
 normalised by the person's size in the image on limb joints, gross errors above 0.2 of that size,
 person-views (at least half of the joints inside the image) with no detection, and fragments
 (fewer than 6 of the 15 BODY25 body joints) among detections of person-views at least half inside the
@@ -20,7 +21,7 @@ from sim.detector import person_size_px
 from sim.types import CameraFrame, DetectionEffect
 from tracker.types import COCO17, Camera
 
-# OpenPose (BODY25) on Shelf, 5 cameras, 301 frames (../shared/data/README.md).
+# OpenPose (BODY25) on the Shelf dataset (Belagiannis et al., CVPR 2014), 5 cameras, 301 frames, limb joints.
 SHELF_OPENPOSE = {
     "error_median": 0.02,
     "error_p95": 0.06,

@@ -94,7 +94,7 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
         occluded_drop_prob=0.0, self_occluded_drop_prob=0.0, joint_drop_prob=0.0, fragment_prob=0.0,
         swap_prob=0.0, duplicate_prob=0.0, phantom_rate=0.0, score_visible=1.0, score_occluded=1.0, score_std=0.0,
     ),
-    # Calibrated against OpenPose on Shelf (../shared/data/README.md); see docs/sensor-model.md.
+    # Calibrated against OpenPose (BODY25) detections on the Shelf dataset; see docs/sensor-model.md.
     DetectorProfile.TYPICAL: DetectorParams(
         noise_frac=0.013, noise_tail_dof=5.0, occluded_noise_scale=1.6, self_occluded_noise_scale=1.3,
         gross_error_prob=0.001, miss_prob=0.03, miss_occlusion_gain=0.15, min_visible_joints=2,
