@@ -23,29 +23,24 @@ from __future__ import annotations
 import bisect
 import functools
 import importlib.metadata
-import itertools
 import json
 import math
 import os
-import queue
 import struct
-import threading
 import zlib
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NamedTuple
 
-import lz4.frame
 import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from google.protobuf.message import DecodeError
 from mcap.exceptions import McapError
-from mcap.opcode import Opcode
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, ChunkIndex, DataEnd, Message, MessageIndex, Metadata, Schema
+from mcap.records import Channel, DataEnd, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
-from mcap.writer import CompressionType, IndexType, Writer
+from mcap.writer import CompressionType, Writer
 
 from crossview import foxglove
 from sim.poses import interpolate_poses
@@ -57,8 +52,6 @@ OLDEST_RECORDING_VERSION = 2  # format 1 stored every frame's poses at capture; 
 MAGIC = b"\x89MCAP0\r\n"
 CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: the unit of reading and of CRC checks
 COMPRESSION = CompressionType.LZ4  # lz4 ships with the mcap package; zstandard would be one more dependency
-COMPRESSION_NAME = "lz4"  # the chunk record's name of COMPRESSION
-COMPRESSION_CODEC = lz4.frame.compress  # what the mcap writer compresses a chunk with for COMPRESSION
 TRUTH_SCENE_PERIOD_S = 0.05  # the 3D truth skeletons people look at are drawn at 20 Hz, the data stay 100 Hz
 TRACK_SCENE_PERIOD_S = 0.05  # likewise for the tracker's skeletons in a tracks file
 
@@ -609,10 +602,6 @@ class _AtomicMcapWriter:
                 self._file, chunk_size=chunk_size, compression=COMPRESSION, enable_data_crcs=True,
             )
             self._writer.start(profile="", library=f"crossview-testbed {header_doc['software_version']}")
-            self._fast = _fast_path(self._writer, chunk_size)
-            self._chunks = _ChunkThread(self._writer, self._file) if self._fast is not None else None
-            if self._chunks is not None:
-                self._fast = (*self._fast[:2], self._chunks.finalize, chunk_size)
             # The flat metadata record lands before the first chunk, so kind and version are read first.
             self._writer.add_metadata(METADATA_NAME, metadata)
             self._schemas: dict[str, int] = {}
@@ -640,84 +629,24 @@ class _AtomicMcapWriter:
 
     def end_chunk(self) -> None:
         """Closes the chunk in progress, so that what came before survives a truncation after it."""
-        if self._chunks is not None:
-            self._chunks.finalize()
-            self._chunks.drain()
         self._writer.flush()
 
     def add(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
-        if self._fast is None:
-            self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data,
-                                     publish_time=log_time_ns)
-            return
-        self.add_many(((channel_id, log_time_ns, data),))
+        self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data, publish_time=log_time_ns)
 
     def add_many(self, messages: Sequence[tuple[int, int, bytes]]) -> None:
-        """`add` of each (channel id, log time ns, data) in turn, the same bytes, with the records of a chunk
-        written to its buffer at once.
-
-        What `Writer.add_message` does, without building a Message record object and packing it field by
-        field (most of the writer's cost per message); the bytes are the same (tests compare files)."""
-        fast = self._fast
-        if fast is None:
-            for message in messages:
-                self.add(*message)
-            return
-        stats, chunk, finalize, chunk_size = fast
-        counts, indices, head = stats.channel_message_counts, chunk.message_indices, _MESSAGE_HEAD.pack
-        buffer = chunk.record_writer._buffer
-        offset = buffer.tell()
-        parts: list = []
-        times: list = []  # of the messages since the chunk's last bookkeeping (`settle`)
-
-        def settle() -> None:
-            """The statistics' and the chunk's message counts and time range, over `times` at once."""
-            if not times:
-                return
-            first, last = min(times), max(times)
-            if stats.message_count == 0 or first < stats.message_start_time:
-                stats.message_start_time = first
-            stats.message_end_time = max(stats.message_end_time, last)
-            stats.message_count += len(times)
-            if chunk.num_messages == 0 or first < chunk.message_start_time:
-                chunk.message_start_time = first
-            chunk.message_end_time = max(chunk.message_end_time, last)
-            chunk.num_messages += len(times)
-            times.clear()
-
+        """`add` of each (channel id, log time ns, data) in turn."""
+        add = self._writer.add_message
         for channel_id, t, data in messages:
-            counts[channel_id] += 1
-            index = indices.get(channel_id)
-            if index is None:
-                index = indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
-            index.records.append((t, offset))
-            times.append(t)
-            parts.append(head(_OPCODE_MESSAGE, 22 + len(data), channel_id, 0, t, t))
-            parts.append(data)
-            offset += _MESSAGE_HEAD.size + len(data)
-            if offset > chunk_size:  # (as `add`: the chunk is closed after the message that fills it)
-                buffer.write(b"".join(parts))
-                parts = []
-                settle()
-                finalize()
-                buffer = chunk.record_writer._buffer
-                offset = buffer.tell()
-        settle()
-        if parts:
-            buffer.write(b"".join(parts))
+            add(channel_id, t, data, t)
 
     def close(self, summary_metadata: dict[str, str]) -> None:
         """Finishes the file, fsyncs it and renames it onto the final path."""
         if self._done:
             return
         try:
-            if self._chunks is not None:  # (the chunk in progress follows the metadata, as it always has)
-                self._chunks.drain()
             self._writer.add_metadata(SUMMARY_METADATA_NAME, summary_metadata)
             self._writer.finish()
-            if self._chunks is not None:  # the thread ends with the file: none is left behind (a later fork
-                self._chunks.drain()  # must not copy a process whose other threads may hold locks)
-                self._chunks.stop()
             self._file.flush()
             os.fsync(self._file.fileno())
             self._file.close()
@@ -742,158 +671,11 @@ class _AtomicMcapWriter:
         if self._done:
             return
         self._done = True
-        if getattr(self, "_chunks", None) is not None:
-            self._chunks.stop()
         self._file.close()
         try:
             os.unlink(self._tmp)
         except FileNotFoundError:
             pass
-
-
-class _ChunkThread:
-    """Finishes the mcap Writer's chunks on a thread of its own: LZ4, the CRCs and the file writes (C code
-    that lets go of the GIL) then run beside the caller's next messages, on the second core.
-
-    `finalize` does what `Writer.__finalize_chunk` does, in the same order, so the bytes are the same (the
-    tests compare files): the caller's thread takes the chunk's bytes and indexes and resets the chunk
-    builder, and the thread compresses the chunk and writes it, its message indexes and its chunk index.
-    Jobs run one at a time in submission order, and nothing else touches the writer's output while any is
-    pending: `drain` before every other write. A failure on the thread is raised by the next call.
-    """
-
-    _QUEUE_CHUNKS = 4  # chunks (of about CHUNK_SIZE each) waiting at most: memory stays bounded
-    # The file's data is sent to the disk every this many bytes, here (the call lets go of the GIL): the
-    # closing fsync then waits for the last few MiB only, not for the whole file (75-85 ms for the 103 MB of
-    # 60 s of store_layout2 on the project's machine, at the end of the command, where nothing runs beside it).
-    _SYNC_BYTES = 16 << 20
-
-    def __init__(self, writer: Writer, file):
-        self._writer = writer
-        self._file = file
-        self._unsynced = 0
-        self._builder = writer._Writer__chunk_builder
-        self._stats = writer._Writer__statistics
-        self._jobs: queue.Queue = queue.Queue(self._QUEUE_CHUNKS)
-        self._error: BaseException | None = None
-        self._thread: threading.Thread | None = None
-
-    def finalize(self) -> None:
-        """Hands the chunk in progress (if it holds messages) to the thread."""
-        self._raise()
-        builder = self._builder
-        if builder.num_messages == 0:
-            return
-        self._stats.chunk_count += 1
-        job = (builder.end(), builder.message_start_time, builder.message_end_time, dict(builder.message_indices))
-        builder.reset()
-        if self._thread is None:
-            self._thread = threading.Thread(target=self._run, name="mcap-chunks", daemon=True)
-            self._thread.start()
-        self._jobs.put(job)
-
-    def drain(self) -> None:
-        """Waits until every chunk handed over is in the file."""
-        self._jobs.join()
-        self._raise()
-
-    def stop(self) -> None:
-        """Drops what is still queued and waits for the thread (after an error or an interrupt)."""
-        if self._thread is None:
-            return
-        self._error = self._error or _Stopped()
-        while True:
-            try:
-                self._jobs.get_nowait()
-                self._jobs.task_done()
-            except queue.Empty:
-                break
-        self._jobs.put(None)
-        self._thread.join()
-        self._thread = None
-
-    def _raise(self) -> None:
-        if self._error is not None and not isinstance(self._error, _Stopped):
-            error, self._error = self._error, _Stopped()
-            raise error
-
-    def _run(self) -> None:
-        while True:
-            job = self._jobs.get()
-            try:
-                if job is None:
-                    return
-                if self._error is None:
-                    self._write(*job)
-            except BaseException as e:  # raised again in the caller's thread
-                self._error = e
-            finally:
-                self._jobs.task_done()
-
-    def _write(self, data: bytes, start_ns: int, end_ns: int, indices: dict) -> None:
-        w = self._writer
-        records = w._Writer__record_builder
-        stream = w._Writer__stream
-        flush = w._Writer__flush
-        compressed = COMPRESSION_CODEC(data)
-        chunk = Chunk(compression=COMPRESSION_NAME, data=compressed, message_start_time=start_ns,
-                      message_end_time=end_ns, uncompressed_crc=zlib.crc32(data), uncompressed_size=len(data))
-        flush()
-        chunk_start = stream.tell()
-        chunk.write(records)
-        chunk_index = ChunkIndex(message_start_time=start_ns, message_end_time=end_ns, chunk_start_offset=chunk_start,
-                                 chunk_length=records.count, message_index_offsets={}, message_index_length=0,
-                                 compression=COMPRESSION_NAME, compressed_size=len(compressed),
-                                 uncompressed_size=len(data))
-        flush()
-        index_start = stream.tell()
-        for channel_id, index in indices.items():
-            chunk_index.message_index_offsets[channel_id] = index_start + records.count
-            # `index.write(records)`, the same bytes: its loop of two struct packs per message held the GIL
-            # for about 2 ms per simulated second of store_layout2, time the caller's thread waited for.
-            n = len(index.records)
-            records.write(_MESSAGE_INDEX_HEAD.pack(_OPCODE_MESSAGE_INDEX, 6 + 16 * n, channel_id, 16 * n))
-            records.write(struct.pack(f"<{2 * n}Q", *itertools.chain.from_iterable(index.records)))
-        chunk_index.message_index_length = records.count
-        flush()
-        w._Writer__chunk_indices.append(chunk_index)
-        self._unsynced += len(compressed)
-        if self._unsynced >= self._SYNC_BYTES:
-            self._file.flush()
-            _datasync(self._file.fileno())
-            self._unsynced = 0
-
-
-_datasync = getattr(os, "fdatasync", os.fsync)  # (macOS has no fdatasync)
-
-
-class _Stopped(Exception):
-    """Marks a chunk thread that was stopped: its remaining jobs are dropped."""
-
-
-_MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel id, sequence, log time, publish time
-_OPCODE_MESSAGE = int(Opcode.MESSAGE)
-_MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel id, length of the records
-_OPCODE_MESSAGE_INDEX = int(Opcode.MESSAGE_INDEX)
-
-
-def _fast_path(writer: Writer, chunk_size: int):
-    """The mcap Writer's statistics, chunk builder and chunk finaliser, when this mcap version has them as
-    expected (else None: messages then go through the public `add_message`)."""
-    try:
-        stats = writer._Writer__statistics
-        chunk = writer._Writer__chunk_builder
-        finalize = writer._Writer__finalize_chunk
-        buffer = chunk.record_writer._buffer
-        ok = (writer._Writer__chunk_size == chunk_size and hasattr(buffer, "tell") and hasattr(chunk, "num_messages")
-              and isinstance(chunk.message_indices, dict) and hasattr(stats, "channel_message_counts")
-              and writer._Writer__compression == COMPRESSION and writer._Writer__enable_crcs
-              and writer._Writer__index_types & IndexType.MESSAGE and isinstance(writer._Writer__chunk_indices, list)
-              and callable(writer._Writer__flush) and hasattr(writer, "_Writer__record_builder")
-              and hasattr(writer, "_Writer__stream"))
-    except AttributeError:
-        return None
-    return (stats, chunk, finalize, chunk_size) if ok else None
 
 
 def _flat_metadata(kind: str, header) -> dict[str, str]:

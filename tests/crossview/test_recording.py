@@ -618,45 +618,32 @@ def test_numpy_encoding_is_protobufs_own_serialisation(world):
     assert checked > 50
 
 
-def test_fast_message_path_writes_what_the_mcap_writer_writes(tmp_path, world, monkeypatch):
-    """Messages go straight into the mcap writer's chunk; the file must equal one written through
-    `Writer.add_message` (small chunks, so that chunks are finalised along the way)."""
+def test_a_failure_while_writing_chunks_is_raised_and_leaves_no_file(tmp_path, world, monkeypatch):
+    """A failure while a chunk is written (a full disk, say) reaches the caller as the exception it was,
+    and the file is dropped as for any other failure."""
     cameras, events = world
-    fast = write_recording(tmp_path / "fast.mcap", cameras, events, chunk_size=4096).read_bytes()
-    monkeypatch.setattr(recording, "_fast_path", lambda writer, chunk_size: None)
-    slow = write_recording(tmp_path / "slow.mcap", cameras, events, chunk_size=4096).read_bytes()
-    assert fast == slow
+    real_open = open
 
+    class FullDisk:
+        def __init__(self, f):
+            self._f = f
 
-def test_the_chunk_thread_sends_the_data_to_disk_along_the_way(tmp_path, world, monkeypatch):
-    """Every _SYNC_BYTES of chunks the chunk thread syncs the file's data (so that the closing fsync waits
-    for the tail only), with the chunks before it in the file, and the bytes are the same."""
-    cameras, events = world
-    plain = write_recording(tmp_path / "plain.mcap", cameras, events, chunk_size=4096).read_bytes()
-    synced = []
+        def write(self, data):
+            if self._f.tell() > 4096:
+                raise OSError(28, "No space left on device")
+            return self._f.write(data)
 
-    def datasync(fd):
-        synced.append(os.fstat(fd).st_size)
-        os.fsync(fd)
+        def __getattr__(self, name):
+            return getattr(self._f, name)
 
-    monkeypatch.setattr(recording, "_datasync", datasync)
-    monkeypatch.setattr(recording._ChunkThread, "_SYNC_BYTES", 3000)
-    path = write_recording(tmp_path / "synced.mcap", cameras, events, chunk_size=4096)
-    assert path.read_bytes() == plain
-    assert len(synced) > 3 and synced == sorted(synced) and synced[0] >= 3000 and synced[-1] < len(plain)
+    def opener(path, mode="r", *args, **kwargs):
+        f = real_open(path, mode, *args, **kwargs)
+        return FullDisk(f) if "w" in mode and str(path).endswith(".tmp") else f
 
-
-def test_a_failure_on_the_chunk_thread_is_raised_and_leaves_no_file(tmp_path, world, monkeypatch):
-    """Chunks are compressed and written on a thread; its failure (a full disk, say) reaches the caller
-    as the exception it was, and the file is dropped as for any other failure."""
-    cameras, events = world
-
-    def disk_full(data):
-        raise OSError(28, "No space left on device")
-
-    monkeypatch.setattr(recording, "COMPRESSION_CODEC", disk_full)
+    monkeypatch.setattr("builtins.open", opener)
     with pytest.raises(OSError, match="No space left"):
         write_recording(tmp_path / "rec.mcap", cameras, events, chunk_size=4096)
+    monkeypatch.undo()
     assert list(tmp_path.iterdir()) == []
 
 

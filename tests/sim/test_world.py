@@ -219,7 +219,7 @@ def test_more_people_than_the_floor_holds_is_an_error():
 
 
 def test_a_body_height_outside_the_supported_range_is_an_error():
-    with pytest.raises(ValueError, match=r"heights_m\[1\]: 2.3 m is outside"):
+    with pytest.raises(ValueError, match=r"heights_m\[1\]: 2.3 must be in \[1\.4, 2\.1\] m"):
         CrowdConfig(people=3, heights_m=(1.7, 2.3))
     with pytest.raises(ScenarioError, match=r"crowd\] heights_m\[0\]"):
         sc.load("store_layout1", overrides={"crowd.heights_m": [1.2]})
