@@ -62,7 +62,7 @@ def bench_tracker(
 
 
 def _skeleton(rec):
-    from tracker.types import SKELETONS
+    from core.types import SKELETONS
 
     return SKELETONS[rec.header.skeleton_name]
 

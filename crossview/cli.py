@@ -12,6 +12,8 @@ import os
 import sys
 from pathlib import Path
 
+from core.errors import CrossviewError
+
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130
 
@@ -305,8 +307,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("crossview: interrupted; no partial output was kept", file=sys.stderr)
         return EXIT_INTERRUPTED
-    except (ValueError, OSError) as e:
-        # Bad input: scenario, recording and config errors are ValueErrors that name the file and key.
+    except (CrossviewError, OSError) as e:
+        # Bad input: scenario, recording, dataset and config errors name the file and the key. Anything
+        # else is a bug and shows its traceback.
         if args.verbose:
             raise
         message = str(e).splitlines()[0] if str(e) else type(e).__name__

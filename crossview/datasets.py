@@ -19,13 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from tracker.types import CAMPUS14, COCO17, Camera, Frame, TrackerOutput
+from core.errors import CrossviewError
+from core.types import CAMPUS14, COCO17, Camera, Frame
+from tracker.types import TrackerOutput
 
 CM_TO_M = 0.01
 _SOURCES = ("detection.json", "annotation_2d.json")
 
 
-class DatasetError(ValueError):
+class DatasetError(CrossviewError):
     """A dataset directory does not follow the published layout; the message names the file and the key."""
 
 

@@ -38,8 +38,9 @@ from google.protobuf import descriptor_pb2
 from google.protobuf.descriptor import Descriptor
 from google.protobuf.timestamp_pb2 import Timestamp
 
+from core.types import Camera, Skeleton
 from sim.types import Box, BoxKind, CameraFrame, PoseTruth
-from tracker.types import Camera, Skeleton, TrackerOutput
+from tracker.types import TrackerOutput
 
 WORLD_FRAME = "world"
 FRUSTUM_DEPTH_M = 0.6  # how far the drawn frustum reaches along the optical axis

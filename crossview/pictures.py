@@ -9,8 +9,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from core.types import Camera
 from sim.types import Box, BoxKind
-from tracker.types import Camera
 
 # BGR colours of the store's boxes.
 _BOX_BGR = {

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from core.errors import CrossviewError
 from sim import scenario as scenario_mod
 from sim.types import BoxKind, PoseTruth
 
@@ -34,7 +35,7 @@ def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
         width_m, depth_m: floor extents along x (columns) and y (rows).
     """
     if count < 1:
-        raise ValueError(f"--cameras: {count} must be >= 1")
+        raise CrossviewError(f"--cameras: {count} must be >= 1")
     aspect = width_m / depth_m
     rows = min(
         (r for r in range(1, count + 1) if count % r == 0),
@@ -65,11 +66,11 @@ def check_writable(path: Path) -> None:
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise ValueError(f"{folder}: output folder cannot be created ({e.strerror})") from None
+        raise CrossviewError(f"{folder}: output folder cannot be created ({e.strerror})") from None
     if not os.access(folder, os.W_OK):
-        raise ValueError(f"{folder}: output folder is not writable; choose another with --out / -o")
+        raise CrossviewError(f"{folder}: output folder is not writable; choose another with --out / -o")
     if path.is_dir():
-        raise ValueError(f"{path}: is a folder; give a file name ending in .mcap")
+        raise CrossviewError(f"{path}: is a folder; give a file name ending in .mcap")
 
 
 @dataclass(frozen=True)
@@ -167,7 +168,7 @@ def make_tracker(method: str, cameras, preset: str, config_path: Path | None, sk
         return Tracker(cameras, config, skeleton), config
     if method == "baseline":
         return BaselineTracker(cameras, config, skeleton), config
-    raise ValueError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
+    raise CrossviewError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
 
 
 @dataclass(frozen=True)
@@ -199,8 +200,8 @@ def track(
     """Runs a tracker over a recording's frames in delivery order and writes the tracks file."""
     from tqdm import tqdm
 
+    from core.types import SKELETONS
     from crossview import recording
-    from tracker.types import SKELETONS
 
     check_writable(out)
     rec = recording.open_recording(rec_path)
@@ -278,7 +279,7 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
     rec = recording.open_recording(rec_path)
     tracks = recording.open_tracks(tracks_path)
     if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
-        raise ValueError(
+        raise CrossviewError(
             f"{tracks_path}: tracks were made from scenario {tracks.header.scenario_name!r} seed {tracks.header.seed} "
             f"(digest {tracks.header.scenario_digest[:12]}), not from {rec_path} "
             f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"

@@ -42,10 +42,12 @@ from mcap.records import Channel, DataEnd, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 from mcap.writer import CompressionType, Writer
 
+from core.errors import CrossviewError
+from core.types import SKELETONS, Camera, Frame, Skeleton
 from crossview import foxglove
 from sim.poses import interpolate_poses
 from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
-from tracker.types import SKELETONS, Camera, Frame, Skeleton, Target, TargetState, TrackerOutput
+from tracker.types import Target, TargetState, TrackerOutput
 
 FORMAT_VERSION = 2
 OLDEST_RECORDING_VERSION = 2  # format 1 stored every frame's poses at capture; this reader derives them
@@ -74,7 +76,7 @@ def camera_topic(camera_name: str, what: str) -> str:
     return f"/cameras/{camera_name}/{what}"
 
 
-class RecordingError(ValueError):
+class RecordingError(CrossviewError):
     """A file that cannot be read as the recording or tracks file asked for; the message names the file."""
 
 

@@ -19,9 +19,11 @@ from llvmlite import ir as llvm_ir
 from numba import types
 from numba.extending import intrinsic
 
+from core.errors import ScenarioError
+from core.jit import jit
+from core.types import Camera
 from sim.config import bounded, check_ranges
-from sim.store import MAX_FLOOR_M, jit
-from tracker.types import Camera
+from sim.store import MAX_FLOOR_M
 
 MAX_GRID = 100  # cameras along one side of a grid
 MAX_IMAGE_PX = 16384
@@ -165,7 +167,6 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
     Raises:
         ScenarioError: a camera lies outside the store, or the calibration file cannot be used.
     """
-    from sim.scenario import ScenarioError  # the scenario module imports this one
 
     config: CameraRigConfig = scenario.cameras
     store = scenario.store

@@ -24,9 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.errors import ScenarioError
+from core.jit import jit
 from sim.config import bounded, check_ranges
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
-from sim.store import StoreGeometry, _astar, _segment_free, jit
+from sim.store import StoreGeometry, _astar, _segment_free
 
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
 STEP_S = 0.1
@@ -124,7 +126,6 @@ def validate(config: CrowdConfig, store: StoreGeometry, name: str = "scenario") 
     Raises:
         ScenarioError: more people than the walkable floor holds.
     """
-    from sim.scenario import ScenarioError
 
     need = config.people * config.area_per_person_m2
     if need > store.free_area_m2:

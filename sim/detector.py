@@ -27,11 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.jit import jit
+from core.types import COCO17, Camera, Skeleton
 from sim.cameras import in_image, in_image_many_kernel, monotonic_radius
 from sim.config import bounded, check_ranges
-from sim.store import jit
 from sim.types import CameraFrame, DetectionEffect, PoseTruth
-from tracker.types import COCO17, Camera, Skeleton
 
 
 class DetectorProfile(enum.Enum):

@@ -12,8 +12,8 @@ import math
 
 import numpy as np
 
+from core.jit import jit
 from sim.types import PoseTruth
-from tracker.jit import jit
 
 
 def interpolate_poses(before: PoseTruth | None, after: PoseTruth | None, t_s: float) -> PoseTruth:

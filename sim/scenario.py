@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import scenarios
+from core.errors import ScenarioError
 from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
 from sim.config import bounded, check_ranges, field_range, field_unit
@@ -32,10 +33,6 @@ MAX_DURATION_S = 86400.0  # a day of simulated time
 MAX_SEED = 2**63 - 1
 SCENARIO_DIR = Path(scenarios.__file__).resolve().parent  # the shipped files, installed as package data
 DEFAULT_SCENARIO = "store_layout1"
-
-
-class ScenarioError(ValueError):
-    """A scenario file that cannot be used; the message names the file and the key."""
 
 
 @dataclass(frozen=True)

@@ -13,14 +13,14 @@ from collections.abc import Iterator
 
 import numpy as np
 
+from core import jit
+from core.types import COCO17
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
 from sim.detector import Detector
 from sim.poses import interpolate_ticks
 from sim.rng import child_rng
 from sim.types import CameraFrame, PoseTruth
-from tracker import jit
-from tracker.types import COCO17
 
 log = logging.getLogger(__name__)
 

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from core.errors import ScenarioError
+from core.jit import jit
 from sim.config import bounded, check_ranges
 from sim.types import Box, BoxKind
-from tracker.jit import jit  # numba compiles the crowd's numeric kernels (plain Python runs them without it)
 
 MAX_FLOOR_M = 500.0  # the largest floor side, and so any position or size on it
 # Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast path searches.
@@ -147,7 +148,6 @@ def _xy(point) -> str:
 
 
 def _error(name: str, message: str):
-    from sim.scenario import ScenarioError  # deferred: sim.scenario imports this module
 
     return ScenarioError(f"{name}: {message}")
 

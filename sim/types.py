@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tracker.types import Frame
+from core.types import Frame
 
 
 class BoxKind(enum.Enum):

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracker.jit import jit
+from core.jit import jit
 
 
 def affinity_2d(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
-from tracker.jit import jit
+from core.jit import jit
 
 
 def associate(affinity: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

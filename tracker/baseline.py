@@ -15,11 +15,12 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
 from tracker.config import TrackerConfig
 from tracker.geometry import fundamental_matrix, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TargetState, TrackerOutput, camera_index
+from tracker.types import Target, TargetState, TrackerOutput
 
 logger = logging.getLogger(__name__)
 

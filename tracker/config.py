@@ -8,6 +8,8 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from core.errors import ConfigError
+
 
 class Triangulation(enum.Enum):
     """How a target's joints are re-estimated from the latest point of each camera.
@@ -178,7 +180,7 @@ class TrackerConfig:
         """Parameters for a dataset: "campus", "shelf", "store" (Table S2 with α2D set for the resolution, see
         PRESETS) or "campus-paper", "shelf-paper", "store-paper" (Table S2 verbatim, the paper's triangulation)."""
         if name not in PRESETS:
-            raise ValueError(f"unknown tracker preset {name!r}; valid presets: {', '.join(sorted(PRESETS))}")
+            raise ConfigError(f"unknown tracker preset {name!r}; valid presets: {', '.join(sorted(PRESETS))}")
         return cls(**PRESETS[name])
 
     @classmethod
@@ -197,25 +199,25 @@ class TrackerConfig:
             with path.open("rb") as f:
                 data = tomllib.load(f)
         except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise ValueError(f"{path}: cannot read tracker config: {exc}") from exc
+            raise ConfigError(f"{path}: cannot read tracker config: {exc}") from exc
         if set(data) == {"tracker"} and isinstance(data["tracker"], dict):
             data = data["tracker"]
         if "preset" in data:
             if base is not None and base != data["preset"]:
-                raise ValueError(f"{path}: key 'preset' = {data['preset']!r} conflicts with base preset {base!r}")
+                raise ConfigError(f"{path}: key 'preset' = {data['preset']!r} conflicts with base preset {base!r}")
             base = data.pop("preset")
         names = {f.name for f in dataclasses.fields(cls)}
         for key in data:
             if key not in names:
-                raise ValueError(f"{path}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}")
-        values = dict(PRESETS[base]) if base is not None else {}
+                raise ConfigError(f"{path}: unknown key {key!r}; valid keys: {', '.join(sorted(names))}")
         if base is not None and base not in PRESETS:
-            raise ValueError(f"{path}: unknown base preset {base!r}; valid presets: {', '.join(sorted(PRESETS))}")
+            raise ConfigError(f"{path}: unknown base preset {base!r}; valid presets: {', '.join(sorted(PRESETS))}")
+        values = dict(PRESETS[base]) if base is not None else {}
         values.update(data)
         try:
             return cls(**values)
-        except ValueError as exc:
-            raise ValueError(f"{path}: {exc}") from exc
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(f"{path}: {exc}") from exc
 
     def replace(self, **changes) -> TrackerConfig:
         """A copy with some fields changed (validated)."""

@@ -11,8 +11,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-from tracker.jit import jit
-from tracker.types import Camera
+from core.jit import jit
+from core.types import Camera
 
 
 def undistort_points(camera: Camera, points_px: np.ndarray) -> np.ndarray:

@@ -25,8 +25,8 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
+from core.types import Skeleton
 from tracker.triangulation import reprojection_error_px, triangulate_incremental
-from tracker.types import Skeleton
 
 logger = logging.getLogger(__name__)
 

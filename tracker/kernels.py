@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracker.jit import jit, sort_prefix
+from core.jit import jit, sort_prefix
 from tracker.triangulation import triangulate_point
 
 MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time

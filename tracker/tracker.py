@@ -24,6 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
 from tracker import lifecycle
 from tracker.association import associate
@@ -31,7 +32,7 @@ from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
 from tracker.kernels import poses_in_state, split_detections, update_matched
-from tracker.types import COCO17, Camera, Frame, Skeleton, Target, TrackerOutput, camera_index
+from tracker.types import Target, TrackerOutput
 
 logger = logging.getLogger(__name__)
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tracker.jit import jit, sort_prefix
+from core.jit import jit, sort_prefix
 
 
 def dlt_rows(P: np.ndarray, points_px: np.ndarray) -> np.ndarray:

@@ -26,13 +26,15 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
+from core.errors import CrossviewError
+from core.types import Camera
 from crossview.scoring.association import SCORED_STATES, association_accuracy, projected_2d_scores
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
 from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
 from crossview.scoring.pose import PoseAccumulator
 from crossview.scoring.report import JSON_KEYS, ScoreReport
 from sim.types import CameraFrame, PoseTruth
-from tracker.types import Camera, TrackerOutput
+from tracker.types import TrackerOutput
 
 __all__ = ["JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TruthTimeline", "score"]
 
@@ -42,7 +44,7 @@ OUTPUT_MAX_AGE_S = 1.0
 """A tracker output older than this at a grid tick no longer stands for the tracker's belief, seconds."""
 
 
-class ScoringError(ValueError):
+class ScoringError(CrossviewError):
     """Tracks and truth that cannot be scored together (another recording, wrong joint layout)."""
 
 

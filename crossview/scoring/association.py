@@ -25,9 +25,10 @@ import cv2
 import motmetrics as mm
 import numpy as np
 
+from core.types import Camera
 from crossview.scoring.identity import identity_scores
 from sim.types import CameraFrame
-from tracker.types import Camera, TargetState, TrackerOutput
+from tracker.types import TargetState, TrackerOutput
 
 IOU_THRESHOLD = 0.5
 """Smallest IoU of a projected target box and a true box that counts as a match (MOTChallenge)."""

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from core.errors import CrossviewError
 from crossview.scoring.pose import PCP_ALPHA, PCP_BONE_GROUPS, coco17_to_campus14, match_nearest, pcp_bones
 
 CAMPUS_TEST_FRAMES = tuple(range(350, 471)) + tuple(range(650, 751))
@@ -30,7 +31,7 @@ RESULT_TIME_TOLERANCE_S = 0.1
 METRES_TO_CM = 100.0
 
 
-class DatasetLayoutError(ValueError):
+class DatasetLayoutError(CrossviewError):
     """A dataset directory or result file does not follow the crossview dataset layout."""
 
 

@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.types import CAMPUS14, Frame
 from crossview.datasets import (
     DatasetError,
     campus14_to_coco17,
@@ -21,7 +22,7 @@ from crossview.scoring.pose import coco17_to_campus14
 from tracker.config import TrackerConfig
 from tracker.geometry import project
 from tracker.tracker import Tracker
-from tracker.types import CAMPUS14, Frame, Target, TrackerOutput
+from tracker.types import Target, TrackerOutput
 
 
 def _tiny_dataset(root: Path) -> Path:

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.types import COCO17, Camera, Frame
 from crossview.detector_stats import body25_joint_count, detector_stats, format_detector_stats
 from sim.types import CameraFrame, DetectionEffect, DetectionTruth, PoseTruth
-from tracker.types import COCO17, Camera, Frame
 
 J = COCO17.num_joints
 

@@ -11,9 +11,10 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from scipy.spatial.transform import Rotation
 
+from core.types import COCO17, Camera, Frame
 from crossview import foxglove, recording
 from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
-from tracker.types import COCO17, Camera, Frame, Target, TrackerOutput
+from tracker.types import Target, TrackerOutput
 
 LAYOUT = Path(__file__).resolve().parents[2] / "crossview" / "foxglove" / "layout.json"
 

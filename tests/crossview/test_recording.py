@@ -12,6 +12,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
+from core.types import COCO17, Camera, Frame
 from crossview import recording
 from crossview.recording import (
     FORMAT_VERSION,
@@ -24,7 +25,7 @@ from crossview.recording import (
     open_tracks,
 )
 from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
-from tracker.types import COCO17, Camera, Frame, Target, TargetState, TrackerOutput
+from tracker.types import Target, TargetState, TrackerOutput
 
 SCENARIO_TEXT = 'description = "synthetic"\n[crowd]\npeople = 3\n'
 

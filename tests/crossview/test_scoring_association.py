@@ -4,10 +4,11 @@ import cv2
 import numpy as np
 import pytest
 
+from core.types import Camera, Frame
 from crossview.scoring import score
 from crossview.scoring.association import association_accuracy, box_iou, pose_boxes, project_points
 from sim.types import CameraFrame, DetectionTruth, PoseTruth
-from tracker.types import Camera, Frame, Target, TrackerOutput
+from tracker.types import Target, TrackerOutput
 
 
 def _camera(name="top", center=(0.0, 0.0, 4.0), dist=(0.0, 0.0, 0.0, 0.0, 0.0)):

@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
+from core.types import CAMPUS14, COCO17
 from crossview.scoring.pose import (
     PoseAccumulator,
     coco17_to_campus14,
     match_nearest,
     pcp_bones,
 )
-from tracker.types import CAMPUS14, COCO17
 
 
 @pytest.fixture

@@ -13,6 +13,8 @@ import cv2
 import numpy as np
 import pytest
 
+from core.errors import ScenarioError
+from core.types import Camera
 from sim import scenario as scenario_mod
 from sim.cameras import (
     CameraPlacement,
@@ -23,7 +25,6 @@ from sim.cameras import (
     mujoco_camera_pose,
     project,
 )
-from tracker.types import Camera
 
 # The Panoptic dome's 31 HD cameras, shipped with the dome scenario (cut by tests/data/cut_fixtures.py).
 PANOPTIC = scenario_mod.SCENARIO_DIR / "calibrations" / "panoptic_160906_hd.json"
@@ -94,7 +95,7 @@ def test_explicit_placements_replace_the_grid(rng):
 
 def test_camera_outside_store_is_a_scenario_error(rng):
     placements = (CameraPlacement((9.0, 0.5, 2.8), (2.0, 1.5, 1.0)),)
-    with pytest.raises(scenario_mod.ScenarioError, match=r"cameras.placements\[0\].*outside the store"):
+    with pytest.raises(ScenarioError, match=r"cameras.placements\[0\].*outside the store"):
         build_rig(_scenario(placements=placements), rng)
 
 
@@ -113,7 +114,7 @@ def test_camera_outside_store_is_a_scenario_error(rng):
 def test_bad_sensor_keys_are_one_line_scenario_errors(tmp_path, text, key):
     path = tmp_path / "bad.toml"
     path.write_text(text)
-    with pytest.raises(scenario_mod.ScenarioError) as err:
+    with pytest.raises(ScenarioError) as err:
         scenario_mod.load(path)
     message = str(err.value)
     assert key in message and "\n" not in message and str(path) in message
@@ -271,10 +272,10 @@ def test_bad_calibrations_are_scenario_errors_naming_the_key(rng):
     assert len(build_rig(dataclasses.replace(base, cameras=config), rng)) == 31
     # A store too small for the dome, or a missing file, is a scenario error naming the key.
     small = dataclasses.replace(base, store=StoreConfig(width_m=4.0, depth_m=4.0, ceiling_m=3.5), cameras=config)
-    with pytest.raises(scenario_mod.ScenarioError, match=r"cameras.calibration\[\d+\].*outside the store"):
+    with pytest.raises(ScenarioError, match=r"cameras.calibration\[\d+\].*outside the store"):
         build_rig(small, rng)
     missing = dataclasses.replace(base, cameras=dataclasses.replace(config, calibration="nowhere.json"))
-    with pytest.raises(scenario_mod.ScenarioError, match="cameras.calibration.*nowhere.json"):
+    with pytest.raises(ScenarioError, match="cameras.calibration.*nowhere.json"):
         build_rig(missing, rng)
 
 

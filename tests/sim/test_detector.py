@@ -7,12 +7,12 @@ import dataclasses
 import numpy as np
 import pytest
 
+from core.types import COCO17
 from sim.cameras import CameraPlacement, CameraRigConfig, build_rig, in_image
 from sim.detector import _TEMPLATE_COCO17, Detector, DetectorConfig, DetectorProfile, person_size_px
 from sim.scenario import Scenario
 from sim.store import StoreConfig
 from sim.types import DetectionEffect, PoseTruth
-from tracker.types import COCO17
 
 # Bodies of the stand-in person (COCO-17 keypoint -> body): head, torso, arms, legs.
 _PARTS = {"head": (0, 1, 2, 3, 4), "larm": (5, 7, 9), "rarm": (6, 8, 10), "lleg": (11, 13, 15),

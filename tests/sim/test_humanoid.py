@@ -6,8 +6,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from core.types import COCO17
 from sim import humanoid as hm
-from tracker.types import COCO17
 
 
 def _model(height_m: float) -> tuple[mujoco.MjModel, mujoco.MjData]:

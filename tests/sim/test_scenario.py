@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 
+from core.errors import ScenarioError
 from sim import scenario
 from sim.detector import DetectorProfile
 
@@ -31,7 +32,7 @@ def test_overrides_are_validated_and_change_the_digest():
     changed = scenario.load(None, {"duration_s": 10.0, "crowd.people": 2})
     assert (changed.duration_s, changed.crowd.people) == (10.0, 2)
     assert changed.digest != base.digest
-    with pytest.raises(scenario.ScenarioError, match="duration_s"):
+    with pytest.raises(ScenarioError, match="duration_s"):
         scenario.load(None, {"duration_s": -1.0})
 
 
@@ -58,12 +59,12 @@ def _write(tmp_path: Path, text: str) -> Path:
     ],
 )
 def test_bad_files_name_the_file_and_key(tmp_path, text, expected):
-    with pytest.raises(scenario.ScenarioError, match=expected):
+    with pytest.raises(ScenarioError, match=expected):
         scenario.load(_write(tmp_path, text))
 
 
 def test_missing_file_lists_the_shipped_scenarios(tmp_path):
-    with pytest.raises(scenario.ScenarioError, match="no such scenario file.*store_layout1"):
+    with pytest.raises(ScenarioError, match="no such scenario file.*store_layout1"):
         scenario.load(tmp_path / "nope.toml")
 
 

@@ -8,8 +8,8 @@ import scipy.ndimage
 import scipy.sparse
 import scipy.sparse.csgraph
 
+from core.errors import ScenarioError
 from sim import scenario as sc
-from sim.scenario import ScenarioError
 from sim.store import ShelfConfig, StoreConfig, StoreGeometry, _distance_to_blocked, rect_distance
 from sim.types import BoxKind
 

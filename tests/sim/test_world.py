@@ -6,14 +6,14 @@ import mujoco
 import numpy as np
 import pytest
 
+from core.errors import ScenarioError
+from core.types import COCO17
 from sim import humanoid as hm
 from sim import scenario as sc
 from sim.crowd import CrowdConfig
 from sim.rng import child_rng
-from sim.scenario import ScenarioError
 from sim.store import ShelfConfig, rect_distance
 from sim.world import World
-from tracker.types import COCO17
 
 RATE_HZ = 50.0
 # The rigid COCO bones: limb segments and the shoulder and hip girdles (the torso diagonals bend with the spine).

@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.types import COCO17, Camera, Frame
 from tracker.geometry import project_distorted
-from tracker.types import COCO17, Camera, Frame
 
 # A standing COCO-17 pose in the body frame (x forward, y left, z up), metres.
 _REST = np.array([

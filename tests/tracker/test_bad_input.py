@@ -7,11 +7,11 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from core.types import Frame
 from tests.tracker.synthetic import store_like
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig
 from tracker.tracker import Tracker
-from tracker.types import Frame
 
 CAMS, _, FRAMES, _ = store_like("layout1", 1.5, seed=3)
 CONFIG = TrackerConfig.preset("store")

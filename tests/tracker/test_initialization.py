@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from scipy.sparse.csgraph import connected_components
 
+from core.types import COCO17
 from tracker.initialization import (
     PlausibilityLimits,
     _component_labels,
@@ -14,7 +15,6 @@ from tracker.initialization import (
     check_plausible,
     partition_graph,
 )
-from tracker.types import COCO17
 
 
 def _set_partitions(items):

@@ -3,12 +3,13 @@
 import numpy as np
 import pytest
 
+from core.types import Frame
 from tests.tracker.synthetic import store_like
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
 from tracker.kernels import update_matched
 from tracker.tracker import Tracker
-from tracker.types import Frame, TargetState
+from tracker.types import TargetState
 
 CONFIG = TrackerConfig.preset("store")
 

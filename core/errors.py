@@ -1,0 +1,17 @@
+"""The project's errors: one base class that the command line turns into a one-line message and exit 2.
+
+Each error names the file, key or value at fault and what would be valid. A ValueError that is not one of
+these is a bug, and shows its traceback.
+"""
+
+
+class CrossviewError(ValueError):
+    """Bad input to the project: a scenario, recording, dataset, result or configuration that cannot be used."""
+
+
+class ConfigError(CrossviewError):
+    """A tracker configuration (preset name or TOML file) that cannot be used."""
+
+
+class ScenarioError(CrossviewError):
+    """A scenario file that cannot be used; the message names the file and the key."""
