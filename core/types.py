@@ -21,6 +21,13 @@ def _as_array(name: str, value, shape: tuple[int | None, ...]) -> np.ndarray:
     return array
 
 
+# Body parts for per-part errors, and the words a joint's name holds to belong to one.
+JOINT_GROUPS = {
+    "head": ("nose", "eye", "ear", "head"), "shoulders": ("shoulder",), "elbows": ("elbow",), "wrists": ("wrist",),
+    "hips": ("hip",), "knees": ("knee",), "ankles": ("ankle",),
+}
+
+
 @dataclass(frozen=True)
 class Skeleton:
     """A joint layout: joint names in order and the bones between them (index pairs)."""
@@ -40,6 +47,20 @@ class Skeleton:
 
     def index(self, joint: str) -> int:
         return self.joints.index(joint)
+
+    @property
+    def hips(self) -> tuple[int, int]:
+        """Indices of the left and right hips: the body root (their midpoint) that identity metrics use."""
+        return self.index("left_hip"), self.index("right_hip")
+
+    def joint_groups(self) -> dict[str, tuple[int, ...]]:
+        """The joints of each body part that has any in this layout, in `JOINT_GROUPS` order, by joint name."""
+        groups = {}
+        for group, words in JOINT_GROUPS.items():
+            members = tuple(i for i, joint in enumerate(self.joints) if any(w in joint for w in words))
+            if members:
+                groups[group] = members
+        return groups
 
 
 COCO17 = Skeleton(

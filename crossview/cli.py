@@ -129,6 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
     p.add_argument("--json", type=Path, help="write the figures here")
+    p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
     p.add_argument("--duration", type=_positive_float, default=20.0, help="simulated seconds per case")
     return parser
 
@@ -264,7 +265,8 @@ def _cmd_convert(args) -> None:
 def _cmd_bench(args) -> None:
     from crossview import bench
 
-    bench.main(json_path=args.json, duration_s=args.duration, progress=not args.no_progress)
+    bench.main(json_path=args.json, duration_s=args.duration, progress=not args.no_progress,
+               markdown_path=args.markdown)
 
 
 COMMANDS = {

@@ -286,7 +286,8 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
         )
     truth = list(rec.truth())
     outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
-    report = score_outputs(truth, outputs, rec.frames(), rec.cameras, scored_area=watched_floor(rec.boxes))
+    report = score_outputs(truth, outputs, rec.frames(), rec.cameras, scored_area=watched_floor(rec.boxes),
+                           skeleton=rec.skeleton)
     summary = tracks.summary or {}
     tracker_s = summary.get("tracker_s") or 0.0
     updates = summary.get("updates") or len(outputs)
@@ -306,8 +307,13 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
 
 
 def write_json(result: dict, path: Path) -> None:
-    """Writes the score JSON atomically (a temporary file renamed at the end)."""
+    """Writes a JSON document (the score JSON, the bench's figures) atomically."""
+    write_text(json.dumps(result, indent=2, sort_keys=False) + "\n", path)
+
+
+def write_text(text: str, path: Path) -> None:
+    """Writes `text` to `path` atomically (a temporary file in the same folder, renamed at the end)."""
     check_writable(path)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(result, indent=2, sort_keys=False) + "\n", encoding="utf-8")
+    tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)

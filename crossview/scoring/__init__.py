@@ -27,7 +27,7 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from core.errors import CrossviewError
-from core.types import Camera
+from core.types import COCO17, Camera, Skeleton
 from crossview.scoring.association import SCORED_STATES, association_accuracy, projected_2d_scores
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
 from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
@@ -64,7 +64,7 @@ class TruthTimeline:
         self.times = np.array([s.t_s for s in self.samples], dtype=np.float64)
         period = float(np.median(np.diff(self.times))) if len(self.times) > 1 else 0.0
         self._edge_s = period / 2 + 1e-9
-        self.num_joints = next((np.asarray(s.poses).shape[1] for s in self.samples if len(s.person_ids)), 17)
+        self.num_joints = next((np.asarray(s.poses).shape[1] for s in self.samples if len(s.person_ids)), None)
 
     def _sample(self, i: int) -> tuple[np.ndarray, np.ndarray]:
         s = self.samples[i]
@@ -97,21 +97,22 @@ class TruthTimeline:
         return (float(self.times[0]), float(self.times[-1])) if len(self.times) else (0.0, 0.0)
 
 
-def _targets(out: TrackerOutput) -> tuple[np.ndarray, np.ndarray]:
+def _targets(out: TrackerOutput, skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     targets = [t for t in out.targets if t.state in SCORED_STATES]
     ids = np.array([t.id for t in targets], dtype=np.int64)
-    poses = np.zeros((0, 17, 3))
+    J = skeleton.num_joints
+    poses = np.zeros((0, J, 3))
     if targets:
         poses = np.array([np.asarray(t.pose, dtype=np.float64) for t in targets])
-        if poses.ndim != 3 or poses.shape[1:] != (17, 3):
+        if poses.ndim != 3 or poses.shape[1:] != (J, 3):
             raise ScoringError(
                 f"tracker output {out.camera}@{out.stamp_s}: target poses have shape {poses.shape[1:]}, expected "
-                "(17, 3) COCO-17"
+                f"({J}, 3) {skeleton.name}"
             )
     return ids, poses
 
 
-def _in_area(g_ids, g_poses, t_ids, t_poses, area, reach_m):
+def _in_area(g_ids, g_poses, t_ids, t_poses, area, reach_m, skeleton: Skeleton):
     """The people whose body root lies in `area`, and the targets that are not about anybody outside it.
 
     Outside the area is an ignored region, as in MOT benchmarks: people there are not scored and targets
@@ -124,7 +125,7 @@ def _in_area(g_ids, g_poses, t_ids, t_poses, area, reach_m):
     def inside(roots):
         return (roots[:, 0] >= x0) & (roots[:, 0] <= x1) & (roots[:, 1] >= y0) & (roots[:, 1] <= y1)
 
-    g_roots, t_roots = body_roots(g_poses), body_roots(t_poses)
+    g_roots, t_roots = body_roots(g_poses, skeleton), body_roots(t_poses, skeleton)
     g_in = inside(g_roots)
     t_keep = inside(t_roots) | ~np.isfinite(t_roots[:, 0])  # no root: cannot be placed, so it counts
     if t_roots.size and (~g_in).any():
@@ -163,11 +164,12 @@ def score(
     root_threshold_m: float = ROOT_MATCH_THRESHOLD_M,
     hota_zero_distance_m: float = HOTA_ZERO_DISTANCE_M,
     scored_area: tuple[float, float, float, float] | None = None,
+    skeleton: Skeleton = COCO17,
 ) -> ScoreReport:
     """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
 
     Args:
-        truth: true poses (COCO-17, metres), e.g. 100 Hz.
+        truth: true poses (metres, in `skeleton`'s layout), e.g. 100 Hz.
         outputs: tracker outputs in delivery order.
         camera_frames: delivered frames with per-detection truth; enables association accuracy.
         cameras: calibrated cameras; enables the per-camera 2D scores.
@@ -175,27 +177,30 @@ def score(
         root_threshold_m: ground-plane gate of MOTA/IDF1, metres.
         hota_zero_distance_m: distance at which the HOTA similarity reaches 0, metres.
         scored_area: (x_min, y_min, x_max, y_max) of the floor the cameras watch, metres; None: everywhere.
+        skeleton: the joint layout of the truth and the targets (the recording's).
 
     Returns:
         the report; metrics that cannot be measured are None.
 
     Raises:
-        ScoringError: tracks that do not belong to the truth, or targets not in COCO-17.
+        ScoringError: tracks that do not belong to the truth, or poses not in `skeleton`'s layout.
     """
     if not eval_rate_hz > 0:
         raise ValueError(f"eval_rate_hz={eval_rate_hz}: must be > 0")
     if not hota_zero_distance_m > 0:
         raise ValueError(f"hota_zero_distance_m={hota_zero_distance_m}: must be > 0 metres")
     timeline = TruthTimeline(truth)
-    if timeline.num_joints != 17:
-        raise ScoringError(f"truth poses have {timeline.num_joints} joints, expected 17 (COCO-17)")
+    if timeline.num_joints not in (None, skeleton.num_joints):
+        raise ScoringError(f"truth poses have {timeline.num_joints} joints, expected {skeleton.num_joints} "
+                           f"({skeleton.name})")
+    timeline.num_joints = skeleton.num_joints
     outputs = list(outputs)
     _check_same_recording(timeline, outputs, cameras)
     ordered = sorted(outputs, key=lambda o: o.stamp_s)  # stable: equal stamps keep delivery order
     stamps = np.array([o.stamp_s for o in ordered], dtype=np.float64)
 
-    pose_acc = PoseAccumulator()
-    id_acc = IdentityAccumulator(root_threshold_m)
+    pose_acc = PoseAccumulator(skeleton=skeleton)
+    id_acc = IdentityAccumulator(root_threshold_m, skeleton)
     hota_truth, hota_targets, hota_sims = [], [], []
     report = ScoreReport(eval_rate_hz=eval_rate_hz, root_threshold_m=root_threshold_m,
                          hota_zero_distance_m=hota_zero_distance_m)
@@ -209,19 +214,20 @@ def score(
             continue  # nothing delivered yet: no tracker could know anything
         scored_ticks += 1
         if j >= 0 and tick - stamps[j] <= OUTPUT_MAX_AGE_S:
-            t_ids, t_poses = _targets(ordered[j])
+            t_ids, t_poses = _targets(ordered[j], skeleton)
             g_ids, g_poses = timeline.at(stamps[j])
         else:
-            t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, 17, 3))
+            t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, skeleton.num_joints, 3))
             g_ids, g_poses = timeline.at(tick)
         if scored_area is not None:
             g_ids, g_poses, t_ids, t_poses = _in_area(g_ids, g_poses, t_ids, t_poses, scored_area,
-                                                          root_threshold_m)
+                                                          root_threshold_m, skeleton)
         pose_acc.update(g_ids, g_poses, t_poses)
         id_acc.update(g_ids, g_poses, t_ids, t_poses)
         hota_truth.append(g_ids)
         hota_targets.append(t_ids)
-        hota_sims.append(ground_similarity(body_roots(g_poses), body_roots(t_poses), hota_zero_distance_m))
+        hota_sims.append(ground_similarity(body_roots(g_poses, skeleton), body_roots(t_poses, skeleton),
+                                           hota_zero_distance_m))
         report.truth_person_instants += len(g_ids)
     report.eval_instants = scored_ticks
 

@@ -13,25 +13,27 @@ from dataclasses import dataclass
 import motmetrics as mm
 import numpy as np
 
+from core.types import COCO17, Skeleton
+
 ROOT_MATCH_THRESHOLD_M = 1.0
 """Largest ground-plane distance between body roots at which a target can match a person, metres."""
 
-COCO17_HIPS = (11, 12)
 
 MOT_METRICS = ("mota", "motp", "idf1", "num_switches", "num_false_positives", "num_misses", "num_objects",
                "num_predictions", "num_matches", "idp", "idr")
 
 
-def body_roots(poses: np.ndarray) -> np.ndarray:
+def body_roots(poses: np.ndarray, skeleton: Skeleton = COCO17) -> np.ndarray:
     """Ground-plane body roots: the (x, y) midpoint of the hips (one hip if the other is NaN).
 
     Args:
-        poses: (N, 17, 3) COCO-17 poses, metres.
+        poses: (N, J, 3) poses in `skeleton`'s layout, metres.
+        skeleton: the joint layout (its `hips`).
 
     Returns:
         (N, 2) roots, metres; NaN where both hips are unknown.
     """
-    hips = np.asarray(poses, dtype=np.float64).reshape(-1, 17, 3)[:, list(COCO17_HIPS), :2]
+    hips = np.asarray(poses, dtype=np.float64).reshape(-1, skeleton.num_joints, 3)[:, list(skeleton.hips), :2]
     known = np.isfinite(hips).all(axis=-1, keepdims=True)
     count = known.sum(axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -82,12 +84,14 @@ class IdentityAccumulator:
 
     Args:
         threshold_m: largest root distance for a match, metres.
+        skeleton: the joint layout of the poses.
     """
 
-    def __init__(self, threshold_m: float = ROOT_MATCH_THRESHOLD_M):
+    def __init__(self, threshold_m: float = ROOT_MATCH_THRESHOLD_M, skeleton: Skeleton = COCO17):
         if not threshold_m > 0:
             raise ValueError(f"threshold_m={threshold_m}: must be > 0 metres")
         self.threshold_m = threshold_m
+        self.skeleton = skeleton
         self.acc = mm.MOTAccumulator(auto_id=True)
 
     def update(self, truth_ids, truth_poses: np.ndarray, target_ids, target_poses: np.ndarray) -> None:
@@ -95,11 +99,12 @@ class IdentityAccumulator:
 
         Args:
             truth_ids: (G,) person ids.
-            truth_poses: (G, 17, 3) true poses, metres.
+            truth_poses: (G, J, 3) true poses, metres.
             target_ids: (H,) target ids.
-            target_poses: (H, 17, 3) estimated poses, metres (NaN hips: the target cannot match).
+            target_poses: (H, J, 3) estimated poses, metres (NaN hips: the target cannot match).
         """
-        d = ground_distances(body_roots(truth_poses), body_roots(target_poses), self.threshold_m)
+        roots = body_roots(truth_poses, self.skeleton), body_roots(target_poses, self.skeleton)
+        d = ground_distances(*roots, self.threshold_m)
         self.acc.update([int(i) for i in truth_ids], [int(i) for i in target_ids], d)
 
     def result(self) -> IdentityScores:

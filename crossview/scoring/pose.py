@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from core.types import CAMPUS14, COCO17, Skeleton
+
 PCP_ALPHA = 0.5
 """Fraction of the true bone length the mean end-point error may reach for a bone to count as correct."""
 
@@ -47,18 +49,6 @@ PCP_BONE_GROUPS: OrderedDict[str, tuple[int, ...]] = OrderedDict(
 )
 """Bone groups as indices into the (10,) result of `pcp_bones`, as in evaluate.py's table."""
 
-COCO17_JOINT_GROUPS: OrderedDict[str, tuple[int, ...]] = OrderedDict(
-    [
-        ("head", (0, 1, 2, 3, 4)),
-        ("shoulders", (5, 6)),
-        ("elbows", (7, 8)),
-        ("wrists", (9, 10)),
-        ("hips", (11, 12)),
-        ("knees", (13, 14)),
-        ("ankles", (15, 16)),
-    ]
-)
-"""Joint groups of the COCO-17 layout for MPJPE and PCK."""
 
 
 def coco17_to_campus14(poses: np.ndarray) -> np.ndarray:
@@ -190,13 +180,25 @@ class PoseScores:
     num_nan_joints: int = 0
 
 
+def to_campus14(poses: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """(..., 14, 3) poses in the layout the PCP protocol checks, from COCO-17 (evaluate.py's mapping) or
+    Campus-14 (as they are)."""
+    if skeleton.name == CAMPUS14.name:
+        return np.asarray(poses, dtype=np.float64)
+    if skeleton.name == COCO17.name:
+        return coco17_to_campus14(poses)
+    raise ValueError(f"PCP: no mapping of the {skeleton.name} layout to the protocol's 14 joints "
+                     f"(known: {COCO17.name}, {CAMPUS14.name})")
+
+
 class PoseAccumulator:
-    """Collects per-instant comparisons of true and estimated COCO-17 poses (py-motmetrics style).
+    """Collects per-instant comparisons of true and estimated poses (py-motmetrics style).
 
     Args:
         alpha: PCP threshold as a fraction of the bone length.
         pck_thresholds_m: PCK thresholds, metres.
         mpjpe_match_max_m: largest mean joint error at which a true person enters MPJPE, metres.
+        skeleton: the joint layout of the poses (COCO-17 or Campus-14; MPJPE and PCK by its body parts).
     """
 
     def __init__(
@@ -204,6 +206,7 @@ class PoseAccumulator:
         alpha: float = PCP_ALPHA,
         pck_thresholds_m: tuple[float, ...] = PCK_THRESHOLDS_M,
         mpjpe_match_max_m: float = MPJPE_MATCH_MAX_M,
+        skeleton: Skeleton = COCO17,
     ):
         if not 0 < alpha:
             raise ValueError(f"alpha={alpha}: must be > 0 (the protocol uses 0.5)")
@@ -212,11 +215,14 @@ class PoseAccumulator:
         self.alpha = alpha
         self.pck_thresholds_m = tuple(pck_thresholds_m)
         self.mpjpe_match_max_m = mpjpe_match_max_m
+        self.skeleton = skeleton
+        self.joint_groups = skeleton.joint_groups()
+        J = skeleton.num_joints
         self._bones: dict[int, list[np.ndarray]] = {}
-        self._joint_err_sum = np.zeros(17)
-        self._joint_err_count = np.zeros(17)
-        self._pck_hits = np.zeros((len(self.pck_thresholds_m), 17))
-        self._pck_total = np.zeros(17)
+        self._joint_err_sum = np.zeros(J)
+        self._joint_err_count = np.zeros(J)
+        self._pck_hits = np.zeros((len(self.pck_thresholds_m), J))
+        self._pck_total = np.zeros(J)
         self._instants = 0
         self._matched = 0
         self._nan_joints = 0
@@ -226,16 +232,17 @@ class PoseAccumulator:
 
         Args:
             truth_ids: (G,) int ids of the true persons.
-            truth_poses: (G, 17, 3) true COCO-17 poses, metres.
-            estimates: (H, 17, 3) estimated COCO-17 poses, metres, NaN for unknown joints.
+            truth_poses: (G, J, 3) true poses, metres.
+            estimates: (H, J, 3) estimated poses, metres, NaN for unknown joints.
         """
-        truth_poses = np.asarray(truth_poses, dtype=np.float64).reshape(-1, 17, 3)
-        estimates = np.asarray(estimates, dtype=np.float64).reshape(-1, 17, 3)
+        J = self.skeleton.num_joints
+        truth_poses = np.asarray(truth_poses, dtype=np.float64).reshape(-1, J, 3)
+        estimates = np.asarray(estimates, dtype=np.float64).reshape(-1, J, 3)
         if len(truth_ids) != len(truth_poses):
             raise ValueError(f"truth_ids has {len(truth_ids)} rows, truth_poses {len(truth_poses)}")
         # The protocol matches in the 14-joint layout (evaluate.py maps results before `_match_gts`).
-        truth14 = coco17_to_campus14(truth_poses)
-        est14 = coco17_to_campus14(estimates)
+        truth14 = to_campus14(truth_poses, self.skeleton)
+        est14 = to_campus14(estimates, self.skeleton)
         idx = match_nearest(truth14, est14)
         for g, pid in enumerate(np.asarray(truth_ids).tolist()):
             self._instants += 1
@@ -244,7 +251,7 @@ class PoseAccumulator:
                 self._bones.setdefault(int(pid), []).append(np.zeros(NUM_PCP_BONES, dtype=bool))
                 continue
             self._bones.setdefault(int(pid), []).append(pcp_bones(est14[idx[g]], truth14[g], self.alpha))
-            err = np.linalg.norm(estimates[idx[g]] - truth_poses[g], axis=1)  # (17,), NaN for unknown
+            err = np.linalg.norm(estimates[idx[g]] - truth_poses[g], axis=1)  # (J,), NaN for unknown
             known = np.isfinite(err)
             for k, thr in enumerate(self.pck_thresholds_m):
                 self._pck_hits[k] += known & (np.where(known, err, np.inf) <= thr)
@@ -267,7 +274,7 @@ class PoseAccumulator:
         else:
             scores.pcp_per_group = {name: None for name in PCP_BONE_GROUPS}
         scores.mpjpe_mm = _mm(_ratio(self._joint_err_sum.sum(), self._joint_err_count.sum()))
-        for name, joints in COCO17_JOINT_GROUPS.items():
+        for name, joints in self.joint_groups.items():
             j = list(joints)
             scores.mpjpe_per_group_mm[name] = _mm(
                 _ratio(self._joint_err_sum[j].sum(), self._joint_err_count[j].sum())
@@ -277,7 +284,7 @@ class PoseAccumulator:
             scores.pck[key] = _ratio(self._pck_hits[k].sum(), self._pck_total.sum())
             scores.pck_per_group[key] = {
                 name: _ratio(self._pck_hits[k][list(j)].sum(), self._pck_total[list(j)].sum())
-                for name, j in COCO17_JOINT_GROUPS.items()
+                for name, j in self.joint_groups.items()
             }
         return scores
 

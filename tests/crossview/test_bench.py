@@ -15,7 +15,6 @@ def test_bench_tracker_times_every_update_after_an_untimed_warm_up(tmp_path, mon
     assert warmed == ["crossview"]  # first-use compiles never enter the timed rounds
     assert result["camera_frames"] == gen.num_frames
     assert result["tracker_fps_median"] > 0 and result["tracker_fps_mean"] > 0
-    assert result["update_ms_p50"] <= result["update_ms_p95"]
     row = {
         "scenario": "store_layout1", "num_cameras": gen.num_cameras, "num_people": 4,
         "generate_realtime_factor": gen.realtime_factor, "generate_running_realtime_factor":
@@ -30,6 +29,11 @@ def test_bench_tracker_times_every_update_after_an_untimed_warm_up(tmp_path, mon
                                                 f"{gen.startup_s:.2f}", "2.5"]
     assert "WARNING" not in text
     assert "WARNING: a new process wrote other bytes" in bench.format_results([{**row, "cold_same_bytes": False}])
+    # The benchmarks page: the run's date, version and machine, and a row of figures per case.
+    page = bench.markdown({"date": "2026-01-02 03:04 UTC", "version": "9.9", "machine": "m", "cpus": 2,
+                           "python": "3.11", "cases": [{**row, "duration_s": 3.0}]})
+    assert "- date: 2026-01-02 03:04 UTC" in page and "crossview-testbed 9.9" in page and "2 CPUs" in page
+    assert f"| store_layout1 | {gen.num_cameras} | 4 | {gen.realtime_factor:.1f} |" in page
 
 
 def test_cold_generate_times_a_new_process_that_writes_the_same_bytes(tmp_path):
@@ -37,7 +41,6 @@ def test_cold_generate_times_a_new_process_that_writes_the_same_bytes(tmp_path):
     pipeline.generate(scenario, tmp_path / "here.mcap", progress=False)  # (also fills numba's cache)
     cold = bench.bench_cold_generate("store_layout1", 1.0, tmp_path / "cold.mcap", same_as=tmp_path / "here.mcap")
     assert cold["cold_same_bytes"] is True
-    assert cold["cold_generate_realtime_factor"] == 1.0 / cold["cold_generate_s"] > 0
 
 
 def test_cold_generate_says_why_the_command_failed(tmp_path):

@@ -5,7 +5,9 @@ import json
 import numpy as np
 import pytest
 
+from core.types import CAMPUS14
 from crossview.scoring import JSON_KEYS, ScoringError, TruthTimeline, score
+from crossview.scoring.pose import coco17_to_campus14
 from sim.types import PoseTruth
 from tracker.types import Target, TrackerOutput
 
@@ -111,8 +113,25 @@ def test_tracks_of_another_recording_are_refused():
 
 def test_tracks_in_another_joint_layout_are_refused():
     bad = [TrackerOutput(0.0, "cam0", [Target(1, np.zeros((14, 3)), 0.0)], np.zeros(0, dtype=np.int64))]
-    with pytest.raises(ScoringError, match="COCO-17"):
+    with pytest.raises(ScoringError, match=r"target poses have shape \(14, 3\), expected \(17, 3\) coco17"):
         score(_truth(), bad)
+    with pytest.raises(ScoringError, match=r"truth poses have 17 joints, expected 14 \(campus14\)"):
+        score(_truth(), [], skeleton=CAMPUS14)
+
+
+def test_campus14_truth_and_tracks_score_by_their_own_layout():
+    # The same two people in the Campus-14 layout (hips, limbs and head joints of their own).
+    def campus(pose):
+        return coco17_to_campus14(pose)
+
+    truth = [PoseTruth(p.t_s, p.person_ids, campus(p.poses)) for p in _truth()]
+    perfect = score(truth, _outputs(modify=campus), skeleton=CAMPUS14)
+    assert perfect.pcp == pytest.approx(1.0) and perfect.idf1 == pytest.approx(1.0)
+    assert perfect.mpjpe_mm == pytest.approx(0.0, abs=1e-9)
+    assert set(perfect.mpjpe_per_group_mm) == {"head", "shoulders", "elbows", "wrists", "hips", "knees", "ankles"}
+    # Everybody 3 m off (no target comes within 1 m of anybody): every target is a false positive.
+    off = score(truth, _outputs(modify=lambda pose: campus(pose) + [0.0, -3.0, 0.0]), skeleton=CAMPUS14)
+    assert off.idf1 == 0.0 and off.pcp == 0.0
 
 
 def test_stale_outputs_stop_counting_after_a_second():
