@@ -29,8 +29,6 @@ MAX_GRID = 100  # cameras along one side of a grid
 MAX_IMAGE_PX = 16384
 # Points closer than this in front of the camera plane count as behind it (their projection blows up).
 _MIN_DEPTH_M = 1e-6
-# Shortest distance a camera may keep from the walls, floor and ceiling of the store.
-_WALL_CLEARANCE_M = 0.0
 # When a camera looks (almost) straight down, "up" in its image points along world +y.
 _STRAIGHT_DOWN_COS = 0.999
 
@@ -197,8 +195,8 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
     for i, cam in enumerate(cameras):
         c = cam.center_world
         inside = (
-            -_WALL_CLEARANCE_M <= c[0] <= store.width_m + _WALL_CLEARANCE_M
-            and -_WALL_CLEARANCE_M <= c[1] <= store.depth_m + _WALL_CLEARANCE_M
+            0 <= c[0] <= store.width_m
+            and 0 <= c[1] <= store.depth_m
             and 0 <= c[2] <= store.ceiling_m
         )
         if not inside:

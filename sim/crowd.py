@@ -614,7 +614,7 @@ def _steer_kernel(pos, want, vel, active, walking, speed_pref, center, half, cos
             wx0 += cx
             wy0 += cy
         # Near a shelf: the sum over footprints within SHELF_COMFORT_M of the outward normal times
-        # (1 - d / SHELF_COMFORT_M), as `StoreGeometry.away_from_obstacles`.
+        # (1 - d / SHELF_COMFORT_M).
         awx = awy = 0.0
         for o in range(center.shape[0]):
             dx, dy = pos[i, 0] - center[o, 0], pos[i, 1] - center[o, 1]

@@ -313,19 +313,6 @@ class StoreGeometry:
         oy = np.maximum(np.abs(ly) - self._ob_half[:, 1], 0.0)
         return np.sqrt(ox * ox + oy * oy).min(axis=1)
 
-    def away_from_obstacles(self, points: np.ndarray, within_m: float) -> np.ndarray:
-        """(n, 2) sum over footprints closer than `within_m` of the outward unit normal times (1 - d / within_m)."""
-        if not self.obstacles:
-            return np.zeros_like(points)
-        lx, ly = self._local(points)
-        hx, hy = self._ob_half[:, 0], self._ob_half[:, 1]
-        ox, oy = lx - np.clip(lx, -hx, hx), ly - np.clip(ly, -hy, hy)
-        dist = np.sqrt(ox * ox + oy * oy)
-        weight = np.maximum(within_m - dist, 0.0) / (within_m * np.maximum(dist, 1e-9))
-        ox, oy = ox * weight, oy * weight
-        c, s = self._ob_cos, self._ob_sin
-        return np.stack([(ox * c - oy * s).sum(axis=1), (ox * s + oy * c).sum(axis=1)], axis=-1)
-
     def push_out(self, points: np.ndarray, clearance_m: float) -> np.ndarray:
         """(n, 2) points moved the shortest way out of every footprint grown by `clearance_m`."""
         if not self.obstacles:

@@ -6,8 +6,6 @@ Pixels here are *undistorted* pixels of the pinhole model P = K [R | t] unless a
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
 import cv2
 import numpy as np
 
@@ -192,8 +190,3 @@ def point_line_distance_px(points_px: np.ndarray, lines: np.ndarray) -> np.ndarr
     """Distance in pixels between points (..., 2) and homogeneous lines (..., 3) (a x + b y + c = 0)."""
     num = np.abs(lines[..., 0] * points_px[..., 0] + lines[..., 1] * points_px[..., 1] + lines[..., 2])
     return num / np.hypot(lines[..., 0], lines[..., 1])
-
-
-def stack_projections(cameras: Sequence[Camera]) -> np.ndarray:
-    """(C, 3, 4) projection matrices of the cameras."""
-    return np.stack([c.P for c in cameras])
