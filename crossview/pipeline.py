@@ -135,8 +135,8 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
         def encoded(requests, rows, bounds) -> list:
             """A block's frames encoded straight from the detector's rows, in one compiled call (no
             CameraFrame objects: the writer takes the encoded frames in their place in the order)."""
-            cameras = [r[0] for r in requests]
-            times = [(stamp_s, capture_s, delivery_s) for _, _, capture_s, stamp_s, delivery_s in requests]
+            cameras = [r.camera for r in requests]
+            times = [(r.stamp_s, r.capture_s, r.delivery_s) for r in requests]
             return opened[0].encode_frames(cameras, np.array(times, dtype=np.float64).reshape(-1, 3), bounds, rows)
 
         batch: list = []  # written many at a time

@@ -46,7 +46,7 @@ from core.errors import CrossviewError
 from core.types import SKELETONS, Camera, Frame, Skeleton
 from crossview import foxglove
 from sim.poses import interpolate_poses
-from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
+from sim.types import Box, BoxKind, CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tracker.types import Target, TargetState, TrackerOutput
 
 FORMAT_VERSION = 2
@@ -381,15 +381,15 @@ class EncodedFrame(NamedTuple):
     annotations: bytes  # foxglove.ImageAnnotations stamped log_time_ns
 
 
-# The detector's row arrays (`Detector.detection_rows`) in the order `encode_frames` takes them, with the
-# dtype and trailing shape (J: joints) the compiled encoder expects.
-_ROWS = (("truth", "person_ids", np.int64, 0), ("frame", "keypoints_px", np.float64, 2),
-         ("frame", "scores", np.float64, 1), ("truth", "keypoints_px", np.float64, 2),
-         ("truth", "in_image", bool, 1), ("truth", "occluded", bool, 1), ("truth", "self_occluded", bool, 1),
-         ("truth", "effects", np.int64, 0))
+# Where each field of `DetectionRows` lives in a CameraFrame (its part and attribute), with the dtype and
+# trailing shape (J: joints) the compiled encoder expects.
+_ROWS = dict(zip(DetectionRows._fields, (
+    ("truth", "person_ids", np.int64, 0), ("frame", "keypoints_px", np.float64, 2), ("frame", "scores", np.float64, 1),
+    ("truth", "keypoints_px", np.float64, 2), ("truth", "in_image", bool, 1), ("truth", "occluded", bool, 1),
+    ("truth", "self_occluded", bool, 1), ("truth", "effects", np.int64, 0)), strict=True))
 
 
-def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray, rows: Sequence[np.ndarray],
+def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray, rows: DetectionRows,
                   skeleton: Skeleton) -> list[EncodedFrame]:
     """The EncodedFrame of n camera frames given as rows, from one compiled call (the bytes of
     `camera_frame_bytes` and `foxglove.image_annotations_bytes` at the delivery time, which the tests check).
@@ -398,8 +398,7 @@ def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray,
         cameras: the n frames' camera names.
         times: (n, 3) each frame's stamp, capture and delivery seconds.
         bounds: (n + 1,) frame i owns rows bounds[i]:bounds[i + 1].
-        rows: person ids (D,), keypoints (D, J, 2), scores (D, J), true pixels (D, J, 2), in_image, occluded,
-            self_occluded (D, J), effects (D,): the detector's `detection_rows`.
+        rows: the frames' detections (the detector's `DetectionRows`).
 
     A frame the batch does not take (a bad effects mask, a +0.0 coordinate, which protobuf leaves out) is
     encoded by the one-frame functions, which also raise their errors.
@@ -415,7 +414,7 @@ def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray,
         raise ValueError(f"encode_frames: {n} cameras, times {times.shape}, bounds {bounds.shape} and "
                          f"{len(rows)} row arrays; expected (n, 3) times, (n + 1,) bounds and {len(_ROWS)} arrays")
     columns = []
-    for (owner, name, dtype, tail), array in zip(_ROWS, rows):
+    for (owner, name, dtype, tail), array in zip(_ROWS.values(), rows):
         array = np.ascontiguousarray(array, dtype=dtype)
         expected = (D, J, 2)[:1 + tail]
         if array.shape != expected:
@@ -441,7 +440,7 @@ def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray,
     result, start = [], 0
     for i, camera in enumerate(cameras):
         if status[i]:  # the one-frame encoders' bytes (or their error)
-            cf = CameraFrame.from_rows(camera, *times[i].tolist(), columns, bounds[i], bounds[i + 1])
+            cf = CameraFrame.from_rows(camera, *times[i].tolist(), DetectionRows(*columns), bounds[i], bounds[i + 1])
             result.append(EncodedFrame(camera, t_ns[i], camera_frame_bytes(cf),
                                        foxglove.image_annotations_bytes(cf, skeleton, t_ns[i])))
         else:
@@ -468,7 +467,7 @@ def encode_camera_frames(frames: Sequence[CameraFrame], skeleton: Skeleton) -> l
     try:
         counts = [cf.frame.keypoints_px.shape[0] for cf in frames]
         rows = []
-        for owner, name, dtype, tail in _ROWS:
+        for owner, name, dtype, tail in _ROWS.values():
             parts = [getattr(getattr(cf, owner), name) for cf in frames]
             shape = (J, 2)[:tail]
             if any(p.shape != (d, *shape) for p, d in zip(parts, counts)):
@@ -478,7 +477,7 @@ def encode_camera_frames(frames: Sequence[CameraFrame], skeleton: Skeleton) -> l
         return one_by_one()
     times = [(cf.frame.stamp_s, cf.truth.capture_s, cf.truth.delivery_s) for cf in frames]
     return encode_frames([cf.frame.camera for cf in frames], np.array(times, dtype=np.float64),
-                         np.cumsum([0] + counts), rows, skeleton)
+                         np.cumsum([0] + counts), DetectionRows(*rows), skeleton)
 
 
 def warm_up(skeleton: Skeleton) -> None:
@@ -814,7 +813,7 @@ class RecordingWriter(_WriterContext):
         self._out.add_many(messages)
 
     def encode_frames(self, cameras: Sequence[int], times: np.ndarray, bounds: np.ndarray,
-                      rows: Sequence[np.ndarray]) -> list[EncodedFrame]:
+                      rows: DetectionRows) -> list[EncodedFrame]:
         """`encode_frames` (the module's) of frames from this recording's cameras, given by index."""
         names = [self.cameras[i].name for i in cameras]
         return encode_frames(names, times, bounds, rows, self.skeleton)

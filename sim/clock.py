@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -67,23 +68,23 @@ class ClockConfig:
         return 1.0 / self.fps
 
 
-@dataclass(frozen=True)
-class Capture:
-    """One frame a camera really took and delivered.
+class Schedule(NamedTuple):
+    """Every frame the rig's cameras really take and deliver, as a struct of (N,) arrays, sorted by true
+    capture time (ties by camera index).
 
     Attributes:
-        camera_index: index of the camera in the rig.
-        frame_index: tick number k of that camera (gaps where frames dropped).
-        capture_s: true capture time (jittered), seconds since the scenario start.
-        stamp_s: the time the camera wrote on the frame (its clock).
-        delivery_s: when the frame reaches the tracker (capture + delay).
+        camera: (N,) int64 index of the camera in the rig.
+        frame: (N,) int64 tick number k of that camera (gaps where frames dropped).
+        capture_s: (N,) true capture time (jittered), seconds since the scenario start.
+        stamp_s: (N,) the time the camera wrote on the frame (its clock).
+        delivery_s: (N,) when the frame reaches the tracker (capture + delay).
     """
 
-    camera_index: int
-    frame_index: int
-    capture_s: float
-    stamp_s: float
-    delivery_s: float
+    camera: np.ndarray
+    frame: np.ndarray
+    capture_s: np.ndarray
+    stamp_s: np.ndarray
+    delivery_s: np.ndarray
 
 
 def delays(config: ClockConfig, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -104,7 +105,7 @@ def drop_mask(config: ClockConfig, n: int, rng: np.random.Generator) -> np.ndarr
     return dropped
 
 
-def schedule(camera_names, config: ClockConfig, duration_s: float, rng: np.random.Generator) -> list[Capture]:
+def schedule(camera_names, config: ClockConfig, duration_s: float, rng: np.random.Generator) -> Schedule:
     """Every frame each camera takes in [0, duration_s), dropped frames removed.
 
     Args:
@@ -113,18 +114,7 @@ def schedule(camera_names, config: ClockConfig, duration_s: float, rng: np.rando
         duration_s: simulated duration, seconds.
         rng: the "clock" generator. Each camera draws from its own child stream, so adding a camera
             does not change the others' clocks.
-
-    Returns:
-        captures sorted by true capture time (ties by camera index).
     """
-    columns = schedule_columns(camera_names, config, duration_s, rng)
-    return [Capture(*row) for row in zip(*(column.tolist() for column in columns))]
-
-
-def schedule_columns(camera_names, config: ClockConfig, duration_s: float,
-                     rng: np.random.Generator) -> tuple[np.ndarray, ...]:
-    """`schedule` as five (N,) columns in its order, one per `Capture` field: camera and frame indices (int64),
-    capture, stamp and delivery times (seconds). The same draws; no Python object per frame."""
     if not duration_s >= 0:
         raise ValueError(f"duration_s: {duration_s} must be >= 0")
     seeds = rng.integers(0, 2**63 - 1, size=len(camera_names))
@@ -150,5 +140,5 @@ def schedule_columns(camera_names, config: ClockConfig, duration_s: float,
         for column, dtype in zip(columns, (np.int64, np.int64, float, float, float)))
     # By capture time, ties by camera index (a stable sort: a camera's frames stay in order).
     order = np.lexsort((camera, capture))
-    return (camera[order].astype(np.int64), frame[order].astype(np.int64), capture[order].astype(float),
-            stamp[order].astype(float), delivery[order].astype(float))
+    return Schedule(camera[order].astype(np.int64), frame[order].astype(np.int64), capture[order].astype(float),
+                    stamp[order].astype(float), delivery[order].astype(float))

@@ -31,7 +31,7 @@ from core.jit import jit
 from core.types import COCO17, Camera, Skeleton
 from sim.cameras import in_image, in_image_many_kernel, monotonic_radius
 from sim.config import bounded, check_ranges
-from sim.types import CameraFrame, DetectionEffect, PoseTruth
+from sim.types import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
 
 
 class DetectorProfile(enum.Enum):
@@ -344,7 +344,7 @@ class Detector:
 
         Args:
             world: the world (or None to skip ray casting).
-            requests: (camera_index, poses, ...) per capture.
+            requests: the captures (`Capture`).
 
         Returns:
             Per request: px (P, J, 2), in_img, occluded, self_occluded (P, J).
@@ -352,11 +352,11 @@ class Detector:
         if not requests:
             return []
         J = self.skeleton.num_joints
-        if any(np.shape(r[1].poses)[1:] != (J, 3) for r in requests):
-            return [self.visibility(r[0], world, r[1]) for r in requests]
+        if any(np.shape(r.poses.poses)[1:] != (J, 3) for r in requests):
+            return [self.visibility(r.camera, world, r.poses) for r in requests]
         scenes = [self.scene_now(world, copy=False)] if world is not None else None
         px, in_img, occluded, self_occluded = self.block_visibility(requests, scenes, [0] * len(requests))
-        bounds = np.cumsum([0] + [len(r[1].person_ids) for r in requests]).tolist()
+        bounds = np.cumsum([0] + [len(r.poses.person_ids) for r in requests]).tolist()
         return [(px[a:b], in_img[a:b], occluded[a:b], self_occluded[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
 
     def scene_now(self, world, copy: bool = True) -> tuple | None:
@@ -460,7 +460,7 @@ class Detector:
         """Projection and occlusion of the captures of several truth ticks, in two compiled passes.
 
         Args:
-            requests: (camera_index, poses, ...) per capture; every pose (P, J, 3).
+            requests: the captures (`Capture`); every pose (P, J, 3).
             scenes: `scene_now` of each tick (None: no ray casting), the world of the latest `_scene` call.
             scene_of: per request, the index of its tick in `scenes`; requests of one tick are one batch
                 (the tangential and skew terms of the lens are added for a batch when a camera of it has them).
@@ -470,8 +470,8 @@ class Detector:
         """
         J = self.skeleton.num_joints
         n_req = len(requests)
-        cams = np.array([r[0] for r in requests], dtype=np.int64)
-        counts = [len(r[1].person_ids) for r in requests]
+        cams = np.array([r.camera for r in requests], dtype=np.int64)
+        counts = [len(r.poses.person_ids) for r in requests]
         most = max(counts)
         N = most * J
         if min(counts) == most:
@@ -480,14 +480,15 @@ class Detector:
             if self._points_buf is None or self._points_buf.shape[0] < n_req or self._points_buf.shape[1] != N:
                 self._points_buf = np.empty((max(n_req, 64), N, 3))
             points = self._points_buf[:n_req]
-            np.concatenate([r[1].poses for r in requests], out=points.reshape(n_req * most, J, 3))
-            ids = np.concatenate([r[1].person_ids for r in requests]).astype(np.int64, copy=False).reshape(n_req, most)
+            np.concatenate([r.poses.poses for r in requests], out=points.reshape(n_req * most, J, 3))
+            ids = np.concatenate([r.poses.person_ids for r in requests]).astype(np.int64, copy=False)
+            ids = ids.reshape(n_req, most)
         else:  # someone arrived or left between two captures: pad with NaN (never in view)
             points = np.full((n_req, N, 3), np.nan)
             ids = np.full((n_req, most), -1, dtype=np.int64)
             for i, r in enumerate(requests):
-                points[i, :counts[i] * J] = np.asarray(r[1].poses, dtype=np.float64).reshape(-1, 3)
-                ids[i, :counts[i]] = r[1].person_ids
+                points[i, :counts[i] * J] = np.asarray(r.poses.poses, dtype=np.float64).reshape(-1, 3)
+                ids[i, :counts[i]] = r.poses.person_ids
         cam_list = cams.tolist()
         batch_tangential, batch_skew = {}, {}
         for c, k in zip(cam_list, scene_of):
@@ -573,14 +574,14 @@ class Detector:
             poses: everybody's true pose at `capture_s`, (P, J, 3).
             capture_s, stamp_s, delivery_s: true capture time, the camera's stamp, delivery time.
         """
-        return self.detect_many(world, [(camera_index, poses, capture_s, stamp_s, delivery_s)])[0]
+        return self.detect_many(world, [Capture(camera_index, poses, capture_s, stamp_s, delivery_s)])[0]
 
     def detect_many(self, world, requests) -> list[CameraFrame]:
         """`detect` for several captures whose bodies are all in `world`'s data (one truth tick).
 
         Args:
             world: the world (or None to skip occlusion).
-            requests: (camera_index, poses, capture_s, stamp_s, delivery_s) per capture.
+            requests: the captures (`Capture`).
         """
         return self.detect_visible(requests, self.visibility_many(world, requests))
 
@@ -591,7 +592,7 @@ class Detector:
         """
         return self.frames_from_rows(requests, *self.detection_rows(requests, visibilities))
 
-    def detection_rows(self, requests, visibilities) -> tuple[list[np.ndarray], np.ndarray]:
+    def detection_rows(self, requests, visibilities) -> tuple[DetectionRows, np.ndarray]:
         """The random part of `detect_visible`: every detection of the requests as rows of a few arrays.
 
         Returns:
@@ -600,25 +601,25 @@ class Detector:
                 they are reported; bounds (R + 1,): request i owns rows bounds[i]:bounds[i + 1].
         """
         if not requests:
-            return [], np.zeros(1, dtype=np.int64)
+            return DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
         return self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities]) for k in range(4)))
 
     def detection_rows_of(self, requests, px, in_img, occluded, self_occluded,
-                          person_ids: list | None = None) -> tuple[list[np.ndarray], np.ndarray]:
+                          person_ids: list | None = None) -> tuple[DetectionRows, np.ndarray]:
         """`detection_rows` from the requests' visibility as `block_visibility` returns it (every request's
         people in turn); person_ids: each request's people (None: its poses' ids), where the requests
         came without their poses."""
         if not requests:
-            return [], np.zeros(1, dtype=np.int64)
+            return DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
         if person_ids is None:
-            person_ids = [r[1].person_ids for r in requests]
+            person_ids = [r.poses.person_ids for r in requests]
         ids = np.concatenate(person_ids).astype(np.int64, copy=False)
         group = np.repeat(np.arange(len(requests)), [len(p) for p in person_ids])
         rows = self._detections(ids, px, in_img, occluded, self_occluded, group)
         # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
         n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
         phantoms = [(i, ph) for i in np.repeat(np.arange(len(requests)), n_phantoms)
-                    for ph in [self._phantom(requests[i][0])] if ph is not None]
+                    for ph in [self._phantom(requests[i].camera)] if ph is not None]
         if phantoms:
             extra = [np.stack([ph[k] for _, ph in phantoms]) for k in range(8)]
             extra.append(np.array([i for i, _ in phantoms], dtype=rows[-1].dtype))
@@ -627,17 +628,17 @@ class Detector:
         order = np.empty(rows[-1].shape[0], dtype=np.int64)
         _frame_order(rows[-1].astype(np.int64, copy=False), self._rng.random(rows[-1].shape[0]), len(requests), order)
         rows = [r[order] for r in rows]
-        return rows[:-1], np.searchsorted(rows[-1], np.arange(len(requests) + 1))
+        return DetectionRows(*rows[:-1]), np.searchsorted(rows[-1], np.arange(len(requests) + 1))
 
-    def frames_from_rows(self, requests, rows: list[np.ndarray], bounds: np.ndarray) -> list[CameraFrame]:
+    def frames_from_rows(self, requests, rows: DetectionRows, bounds: np.ndarray) -> list[CameraFrame]:
         """The frames of `requests` from their `detection_rows` (no randomness: any process can do it)."""
         if not requests:
             return []
         bounds = bounds.tolist()
         frames = []
-        for i, (camera_index, poses, capture_s, stamp_s, delivery_s) in enumerate(requests):
-            frames.append(CameraFrame.from_rows(self.cameras[camera_index].name, stamp_s, capture_s, delivery_s,
-                                                rows, bounds[i], bounds[i + 1], poses))
+        for i, r in enumerate(requests):
+            frames.append(CameraFrame.from_rows(self.cameras[r.camera].name, r.stamp_s, r.capture_s, r.delivery_s,
+                                                rows, bounds[i], bounds[i + 1], r.poses))
         return frames
 
     def _detections(self, person_ids, px, in_img, occluded, self_occluded, group):

@@ -10,6 +10,7 @@ import os
 import signal
 import traceback
 from collections.abc import Iterator
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from sim import clock as clock_mod
 from sim.detector import Detector
 from sim.poses import interpolate_ticks
 from sim.rng import child_rng
-from sim.types import CameraFrame, PoseTruth
+from sim.types import CameraFrame, Capture, DetectionRows, PoseTruth
 
 log = logging.getLogger(__name__)
 
@@ -31,6 +32,25 @@ _TRUTH_KIND, _FRAME_KIND = 0, 1
 # together: the per-call costs are then shared by about 84 frames of store_layout2 instead of about 3.
 # (Ten ticks cost about 15 % more per simulated second in both processes; fifty or a hundred, no less.)
 _DETECT_BLOCK_TICKS = 30
+
+
+class Block(NamedTuple):
+    """One block of `_DETECT_BLOCK_TICKS` truth ticks, as `Simulation._blocks` gives it.
+
+    Attributes:
+        t: the block's last tick time, seconds: every later event has a later log time.
+        truths: the block's truth ticks (`PoseTruth`), in time order.
+        requests: the captures taken during the block (`Capture`), by capture time.
+        rows: their detections (`DetectionRows`); or, from a block left without the detector's draws, the
+            captures' visibility (`Detector.block_visibility`).
+        bounds: (R + 1,) capture i owns rows bounds[i]:bounds[i + 1] (None without the draws).
+    """
+
+    t: float
+    truths: list
+    requests: list
+    rows: object
+    bounds: np.ndarray | None
 
 
 class Simulation:
@@ -114,16 +134,17 @@ class Simulation:
                 while_starting()
             blocks = self._blocks(duration)
             if not with_poses:
-                blocks = ((t, truths, [(r[0], None, *r[2:]) for r in requests], rows, bounds)
-                          for t, truths, requests, rows, bounds in blocks)
+                blocks = (Block(b.t, b.truths, [r._replace(poses=None) for r in b.requests], b.rows, b.bounds)
+                          for b in blocks)
         pending: list = []
         seq = itertools.count()
-        for t, truths, requests, rows, bounds in blocks:
+        for t, truths, requests, rows, bounds in blocks:  # (a Block)
             for poses in truths:
                 heapq.heappush(pending, (poses.t_s, _TRUTH_KIND, -1, poses.t_s, next(seq), poses))
             # A block can hold no capture at all (a short last block, a slow or dropping clock).
             for request, event in zip(requests, frames_of(requests, rows, bounds) if requests else ()):
-                heapq.heappush(pending, (request[4], _FRAME_KIND, request[0], request[2], next(seq), event))
+                heapq.heappush(pending, (request.delivery_s, _FRAME_KIND, request.camera, request.capture_s,
+                                         next(seq), event))
             # Everything later has a log time > t (a later capture is after t, and delivered after it).
             while pending and pending[0][0] <= t:
                 yield heapq.heappop(pending)[-1]
@@ -138,7 +159,7 @@ class Simulation:
         None: the error draws are left to the consumer (`_blocks_from_worker`), with the same detector state.
         """
         world, detector = self.world, self.detector
-        cams, _, capture_times, stamp_s, delivery_s = clock_mod.schedule_columns(
+        cams, _, capture_times, stamp_s, delivery_s = clock_mod.schedule(
             [c.name for c in self.cameras], self.scenario.clock, duration, child_rng(self.seed, "clock"))
         cams, capture_s, stamp_s, delivery_s = (c.tolist() for c in (cams, capture_times, stamp_s, delivery_s))
         # Truth ticks cover [0, duration] and the last capture.
@@ -164,13 +185,13 @@ class Simulation:
                 continue
             end = first + len(tick_of)
             at_capture = interpolate_ticks(previous, truths, tick_of, capture_times[first:end])
-            requests = list(zip(cams[first:end], at_capture, capture_s[first:end], stamp_s[first:end],
+            requests = list(map(Capture, cams[first:end], at_capture, capture_s[first:end], stamp_s[first:end],
                                 delivery_s[first:end]))
-            rows, bounds = [], np.zeros(1, dtype=np.int64)
+            rows, bounds = DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
             if requests:
                 visible = detector.block_visibility(requests, None if scenes[0] is None else scenes, scene_of)
                 rows, bounds = detector.detection_rows_of(requests, *visible) if draws else (visible, None)
-            yield t, truths, requests, rows, bounds
+            yield Block(t, truths, requests, rows, bounds)
             previous, first = truths[-1], end
             truths, scenes, scene_of, tick_of = [], [], [], []
 
@@ -206,10 +227,10 @@ class Simulation:
                     previous = truths[-1] if truths else previous
                     # The detector's draws are made here: the worker only does geometry (the two processes
                     # then take about the same time per block). The same draws, in the same order.
-                    rows, bounds = [], np.zeros(1, dtype=np.int64)
+                    rows, bounds = DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
                     if requests:
                         rows, bounds = self.detector.detection_rows_of(requests, *visible, person_ids=people)
-                    yield t, truths, requests, rows, bounds
+                    yield Block(t, truths, requests, rows, bounds)
                 elif kind == "error":
                     raise payload
                 else:  # "end": the counts of the detector that ran there
@@ -265,7 +286,8 @@ def _load_draw_kernels(detector: Detector) -> None:
     spare = Detector(detector.config, detector.cameras, np.random.default_rng(0), detector.skeleton)
     J = detector.skeleton.num_joints
     seen = np.ones((1, J), dtype=bool)
-    spare.detection_rows_of([(0, None)], np.ones((1, J, 2)), seen, ~seen, ~seen, person_ids=[np.zeros(1, np.int64)])
+    spare.detection_rows_of([Capture(0, None, 0.0, 0.0, 0.0)], np.ones((1, J, 2)), seen, ~seen, ~seen,
+                            person_ids=[np.zeros(1, np.int64)])
 
 
 def _usable_cores() -> int:
@@ -275,13 +297,13 @@ def _usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _pack_block(block: tuple) -> tuple:
+def _pack_block(block: Block) -> tuple:
     """A block of `_blocks(draws=False)` as a few flat arrays (one pickle of a handful of arrays instead of
     dozens of small ones): the truths' poses concatenated, with their times and people counts; the
     captures' cameras, times, people and visibility (their poses are left out: `_unpack_block` derives
     them from the truths)."""
     t, truths, requests, visible, _ = block
-    seen = [r[1].person_ids for r in requests]
+    seen = [r.poses.person_ids for r in requests]
     people = (np.concatenate(seen).astype(np.int64, copy=False) if seen else np.zeros(0, dtype=np.int64),
               np.array([len(p) for p in seen]))
     times = np.array([p.t_s for p in truths])
@@ -290,7 +312,8 @@ def _pack_block(block: tuple) -> tuple:
     poses = [p.poses for p in truths]
     joints = np.concatenate([p.reshape(-1, 3) for p in poses]).astype(np.float64, copy=False)
     shapes = [p.shape[1:] for p in poses]
-    meta = np.array([r[0] for r in requests], dtype=np.int64), np.array([r[2:5] for r in requests]).reshape(-1, 3)
+    meta = (np.array([r.camera for r in requests], dtype=np.int64),
+            np.array([(r.capture_s, r.stamp_s, r.delivery_s) for r in requests]).reshape(-1, 3))
     return t, times, counts, ids, joints, shapes, meta, visible, people
 
 
@@ -311,5 +334,5 @@ def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -
     if with_poses and capture_list:
         tick_of = np.searchsorted(times, capture_times[:, 0], side="left")
         poses = interpolate_ticks(previous, truths, tick_of, capture_times[:, 0])
-    requests = [(c, p, *times_i) for c, p, times_i in zip(cams.tolist(), poses, capture_list)]
+    requests = [Capture(c, p, *times_i) for c, p, times_i in zip(cams.tolist(), poses, capture_list)]
     return t, truths, requests, visible, seen

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -92,6 +93,57 @@ class DetectionEffect(enum.IntFlag):
     GROSS_ERROR = 16
 
 
+class Capture(NamedTuple):
+    """One frame a camera takes, as the simulation hands it to the detector.
+
+    Attributes:
+        camera: index of the camera in the rig.
+        poses: everybody's true pose at the capture time; None where the poses were left out (a recording
+            writer does not need them, and the detector then takes the people's ids separately).
+        capture_s: true capture time, seconds since the scenario start.
+        stamp_s: the time the camera stamped on the frame.
+        delivery_s: when the frame reaches the tracker.
+    """
+
+    camera: int
+    poses: PoseTruth | None
+    capture_s: float
+    stamp_s: float
+    delivery_s: float
+
+
+class DetectionRows(NamedTuple):
+    """Every detection of a batch of captures as a struct of arrays, one row per detection (D rows, each
+    frame's rows together and in the order the detector reports them).
+
+    Attributes:
+        person_ids: (D,) int64 true person of each detection, -1 for a phantom.
+        keypoints_px: (D, J, 2) reported pixels, NaN for a joint not reported.
+        scores: (D, J) reported scores, 0 for a joint not reported.
+        true_px: (D, J, 2) the true joints' pixels (NaN behind the camera).
+        in_image: (D, J) bool, the true joint is inside the image.
+        occluded: (D, J) bool, hidden by the store or another person.
+        self_occluded: (D, J) bool, hidden by the person's own body.
+        effects: (D,) int64 `DetectionEffect` bits.
+    """
+
+    person_ids: np.ndarray
+    keypoints_px: np.ndarray
+    scores: np.ndarray
+    true_px: np.ndarray
+    in_image: np.ndarray
+    occluded: np.ndarray
+    self_occluded: np.ndarray
+    effects: np.ndarray
+
+    @classmethod
+    def empty(cls, num_joints: int) -> DetectionRows:
+        """No detection at all."""
+        J = num_joints
+        return cls(np.zeros(0, np.int64), np.zeros((0, J, 2)), np.zeros((0, J)), np.zeros((0, J, 2)),
+                   *(np.zeros((0, J), dtype=bool) for _ in range(3)), np.zeros(0, np.int64))
+
+
 @dataclass(frozen=True, eq=False)
 class CameraFrame:
     """One delivered camera frame: what the tracker sees and the truth behind it.
@@ -109,11 +161,9 @@ class CameraFrame:
     poses_at_capture: PoseTruth | None
 
     @classmethod
-    def from_rows(cls, camera: str, stamp_s: float, capture_s: float, delivery_s: float, rows, start: int,
-                  end: int, poses_at_capture: PoseTruth | None = None) -> CameraFrame:
-        """The frame whose detections are rows start:end of the detector's row arrays
-        (`Detector.detection_rows`: person ids, keypoints, scores, true pixels, in_image, occluded,
-        self_occluded, effects), as views."""
+    def from_rows(cls, camera: str, stamp_s: float, capture_s: float, delivery_s: float, rows: DetectionRows,
+                  start: int, end: int, poses_at_capture: PoseTruth | None = None) -> CameraFrame:
+        """The frame whose detections are rows start:end of `rows`, as views."""
         ids, kp, scores, true_px, in_image, occluded, self_occluded, effects = (r[start:end] for r in rows)
         return cls(Frame(camera, float(stamp_s), kp, scores),
                    DetectionTruth(capture_s=float(capture_s), delivery_s=float(delivery_s), person_ids=ids,

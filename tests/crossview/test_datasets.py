@@ -169,7 +169,7 @@ def test_campus_pcp_from_ground_truth_2d_joints(campus, tmp_path):
 def _typical_detector(frames, cams, seed):
     """The simulator's `typical` detector errors (noise, misses, gross errors, swaps) on the true 2D joints."""
     from sim.detector import Detector, DetectorConfig
-    from sim.types import PoseTruth
+    from sim.types import Capture, PoseTruth
 
     detector = Detector(DetectorConfig(), list(cams), np.random.default_rng(seed), skeleton=CAMPUS14)
     index = {c.name: i for i, c in enumerate(cams)}
@@ -182,7 +182,7 @@ def _typical_detector(frames, cams, seed):
         inside &= (px[..., 1] >= 0) & (px[..., 1] < cam.height_px)
         clear = np.zeros((D, J), dtype=bool)
         poses = PoseTruth(frame.stamp_s, np.arange(D), np.zeros((D, J, 3)))
-        request = (index[frame.camera], poses, frame.stamp_s, frame.stamp_s, frame.stamp_s)
+        request = Capture(index[frame.camera], poses, frame.stamp_s, frame.stamp_s, frame.stamp_s)
         out = detector.detect_visible([request], [(px, inside, clear, clear)])[0]
         noisy.append(Frame(frame.camera, frame.stamp_s, out.frame.keypoints_px, out.frame.scores))
     return noisy

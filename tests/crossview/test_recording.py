@@ -24,7 +24,7 @@ from crossview.recording import (
     open_recording,
     open_tracks,
 )
-from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
+from sim.types import Box, BoxKind, CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tracker.types import Target, TargetState, TrackerOutput
 
 SCENARIO_TEXT = 'description = "synthetic"\n[crowd]\npeople = 3\n'
@@ -710,8 +710,8 @@ def test_encoded_frames_are_written_as_the_frames_they_encode(tmp_path, world):
             pytest.raises(ValueError, match="'nowhere' is not one of the recording's cameras"):
         writer.write(stranger)
     f = frames[0]
-    rows = [f.truth.person_ids, f.frame.keypoints_px, f.frame.scores[:, :3], f.truth.keypoints_px, f.truth.in_image,
-            f.truth.occluded, f.truth.self_occluded, f.truth.effects]
+    rows = DetectionRows(f.truth.person_ids, f.frame.keypoints_px, f.frame.scores[:, :3], f.truth.keypoints_px,
+                         f.truth.in_image, f.truth.occluded, f.truth.self_occluded, f.truth.effects)
     times = np.array([[f.frame.stamp_s, f.truth.capture_s, f.truth.delivery_s]])
     with pytest.raises(ValueError, match=r"frame.scores rows expected \(\d+, 17\), got"):
         recording.encode_frames([f.frame.camera], times, [0, f.frame.num_detections], rows, COCO17)

@@ -3,12 +3,27 @@
 from __future__ import annotations
 
 import dataclasses
+from typing import NamedTuple
 
 import numpy as np
 import pytest
 from scipy import stats
 
-from sim.clock import ClockConfig, schedule, schedule_columns
+from sim.clock import ClockConfig, Schedule
+from sim.clock import schedule as schedule_columns
+
+
+class _Capture(NamedTuple):
+    camera_index: int
+    frame_index: int
+    capture_s: float
+    stamp_s: float
+    delivery_s: float
+
+
+def schedule(*args) -> list[_Capture]:
+    """The schedule's frames one by one, in its order."""
+    return [_Capture(*row) for row in zip(*(column.tolist() for column in schedule_columns(*args)))]
 
 
 def _by_camera(captures, n):
@@ -132,7 +147,7 @@ def test_simultaneous_captures_come_by_camera_index_and_the_columns_say_the_same
     assert keys == sorted(keys) and len(set(keys)) == len(keys)
     for cam in _by_camera(captures, len(names)):
         assert [c.frame_index for c in cam] == sorted(c.frame_index for c in cam)
-    # The columns are the captures' fields, in the same order.
+    # The columns: indices as int64, times as float64, one per field.
     columns = schedule_columns(names, config, 3.0, np.random.default_rng(6))
-    assert [column.dtype for column in columns] == [np.int64, np.int64, float, float, float]
-    assert list(zip(*(column.tolist() for column in columns))) == [dataclasses.astuple(c) for c in captures]
+    assert isinstance(columns, Schedule) and [column.dtype for column in columns] == [np.int64, np.int64, float,
+                                                                                       float, float]

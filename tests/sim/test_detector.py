@@ -12,7 +12,7 @@ from sim.cameras import CameraPlacement, CameraRigConfig, build_rig, in_image
 from sim.detector import _TEMPLATE_COCO17, Detector, DetectorConfig, DetectorProfile, person_size_px
 from sim.scenario import Scenario
 from sim.store import StoreConfig
-from sim.types import DetectionEffect, PoseTruth
+from sim.types import Capture, DetectionEffect, PoseTruth
 
 # Bodies of the stand-in person (COCO-17 keypoint -> body): head, torso, arms, legs.
 _PARTS = {"head": (0, 1, 2, 3, 4), "larm": (5, 7, 9), "rarm": (6, 8, 10), "lleg": (11, 13, 15),
@@ -123,7 +123,7 @@ def test_a_capture_that_sees_nobody_does_not_break_the_batch():
                     CameraPlacement((5.8, 3.8, 2.8), (5.9, 3.9, 0.0)))
     detector = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
     for order in ((0, 1), (1, 0), (1, 1)):
-        views = detector.visibility_many(world, [(c, world.truth()) for c in order])
+        views = detector.visibility_many(world, [Capture(c, world.truth(), 0.0, 0.0, 0.0) for c in order])
         for c, (_, in_img, occluded, _) in zip(order, views):
             assert in_img.any() == (c == 0)
             if c == 0:
@@ -356,7 +356,7 @@ def test_block_visibility_of_snapshots_equals_visibility_at_each_tick():
     ticks = []
     for k in range(2 * _SCENE_ROWS + 30):
         truth = world.advance(k * 0.05)
-        requests = [(c, truth) for c in range(len(cams))]
+        requests = [Capture(c, truth, k * 0.05, k * 0.05, k * 0.05) for c in range(len(cams))]
         ticks.append((requests, later.scene_now(world), [now.visibility(c, world, truth) for c in range(len(cams))]))
     assert len({id(scene[2]) for _, scene, _ in ticks}) > 1 and len({id(scene[4]) for _, scene, _ in ticks}) > 1
     blocks = [list(range(a, min(a + n, len(ticks)))) for a, n in ((0, 7), (7, 50), (57, 10), (67, 70))]
