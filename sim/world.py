@@ -6,7 +6,7 @@ length of `sim.humanoid` is proportional to height) and it gets a new, never reu
 world is kinematic: `advance` sets qpos from the crowd's motion and computes the 17 keypoint sites by
 its own forward kinematics of the keypoint chain (a compiled kernel; equal to MuJoCo's site positions to
 ~1e-15 m); MuJoCo's `mj_kinematics`, which is all `mj_ray` needs to see the bodies where they are, runs
-when `data` or `ray_scene` is next asked for, so people-only simulation skips it.
+when `data` is next asked for, so people-only simulation skips it.
 
 Speed: the per-step and per-tick numeric work (posing, keypoints, and in `sim.crowd` steering, hard
 constraints, gait; A* in `sim.store`) runs in numba-compiled loops over plain floats, because with a few
@@ -85,6 +85,7 @@ class World:
         self.boxes: tuple[Box, ...] = self.store.boxes
         self.skeleton: Skeleton = COCO17
         self.slots = S = scenario.crowd.people
+        J = len(hm.KEYPOINT_NAMES)
         self.model = mujoco.MjModel.from_xml_string(self._xml())
         self._data = mujoco.MjData(self.model)
         self._kinematics_stale = False
@@ -94,7 +95,7 @@ class World:
         if root_adr != [k * hm.NQ for k in range(S)] or m.nq != S * hm.NQ:
             raise RuntimeError("humanoid qpos layout is not slot-contiguous")
         self._kp_sites = np.array([[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, f"p{k}_{n}")
-                                    for n in hm.KEYPOINT_NAMES] for k in range(S)], dtype=np.int64).reshape(S, 17)
+                                    for n in hm.KEYPOINT_NAMES] for k in range(S)], dtype=np.int64).reshape(S, J)
         body_names = [m.body(b).name for b in range(m.nbody)]
         self._body_slot = np.full(m.nbody, -1, dtype=np.int64)
         self._body_local = np.full(m.nbody, -1, dtype=np.int64)
@@ -134,8 +135,7 @@ class World:
         no_slot = np.zeros((0, hm.NQ))
         _pose_kernel(no_slot, no_slot, np.zeros(0), np.zeros(0), 0.0, np.zeros(0, dtype=bool), np.zeros(0),
                      np.zeros(0, dtype=np.int64), self._fk_body, _FK_TABLES, _FK_HINGES, self._body_pos, self._kp_sites,
-                     self._site_pos, np.empty((0, 17, 3)))
-        self._ray: _RayScene | None = None  # built when first asked for
+                     self._site_pos, np.empty((0, J, 3)))
 
     # -- model -------------------------------------------------------------------------------------
 
@@ -238,14 +238,12 @@ class World:
         exact = cur.time_s <= t_s or prev is cur
         present, order, self._ids = self._orders[exact]
         # The keypoints by forward kinematics of the keypoint sites alone; MuJoCo's full kinematics (every
-        # body, geom and site) runs when `data` or `ray_scene` is next asked for.
-        poses = np.empty((len(order), 17, 3))
+        # body, geom and site) runs when `data` is next asked for.
+        poses = np.empty((len(order), self.skeleton.num_joints, 3))
         q0, h0, a = (cur.qpos, cur.heading, 0.0) if exact else (prev.qpos, prev.heading, (t_s - prev.time_s) / STEP_S)
         _pose_kernel(q0, cur.qpos, h0, cur.heading, a, present, self._data.qpos, order, self._fk_body, _FK_TABLES,
                      _FK_HINGES, self._body_pos, self._kp_sites, self._site_pos, poses)
         self._kinematics_stale = True
-        if self._ray is not None:
-            self._ray.stale = True
         self._present = present
         return PoseTruth(t_s=float(t_s), person_ids=self._ids, poses=poses)
 
@@ -256,16 +254,6 @@ class World:
             mujoco.mj_kinematics(self.model, self._data)
             self._kinematics_stale = False
         return self._data
-
-    def ray_scene(self) -> tuple:
-        """(model, data) to cast rays against at the last `advance`: the same geoms, in the same order
-        and at the same places as `model`/`data`, so `mujoco.mj_multiRay` gives the same geom ids and
-        distances, but grouped one body per person slot with bounding volumes, which lets MuJoCo skip the
-        people a ray passes far from (in `model` no geom collides, so MuJoCo builds no bounding volumes
-        and every ray is tested against every geom)."""
-        if self._ray is None:
-            self._ray = _RayScene(self)
-        return self._ray.synced()
 
     def geom_groups(self) -> np.ndarray:
         """(K + 1,) int64 starts of the contiguous runs of geoms that move together (the store's, then one
@@ -459,93 +447,6 @@ def _qpos_kernel(pos, vel, heading_, phase_, feet, swing_len, reach_, reach_heig
             q[n, C_WRIST + leg * ARM_STRIDE] = 0.1 + 0.25 * ra
         for j in range(lo.shape[0]):
             q[n, 7 + j] = min(max(q[n, 7 + j], lo[j]), hi[j])
-
-
-class _RayScene:
-    """A second MuJoCo model holding only what rays need: the store's geoms, then one mocap body per
-    person slot carrying that slot's geoms, in `World.model`'s geom order.
-
-    The store's geoms collide with nothing, so the world body keeps no bounding volume and its geoms are
-    tried in order, as in `World.model` (two store faces at the same distance resolve alike). Nothing
-    moves in it by kinematics: `synced` copies the geoms' world poses (and sizes, which change
-    when a slot is resized) from the world's data, and sets every bounding-volume node of a slot body
-    to the box around the bounding spheres of the geoms beneath it. Those boxes contain the geoms, so
-    the culling never drops a hit.
-    """
-
-    _TYPES = {int(mujoco.mjtGeom.mjGEOM_SPHERE): "sphere", int(mujoco.mjtGeom.mjGEOM_CAPSULE): "capsule",
-              int(mujoco.mjtGeom.mjGEOM_ELLIPSOID): "ellipsoid", int(mujoco.mjtGeom.mjGEOM_CYLINDER): "cylinder",
-              int(mujoco.mjtGeom.mjGEOM_BOX): "box"}
-
-    def __init__(self, world: World):
-        self.world = world
-        m = world.model
-        # A standing pose (qpos0) places the geoms for a sensible bounding-volume tree.
-        d0 = mujoco.MjData(m)
-        mujoco.mj_kinematics(m, d0)
-        store_xml = "".join(world._store_geoms_xml())
-        bodies = []
-        for k in range(world.slots):
-            geoms = np.nonzero(world._geom_slot == k)[0]
-            root = d0.geom_xpos[geoms].mean(axis=0)
-            bodies.append(
-                f'<body name="r{k}" mocap="true"><inertial pos="0 0 0" mass="1" diaginertia="1 1 1"/>'
-                + "".join(f'<geom type="{self._TYPES[int(m.geom_type[g])]}" size="0.05 0.05 0.05" contype="1" '
-                          f'conaffinity="1" pos="{_fmt(*(d0.geom_xpos[g] - root))}"/>' for g in geoms)
-                + "</body>")
-        xml = ('<mujoco model="store_rays"><compiler angle="radian"/>'
-               '<option><flag contact="disable" gravity="disable"/></option>'
-               '<default><geom contype="0" conaffinity="0"/></default>'
-               f'<worldbody>{store_xml}{"".join(bodies)}</worldbody></mujoco>')
-        self.model = rm = mujoco.MjModel.from_xml_string(xml)
-        self.data = rd = mujoco.MjData(rm)
-        mujoco.mj_kinematics(rm, rd)  # body (and inertial) frames at the origin, identity rotations: set once
-        if np.abs(rd.xipos).max() > 0 or np.abs(rd.ximat - np.eye(3).ravel()).max() > 0:
-            raise RuntimeError("ray scene bodies are not at the origin")
-        if rm.ngeom != m.ngeom or not np.array_equal(rm.geom_type, m.geom_type):
-            raise RuntimeError("ray scene geoms do not match the world's")
-        static = world._geom_slot < 0
-        if not np.allclose(rd.geom_xpos[static], d0.geom_xpos[static]):
-            raise RuntimeError("ray scene store geoms are not where the world's are")
-        # Bounding-volume nodes of the slot bodies.
-        slot_bodies = [mujoco.mj_name2id(rm, mujoco.mjtObj.mjOBJ_BODY, f"r{k}") for k in range(world.slots)]
-        nodes = np.concatenate([np.arange(rm.body_bvhadr[b], rm.body_bvhadr[b] + rm.body_bvhnum[b])
-                                for b in slot_bodies]) if slot_bodies else np.zeros(0, dtype=np.int64)
-        if nodes.size and (rm.body_bvhadr[slot_bodies] < 0).any():
-            raise RuntimeError("ray scene slot bodies have no bounding volumes")
-        self._sizes_version = -1
-        self._slot_geoms = np.array([np.nonzero(world._geom_slot == k)[0] for k in range(world.slots)],
-                                    dtype=np.int64).reshape(world.slots, -1 if world.slots else 0)
-        leaf = rm.bvh_nodeid[nodes] >= 0
-        self._leaf_nodes, self._leaf_geoms = nodes[leaf], rm.bvh_nodeid[nodes[leaf]]
-        self._inner_nodes = nodes[~leaf]
-        self._inner_slot = np.repeat(np.arange(world.slots), [rm.body_bvhnum[b] for b in slot_bodies])[~leaf]
-        self.stale = True
-
-    def synced(self) -> tuple:
-        if self.stale:
-            m, d, rm, rd = self.world.model, self.world.data, self.model, self.data
-            if self._sizes_version != self.world._sizes_version:
-                rm.geom_size[:] = m.geom_size
-                rm.geom_rbound[:] = m.geom_rbound
-                rm.geom_aabb[:] = m.geom_aabb
-                self._sizes_version = self.world._sizes_version
-            rd.geom_xpos[:] = d.geom_xpos
-            rd.geom_xmat[:] = d.geom_xmat
-            # bvh_aabb rows: centre and half sizes in the world frame (the bodies sit at the origin). A leaf
-            # holds one geom's bounding sphere; every inner node the box around all of its slot's spheres.
-            pos, r = d.geom_xpos[self._slot_geoms], m.geom_rbound[self._slot_geoms][..., None]  # (S, G, 3)
-            lo, hi = (pos - r).min(axis=1), (pos + r).max(axis=1)
-            slot_box = np.concatenate([0.5 * (lo + hi), 0.5 * (hi - lo)], axis=1)
-            rm.bvh_aabb[self._inner_nodes] = slot_box[self._inner_slot]
-            rm.bvh_aabb[self._leaf_nodes, :3] = d.geom_xpos[self._leaf_geoms]
-            rm.bvh_aabb[self._leaf_nodes, 3:] = m.geom_rbound[self._leaf_geoms][:, None]
-            self.stale = False
-        return self.model, self.data
-
-
-def _fmt(*values: float) -> str:
-    return " ".join(f"{v:.9g}" for v in values)
 
 
 _SIDES = np.array([1.0, -1.0])

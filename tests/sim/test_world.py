@@ -232,36 +232,6 @@ def test_a_store_without_people_poses_nobody():
     assert np.all(world.geom_person_ids() == -1)
 
 
-def test_ray_scene_gives_the_same_hits_as_the_world_model():
-    """Rays cast in `ray_scene()` (bounding volumes per person) hit the same geom at the same distance as in
-    the world's own model (no bounding volumes), through arrivals, departures and slot resizes."""
-    world = _world(mean_visit_s=8.0, mean_arrival_gap_s=1.0)
-    rng = np.random.default_rng(1)
-    origins = np.array([[0.5, 0.5, 2.9], [8.0, 5.5, 2.9], [4.2, 3.0, 3.0], [1.0, 5.0, 1.2]])
-    rays = 0
-    heights = set()
-    for t in np.arange(0.0, 20.0, 0.25):
-        truth = world.advance(float(t))
-        heights.update(float(h) for h in world._slot_height)
-        model, data = world.ray_scene()
-        targets = truth.poses.reshape(-1, 3)
-        targets = np.concatenate([targets, rng.uniform([0, 0, 0], [8.4, 6.0, 2.0], (40, 3))])
-        for origin in origins:
-            vec = targets - origin
-            length = np.linalg.norm(vec, axis=1)
-            unit = (vec / length[:, None]).ravel()
-            hits = []
-            for m, d in ((world.model, world.data), (model, data)):
-                geomid, dist = np.empty(len(targets), np.int32), np.empty(len(targets))
-                mujoco.mj_multiRay(m, d, origin, unit, None, 1, -1, geomid, dist, None, len(targets),
-                                   float(length.max()))
-                hits.append((geomid, dist))
-            np.testing.assert_array_equal(hits[0][0], hits[1][0])
-            np.testing.assert_array_equal(hits[0][1], hits[1][1])
-            rays += len(targets)
-    assert rays > 20_000 and len(heights) > world.slots  # slots were resized along the way
-
-
 def test_keypoints_are_mujocos_sites_after_its_own_kinematics():
     """advance computes the keypoints by its own forward kinematics and leaves MuJoCo's for when `data`
     is read: both must agree, through arrivals (resized slots) and interpolated ticks."""
