@@ -22,7 +22,6 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
-import sys
 from dataclasses import dataclass
 
 import numpy as np
@@ -295,7 +294,6 @@ class Detector:
         self._template = _TEMPLATE_COCO17 if coco else None
         self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
         self._scene_rows: tuple | None = None  # `scene_now`'s buffer: positions, rotations, rows handed out
-        self._scene_pool: list = []  # retired buffers, reused once no row of them is referenced
         self._scene_retire = False
         self._points_buf: np.ndarray | None = None  # `block_visibility`'s keypoints, reused block to block
         self._ray_held: tuple | None = None  # `_ray_scratch`'s arrays
@@ -394,25 +392,9 @@ class Detector:
         return pos_row, buf_mat[i], size, rbound, owner
 
     def _new_scene_rows(self, G: int) -> tuple:
-        """A buffer for `scene_now`: one retired earlier that nothing refers to any more (no row of it is
-        alive anywhere: writing into fresh memory costs page faults), else a new one. The current buffer
-        is retired."""
-        pool = self._scene_pool
-        if self._scene_rows is not None:
-            pool.append([self._scene_rows[0], self._scene_rows[1]])
-        self._scene_rows, self._scene_retire = None, False
-        fresh = None
-        probe = [np.empty(0)]  # held as the pool holds its buffers: the reference count of an unused one
-        for i, entry in enumerate(pool):
-            free = sys.getrefcount(probe[0])
-            if (entry[0].shape[1] == G and sys.getrefcount(entry[0]) == free
-                    and sys.getrefcount(entry[1]) == free):
-                fresh = pool.pop(i)
-                break
-        del pool[:-2]
-        if fresh is None:
-            fresh = [np.empty((_SCENE_ROWS, G, 3)), np.empty((_SCENE_ROWS, G, 9))]
-        self._scene_rows = (fresh[0], fresh[1], [], {})
+        """A new buffer for `scene_now` (the current one is left to the ticks that still hold rows of it)."""
+        self._scene_retire = False
+        self._scene_rows = (np.empty((_SCENE_ROWS, G, 3)), np.empty((_SCENE_ROWS, G, 9)), [], {})
         return self._scene_rows
 
     def _scene_arrays(self, scenes: list) -> tuple:
