@@ -6,7 +6,6 @@ Every command prints a one-line error and exits with status 2 on bad input; only
 from __future__ import annotations
 
 import argparse
-import gc
 import logging
 import os
 import sys
@@ -323,16 +322,8 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run() -> None:
-    """The `crossview` command: `main`, then the exit without Python's final sweep of the heap.
-
-    At exit the interpreter collects garbage over every object still alive, and numba's and MuJoCo's
-    modules leave a few hundred thousand: 0.45 s after a `generate` that took 3 s. By then every output is
-    closed (or was never made under its final name) and nothing left has a finaliser that matters, so the
-    objects are frozen out of those collections (`gc.freeze`): the process ends in about 0.05 s.
-    """
-    code = main()
-    gc.freeze()
-    sys.exit(code)
+    """The `crossview` command."""
+    sys.exit(main())
 
 
 if __name__ == "__main__":
