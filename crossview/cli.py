@@ -288,7 +288,7 @@ COMMANDS = {
 # one thread per process unless the user asked otherwise (set before numpy is first imported).
 _SINGLE_THREAD_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
 # No command renders with MuJoCo: unless the user chose a backend, MuJoCo's import skips looking for one
-# (GLFW: 40 ms of the simulation worker's start-up, which the whole generation waits for).
+# (which the simulation worker's start-up, and so the whole generation, would wait for).
 _NO_RENDERING_ENV = ("MUJOCO_GL", "disable")
 
 

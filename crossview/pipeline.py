@@ -112,7 +112,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
 
         def open_writer() -> None:
             # The writer's modules are imported here, not before: while the worker process builds its
-            # world (about 0.3 s), this process imports them (0.16 s), opens the file and loads the encoders.
+            # world, this process imports them, opens the file and loads the encoders.
             from tqdm import tqdm
 
             from crossview import recording

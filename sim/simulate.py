@@ -29,8 +29,7 @@ TRUTH_RATE_HZ = 100.0
 # Order of events that share a log time: the truth first, then frames by camera index.
 _TRUTH_KIND, _FRAME_KIND = 0, 1
 # The captures of this many truth ticks (0.3 s) are projected, ray cast and given their detector errors
-# together: the per-call costs are then shared by about 84 frames of store_layout2 instead of about 3.
-# (Ten ticks cost about 15 % more per simulated second in both processes; fifty or a hundred, no less.)
+# together, so that the per-call costs are shared by many frames (about 84 of store_layout2).
 _DETECT_BLOCK_TICKS = 30
 
 

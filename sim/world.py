@@ -10,8 +10,8 @@ when `data` is next asked for, so people-only simulation skips it.
 
 Speed: the per-step and per-tick numeric work (posing, keypoints, and in `sim.crowd` steering, hard
 constraints, gait; A* in `sim.store`) runs in numba-compiled loops over plain floats, because with a few
-dozen people numpy's per-call cost dominated. Kernels are compiled once per machine (about 10 s, cached
-on disk under __pycache__) and loaded when the first world is built.
+dozen people numpy's per-call cost dominated. Kernels are compiled once per machine (cached on disk
+under __pycache__) and loaded when the first world is built.
 """
 
 from __future__ import annotations
