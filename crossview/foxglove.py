@@ -24,6 +24,7 @@ from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+from foxglove_schemas_protobuf.Point2_pb2 import Point2
 from foxglove_schemas_protobuf.Point3_pb2 import Point3
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.Pose_pb2 import Pose
@@ -391,12 +392,6 @@ _LINE_POINTS_FIELD = LinePrimitive.DESCRIPTOR.fields_by_name["points"].number
 _LINE_POINTS_KEY = (_LINE_POINTS_FIELD << 3) | 2
 
 
-def _pose_bytes(x: float, y: float, z: float) -> bytes:
-    """Wire bytes of Pose(position=(x, y, z), orientation=identity)."""
-    position = wire_double(1, x) + wire_double(2, y) + wire_double(3, z)
-    return _length_delimited(1, position) + _ORIENTATION_IDENTITY
-
-
 def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
     """`truth_skeletons(...)` as its wire bytes, written by a compiled loop from cached pieces (what the
     recording writes)."""
@@ -417,44 +412,9 @@ def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> by
         if size != wire.NEW_STYLE:
             break
         pieces.add(ids)
-    if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out
-        return _truth_skeletons_numpy(truth, skeleton, t_ns)
+    if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: the rare instant goes through it
+        return truth_skeletons(truth, skeleton, t_ns).SerializeToString()
     return out[:size].tobytes()
-
-
-def _truth_skeletons_numpy(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
-    """`truth_skeletons(...)` as its wire bytes, built from cached pieces with numpy: the path of the rare
-    instants that hold a coordinate of exactly +0.0."""
-    head = _length_delimited(1, _timestamp_bytes(t_ns)) + wire_string(2, WORLD_FRAME)
-    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
-    parts = [_length_delimited(1, deletion)]
-    bones, bone_ends = _bone_table(tuple(skeleton.bones))
-    poses = np.asarray(truth.poses, dtype=np.float64)
-    P = poses.shape[0]
-    # Everybody's bone endpoints encoded at once, then cut per person (every point has the same size).
-    known = np.isfinite(poses).all(axis=2)  # (P, J)
-    ends_known = np.repeat(known[:, bones[:, 0]] & known[:, bones[:, 1]], 2, axis=1)  # (P, 2 * bones)
-    blob = encode_points(_LINE_POINTS_FIELD, poses[:, bone_ends][ends_known])
-    ends = (np.cumsum(ends_known.sum(axis=1)) * _POINT3_WIRE.itemsize).tolist()
-    height = np.where(known, poses[..., 2], -np.inf)
-    tops = poses[np.arange(P), np.argmax(height, axis=1)].tolist()  # the highest known joint of each person
-    has_top = known.any(axis=1).tolist()
-    start = 0
-    for i, pid in enumerate(np.asarray(truth.person_ids).tolist()):
-        id_field, line_head, line_tail, text_tail, sphere_tail = _truth_entity_parts(int(pid))
-        line = _length_delimited(11, line_head + blob[start:ends[i]] + line_tail)
-        start = ends[i]
-        if has_top[i]:
-            x, y, z = tops[i]
-            sphere = _length_delimited(9, _length_delimited(1, _pose_bytes(x, y, z)) + sphere_tail)
-            text = _length_delimited(13, _length_delimited(1, _pose_bytes(x, y, z + 0.25)) + text_tail)
-            entity = b"".join((head, id_field, sphere, line, text))
-        else:
-            entity = head + id_field + line
-        parts.append(_length_delimited(2, entity))
-    data = b"".join(parts)
-    # A coordinate of exactly +0.0 is left out by protobuf; such rare messages go through it once.
-    return SceneUpdate.FromString(data).SerializeToString() if _has_zero_bits(poses) else data
 
 
 def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
@@ -486,8 +446,27 @@ def _detection_styles(person_id: int) -> tuple[bytes, bytes, bytes, bytes, int, 
 
 def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> ImageAnnotations:
     """One camera frame's 2D detections: keypoints and bones in pixels, coloured by the true person
-    behind each detection (grey for false positives)."""
-    return ImageAnnotations.FromString(image_annotations_bytes(camera_frame, skeleton, t_ns))
+    behind each detection (grey for false positives). Per detection, a line list of the bones whose two
+    ends were detected, then the detected joints as points."""
+    kp = np.asarray(camera_frame.frame.keypoints_px, dtype=np.float64)
+    person_ids = np.asarray(camera_frame.truth.person_ids).tolist()
+    stamp = timestamp(t_ns)
+    message = ImageAnnotations()
+    for d in range(kp.shape[0]):
+        pid = person_ids[d] if d < len(person_ids) else -1
+        rgba = truth_color(pid) if pid >= 0 else color(FALSE_POSITIVE_COLOR)
+        rgba.a = 1.0
+        known = np.isfinite(kp[d]).all(axis=1)
+        ends = [end for a, b in skeleton.bones if known[a] and known[b] for end in (a, b)]
+        if ends:
+            message.points.append(PointsAnnotation(
+                timestamp=stamp, type=PointsAnnotation.LINE_LIST, outline_color=rgba, thickness=DETECTION_LINE_PX,
+                points=[Point2(x=x, y=y) for x, y in kp[d, ends].tolist()]))
+        if known.any():
+            message.points.append(PointsAnnotation(
+                timestamp=stamp, type=PointsAnnotation.POINTS, outline_color=rgba, fill_color=rgba,
+                thickness=2 * DETECTION_LINE_PX, points=[Point2(x=x, y=y) for x, y in kp[d, known].tolist()]))
+    return message
 
 
 _POINTS_FIELD = PointsAnnotation.DESCRIPTOR.fields_by_name["points"].number
@@ -521,8 +500,7 @@ def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns:
             break
         styles.add(person_ids)
     if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: such rare messages go through it
-        return ImageAnnotations.FromString(_image_annotations_numpy(kp, truth.person_ids, skeleton, t_ns)
-                                           ).SerializeToString()
+        return image_annotations(camera_frame, skeleton, t_ns).SerializeToString()
     return out[:size].tobytes()
 
 
@@ -588,44 +566,6 @@ def _annotation_buffer(size: int) -> np.ndarray:
     if _ANNOTATION_BUFFER[0].size < size:
         _ANNOTATION_BUFFER[0] = np.empty(2 * size, dtype=np.uint8)
     return _ANNOTATION_BUFFER[0]
-
-
-def _image_annotations_numpy(kp: np.ndarray, person_ids, skeleton: Skeleton, t_ns: int) -> bytes:
-    """The bytes of `image_annotations_bytes` with +0.0 coordinates written (protobuf leaves them out), built
-    with numpy: what protobuf parses and writes again on the rare frames that hold such a coordinate."""
-    D = kp.shape[0]
-    bones, bone_ends = _bone_table(tuple(skeleton.bones))
-    known = np.isfinite(kp).all(axis=2)  # (D, J)
-    ends_known = np.repeat(known[:, bones[:, 0]] & known[:, bones[:, 1]], 2, axis=1)  # (D, 2 * bones)
-    # All detections' bone and joint points encoded at once, then cut per detection (every element has
-    # the same size): bones first, joints after.
-    blob = encode_points(_POINTS_FIELD, np.concatenate([kp[:, bone_ends][ends_known], kp[known]]))
-    size = _POINT2_WIRE.itemsize
-    bone_end = (np.cumsum(ends_known.sum(axis=1)) * size).tolist()
-    joint_end = (np.cumsum(known.sum(axis=1)) * size + bone_end[-1]).tolist()
-    person_ids = np.asarray(person_ids).tolist()
-    stamp_field = _length_delimited(_STAMP_FIELD, _timestamp_bytes(t_ns))
-    key = _SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2]
-    parts = []
-    bone_start, joint_start = 0, bone_end[-1]
-    fixed = len(stamp_field)
-    for d in range(D):
-        pid = person_ids[d] if d < len(person_ids) else -1
-        bones_type, bones_rest, joints_type, joints_rest, bones_len, joints_len = _detection_styles(max(pid, -1))
-        b, j = bone_end[d], joint_end[d]
-        if b > bone_start:
-            parts += (key, _varint(fixed + bones_len + b - bone_start), stamp_field, bones_type, blob[bone_start:b],
-                      bones_rest)
-        if j > joint_start:
-            parts += (key, _varint(fixed + joints_len + j - joint_start), stamp_field, joints_type,
-                      blob[joint_start:j], joints_rest)
-        bone_start, joint_start = b, j
-    return b"".join(parts)
-
-
-def _has_zero_bits(values: np.ndarray) -> bool:
-    """Whether any float64 of `values` is exactly +0.0 (the value proto3 does not write)."""
-    return bool((np.ascontiguousarray(values, dtype=np.float64).view(np.int64) == 0).any())
 
 
 def file_descriptor_set(descriptor: Descriptor) -> bytes:
