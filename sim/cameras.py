@@ -28,7 +28,7 @@ from sim.store import MAX_FLOOR_M
 MAX_GRID = 100  # cameras along one side of a grid
 MAX_IMAGE_PX = 16384
 # Points closer than this in front of the camera plane count as behind it (their projection blows up).
-_MIN_DEPTH_M = 1e-6
+MIN_DEPTH_M = 1e-6
 # When a camera looks (almost) straight down, "up" in its image points along world +y.
 _STRAIGHT_DOWN_COS = 0.999
 
@@ -237,47 +237,6 @@ def _grid(config: CameraRigConfig, store, K: np.ndarray, rng: np.random.Generato
     return cameras
 
 
-def _distort(xn: np.ndarray, yn: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """OpenCV's radial-tangential distortion of normalised image coordinates."""
-    k1, k2, p1, p2, k3 = dist
-    r2 = xn * xn + yn * yn
-    radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    xd = xn * radial + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn)
-    yd = yn * radial + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn
-    return xd, yd
-
-
-def project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Projects world points to distorted pixels with OpenCV's camera model.
-
-    Args:
-        camera: the camera.
-        points_world: (..., 3) points in the world frame, metres.
-
-    Returns:
-        (..., 2) distorted pixel coordinates (NaN for points not in front of the camera) and
-        (...,) bool mask of the points in front of the camera.
-    """
-    px, in_front, _ = _project(camera, points_world)
-    return px, in_front
-
-
-def _project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`project` plus (...,) the undistorted normalised radius of each point (NaN behind)."""
-    points = np.asarray(points_world, dtype=np.float64)
-    if points.shape[-1:] != (3,):
-        raise ValueError(f"points_world: expected shape (..., 3), got {points.shape}")
-    cam = points @ camera.R_cam_from_world.T + camera.t_cam_from_world
-    z = cam[..., 2]
-    in_front = z > _MIN_DEPTH_M
-    inv_z = np.divide(1.0, z, out=np.full(z.shape, np.nan), where=in_front)
-    xn, yn = cam[..., 0] * inv_z, cam[..., 1] * inv_z
-    xd, yd = _distort(xn, yn, camera.dist)
-    K = camera.K
-    px = np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
-    return px, in_front, np.sqrt(xn * xn + yn * yn)
-
-
 def monotonic_radius(dist: np.ndarray) -> float:
     """Largest undistorted normalised radius up to which the radial distortion keeps growing.
 
@@ -298,7 +257,8 @@ def _monotonic_radius(dist: tuple[float, ...]) -> float:
 
 
 def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distorted pixels and whether each point is in front of the camera and inside its image.
+    """Distorted pixels (OpenCV's camera model) and whether each point is in front of the camera, within the
+    lens's monotonic radius (`monotonic_radius`) and inside its image.
 
     Args:
         camera: the camera.
@@ -307,20 +267,19 @@ def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.n
     Returns:
         (..., 2) distorted pixels (NaN behind the camera) and (...,) bool visible-in-image mask.
     """
-    px, in_front, r = _project(camera, points_world)
-    with np.errstate(invalid="ignore"):
-        inside = (
-            in_front
-            & (r <= monotonic_radius(camera.dist))
-            & (px[..., 0] >= -0.5) & (px[..., 0] <= camera.width_px - 0.5)
-            & (px[..., 1] >= -0.5) & (px[..., 1] <= camera.height_px - 0.5)
-        )
-    return px, inside
+    points = np.asarray(points_world, dtype=np.float64)
+    if points.shape[-1:] != (3,):
+        raise ValueError(f"points_world: expected shape (..., 3), got {points.shape}")
+    px, inside = in_image_many(camera.R_cam_from_world[None], camera.t_cam_from_world[None], camera.K[None],
+                               camera.dist[None], np.array([[camera.width_px, camera.height_px]], dtype=float),
+                               np.array([monotonic_radius(camera.dist)]), points.reshape(1, -1, 3),
+                               np.zeros(1, dtype=np.int64))
+    return px.reshape(points.shape[:-1] + (2,)), inside.reshape(points.shape[:-1])
 
 
 def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray, size: np.ndarray,
                   max_radius: np.ndarray, points_world: np.ndarray, cameras: np.ndarray):
-    """`in_image` of several point sets, each seen by its own camera of a rig, in one vectorised pass.
+    """`in_image` of several point sets, each seen by its own camera of a rig, in one compiled pass.
 
     Args:
         R (C, 3, 3), t (C, 3), K (C, 3, 3), dist (C, 5): the rig's extrinsics, intrinsics and distortion.
@@ -363,9 +322,10 @@ def _fma(typingctx, a, b, c):
 def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tangential, skew, px, inside):
     """The loops of `in_image_many` (its arguments, C-contiguous, then `tangential` and `skew` (S,): whether
     a camera of each set's batch has those terms, and the outputs px (S, N, 2) and inside (S, N)), for
-    callers that keep the rig's arrays ready. Written out in the order of the vectorised numpy formula it
-    replaced, so that every pixel is the same bit for bit: numpy's matmul (OpenBLAS) rotates as
-    fma(z, R2, fma(y, R1, x R0)), fused multiply-adds rounded once, and so does this loop."""
+    callers that keep the rig's arrays ready. Written out in the order of the vectorised numpy formula of
+    `tests/reference/cameras.py`, so that every pixel is the same bit for bit (which keeps the recordings'
+    bytes): numpy's matmul (OpenBLAS) rotates as fma(z, R2, fma(y, R1, x R0)), fused multiply-adds rounded
+    once, and so does this loop."""
     for s in range(points.shape[0]):
         c = cameras[s]
         k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]
@@ -376,7 +336,7 @@ def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tange
             cx = _fma(z, R[c, 0, 2], _fma(y, R[c, 0, 1], x * R[c, 0, 0])) + t[c, 0]
             cy = _fma(z, R[c, 1, 2], _fma(y, R[c, 1, 1], x * R[c, 1, 0])) + t[c, 1]
             cz = _fma(z, R[c, 2, 2], _fma(y, R[c, 2, 1], x * R[c, 2, 0])) + t[c, 2]
-            in_front = cz > _MIN_DEPTH_M
+            in_front = cz > MIN_DEPTH_M
             inv_z = 1.0 / cz if in_front else np.nan
             xn, yn = cx * inv_z, cy * inv_z
             r2 = xn * xn + yn * yn

@@ -23,8 +23,8 @@ from sim.cameras import (
     load_panoptic,
     look_at,
     mujoco_camera_pose,
-    project,
 )
+from tests.reference import cameras as reference
 
 # The Panoptic dome's 31 HD cameras, shipped with the dome scenario (cut by tests/data/cut_fixtures.py).
 PANOPTIC = scenario_mod.SCENARIO_DIR / "calibrations" / "panoptic_160906_hd.json"
@@ -44,18 +44,21 @@ def test_projection_agrees_with_cv2_project_points(rng):
     camera = Camera("c", [[900, 0, 640], [0, 880, 350], [0, 0, 1]], [-0.2, 0.08, 0.001, -0.002, -0.01],
                     look_at([0.5, 0.2, 3.0], [2.0, 1.5, 0.5]), [0.1, -0.2, 3.0], 1280, 720)
     points = camera.center_world + rng.normal(0, 0.5, (200, 3)) + 3.0 * camera.R_cam_from_world[2]
-    ours, in_front = project(camera, points)
     rvec, _ = cv2.Rodrigues(camera.R_cam_from_world)
     theirs, _ = cv2.projectPoints(points, rvec, camera.t_cam_from_world, camera.K, camera.dist)
+    # The numpy reference and the product's compiled projection both give OpenCV's pixels.
+    ref, in_front = reference.project(camera, points)
+    ours, _ = in_image(camera, points)
     assert in_front.all()
+    np.testing.assert_allclose(ref, theirs[:, 0], atol=1e-6)  # px
     np.testing.assert_allclose(ours, theirs[:, 0], atol=1e-6)  # px
 
 
 def test_projection_keeps_leading_shape_and_flags_points_behind(rng):
     camera = build_rig(_scenario(rows=1, cols=1), rng)[0]
     points = np.stack([camera.center_world + [0.1, 0.1, -2.0], camera.center_world + [0.0, 0.0, 1.0]])
-    px, in_front = project(camera, points.reshape(1, 2, 3))
-    assert px.shape == (1, 2, 2) and in_front.tolist() == [[True, False]]
+    px, inside = in_image(camera, points.reshape(1, 2, 3))
+    assert px.shape == (1, 2, 2) and inside.tolist() == [[True, False]]
     assert np.isnan(px[0, 1]).all()
 
 
@@ -89,7 +92,7 @@ def test_explicit_placements_replace_the_grid(rng):
     cams = build_rig(_scenario(placements=placements), rng)
     assert [c.name for c in cams] == ["door", "cam01"]
     np.testing.assert_allclose(cams[0].center_world, [0.5, 0.5, 2.8], atol=1e-12)  # m
-    px, _ = project(cams[0], np.array([2.0, 1.5, 1.0]))
+    px, _ = in_image(cams[0], np.array([2.0, 1.5, 1.0]))
     np.testing.assert_allclose(px, cams[0].K[:2, 2], atol=1e-9)  # px: the aim point is the image centre
 
 
@@ -129,7 +132,7 @@ def test_panoptic_hd_cameras_reproject_their_own_calibration():
     rvec, _ = cv2.Rodrigues(np.array(entry["R"]))
     theirs, _ = cv2.projectPoints(point_cm, rvec, np.array(entry["t"]), np.array(entry["K"]),
                                   np.array(entry["distCoef"]))
-    ours, _ = project(cams[0], point_cm * 0.01)
+    ours, _ = in_image(cams[0], point_cm * 0.01)
     np.testing.assert_allclose(ours, theirs[:, 0], atol=1e-3)  # px
 
 
@@ -139,7 +142,7 @@ def test_panoptic_z_up_keeps_the_images_and_puts_cameras_above_the_floor():
     point_pan = np.array([0.1, -1.2, 0.3])
     point_ours = np.array([0.1, 0.3, 1.2]) + [5.0, 5.0, 0.0]
     for a, b in zip(y_down, z_up):
-        np.testing.assert_allclose(project(a, point_pan)[0], project(b, point_ours)[0], atol=1e-6)  # px
+        np.testing.assert_allclose(in_image(a, point_pan)[0], in_image(b, point_ours)[0], atol=1e-6)  # px
     assert min(c.center_world[2] for c in z_up) > -0.5
 
 
@@ -303,7 +306,7 @@ def test_in_image_many_agrees_with_in_image_per_camera(layout):
     points[2, :10] = np.nan
     px, inside = in_image_many(R, t, K, dist, size, radius, points, cams)
     for i, c in enumerate(cams):
-        ref_px, ref_inside = in_image(rig[c], points[i])
+        ref_px, ref_inside = reference.in_image(rig[c], points[i])
         np.testing.assert_array_equal(inside[i], ref_inside)
         np.testing.assert_array_equal(px[i], ref_px)
     assert inside.any() and not inside.all()
@@ -328,7 +331,7 @@ def test_in_image_many_kernel_agrees_with_in_image_on_single_skeletons():
             px, inside = np.empty((1, 17, 2)), np.empty((1, 17), dtype=bool)
             in_image_many_kernel(R, t, K, dist, size, radius, points[None], np.array([c]),
                                  np.array([bool(dist[c, 2:4].any())]), np.array([bool(K[c, 0, 1])]), px, inside)
-            ref_px, ref_inside = in_image(rig[c], points)
+            ref_px, ref_inside = reference.in_image(rig[c], points)
             assert px[0].tobytes() == ref_px.tobytes() and inside[0].tobytes() == ref_inside.tobytes()
             seen += int(ref_inside.sum())
         assert seen > 300  # plenty of the joints land in the image

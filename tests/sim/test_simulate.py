@@ -65,7 +65,7 @@ def test_a_second_pass_replays_the_same_events(small):
 
 
 def test_frames_project_the_poses_at_capture(small):
-    from sim.cameras import project
+    from sim.cameras import in_image
 
     sim = Simulation(dataclasses.replace(small, detector=dataclasses.replace(small.detector, profile=type(
         small.detector.profile).IDEAL)), seed=2)
@@ -76,7 +76,7 @@ def test_frames_project_the_poses_at_capture(small):
             truth = event.truth
             poses = event.poses_at_capture
             for row, pid in enumerate(truth.person_ids):
-                px, _ = project(names[event.frame.camera], poses.poses[list(poses.person_ids).index(pid)])
+                px, _ = in_image(names[event.frame.camera], poses.poses[list(poses.person_ids).index(pid)])
                 ok = truth.in_image[row]
                 np.testing.assert_allclose(event.frame.keypoints_px[row][ok], px[ok], atol=1e-9)  # px
                 checked += 1

@@ -1,0 +1,1 @@
+"""Plain reference implementations that the product's compiled or batched code is tested against."""
