@@ -659,7 +659,7 @@ def _violations_kernel(q, lo, hi, center, half, cos, sin, bad):
 def _project_kernel(p, lo, hi, center, half, cos, sin):
     """Moves the points p (n, 2) in place toward the hard constraints: up to three rounds of pushing
     pairs apart to SEPARATION_M + PROJECTION_MARGIN_M (half each), pushing points out of every footprint
-    grown by SHELF_CLEARANCE_M + PROJECTION_MARGIN_M (as `StoreGeometry.push_out`) and clipping to the
+    grown by SHELF_CLEARANCE_M + PROJECTION_MARGIN_M (as `tests/reference/store.py`'s `push_out`) and clipping to the
     wall bounds lo/hi (n, 2)."""
     n = p.shape[0]
     clearance = SHELF_CLEARANCE_M + PROJECTION_MARGIN_M

@@ -313,29 +313,6 @@ class StoreGeometry:
         oy = np.maximum(np.abs(ly) - self._ob_half[:, 1], 0.0)
         return np.sqrt(ox * ox + oy * oy).min(axis=1)
 
-    def push_out(self, points: np.ndarray, clearance_m: float) -> np.ndarray:
-        """(n, 2) points moved the shortest way out of every footprint grown by `clearance_m`."""
-        if not self.obstacles:
-            return points
-        lx, ly = self._local(points)
-        hx, hy = self._ob_half[:, 0], self._ob_half[:, 1]
-        qx, qy = np.clip(lx, -hx, hx), np.clip(ly, -hy, hy)
-        ox, oy = lx - qx, ly - qy
-        dist = np.sqrt(ox * ox + oy * oy)
-        hit = dist < clearance_m
-        if not hit.any():
-            return points
-        # Outside the core rectangle: radially from its nearest point; inside: through the nearest face.
-        scale = clearance_m / np.maximum(dist, 1e-12)
-        nx, ny = qx + ox * scale, qy + oy * scale
-        core = dist < 1e-12
-        use_x = (hx - np.abs(lx)) < (hy - np.abs(ly))
-        nx = np.where(core & use_x, np.where(lx >= 0, hx + clearance_m, -hx - clearance_m), np.where(core, lx, nx))
-        ny = np.where(core & ~use_x, np.where(ly >= 0, hy + clearance_m, -hy - clearance_m), np.where(core, ly, ny))
-        dx, dy = np.where(hit, nx - lx, 0.0), np.where(hit, ny - ly, 0.0)
-        c, s = self._ob_cos, self._ob_sin
-        return points + np.stack([(dx * c - dy * s).sum(axis=1), (dx * s + dy * c).sum(axis=1)], axis=-1)
-
     def obstacle_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The footprints as contiguous arrays for compiled loops: centres (O, 2), half extents (O, 2),
         cos and sin of the yaws (O,)."""

