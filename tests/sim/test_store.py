@@ -12,6 +12,7 @@ from core.errors import ScenarioError
 from sim import scenario as sc
 from sim.store import ShelfConfig, StoreConfig, StoreGeometry, _distance_to_blocked, rect_distance
 from sim.types import BoxKind
+from tests.reference import store as store_reference
 
 SHIPPED = ("store_layout1", "store_layout2", "supermarket")
 
