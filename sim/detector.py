@@ -28,7 +28,7 @@ import numpy as np
 
 from core.jit import jit
 from core.types import COCO17, Camera, Skeleton
-from sim.cameras import in_image, in_image_many_kernel, monotonic_radius
+from sim.cameras import in_image_many_kernel, monotonic_radius
 from sim.config import bounded, check_ranges
 from sim.types import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
 
@@ -313,7 +313,7 @@ class Detector:
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
 
     def visibility(self, camera_index: int, world, poses: PoseTruth):
-        """Projection and occlusion of everybody's joints in one camera.
+        """Projection and occlusion of everybody's joints in one camera (`visibility_many` of one capture).
 
         Args:
             camera_index: which camera.
@@ -323,18 +323,7 @@ class Detector:
         Returns:
             px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J).
         """
-        camera = self.cameras[camera_index]
-        P, J = poses.poses.shape[:2]
-        px, in_img = in_image(camera, poses.poses)
-        occluded = np.zeros((P, J), dtype=bool)
-        self_occluded = np.zeros((P, J), dtype=bool)
-        if world is not None and self.config.occlusion and in_img.any():
-            person = np.asarray(poses.person_ids, dtype=np.int64)[None]
-            occ, self_occ, _, _ = self._cast(world, self._centres[camera_index][None], poses.poses.reshape(1, P * J, 3),
-                                       in_img.reshape(1, P * J), person)
-            occluded, self_occluded = occ.reshape(P, J), self_occ.reshape(P, J)
-        self.visibility_counts[camera_index] += (in_img.sum(), occluded.sum(), self_occluded.sum())
-        return px, in_img, occluded, self_occluded
+        return self.visibility_many(world, [Capture(camera_index, poses, poses.t_s, poses.t_s, poses.t_s)])[0]
 
     def visibility_many(self, world, requests) -> list[tuple]:
         """`visibility` of several captures whose bodies are all in `world`'s data (one truth tick): the
@@ -350,8 +339,9 @@ class Detector:
         if not requests:
             return []
         J = self.skeleton.num_joints
-        if any(np.shape(r.poses.poses)[1:] != (J, 3) for r in requests):
-            return [self.visibility(r.camera, world, r.poses) for r in requests]
+        for r in requests:
+            if np.shape(r.poses.poses)[1:] != (J, 3):
+                raise ValueError(f"visibility: poses of shape {np.shape(r.poses.poses)}, expected (P, {J}, 3)")
         scenes = [self.scene_now(world, copy=False)] if world is not None else None
         px, in_img, occluded, self_occluded = self.block_visibility(requests, scenes, [0] * len(requests))
         bounds = np.cumsum([0] + [len(r.poses.person_ids) for r in requests]).tolist()
@@ -545,46 +535,19 @@ class Detector:
             np.empty((1, len(geom_type) + len(groups) - 1, 6)))
         return occluded, self_occluded, geomid, dist
 
-    def detect(self, camera_index: int, world, poses: PoseTruth, capture_s: float, stamp_s: float,
-               delivery_s: float) -> CameraFrame:
-        """The frame camera `camera_index` delivers for a capture, with the truth behind each row.
-
-        Args:
-            camera_index: which camera.
-            world: the `sim.world.World`, advanced to `capture_s` (its MuJoCo data is used for rays),
-                or None to skip occlusion.
-            poses: everybody's true pose at `capture_s`, (P, J, 3).
-            capture_s, stamp_s, delivery_s: true capture time, the camera's stamp, delivery time.
-        """
-        return self.detect_many(world, [Capture(camera_index, poses, capture_s, stamp_s, delivery_s)])[0]
-
-    def detect_many(self, world, requests) -> list[CameraFrame]:
-        """`detect` for several captures whose bodies are all in `world`'s data (one truth tick).
-
-        Args:
-            world: the world (or None to skip occlusion).
-            requests: the captures (`Capture`).
-        """
-        return self.detect_visible(requests, self.visibility_many(world, requests))
-
     def detect_visible(self, requests, visibilities) -> list[CameraFrame]:
-        """`detect_many` from visibility already computed (`Detector.visibility` of the same poses).
+        """The frames of captures whose visibility is already known (`visibility_many` of the same poses, or
+        a dataset's true 2D joints), with the detector's errors drawn for all of them at once.
 
-        The error draws of all requests are made at once, which is what keeps the per-frame cost low.
-        """
-        return self.frames_from_rows(requests, *self.detection_rows(requests, visibilities))
-
-    def detection_rows(self, requests, visibilities) -> tuple[DetectionRows, np.ndarray]:
-        """The random part of `detect_visible`: every detection of the requests as rows of a few arrays.
-
-        Returns:
-            rows: person ids (D,), keypoints (D, J, 2), scores (D, J), true pixels (D, J, 2), in_image,
-                occluded, self_occluded (D, J), effects (D,), each frame's rows together and in the order
-                they are reported; bounds (R + 1,): request i owns rows bounds[i]:bounds[i + 1].
+        Args:
+            requests: the captures (`Capture`).
+            visibilities: per capture, px (P, J, 2), in_img, occluded, self_occluded (P, J).
         """
         if not requests:
-            return DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
-        return self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities]) for k in range(4)))
+            return []
+        rows, bounds = self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities])
+                                                           for k in range(4)))
+        return self.frames_from_rows(requests, rows, bounds)
 
     def detection_rows_of(self, requests, px, in_img, occluded, self_occluded,
                           person_ids: list | None = None) -> tuple[DetectionRows, np.ndarray]:

@@ -13,6 +13,7 @@ from sim.detector import _TEMPLATE_COCO17, Detector, DetectorConfig, DetectorPro
 from sim.scenario import Scenario
 from sim.store import StoreConfig
 from sim.types import Capture, DetectionEffect, PoseTruth
+from tests.reference.detector import detect
 
 # Bodies of the stand-in person (COCO-17 keypoint -> body): head, torso, arms, legs.
 _PARTS = {"head": (0, 1, 2, 3, 4), "larm": (5, 7, 9), "rarm": (6, 8, 10), "lleg": (11, 13, 15),
@@ -83,7 +84,7 @@ def test_person_behind_a_shelf_has_its_hidden_joints_flagged():
     world = BoxWorld([(2.6, 1.5)])
     cams = _cameras(CameraPlacement((0.3, 1.5, 2.8), (2.6, 1.5, 0.9)))
     detector = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
-    frame = detector.detect(0, world, world.truth(), 0.0, 0.0, 0.05)
+    frame = detect(detector, 0, world, world.truth(), 0.0, 0.0, 0.05)
     truth = frame.truth
     assert truth.person_ids.tolist() == [0]
     occluded = truth.occluded[0]
@@ -95,8 +96,8 @@ def test_person_behind_a_shelf_has_its_hidden_joints_flagged():
     np.testing.assert_allclose(frame.frame.keypoints_px[0], truth.keypoints_px[0], atol=1e-9)  # px
     # Without the shelf nothing is occluded.
     open_world = BoxWorld([(2.6, 1.5)], shelf=((9.0, 9.0, 0.1), (0.1, 0.1, 0.1)))
-    assert not Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1)).detect(
-        0, open_world, open_world.truth(), 0.0, 0.0, 0.05).truth.occluded.any()
+    ideal = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
+    assert not detect(ideal, 0, open_world, open_world.truth(), 0.0, 0.0, 0.05).truth.occluded.any()
 
 
 def test_limbs_behind_the_body_are_self_occluded_and_other_people_occlude():
@@ -141,7 +142,7 @@ def _open_scene(people=4):
 def _frames(config, n=300, world_rays=False, seed=2):
     world, cams = _open_scene()
     detector = Detector(config, cams, np.random.default_rng(seed))
-    return [detector.detect(0, world if world_rays else None, world.truth(k * 0.1), k * 0.1, k * 0.1, k * 0.1)
+    return [detect(detector, 0, world if world_rays else None, world.truth(k * 0.1), k * 0.1, k * 0.1, k * 0.1)
             for k in range(n)]
 
 
@@ -217,10 +218,10 @@ def test_misses_grow_with_occlusion():
     cams = _cameras(CameraPlacement((0.3, 1.5, 2.8), (2.6, 1.5, 0.9)))
     config = _only(miss_prob=0.1, miss_occlusion_gain=0.8)
     detector = Detector(config, cams, np.random.default_rng(3))
-    hidden = np.mean([len(detector.detect(0, world, world.truth(), 0, 0, 0).truth.person_ids) == 0
+    hidden = np.mean([len(detect(detector, 0, world, world.truth(), 0, 0, 0).truth.person_ids) == 0
                       for _ in range(400)])
     open_world = BoxWorld([(2.6, 1.5)], shelf=((9.0, 9.0, 0.1), (0.1, 0.1, 0.1)))
-    seen = np.mean([len(detector.detect(0, open_world, open_world.truth(), 0, 0, 0).truth.person_ids) == 0
+    seen = np.mean([len(detect(detector, 0, open_world, open_world.truth(), 0, 0, 0).truth.person_ids) == 0
                     for _ in range(400)])
     assert seen == pytest.approx(0.1, abs=0.04)
     assert hidden > seen + 0.15
@@ -249,7 +250,7 @@ def test_in_image_joints_of_far_away_people_are_not_reported():
     far = PoseTruth(0.0, np.array([7]), truth.poses[:1] + [0.0, -40.0, 0.0])
     _, inside = in_image(cams[0], far.poses)
     detector = Detector(DetectorConfig(), cams, np.random.default_rng(0))
-    assert not inside.any() and detector.detect(0, None, far, 0, 0, 0).truth.person_ids.size == 0
+    assert not inside.any() and detect(detector, 0, None, far, 0, 0, 0).truth.person_ids.size == 0
 
 
 def test_profiles_order_from_ideal_to_harsh():
