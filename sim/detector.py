@@ -19,10 +19,10 @@ Every effect has its own knob in [detector]; a knob left unset takes the value o
 
 from __future__ import annotations
 
-import dataclasses
 import enum
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -41,9 +41,9 @@ class DetectorProfile(enum.Enum):
     HARSH = "harsh"
 
 
-@dataclass(frozen=True)
-class DetectorParams:
-    """The effective error model (a profile with the scenario's knobs applied).
+class DetectorParams(NamedTuple):
+    """The effective error model (a profile with the scenario's knobs applied); the compiled draws take it as
+    it is (a named tuple of numbers).
 
     Attributes:
         noise_frac: per-axis std of the joint noise core, as a fraction of the person's size in the image.
@@ -154,9 +154,8 @@ class DetectorConfig:
 
     def params(self) -> DetectorParams:
         """The profile's parameters with every knob that was set applied."""
-        names = [f.name for f in dataclasses.fields(DetectorParams)]
-        overrides = {name: getattr(self, name) for name in names if getattr(self, name) is not None}
-        return dataclasses.replace(PROFILES[self.profile], **overrides)
+        overrides = {name: getattr(self, name) for name in DetectorParams._fields if getattr(self, name) is not None}
+        return PROFILES[self.profile]._replace(**overrides)
 
 
 # Per-joint noise multipliers (COCO-17): wrists worst, knees and ankles best, as OpenPose on Shelf.
@@ -179,6 +178,20 @@ _TEMPLATE_COCO17 = np.array([
     [0.05, -0.24, 0.86], [0.0, 0.1, 0.92], [0.0, -0.1, 0.92], [0.02, 0.1, 0.5], [0.02, -0.1, 0.5],
     [0.0, 0.1, 0.08], [0.0, -0.1, 0.08],
 ])
+
+
+class _DrawnRows(NamedTuple):
+    """What `_draw_detections` writes: `DetectionRows`' arrays, then each row's capture in the block."""
+
+    person_ids: np.ndarray
+    keypoints_px: np.ndarray
+    scores: np.ndarray
+    true_px: np.ndarray
+    in_image: np.ndarray
+    occluded: np.ndarray
+    self_occluded: np.ndarray
+    effects: np.ndarray
+    group: np.ndarray
 
 
 def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
@@ -598,19 +611,14 @@ class Detector:
             ids (D,), keypoints (D, J, 2), scores (D, J), true px (D, J, 2), in_image, occluded,
             self_occluded (D, J), effects (D,), group (D,).
         """
-        p = self.params
         P, J = in_img.shape
-        rows = [np.empty(2 * P, dtype=np.int64), np.empty((2 * P, J, 2)), np.empty((2 * P, J)),
-                np.empty((2 * P, J, 2)), *(np.empty((2 * P, J), dtype=bool) for _ in range(3)),
-                np.empty(2 * P, dtype=np.int64), np.empty(2 * P, dtype=np.int64)]
-        params = np.array([p.occluded_drop_prob, p.self_occluded_drop_prob, p.joint_drop_prob, p.fragment_prob,
-                           p.noise_frac, p.occluded_noise_scale, p.self_occluded_noise_scale, p.noise_tail_dof,
-                           p.gross_error_prob, p.score_occluded, p.score_visible, p.score_std, p.swap_prob,
-                           p.miss_prob, p.miss_occlusion_gain, p.min_visible_joints, p.duplicate_prob])
+        out = _DrawnRows(np.empty(2 * P, dtype=np.int64), np.empty((2 * P, J, 2)), np.empty((2 * P, J)),
+                         np.empty((2 * P, J, 2)), *(np.empty((2 * P, J), dtype=bool) for _ in range(3)),
+                         np.empty(2 * P, dtype=np.int64), np.empty(2 * P, dtype=np.int64))
         n = _draw_detections(self._rng, np.ascontiguousarray(person_ids, dtype=np.int64), px, in_img, occluded,
                              self_occluded, np.ascontiguousarray(group, dtype=np.int64), self._fragment_masks,
-                             self._joint_noise, self._swap, params, math.isfinite(p.noise_tail_dof), *rows)
-        return [r[:n] for r in rows]
+                             self._joint_noise, self._swap, self.params, out)
+        return [r[:n] for r in out]
 
     def _phantom(self, camera_index: int):
         """A false-positive skeleton: a person template standing somewhere on the floor in view of a camera."""
@@ -972,8 +980,7 @@ _FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP, _DUPLICATE = (int(e) for e in (
 
 @jit
 def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group, fragment_masks, joint_noise,
-                     swap_order, params, heavy, ids, kp, scores, true_px, out_in, out_occluded, out_self, effects,
-                     out_group):
+                     swap_order, model, out):
     """The detections of real people (`Detector._detections`): every draw from `rng` (a numpy Generator,
     whose stream numba reads and advances as numpy would) and what it does, person-view by person-view,
     each value drawn only where it is used.
@@ -989,17 +996,12 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
     `_DUPLICATE_OFFSET_FRAC` of the size, repeating each joint with probability `_DUPLICATE_KEEP`, at
     `_DUPLICATE_SCORE` of the scores.
 
-    params: occluded, self-occluded and joint drop probabilities, fragment probability, noise fraction,
-    occluded and self-occluded noise scales, tail degrees of freedom, gross error probability, occluded
-    and visible scores, score std, swap probability, miss probability, miss occlusion gain, minimum
-    visible joints, duplicate probability.
-
-    Writes the rows (detections in person-view order, then their duplicates) into ids (2P,), kp
-    (2P, J, 2), scores (2P, J), true_px (2P, J, 2), out_in, out_occluded, out_self (2P, J), effects and
-    out_group (2P,), and returns how many it wrote.
+    model: the `DetectorParams`. Writes the rows (detections in person-view order, then their duplicates)
+    into `out` (a `_DrawnRows` of 2P rows) and returns how many it wrote.
     """
-    (drop_occluded, drop_self, drop_joint, fragment_prob, noise_frac, scale_occluded, scale_self, dof, gross_prob,
-     score_occluded, score_visible, score_std, swap_prob, miss_prob, miss_gain, min_visible, duplicate_prob) = params
+    ids, kp, scores, true_px, out_in, out_occluded, out_self, effects, out_group = out
+    dof = model.noise_tail_dof
+    heavy = math.isfinite(dof)
     P, J = in_img.shape
     n_parts = fragment_masks.shape[0]
     reported = np.empty(J, dtype=np.bool_)
@@ -1014,9 +1016,9 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
             n_in += in_img[p, j]
             n_visible += in_img[p, j] and not occluded[p, j]
             n_occluded += occluded[p, j]
-        if n_in == 0 or n_visible < min_visible:
+        if n_in == 0 or n_visible < model.min_visible_joints:
             continue
-        if rng.random() < miss_prob + miss_gain * n_occluded / n_in:
+        if rng.random() < model.miss_prob + model.miss_occlusion_gain * n_occluded / n_in:
             continue
         high0 = high1 = -np.inf
         low0 = low1 = np.inf
@@ -1030,10 +1032,11 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
         size = extent if np.isfinite(extent) else np.nan
         effect = 0
         for j in range(J):
-            drop = drop_occluded if occluded[p, j] else (drop_self if self_occluded[p, j] else drop_joint)
+            drop = model.occluded_drop_prob if occluded[p, j] else (
+                model.self_occluded_drop_prob if self_occluded[p, j] else model.joint_drop_prob)
             reported[j] = in_img[p, j] and rng.random() >= drop
         # Fragments keep one body part (if it holds a reported joint).
-        if rng.random() < fragment_prob:
+        if rng.random() < model.fragment_prob:
             part = rng.integers(0, n_parts)
             any_part = False
             for j in range(J):
@@ -1049,24 +1052,25 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
                 score[j] = 0.0
                 continue
             any_reported = True
-            scale = noise_frac * size * joint_noise[j]
-            scale = scale * (scale_occluded if occluded[p, j] else (scale_self if self_occluded[p, j] else 1.0))
+            scale = model.noise_frac * size * joint_noise[j]
+            scale = scale * (model.occluded_noise_scale if occluded[p, j] else (
+                model.self_occluded_noise_scale if self_occluded[p, j] else 1.0))
             z0, z1 = rng.standard_normal(), rng.standard_normal()
             if heavy:  # Student-t: the normal core over the root of a chi-square / dof
                 stretch = math.sqrt(dof / rng.chisquare(dof))
                 z0, z1 = z0 * stretch, z1 * stretch
             value[j, 0], value[j, 1] = px[p, j, 0] + scale * z0, px[p, j, 1] + scale * z1
-            if rng.random() < gross_prob:
+            if rng.random() < model.gross_error_prob:
                 angle = rng.uniform(0.0, 2.0 * np.pi)
                 jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC) * size
                 value[j, 0] += jump * math.cos(angle)
                 value[j, 1] += jump * math.sin(angle)
                 effect |= _GROSS_ERROR
-            base = score_occluded if occluded[p, j] else score_visible
-            score[j] = min(max(base + score_std * rng.standard_normal(), _MIN_SCORE), 1.0)
+            base = model.score_occluded if occluded[p, j] else model.score_visible
+            score[j] = min(max(base + model.score_std * rng.standard_normal(), _MIN_SCORE), 1.0)
         if not any_reported:
             continue
-        swap = rng.random() < swap_prob
+        swap = rng.random() < model.swap_prob
         if swap:
             effect |= _LEFT_RIGHT_SWAP
         for j in range(J):
@@ -1080,7 +1084,7 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
     # Duplicates: a second, partial, shifted and less confident copy of a detection.
     D = n
     for d in range(D):
-        if not rng.random() < duplicate_prob:
+        if not rng.random() < model.duplicate_prob:
             continue
         p = originals[d]
         shift0 = _DUPLICATE_OFFSET_FRAC * sizes[d] * rng.standard_normal()
