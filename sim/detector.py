@@ -180,18 +180,8 @@ _TEMPLATE_COCO17 = np.array([
 ])
 
 
-class _DrawnRows(NamedTuple):
-    """What `_draw_detections` writes: `DetectionRows`' arrays, then each row's capture in the block."""
-
-    person_ids: np.ndarray
-    keypoints_px: np.ndarray
-    scores: np.ndarray
-    true_px: np.ndarray
-    in_image: np.ndarray
-    occluded: np.ndarray
-    self_occluded: np.ndarray
-    effects: np.ndarray
-    group: np.ndarray
+# What `_draw_detections` writes: `DetectionRows`' arrays, then each row's capture in the block.
+_DrawnRows = NamedTuple("_DrawnRows", [(name, np.ndarray) for name in (*DetectionRows._fields, "group")])
 
 
 def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
