@@ -1,5 +1,5 @@
 """The dependency rules of ARCHITECTURE.md and STYLE.md, read off the source: no import cycles, `core/`
-imports no other part, `tracker/` neither mujoco, mcap nor `sim/`, only the recording module imports mcap,
+imports no other part, `tracker/` neither mujoco, mcap nor `sim/`, only the recording package imports mcap,
 only `sim/` imports mujoco, and no code reaches into a library's private (name-mangled) attributes."""
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ def test_only_the_recording_imports_mcap_and_only_sim_imports_mujoco():
     for name, path in _modules().items():
         roots = {imported.split(".")[0] for imported in _imports(path)}
         if "mcap" in roots:
-            assert name == "crossview.recording", name
+            assert name.startswith("crossview.recording"), name
         if "mujoco" in roots:
             assert name.split(".")[0] == "sim", name
 

@@ -21,8 +21,10 @@ from crossview.recording import (
     RecordingWriter,
     TracksHeader,
     TracksWriter,
+    messages,
     open_recording,
     open_tracks,
+    reader,
 )
 from sim.types import Box, BoxKind, CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tracker.types import Target, TargetState, TrackerOutput
@@ -425,13 +427,13 @@ def test_poses_at_capture_far_behind_the_window_read_the_ticks_again():
         opened.append(1)
         return iter(ticks)
 
-    window = recording._TruthWindow(open_ticks, 17)
+    window = reader._TruthWindow(open_ticks, 17)
     assert window.at(25.005).poses[0, 0, 0] == pytest.approx(2500.5)
     assert window.at(0.0).poses[0, 0, 0] == 0.0  # 25 s back: read again
     assert len(opened) == 2
     assert window.at(30.0).poses[0, 0, 0] == 3000.0  # a tick's own time: that tick exactly
     assert window.at(31.0).poses[0, 0, 0] == 3000.0  # after the last tick: the last tick
-    empty = recording._TruthWindow(lambda: iter(()), 17).at(1.0)
+    empty = reader._TruthWindow(lambda: iter(()), 17).at(1.0)
     assert empty.person_ids.size == 0 and empty.poses.shape == (0, 17, 3)
 
 
@@ -608,13 +610,13 @@ def test_numpy_encoding_is_protobufs_own_serialisation(world):
     for event in events + extra:
         if isinstance(event, PoseTruth):
             msg = recording.PoseTruthMsg()
-            recording._pose_truth_to_msg(event, msg)
+            messages._pose_truth_to_msg(event, msg)
             assert recording.pose_truth_bytes(event) == msg.SerializeToString()
         else:
-            assert recording.camera_frame_bytes(event) == recording._camera_frame_to_msg(event).SerializeToString()
+            assert recording.camera_frame_bytes(event) == messages._camera_frame_to_msg(event).SerializeToString()
             effects = rng.integers(0, 1 << 31, len(event.truth.effects))
             bigger = CameraFrame(event.frame, dataclasses.replace(event.truth, effects=effects), event.poses_at_capture)
-            assert recording.camera_frame_bytes(bigger) == recording._camera_frame_to_msg(bigger).SerializeToString()
+            assert recording.camera_frame_bytes(bigger) == messages._camera_frame_to_msg(bigger).SerializeToString()
         checked += 1
     assert checked > 50
 

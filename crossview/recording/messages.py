@@ -1,0 +1,298 @@
+"""Message bytes: the protobuf messages of truth ticks, camera frames and tracker outputs, encoded one at a
+time or many frames in one compiled call (`crossview.wire`), and decoded back."""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from core.types import Frame, Skeleton
+from crossview import foxglove
+from crossview.recording.schemas import CameraFrameMsg, TrackerOutputMsg, to_ns
+from sim.types import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
+from tracker.types import Target, TargetState, TrackerOutput
+
+
+def _pose_truth_to_msg(truth: PoseTruth, msg) -> None:
+    poses, ids = _checked_poses(truth)
+    msg.t_s = float(truth.t_s)
+    msg.num_joints = poses.shape[1]
+    msg.person_ids.extend(ids.tolist())
+    msg.poses_m.extend(poses.ravel().tolist())
+
+
+def pose_truth_bytes(truth: PoseTruth) -> bytes:
+    """`crossview.PoseTruth` wire bytes of `truth`, written by a compiled loop (the same bytes as protobuf's)."""
+    from crossview import wire  # (numba: loaded for writing only)
+
+    poses, ids = _checked_poses(truth)
+    out = _scratch(wire.pose_truth_capacity(*poses.shape[:2]))
+    return out[:wire.pose_truth(out, 0, float(truth.t_s), ids, poses)].tobytes()
+
+
+def _checked_poses(truth: PoseTruth) -> tuple[np.ndarray, np.ndarray]:
+    """poses (P, J, 3) float64 and person_ids (P,) int64 of `truth`, C-contiguous, shapes checked."""
+    poses = np.ascontiguousarray(truth.poses, dtype=np.float64)
+    ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
+    if poses.ndim != 3 or poses.shape[2] != 3 or ids.ndim != 1 or poses.shape[0] != ids.shape[0]:
+        raise ValueError(f"PoseTruth@{truth.t_s}: poses expected (P, J, 3) with P={ids.shape[0]}, got {poses.shape}")
+    return poses, ids
+
+
+_SCRATCH = [np.empty(1 << 16, dtype=np.uint8)]
+
+
+def _scratch(size: int) -> np.ndarray:
+    """A reusable byte buffer of at least `size` bytes for the message encoders (the writer's thread only)."""
+    if _SCRATCH[0].size < size:
+        _SCRATCH[0] = np.empty(2 * size, dtype=np.uint8)
+    return _SCRATCH[0]
+
+
+def camera_frame_bytes(cf: CameraFrame) -> bytes:
+    """`crossview.CameraFrame` wire bytes of one camera frame, written by a compiled loop (the same bytes as
+    protobuf's serialisation of `_camera_frame_to_msg`, which the tests check)."""
+    from crossview import wire  # (numba: loaded for writing only)
+
+    frame, truth = cf.frame, cf.truth
+    kp = np.ascontiguousarray(frame.keypoints_px, dtype=np.float64)
+    if kp.ndim != 3 or kp.shape[2] != 2:
+        raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: keypoints_px expected (D, J, 2), got "
+                         f"{kp.shape}")
+    D, J = kp.shape[:2]
+    arrays = [kp]
+    for name, value, shape, dtype in (
+            ("scores", frame.scores, (D, J), np.float64), ("truth.person_ids", truth.person_ids, (D,), np.int64),
+            ("truth.keypoints_px", truth.keypoints_px, (D, J, 2), np.float64),
+            ("truth.in_image", truth.in_image, (D, J), bool), ("truth.occluded", truth.occluded, (D, J), bool),
+            ("truth.self_occluded", truth.self_occluded, (D, J), bool),
+            ("truth.effects", truth.effects, (D,), np.int64)):
+        array = np.ascontiguousarray(value, dtype=dtype)
+        if array.shape != shape:
+            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: {name} expected {shape}, got {array.shape}")
+        arrays.append(array)
+    name = _utf8(frame.camera)
+    out = _scratch(wire.camera_frame_capacity(D, J, name.size))
+    size = wire.camera_frame(out, name, float(frame.stamp_s), float(truth.capture_s), float(truth.delivery_s), *arrays)
+    if size < 0:
+        raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.effects must be uint32 bit masks")
+    return out[:size].tobytes()
+
+
+class EncodedFrame(NamedTuple):
+    """A camera frame as the two messages a recording stores for it (`encode_frames`). A writer takes it
+    in place of the CameraFrame: a producer can encode frames as they are made and write them later, in
+    log-time order, without the CameraFrame objects in between."""
+    camera: str
+    log_time_ns: int  # its delivery time
+    frame: bytes  # crossview.CameraFrame
+    annotations: bytes  # foxglove.ImageAnnotations stamped log_time_ns
+
+
+# Where each field of `DetectionRows` lives in a CameraFrame (its part and attribute), with the dtype and
+# trailing shape (J: joints) the compiled encoder expects.
+_ROWS = dict(zip(DetectionRows._fields, (
+    ("truth", "person_ids", np.int64, 0), ("frame", "keypoints_px", np.float64, 2), ("frame", "scores", np.float64, 1),
+    ("truth", "keypoints_px", np.float64, 2), ("truth", "in_image", bool, 1), ("truth", "occluded", bool, 1),
+    ("truth", "self_occluded", bool, 1), ("truth", "effects", np.int64, 0)), strict=True))
+
+
+def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray, rows: DetectionRows,
+                  skeleton: Skeleton) -> list[EncodedFrame]:
+    """The EncodedFrame of n camera frames given as rows, from one compiled call (the bytes of
+    `camera_frame_bytes` and `foxglove.image_annotations_bytes` at the delivery time, which the tests check).
+
+    Args:
+        cameras: the n frames' camera names.
+        times: (n, 3) each frame's stamp, capture and delivery seconds.
+        bounds: (n + 1,) frame i owns rows bounds[i]:bounds[i + 1].
+        rows: the frames' detections (the detector's `DetectionRows`).
+
+    A frame the batch does not take (a bad effects mask, a +0.0 coordinate, which protobuf leaves out) is
+    encoded by the one-frame functions, which also raise their errors.
+    """
+    from crossview import wire  # (numba: loaded for writing only)
+
+    times = np.ascontiguousarray(times, dtype=np.float64).reshape(-1, 3)
+    bounds = np.ascontiguousarray(bounds, dtype=np.int64)
+    n = len(cameras)
+    J = skeleton.num_joints
+    D = int(bounds[-1]) if bounds.size else 0
+    if times.shape[0] != n or bounds.shape != (n + 1,) or len(rows) != len(_ROWS):
+        raise ValueError(f"encode_frames: {n} cameras, times {times.shape}, bounds {bounds.shape} and "
+                         f"{len(rows)} row arrays; expected (n, 3) times, (n + 1,) bounds and {len(_ROWS)} arrays")
+    columns = []
+    for (owner, name, dtype, tail), array in zip(_ROWS.values(), rows):
+        array = np.ascontiguousarray(array, dtype=dtype)
+        expected = (D, J, 2)[:1 + tail]
+        if array.shape != expected:
+            raise ValueError(f"encode_frames: {owner}.{name} rows expected {expected}, got {array.shape}")
+        columns.append(array)
+    names = [_utf8(camera) for camera in cameras]
+    name_ends = np.cumsum([0] + [a.size for a in names])
+    t_ns = [to_ns(t) for t in times[:, 2].tolist()]
+    styles = foxglove.detection_styles(columns[0])
+    bones = foxglove.bone_table(skeleton)
+    counts = np.diff(bounds).tolist()
+    capacity = sum(wire.camera_frame_capacity(d, J, a.size) + wire.image_annotations_capacity(
+        d, J, len(bones), styles.table.shape[1]) for d, a in zip(counts, names))
+    out = _scratch(capacity)
+    ends = np.empty(2 * n, dtype=np.int64)
+    status = np.empty(n, dtype=np.int64)
+    ids, kp, scores, *truth = columns
+    wire.frames_and_annotations(out, ends, status, np.concatenate(names) if names else np.zeros(0, np.uint8),
+                                name_ends, times, np.asarray(t_ns, dtype=np.int64), bounds, kp, scores, ids, *truth,
+                                bones, styles.lut, styles.table, styles.sizes, *foxglove.ANNOTATION_FIELDS)
+    ends, status, bounds = ends.tolist(), status.tolist(), bounds.tolist()
+    data = out[:ends[-1] if n else 0].tobytes()
+    result, start = [], 0
+    for i, camera in enumerate(cameras):
+        if status[i]:  # the one-frame encoders' bytes (or their error)
+            cf = CameraFrame.from_rows(camera, *times[i].tolist(), DetectionRows(*columns), bounds[i], bounds[i + 1])
+            result.append(EncodedFrame(camera, t_ns[i], camera_frame_bytes(cf),
+                                       foxglove.image_annotations_bytes(cf, skeleton, t_ns[i])))
+        else:
+            result.append(EncodedFrame(camera, t_ns[i], data[start:ends[2 * i]], data[ends[2 * i]:ends[2 * i + 1]]))
+        start = ends[2 * i + 1]
+    return result
+
+
+def encode_camera_frames(frames: Sequence[CameraFrame], skeleton: Skeleton) -> list[EncodedFrame]:
+    """`encode_frames` of CameraFrame objects: their arrays are put together as rows. Frames with unusual
+    arrays (not of the shapes and kinds the detector makes) go through the one-frame functions."""
+
+    def one_by_one():
+        result = []
+        for cf in frames:
+            t_ns = to_ns(cf.truth.delivery_s)
+            result.append(EncodedFrame(cf.frame.camera, t_ns, camera_frame_bytes(cf),
+                                       foxglove.image_annotations_bytes(cf, skeleton, t_ns)))
+        return result
+
+    if len(frames) < 2:
+        return one_by_one()
+    J = skeleton.num_joints
+    try:
+        counts = [cf.frame.keypoints_px.shape[0] for cf in frames]
+        rows = []
+        for owner, name, dtype, tail in _ROWS.values():
+            parts = [getattr(getattr(cf, owner), name) for cf in frames]
+            shape = (J, 2)[:tail]
+            if any(p.shape != (d, *shape) for p, d in zip(parts, counts)):
+                return one_by_one()
+            rows.append(np.concatenate(parts, dtype=dtype))
+    except (AttributeError, IndexError, TypeError, ValueError):  # not arrays of the expected kinds
+        return one_by_one()
+    times = [(cf.frame.stamp_s, cf.truth.capture_s, cf.truth.delivery_s) for cf in frames]
+    return encode_frames([cf.frame.camera for cf in frames], np.array(times, dtype=np.float64),
+                         np.cumsum([0] + counts), DetectionRows(*rows), skeleton)
+
+
+def warm_up(skeleton: Skeleton) -> None:
+    """Loads the writer's compiled encoders (the first use of each costs tens of milliseconds) by encoding
+    a made-up instant: call it where the time is free, e.g. while a simulation worker starts."""
+    J = skeleton.num_joints
+    ids = np.array([3], dtype=np.int64)
+    truth = PoseTruth(0.5, ids, np.ones((1, J, 3)))
+    seen = np.ones((1, J), dtype=bool)
+    frame = CameraFrame(Frame("warm", 0.5, np.ones((1, J, 2)), np.ones((1, J))),
+                        DetectionTruth(0.5, 0.5, ids, np.ones((1, J, 2)), seen, ~seen, ~seen,
+                                       np.zeros(1, dtype=np.int64)), None)
+    pose_truth_bytes(truth)
+    foxglove.truth_skeletons_bytes(truth, skeleton, 1)
+    encode_camera_frames([frame, frame], skeleton)
+
+
+@functools.lru_cache(maxsize=1024)
+def _utf8(text: str) -> np.ndarray:
+    return np.frombuffer(text.encode(), dtype=np.uint8)
+
+
+def _pose_truth_from_msg(msg) -> PoseTruth:
+    ids = np.array(msg.person_ids, dtype=np.int64)
+    poses = np.array(msg.poses_m, dtype=np.float64).reshape(len(ids), msg.num_joints, 3)
+    return PoseTruth(t_s=msg.t_s, person_ids=ids, poses=poses)
+
+
+def _camera_frame_to_msg(cf: CameraFrame):
+    frame, truth = cf.frame, cf.truth
+    D, J = frame.keypoints_px.shape[:2]
+    msg = CameraFrameMsg(
+        camera=frame.camera,
+        stamp_s=float(frame.stamp_s),
+        capture_s=float(truth.capture_s),
+        delivery_s=float(truth.delivery_s),
+        num_detections=D,
+        num_joints=J,
+    )
+    msg.keypoints_px.extend(frame.keypoints_px.ravel().tolist())
+    msg.scores.extend(frame.scores.ravel().tolist())
+
+    def rows(name: str, value, shape: tuple, dtype) -> list:
+        array = np.asarray(value, dtype=dtype)
+        if array.shape != shape:
+            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.{name} expected {shape}, got "
+                             f"{array.shape}")
+        return array.ravel().tolist()
+
+    msg.person_ids.extend(rows("person_ids", truth.person_ids, (D,), np.int64))
+    msg.true_keypoints_px.extend(rows("keypoints_px", truth.keypoints_px, (D, J, 2), np.float64))
+    msg.in_image.extend(rows("in_image", truth.in_image, (D, J), bool))
+    msg.occluded.extend(rows("occluded", truth.occluded, (D, J), bool))
+    msg.self_occluded.extend(rows("self_occluded", truth.self_occluded, (D, J), bool))
+    msg.effects.extend(rows("effects", truth.effects, (D,), np.int64))
+    return msg
+
+
+def _camera_frame_from_msg(msg, poses_at_capture: PoseTruth | None = None) -> CameraFrame:
+    D, J = msg.num_detections, msg.num_joints
+    frame = Frame(
+        camera=msg.camera,
+        stamp_s=msg.stamp_s,
+        keypoints_px=np.array(msg.keypoints_px, dtype=np.float64).reshape(D, J, 2),
+        scores=np.array(msg.scores, dtype=np.float64).reshape(D, J),
+    )
+    truth = DetectionTruth(
+        capture_s=msg.capture_s,
+        delivery_s=msg.delivery_s,
+        person_ids=np.array(msg.person_ids, dtype=np.int64),
+        keypoints_px=np.array(msg.true_keypoints_px, dtype=np.float64).reshape(D, J, 2),
+        in_image=np.array(msg.in_image, dtype=bool).reshape(D, J),
+        occluded=np.array(msg.occluded, dtype=bool).reshape(D, J),
+        self_occluded=np.array(msg.self_occluded, dtype=bool).reshape(D, J),
+        effects=np.array(msg.effects, dtype=np.int64),
+    )
+    return CameraFrame(frame=frame, truth=truth, poses_at_capture=poses_at_capture)
+
+
+def _tracker_output_to_msg(output: TrackerOutput, num_joints: int):
+    msg = TrackerOutputMsg(stamp_s=float(output.stamp_s), camera=output.camera, num_joints=num_joints)
+    for target in output.targets:
+        pose = np.asarray(target.pose, dtype=np.float64)
+        if pose.shape != (num_joints, 3):
+            raise ValueError(f"TrackerOutput@{output.stamp_s}: target {target.id} pose expected ({num_joints}, 3), "
+                             f"got {pose.shape}")
+        t = msg.targets.add(id=int(target.id), stamp_s=float(target.stamp_s), state=TargetState(target.state).value)
+        t.pose_m.extend(pose.ravel().tolist())
+    msg.detection_target_ids.extend(np.asarray(output.detection_target_ids, dtype=np.int64).ravel().tolist())
+    return msg
+
+
+def _tracker_output_from_msg(msg) -> TrackerOutput:
+    J = msg.num_joints
+    targets = [
+        Target(id=t.id, pose=np.array(t.pose_m, dtype=np.float64).reshape(J, 3), stamp_s=t.stamp_s,
+               state=TargetState(t.state))
+        for t in msg.targets
+    ]
+    return TrackerOutput(
+        stamp_s=msg.stamp_s, camera=msg.camera, targets=targets,
+        detection_target_ids=np.array(msg.detection_target_ids, dtype=np.int64),
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# Writing.

@@ -1,0 +1,326 @@
+"""Streamed readers of recordings and tracks files: one chunk at a time, CRCs checked, truncated files
+read up to their last complete chunk on request."""
+
+from __future__ import annotations
+
+import bisect
+import json
+import struct
+import zlib
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+from google.protobuf.message import DecodeError
+from mcap.exceptions import McapError
+from mcap.reader import make_reader
+from mcap.records import Channel, DataEnd, Message, Metadata, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader
+
+from core.types import SKELETONS
+from crossview.recording.messages import _camera_frame_from_msg, _pose_truth_from_msg, _tracker_output_from_msg
+from crossview.recording.schemas import (
+    FORMAT_VERSION,
+    KIND_RECORDING,
+    KIND_TRACKS,
+    MAGIC,
+    METADATA_NAME,
+    OLDEST_RECORDING_VERSION,
+    SUMMARY_METADATA_NAME,
+    TOPIC_HEADER,
+    CameraFrameMsg,
+    PoseTruthMsg,
+    RecordingError,
+    RecordingHeader,
+    TrackerOutputMsg,
+    TracksHeader,
+    _box_from_json,
+    _camera_from_json,
+    software_version,
+)
+from sim.poses import interpolate_poses
+from sim.types import CameraFrame, PoseTruth
+from tracker.types import TrackerOutput
+
+_READ_ERRORS = (McapError, CRCValidationError, struct.error, EOFError, UnicodeDecodeError, RuntimeError,
+                DecodeError, KeyError, ValueError, zlib.error)
+
+
+class _McapStream:
+    """Streams one file's records in file order, turning every failure into a RecordingError."""
+
+    def __init__(self, path, allow_truncated: bool):
+        self.path = Path(path)
+        self.allow_truncated = allow_truncated
+        try:
+            size = self.path.stat().st_size
+            with open(self.path, "rb") as f:
+                head = f.read(len(MAGIC))
+                if size >= 2 * len(MAGIC):
+                    f.seek(size - len(MAGIC))
+                tail = f.read(len(MAGIC))
+        except OSError as e:
+            raise RecordingError(f"{self.path}: cannot read: {e.strerror or e}") from None
+        self.size = size
+        if head != MAGIC:
+            raise RecordingError(f"{self.path}: not an MCAP file (it does not start with the MCAP magic bytes)")
+        self.complete = tail == MAGIC and size > 2 * len(MAGIC)
+        if not self.complete and not allow_truncated:
+            raise RecordingError(
+                f"{self.path}: truncated MCAP file (no end magic; the writer was interrupted or the copy is "
+                "incomplete); use --allow-truncated to read the readable prefix"
+            )
+
+    def records(self) -> Iterator:
+        """Schema, Channel, Message, Metadata records of the data section, in file order."""
+        with open(self.path, "rb") as f:
+            reader = StreamReader(f, validate_crcs=True, record_size_limit=max(self.size, 1))
+            iterator = iter(reader.records)
+            while True:
+                try:
+                    record = next(iterator)
+                except StopIteration:
+                    return
+                except _READ_ERRORS as e:
+                    if self.allow_truncated:
+                        return
+                    raise RecordingError(f"{self.path}: corrupt MCAP data ({_describe(e)}); "
+                                         "use --allow-truncated to read the readable prefix") from None
+                if isinstance(record, DataEnd):
+                    return
+                yield record
+
+
+def _describe(e: BaseException) -> str:
+    if isinstance(e, CRCValidationError):
+        return "CRC mismatch"
+    if isinstance(e, McapError) and type(e).__name__ == "EndOfFile":
+        return "unexpected end of file"
+    return f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
+
+
+class _Container:
+    """The common part of a recording and a tracks file: the header document and the channel table."""
+
+    kind: str
+
+    def __init__(self, path, allow_truncated: bool):
+        self._stream = _McapStream(path, allow_truncated)
+        self.path = self._stream.path
+        self.truncated = not self._stream.complete
+        self.doc = self._read_header()
+        try:
+            self.skeleton = SKELETONS[self.doc["skeleton"]["name"]]
+            self.cameras = [_camera_from_json(c) for c in self.doc["cameras"]]
+        except (KeyError, TypeError, ValueError) as e:
+            raise RecordingError(f"{self.path}: unreadable header ({e})") from None
+
+    def _check(self, kind: str, version: int) -> None:
+        if kind != self.kind:
+            wanted = "a recording (made by `crossview generate`)" if self.kind == KIND_RECORDING else \
+                "a tracks file (made by `crossview track`)"
+            raise RecordingError(f"{self.path}: this is a {kind} file, but {wanted} is expected here")
+        if kind == KIND_RECORDING and version < OLDEST_RECORDING_VERSION:
+            raise RecordingError(
+                f"{self.path}: format version {version} is older than this software reads (recordings: "
+                f"{OLDEST_RECORDING_VERSION} to {FORMAT_VERSION}); generate it again with `crossview generate`"
+            )
+        if version > FORMAT_VERSION:
+            raise RecordingError(
+                f"{self.path}: format version {version} is newer than this software reads ({FORMAT_VERSION}); "
+                f"upgrade crossview-testbed (this is {software_version()})"
+            )
+
+    def _read_header(self) -> dict:
+        channels: dict[int, Channel] = {}
+        try:
+            for record in self._stream.records():
+                if isinstance(record, Metadata) and record.name == METADATA_NAME:
+                    self._check(record.metadata.get("kind", "?"), int(record.metadata.get("format_version", "0")))
+                elif isinstance(record, Channel):
+                    channels[record.id] = record
+                elif isinstance(record, Message) and channels.get(record.channel_id, None) is not None \
+                        and channels[record.channel_id].topic == TOPIC_HEADER:
+                    doc = json.loads(record.data)
+                    self._check(doc["kind"], int(doc["format_version"]))
+                    return doc
+        except RecordingError:
+            raise
+        except (ValueError, KeyError, TypeError) as e:
+            raise RecordingError(f"{self.path}: unreadable crossview header ({e})") from None
+        raise RecordingError(f"{self.path}: no {TOPIC_HEADER} message; not a crossview {self.kind} file")
+
+    def _messages(self, schema_names: set[str]) -> Iterator[tuple[str, Message]]:
+        """(schema name, message) for the messages whose channel has one of `schema_names`, in file order."""
+        schemas: dict[int, str] = {}
+        wanted: dict[int, str] = {}
+        for record in self._stream.records():
+            if isinstance(record, Message):
+                name = wanted.get(record.channel_id)
+                if name is not None:
+                    yield name, record
+            elif isinstance(record, Schema):
+                schemas[record.id] = record.name
+            elif isinstance(record, Channel):
+                name = schemas.get(record.schema_id)
+                if name in schema_names:
+                    wanted[record.id] = name
+
+    def _decode(self, decode, data: bytes):
+        try:
+            return decode(data)
+        except (DecodeError, ValueError) as e:
+            if self._stream.allow_truncated:
+                return None
+            raise RecordingError(f"{self.path}: corrupt message ({e})") from None
+
+
+class Recording(_Container):
+    """A recording opened for reading. `header`, `cameras` and `boxes` are read on open; the events
+    stream from disk one chunk at a time every time an iterator is asked for."""
+
+    kind = KIND_RECORDING
+
+    def __init__(self, path, allow_truncated: bool = False):
+        super().__init__(path, allow_truncated)
+        d = self.doc
+        try:
+            self.header = RecordingHeader(
+                scenario_name=d["scenario_name"], scenario_text=d["scenario_text"],
+                scenario_digest=d["scenario_digest"], seed=int(d["seed"]), duration_s=float(d["duration_s"]),
+                skeleton_name=d["skeleton"]["name"], software_version=d["software_version"],
+                format_version=int(d["format_version"]),
+            )
+            self.boxes = tuple(_box_from_json(b) for b in d["boxes"])
+        except (KeyError, TypeError, ValueError) as e:
+            raise RecordingError(f"{self.path}: unreadable recording header ({e})") from None
+
+    def _events(self, names: set[str], with_poses: bool = False) -> Iterator[PoseTruth | CameraFrame]:
+        window = _TruthWindow(self.truth, self.skeleton.num_joints) if with_poses else None
+        for name, record in self._messages(names):
+            if name == "crossview.PoseTruth":
+                event = self._decode(lambda b: _pose_truth_from_msg(PoseTruthMsg.FromString(b)), record.data)
+            else:
+                event = self._decode(lambda b: CameraFrameMsg.FromString(b), record.data)
+                if event is not None:
+                    event = _camera_frame_from_msg(event, window.at(event.capture_s) if window else None)
+            if event is None:
+                return
+            yield event
+
+    def events(self, with_poses: bool = False) -> Iterator[PoseTruth | CameraFrame]:
+        """Truth and camera frames in log-time order (the order they were written).
+
+        Args:
+            with_poses: give each frame its `poses_at_capture`, derived from the truth ticks (read in a
+                second pass over the file); else None.
+        """
+        return self._events({"crossview.PoseTruth", "crossview.CameraFrame"}, with_poses)
+
+    def frames(self, with_poses: bool = False) -> Iterator[CameraFrame]:
+        """Camera frames in delivery order (`with_poses` as in `events`)."""
+        return self._events({"crossview.CameraFrame"}, with_poses)
+
+    def truth(self) -> Iterator[PoseTruth]:
+        """The 100 Hz ground truth in time order."""
+        return self._events({"crossview.PoseTruth"})
+
+
+class _TruthWindow:
+    """Everybody's true pose at any capture time of a recording, derived from its truth ticks by
+    `sim.poses.interpolate_poses`: the rule and the arithmetic the simulator used for the frames'
+    `poses_at_capture`, so the same bits.
+
+    The ticks stream from a second pass over the file. Captures come nearly in time order (frames are in
+    delivery order), so only the ticks of the last `KEEP_S` seconds are kept; a capture older than that
+    reads the ticks again from the start.
+    """
+
+    KEEP_S = 10.0
+
+    def __init__(self, open_ticks, num_joints: int):
+        self._open = open_ticks
+        self._empty = np.zeros((0, num_joints, 3))
+        self._start()
+
+    def _start(self) -> None:
+        self._ticks = self._open()
+        self._times: list[float] = []
+        self._poses: list[PoseTruth] = []
+        self._trimmed = False
+        self._ended = False
+
+    def at(self, t_s: float) -> PoseTruth:
+        if self._trimmed and t_s <= self._times[0]:
+            self._start()
+        while not self._ended and (not self._times or self._times[-1] < t_s):
+            tick = next(self._ticks, None)
+            if tick is None:
+                self._ended = True
+            else:
+                self._times.append(tick.t_s)
+                self._poses.append(tick)
+        i = bisect.bisect_left(self._times, t_s)
+        before = self._poses[i - 1] if i > 0 else None
+        after = self._poses[i] if i < len(self._poses) else None
+        if before is None and after is None:  # a recording without truth
+            return PoseTruth(float(t_s), np.zeros(0, dtype=np.int64), self._empty)
+        poses = interpolate_poses(before, after, t_s)
+        old = bisect.bisect_left(self._times, t_s - self.KEEP_S) - 1
+        if old > 0:
+            del self._times[:old], self._poses[:old]
+            self._trimmed = True
+        return poses
+
+
+class Tracks(_Container):
+    """A tracks file opened for reading; `outputs()` streams the tracker outputs in processing order."""
+
+    kind = KIND_TRACKS
+
+    def __init__(self, path, allow_truncated: bool = False):
+        super().__init__(path, allow_truncated)
+        d = self.doc
+        try:
+            self.header = TracksHeader(
+                scenario_name=d["scenario_name"], scenario_digest=d["scenario_digest"], seed=int(d["seed"]),
+                method=d["method"], preset=d["preset"], config=d["config"], skeleton_name=d["skeleton"]["name"],
+                software_version=d["software_version"], format_version=int(d["format_version"]),
+            )
+        except (KeyError, TypeError, ValueError) as e:
+            raise RecordingError(f"{self.path}: unreadable tracks header ({e})") from None
+        self.summary: dict = _read_summary(self.path) if not self.truncated else {}
+
+    def outputs(self) -> Iterator[TrackerOutput]:
+        for _, record in self._messages({"crossview.TrackerOutput"}):
+            output = self._decode(lambda b: _tracker_output_from_msg(TrackerOutputMsg.FromString(b)), record.data)
+            if output is None:
+                return
+            yield output
+
+
+def _read_summary(path: Path) -> dict:
+    """The summary metadata written at close, found through the file's summary section (one seek)."""
+    try:
+        with open(path, "rb") as f:
+            for metadata in make_reader(f).iter_metadata():
+                if metadata.name == SUMMARY_METADATA_NAME:
+                    return json.loads(metadata.metadata["json"])
+    except _READ_ERRORS as e:
+        raise RecordingError(f"{path}: unreadable summary section ({_describe(e)})") from None
+    return {}
+
+
+def open_recording(path, allow_truncated: bool = False) -> Recording:
+    """Opens a recording. Raises RecordingError for a file that is not MCAP, truncated (unless
+    `allow_truncated`), corrupt, of a newer format version, or a tracks file."""
+    return Recording(path, allow_truncated)
+
+
+def open_tracks(path, allow_truncated: bool = False) -> Tracks:
+    """Opens a tracks file; the same errors as `open_recording`, and a recording given here is one."""
+    return Tracks(path, allow_truncated)
+
+
+# --------------------------------------------------------------------------------------------------
+# info.

@@ -1,0 +1,367 @@
+"""Atomic writers of recordings and tracks files, through mcap's public `Writer`: a temporary file in the
+target folder, fsynced and renamed onto the final name only when complete."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from mcap.writer import Writer
+
+from core.types import SKELETONS, Camera
+from crossview import foxglove
+from crossview.recording.messages import (
+    EncodedFrame,
+    _tracker_output_to_msg,
+    encode_camera_frames,
+    encode_frames,
+    pose_truth_bytes,
+)
+from crossview.recording.schemas import (
+    CHUNK_SIZE,
+    COMPRESSION,
+    HEADER_JSON_SCHEMAS,
+    KIND_RECORDING,
+    KIND_TRACKS,
+    METADATA_NAME,
+    SUMMARY_METADATA_NAME,
+    TOPIC_HEADER,
+    TOPIC_OUTPUTS,
+    TOPIC_STORE,
+    TOPIC_TF,
+    TOPIC_TRACK_SCENE,
+    TOPIC_TRUTH,
+    TOPIC_TRUTH_SCENE,
+    TRACK_SCENE_PERIOD_S,
+    TRUTH_SCENE_PERIOD_S,
+    CameraFrameMsg,
+    PoseTruthMsg,
+    RecordingError,
+    RecordingHeader,
+    TrackerOutputMsg,
+    TracksHeader,
+    _box_json,
+    _camera_json,
+    _json,
+    _skeleton_json,
+    camera_topic,
+    to_ns,
+)
+from sim.types import Box, CameraFrame, DetectionRows, PoseTruth
+from tracker.types import TrackerOutput
+
+
+class _AtomicMcapWriter:
+    """An MCAP writer onto a temporary file in the target folder, renamed onto `path` on clean exit."""
+
+    def __init__(self, path, kind: str, header_doc: dict, metadata: dict[str, str], chunk_size: int):
+        self.path = Path(path)
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        try:
+            self._file = open(self._tmp, "wb")  # closed in close() or abort()
+        except OSError as e:
+            raise RecordingError(f"{self.path}: cannot write here: {e.strerror or e}") from None
+        self._done = False
+        try:
+            self._writer = Writer(
+                self._file, chunk_size=chunk_size, compression=COMPRESSION, enable_data_crcs=True,
+            )
+            self._writer.start(profile="", library=f"crossview-testbed {header_doc['software_version']}")
+            # The flat metadata record lands before the first chunk, so kind and version are read first.
+            self._writer.add_metadata(METADATA_NAME, metadata)
+            self._schemas: dict[str, int] = {}
+            header_channel = self.channel(TOPIC_HEADER, "json", f"crossview.{kind.capitalize()}Header",
+                                          "jsonschema", _json(HEADER_JSON_SCHEMAS[kind]))
+            self.add(header_channel, 0, _json(header_doc))
+        except BaseException:
+            self.abort()
+            raise
+
+    def schema(self, name: str, encoding: str, data: bytes) -> int:
+        if name not in self._schemas:
+            self._schemas[name] = self._writer.register_schema(name=name, encoding=encoding, data=data)
+        return self._schemas[name]
+
+    def channel(self, topic: str, message_encoding: str, schema_name: str, schema_encoding: str,
+                schema_data: bytes) -> int:
+        schema_id = self.schema(schema_name, schema_encoding, schema_data)
+        return self._writer.register_channel(topic=topic, message_encoding=message_encoding, schema_id=schema_id)
+
+    def protobuf_channel(self, topic: str, message_class) -> int:
+        descriptor = message_class.DESCRIPTOR
+        return self.channel(topic, "protobuf", descriptor.full_name, "protobuf",
+                            foxglove.file_descriptor_set(descriptor))
+
+    def end_chunk(self) -> None:
+        """Closes the chunk in progress, so that what came before survives a truncation after it."""
+        self._writer.flush()
+
+    def add(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
+        self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data, publish_time=log_time_ns)
+
+    def add_many(self, messages: Sequence[tuple[int, int, bytes]]) -> None:
+        """`add` of each (channel id, log time ns, data) in turn."""
+        add = self._writer.add_message
+        for channel_id, t, data in messages:
+            add(channel_id, t, data, t)
+
+    def close(self, summary_metadata: dict[str, str]) -> None:
+        """Finishes the file, fsyncs it and renames it onto the final path."""
+        if self._done:
+            return
+        try:
+            self._writer.add_metadata(SUMMARY_METADATA_NAME, summary_metadata)
+            self._writer.finish()
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            os.replace(self._tmp, self.path)
+            self._done = True
+        except BaseException:
+            self.abort()
+            raise
+        try:
+            dir_fd = os.open(self.path.parent, os.O_RDONLY)
+        except OSError:
+            return
+        try:
+            os.fsync(dir_fd)
+        except OSError:
+            pass
+        finally:
+            os.close(dir_fd)
+
+    def abort(self) -> None:
+        """Drops the temporary file; nothing appears under the final name."""
+        if self._done:
+            return
+        self._done = True
+        self._file.close()
+        try:
+            os.unlink(self._tmp)
+        except FileNotFoundError:
+            pass
+
+
+def _flat_metadata(kind: str, header) -> dict[str, str]:
+    return {
+        "kind": kind,
+        "format_version": str(header.format_version),
+        "software_version": header.software_version,
+        "scenario_name": header.scenario_name,
+        "scenario_digest": header.scenario_digest,
+        "seed": str(header.seed),
+        "skeleton": header.skeleton_name,
+    }
+
+
+class _WriterContext:
+    """Context-manager behaviour shared by the writers: close on a clean exit, abort on any exception.
+
+    Subclasses hold an `_AtomicMcapWriter` in `_out` and define `close()`.
+    """
+
+    _out: _AtomicMcapWriter
+
+    def abort(self) -> None:
+        """Drops the temporary file; nothing appears under the final name."""
+        self._out.abort()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+
+class RecordingWriter(_WriterContext):
+    """Writes a recording atomically. Events must come in log-time order (truth at t_s, frames at
+    delivery_s), which makes the file streamable in that order.
+
+    Use as a context manager: the file appears under `path` only when the block exits cleanly; on an
+    exception (KeyboardInterrupt included) the temporary file is removed.
+    """
+
+    def __init__(self, path, header: RecordingHeader, cameras: Sequence[Camera], boxes: Sequence[Box], *,
+                 chunk_size: int = CHUNK_SIZE):
+        self.header = header
+        self.cameras = list(cameras)
+        self.boxes = tuple(boxes)
+        self.skeleton = SKELETONS[header.skeleton_name]
+        names = [c.name for c in self.cameras]
+        if len(set(names)) != len(names):
+            raise ValueError(f"cameras: names must be unique, got {names}")
+        doc = {
+            "kind": KIND_RECORDING,
+            "format_version": header.format_version,
+            "software_version": header.software_version,
+            "scenario_name": header.scenario_name,
+            "scenario_digest": header.scenario_digest,
+            "seed": int(header.seed),
+            "duration_s": float(header.duration_s),
+            "skeleton": _skeleton_json(self.skeleton),
+            "scenario_text": header.scenario_text,
+            "cameras": [_camera_json(c) for c in self.cameras],
+            "boxes": [_box_json(b) for b in self.boxes],
+        }
+        self._out = _AtomicMcapWriter(path, KIND_RECORDING, doc, _flat_metadata(KIND_RECORDING, header), chunk_size)
+        try:
+            out = self._out
+            self._tf = out.protobuf_channel(TOPIC_TF, foxglove.FrameTransforms)
+            self._store = out.protobuf_channel(TOPIC_STORE, foxglove.SceneUpdate)
+            self._truth = out.protobuf_channel(TOPIC_TRUTH, PoseTruthMsg)
+            self._truth_scene = out.protobuf_channel(TOPIC_TRUTH_SCENE, foxglove.SceneUpdate)
+            self._frame_ch, self._annotation_ch = {}, {}
+            for camera in self.cameras:
+                calibration = out.protobuf_channel(camera_topic(camera.name, "calibration"),
+                                                   foxglove.CameraCalibration)
+                self._frame_ch[camera.name] = out.protobuf_channel(camera_topic(camera.name, "frame"), CameraFrameMsg)
+                self._annotation_ch[camera.name] = out.protobuf_channel(
+                    camera_topic(camera.name, "detections"), foxglove.ImageAnnotations)
+                backdrop = out.protobuf_channel(camera_topic(camera.name, "image"), foxglove.CompressedImage)
+                out.add(calibration, 0, foxglove.camera_calibration(camera, 0).SerializeToString())
+                out.add(backdrop, 0, foxglove.camera_backdrop(camera, 0).SerializeToString())
+            out.add(self._tf, 0, foxglove.frame_transforms(self.cameras, 0).SerializeToString())
+            out.add(self._store, 0, foxglove.store_scene(self.boxes, self.cameras, 0).SerializeToString())
+            out.end_chunk()  # the header and the static scene get a chunk of their own
+        except BaseException:
+            self._out.abort()
+            raise
+        self._last_ns = 0
+        self._next_scene_ns = 0
+        self._people: set[int] = set()
+        self._counts = {"truth": 0, "frames": 0}
+
+    def _log_time(self, t_ns: int, what: str) -> int:
+        if t_ns < self._last_ns:
+            raise ValueError(f"{what}: log time {t_ns / 1e9} s is before the previous event ({self._last_ns / 1e9} s); "
+                             "events must be written in log-time order")
+        self._last_ns = t_ns
+        return t_ns
+
+    def write(self, event: PoseTruth | CameraFrame | EncodedFrame) -> None:
+        """Appends one event: a PoseTruth (log time t_s) or a CameraFrame (log time truth.delivery_s),
+        or a camera frame already encoded (`EncodedFrame`, log time log_time_ns)."""
+        self.write_many([event])
+
+    def write_many(self, events: Sequence[PoseTruth | CameraFrame | EncodedFrame]) -> None:
+        """`write` of each event in turn (the same bytes), with all the CameraFrames among them encoded
+        in one compiled call (`encode_camera_frames`): what a producer of many events at a time should use."""
+        encoded = iter(encode_camera_frames([e for e in events if isinstance(e, CameraFrame)], self.skeleton))
+        messages = []
+        for event in events:
+            if isinstance(event, CameraFrame):
+                event = next(encoded)
+            if isinstance(event, EncodedFrame):
+                frame_channel = self._frame_ch.get(event.camera)
+                if frame_channel is None:
+                    raise ValueError(f"CameraFrame: camera {event.camera!r} is not one of the recording's cameras")
+                t = self._log_time(event.log_time_ns, f"CameraFrame {event.camera}")
+                messages.append((frame_channel, t, event.frame))
+                messages.append((self._annotation_ch[event.camera], t, event.annotations))
+                self._counts["frames"] += 1
+            elif isinstance(event, PoseTruth):
+                t = self._log_time(to_ns(event.t_s), "PoseTruth")
+                messages.append((self._truth, t, pose_truth_bytes(event)))
+                if t >= self._next_scene_ns:
+                    messages.append((self._truth_scene, t, foxglove.truth_skeletons_bytes(event, self.skeleton, t)))
+                    self._next_scene_ns = t + to_ns(TRUTH_SCENE_PERIOD_S)
+                self._people.update(np.asarray(event.person_ids).tolist())
+                self._counts["truth"] += 1
+            else:
+                raise TypeError(f"RecordingWriter.write: expected PoseTruth, CameraFrame or EncodedFrame, got "
+                                f"{type(event).__name__}")
+        self._out.add_many(messages)
+
+    def encode_frames(self, cameras: Sequence[int], times: np.ndarray, bounds: np.ndarray,
+                      rows: DetectionRows) -> list[EncodedFrame]:
+        """`encode_frames` (the module's) of frames from this recording's cameras, given by index."""
+        names = [self.cameras[i].name for i in cameras]
+        return encode_frames(names, times, bounds, rows, self.skeleton)
+
+    def close(self) -> None:
+        summary = {
+            "num_people": len(self._people),
+            "num_truth": self._counts["truth"],
+            "num_frames": self._counts["frames"],
+            "end_s": self._last_ns / 1e9,
+        }
+        self._out.close({"json": _json(summary).decode()})
+
+
+
+class TracksWriter(_WriterContext):
+    """Writes a tracks file atomically: one TrackerOutput per processed frame, in processing order.
+
+    The log time of an output is its stamp (clamped at 0: a camera clock may stamp a frame slightly
+    before the scenario start; the exact stamp is in the message). Call `finish(summary)` before the
+    block ends to record tracker timings.
+    """
+
+    def __init__(self, path, header: TracksHeader, cameras: Sequence[Camera], *, chunk_size: int = CHUNK_SIZE):
+        self.header = header
+        self.cameras = list(cameras)
+        self.skeleton = SKELETONS[header.skeleton_name]
+        doc = {
+            "kind": KIND_TRACKS,
+            "format_version": header.format_version,
+            "software_version": header.software_version,
+            "scenario_name": header.scenario_name,
+            "scenario_digest": header.scenario_digest,
+            "seed": int(header.seed),
+            "method": header.method,
+            "preset": header.preset,
+            "config": header.config,
+            "skeleton": _skeleton_json(self.skeleton),
+            "cameras": [_camera_json(c) for c in self.cameras],
+        }
+        try:
+            _json(header.config)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"TracksHeader.config: must be JSON-serialisable without NaN: {e}") from None
+        self._out = _AtomicMcapWriter(path, KIND_TRACKS, doc, _flat_metadata(KIND_TRACKS, header), chunk_size)
+        try:
+            self._outputs = self._out.protobuf_channel(TOPIC_OUTPUTS, TrackerOutputMsg)
+            self._scene = self._out.protobuf_channel(TOPIC_TRACK_SCENE, foxglove.SceneUpdate)
+            self._out.end_chunk()
+        except BaseException:
+            self._out.abort()
+            raise
+        self._summary: dict = {}
+        self._next_scene_ns = 0
+        self._targets: set[int] = set()
+        self._count = 0
+
+    def write(self, output: TrackerOutput) -> None:
+        """Appends the tracker's output after one frame."""
+        t_ns = to_ns(max(0.0, float(output.stamp_s)))
+        msg = _tracker_output_to_msg(output, self.skeleton.num_joints)
+        self._out.add(self._outputs, t_ns, msg.SerializeToString())
+        if t_ns >= self._next_scene_ns:
+            scene = foxglove.tracker_skeletons(output, self.skeleton, t_ns)
+            self._out.add(self._scene, t_ns, scene.SerializeToString())
+            self._next_scene_ns = t_ns + to_ns(TRACK_SCENE_PERIOD_S)
+        self._targets.update(int(t.id) for t in output.targets)
+        self._count += 1
+
+    def finish(self, summary: dict) -> None:
+        """Records the run's summary (e.g. tracker_s, updates, num_cameras); written when the file closes."""
+        try:
+            _json(summary)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"tracks summary: must be JSON-serialisable without NaN: {e}") from None
+        self._summary = dict(summary)
+
+    def close(self) -> None:
+        summary = {"num_outputs": self._count, "num_targets": len(self._targets)} | self._summary
+        self._out.close({"json": _json(summary).decode()})
+
+
+
+# --------------------------------------------------------------------------------------------------
+# Reading.
