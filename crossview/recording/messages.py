@@ -11,17 +11,9 @@ import numpy as np
 
 from core.types import Frame, Skeleton
 from crossview import foxglove
-from crossview.recording.schemas import CameraFrameMsg, TrackerOutputMsg, to_ns
+from crossview.recording.schemas import TrackerOutputMsg, to_ns
 from sim.types import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tracker.types import Target, TargetState, TrackerOutput
-
-
-def _pose_truth_to_msg(truth: PoseTruth, msg) -> None:
-    poses, ids = _checked_poses(truth)
-    msg.t_s = float(truth.t_s)
-    msg.num_joints = poses.shape[1]
-    msg.person_ids.extend(ids.tolist())
-    msg.poses_m.extend(poses.ravel().tolist())
 
 
 def pose_truth_bytes(truth: PoseTruth) -> bytes:
@@ -54,7 +46,7 @@ def _scratch(size: int) -> np.ndarray:
 
 def camera_frame_bytes(cf: CameraFrame) -> bytes:
     """`crossview.CameraFrame` wire bytes of one camera frame, written by a compiled loop (the same bytes as
-    protobuf's serialisation of `_camera_frame_to_msg`, which the tests check)."""
+    protobuf's serialisation of the message object, which the tests check)."""
     from crossview import wire  # (numba: loaded for writing only)
 
     frame, truth = cf.frame, cf.truth
@@ -215,36 +207,6 @@ def _pose_truth_from_msg(msg) -> PoseTruth:
     ids = np.array(msg.person_ids, dtype=np.int64)
     poses = np.array(msg.poses_m, dtype=np.float64).reshape(len(ids), msg.num_joints, 3)
     return PoseTruth(t_s=msg.t_s, person_ids=ids, poses=poses)
-
-
-def _camera_frame_to_msg(cf: CameraFrame):
-    frame, truth = cf.frame, cf.truth
-    D, J = frame.keypoints_px.shape[:2]
-    msg = CameraFrameMsg(
-        camera=frame.camera,
-        stamp_s=float(frame.stamp_s),
-        capture_s=float(truth.capture_s),
-        delivery_s=float(truth.delivery_s),
-        num_detections=D,
-        num_joints=J,
-    )
-    msg.keypoints_px.extend(frame.keypoints_px.ravel().tolist())
-    msg.scores.extend(frame.scores.ravel().tolist())
-
-    def rows(name: str, value, shape: tuple, dtype) -> list:
-        array = np.asarray(value, dtype=dtype)
-        if array.shape != shape:
-            raise ValueError(f"CameraFrame {frame.camera}@{frame.stamp_s}: truth.{name} expected {shape}, got "
-                             f"{array.shape}")
-        return array.ravel().tolist()
-
-    msg.person_ids.extend(rows("person_ids", truth.person_ids, (D,), np.int64))
-    msg.true_keypoints_px.extend(rows("keypoints_px", truth.keypoints_px, (D, J, 2), np.float64))
-    msg.in_image.extend(rows("in_image", truth.in_image, (D, J), bool))
-    msg.occluded.extend(rows("occluded", truth.occluded, (D, J), bool))
-    msg.self_occluded.extend(rows("self_occluded", truth.self_occluded, (D, J), bool))
-    msg.effects.extend(rows("effects", truth.effects, (D,), np.int64))
-    return msg
 
 
 def _camera_frame_from_msg(msg, poses_at_capture: PoseTruth | None = None) -> CameraFrame:

@@ -21,12 +21,12 @@ from crossview.recording import (
     RecordingWriter,
     TracksHeader,
     TracksWriter,
-    messages,
     open_recording,
     open_tracks,
     reader,
 )
 from sim.types import Box, BoxKind, CameraFrame, DetectionRows, DetectionTruth, PoseTruth
+from tests.reference import recording as reference
 from tracker.types import Target, TargetState, TrackerOutput
 
 SCENARIO_TEXT = 'description = "synthetic"\n[crowd]\npeople = 3\n'
@@ -610,13 +610,13 @@ def test_numpy_encoding_is_protobufs_own_serialisation(world):
     for event in events + extra:
         if isinstance(event, PoseTruth):
             msg = recording.PoseTruthMsg()
-            messages._pose_truth_to_msg(event, msg)
+            reference.pose_truth_to_msg(event, msg)
             assert recording.pose_truth_bytes(event) == msg.SerializeToString()
         else:
-            assert recording.camera_frame_bytes(event) == messages._camera_frame_to_msg(event).SerializeToString()
+            assert recording.camera_frame_bytes(event) == reference.camera_frame_to_msg(event).SerializeToString()
             effects = rng.integers(0, 1 << 31, len(event.truth.effects))
             bigger = CameraFrame(event.frame, dataclasses.replace(event.truth, effects=effects), event.poses_at_capture)
-            assert recording.camera_frame_bytes(bigger) == messages._camera_frame_to_msg(bigger).SerializeToString()
+            assert recording.camera_frame_bytes(bigger) == reference.camera_frame_to_msg(bigger).SerializeToString()
         checked += 1
     assert checked > 50
 
