@@ -143,8 +143,9 @@ def _cmd_run(args) -> None:
     rec_path = out / f"{scenario.name}.mcap"
     tracks_path = out / f"{scenario.name}.tracks.mcap"
     json_path = args.json or out / f"{scenario.name}.score.json"
-    for path in (rec_path, tracks_path, json_path):
-        pipeline.check_writable(path)
+    pipeline.check_writable(rec_path)
+    pipeline.check_writable(tracks_path, inputs=(rec_path,))
+    pipeline.check_writable(json_path, inputs=(rec_path, tracks_path))
     progress = not args.no_progress
     gen = pipeline.generate(scenario, rec_path, progress=progress)
     print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
@@ -205,7 +206,7 @@ def _cmd_score(args) -> None:
     from crossview import pipeline
 
     if args.json:
-        pipeline.check_writable(args.json)
+        pipeline.check_writable(args.json, inputs=(args.recording, args.tracks))
     report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress)
     print(report.table())
     if args.json:
@@ -246,7 +247,7 @@ def _cmd_export(args) -> None:
     from crossview import pipeline, recording
     from crossview.datasets import write_result_3d
 
-    pipeline.check_writable(args.output)
+    pipeline.check_writable(args.output, inputs=(args.tracks,))
     tracks = recording.open_tracks(args.tracks)
     write_result_3d(tracks.outputs(), args.output)
     print(f"{args.output}: written")
@@ -256,7 +257,7 @@ def _cmd_convert(args) -> None:
     from crossview import pipeline
     from crossview.datasets import convert
 
-    pipeline.check_writable(args.output)
+    pipeline.check_writable(args.output, inputs=tuple(Path(args.dataset).glob("*.json")))
     convert(args.dataset, args.output)
     print(f"{args.output}: written")
 

@@ -60,8 +60,16 @@ def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None
     return scenario
 
 
-def check_writable(path: Path) -> None:
-    """Fails early, before any work, when `path` cannot be created."""
+def check_writable(path: Path, inputs: tuple = ()) -> None:
+    """Fails early, before any work, when `path` cannot be created, or writing it would replace one of
+    `inputs` (the same file under any name) or something that is not a regular file (a device, a pipe)."""
+    path = Path(path)
+    for given in inputs:
+        if given is not None and os.path.realpath(given) == os.path.realpath(path):
+            raise CrossviewError(f"{path}: is also an input ({given}); writing it would destroy the input, "
+                                 "so choose another output")
+    if path.exists() and not path.is_dir() and not path.is_file():
+        raise CrossviewError(f"{path}: is not a regular file (a device or a pipe); choose a file name for the output")
     folder = path.parent if str(path.parent) else Path(".")
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -103,7 +111,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
     """Simulates `scenario` for its duration and writes the recording to `out` atomically."""
     from sim.simulate import Simulation  # MuJoCo is only needed for this stage
 
-    check_writable(out)
+    check_writable(out, inputs=(scenario.source_path or None,))
     start = time.perf_counter()
     sim = Simulation(scenario, scenario.seed)
     frames = 0
@@ -203,7 +211,7 @@ def track(
     from core.types import SKELETONS
     from crossview import recording
 
-    check_writable(out)
+    check_writable(out, inputs=(rec_path, config_path))
     rec = recording.open_recording(rec_path)
     skeleton = SKELETONS[rec.header.skeleton_name]
     tracker, config = make_tracker(method, rec.cameras, preset, config_path, skeleton)

@@ -95,3 +95,29 @@ def test_scenarios_show_prints_a_file_that_loads_and_reference_is_the_docs(tmp_p
     assert capsys.readouterr().out == scenario.reference_markdown()
     err = _run_bad(capsys, ["scenarios", "--show", "nowhere"])
     assert "nowhere: no such scenario file (shipped scenarios: panoptic_dome, store_layout1" in err
+
+
+def test_an_output_that_is_an_input_is_refused_and_the_input_kept(tmp_path, capsys):
+    rec = tmp_path / "rec.mcap"
+    assert main(["--no-progress", "generate", "store_layout1", "-o", str(rec), "--duration", "1"]) == 0
+    tracks = tmp_path / "t.mcap"
+    assert main(["--no-progress", "track", str(rec), "-o", str(tracks)]) == 0
+    before = {p: p.read_bytes() for p in (rec, tracks)}
+    # The same file under its own name, another spelling of it, and as the score JSON of its own run.
+    for argv in (["track", str(rec), "-o", str(rec)],
+                 ["track", str(rec), "-o", str(tmp_path / "." / "rec.mcap")],
+                 ["score", str(rec), str(tracks), "--json", str(tracks)],
+                 ["export", str(tracks), "-o", str(tracks)]):
+        err = _run_bad(capsys, ["--no-progress", *argv])
+        assert ": is also an input (" in err, err
+    assert {p: p.read_bytes() for p in (rec, tracks)} == before
+    scenario = tmp_path / "s.toml"
+    scenario.write_text("duration_s = 1.0\n")
+    err = _run_bad(capsys, ["generate", str(scenario), "-o", str(scenario)])
+    assert "s.toml: is also an input" in err and scenario.read_text() == "duration_s = 1.0\n"
+
+
+def test_an_output_that_is_not_a_regular_file_is_refused(tmp_path, capsys):
+    rec = tmp_path / "rec.mcap"
+    err = _run_bad(capsys, ["generate", "store_layout1", "-o", "/dev/null", "--duration", "1"])
+    assert "/dev/null: is not a regular file" in err and not rec.exists()
