@@ -8,13 +8,29 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import signal
 import sys
+import threading
 from pathlib import Path
 
 from core.errors import CrossviewError
 
 EXIT_BAD_INPUT = 2
-EXIT_INTERRUPTED = 130
+EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
+_ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+
+
+class _Ended(BaseException):
+    """SIGTERM or SIGHUP, raised where the command is, so that it unwinds as from Ctrl-C: workers are
+    stopped, temporary files removed, nothing left under a final name."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+def _end(signum, frame):
+    raise _Ended(signum)
 
 
 class _Parser(argparse.ArgumentParser):
@@ -304,8 +320,13 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
+    on_main_thread = threading.current_thread() is threading.main_thread()
+    previous = {s: signal.signal(s, _end) for s in _ENDING_SIGNALS} if on_main_thread else {}
     try:
         COMMANDS[args.command](args)
+    except _Ended as e:
+        print(f"crossview: ended by {signal.Signals(e.signum).name}; no partial output was kept", file=sys.stderr)
+        return 128 + e.signum
     except KeyboardInterrupt:
         print("crossview: interrupted; no partial output was kept", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -319,6 +340,9 @@ def main(argv: list[str] | None = None) -> int:
             message = f"{e.filename}: {e.strerror}"
         print(f"crossview {args.command}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    finally:
+        for ending, handler in previous.items():
+            signal.signal(ending, handler)
     return 0
 
 

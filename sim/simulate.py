@@ -244,6 +244,8 @@ class Simulation:
     def _work(self, duration: float, sender) -> None:
         """The worker process: simulates and sends every block, then the detector's counts (or its error)."""
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        for ending in (signal.SIGTERM, signal.SIGHUP):  # the consumer's handlers are not the worker's
+            signal.signal(ending, signal.SIG_DFL)
         try:
             for block in self._blocks(duration, draws=False):
                 sender.send(("block", _pack_block(block)))

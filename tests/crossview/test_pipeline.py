@@ -1,6 +1,11 @@
 """The main job end to end on a short run: generate, track, score, through the command line."""
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 
 import pytest
 
@@ -124,6 +129,30 @@ def test_generate_interrupted_leaves_no_file_and_no_worker(tmp_path, monkeypatch
         pipeline.generate(scenario, tmp_path / "g.mcap", progress=False)
     assert calls and list(tmp_path.iterdir()) == []
     assert multiprocessing.active_children() == []
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_a_terminating_signal_ends_generate_cleanly(tmp_path, signum):
+    """SIGTERM or SIGHUP in the middle of a real `crossview generate`: exit status 128 + the signal, one
+    line saying so, no file under the final name or left as a temporary, and no worker process left."""
+    out = tmp_path / "g.mcap"
+    command = [sys.executable, "-c", "from crossview.cli import run; run()", "--no-progress", "generate",
+               "store_layout2", "-o", str(out), "--duration", "600"]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while not any(tmp_path.iterdir()) and time.monotonic() < deadline:  # the temporary file: it is writing
+        time.sleep(0.05)
+    time.sleep(0.5)
+    process.send_signal(signum)
+    _, err = process.communicate(timeout=60)
+    assert process.returncode == 128 + signum, err
+    name = signal.Signals(signum).name
+    assert err.strip().splitlines()[-1] == f"crossview: ended by {name}; no partial output was kept"
+    assert list(tmp_path.iterdir()) == []
+    # Nothing of the process group is left (the simulation worker included).
+    time.sleep(0.2)
+    with pytest.raises(ProcessLookupError):
+        os.killpg(process.pid, 0)
 
 
 # Durations that end at awkward instants: before most cameras' first capture, one truth tick into a block
