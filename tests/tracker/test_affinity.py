@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from tests.reference.plain import plain_python
 from tests.tracker.synthetic import look_at_camera
 from tracker.affinity import (
     affinity_2d,
@@ -116,7 +117,7 @@ def test_compiled_affinity_matrix_equals_the_per_equation_functions(normalize):
     a3d = affinity_3d(predicted, seen_s, cam.center_world, ray_directions(cam, det, M), t, w3, a3, lam)
     a2d = affinity_2d(prev_px[:, c], prev_s[:, c], det, t, w2, a2, lam, floor)
     expected = combine(a2d, a3d, normalize)
-    for kernel in (affinity_matrix, affinity_matrix.py_func):
+    for kernel in (affinity_matrix, plain_python(affinity_matrix)):
         out = np.full((T, D), np.nan)
         kernel(pos, vel, joint_s, seen_s, prev_px, prev_s, c, det, M, cam.center_world, t, w2, a2, floor, w3, a3, lam,
                horizon, normalize, out)

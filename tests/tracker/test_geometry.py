@@ -4,6 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.reference.plain import plain_python
 from tests.tracker.synthetic import look_at_camera
 from tracker.geometry import (
     distort_points,
@@ -89,7 +90,7 @@ def test_compiled_frame_undistortion_agrees_with_opencv_and_masks_unusable_joint
     clean = np.clip(np.nan_to_num(scores, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0)
     usable = np.all(np.isfinite(kp), axis=-1) & (clean >= 0.2) & (clean > 0)
     expected = undistort_points(cam, np.where(usable[..., None], kp, np.nan))
-    for kernel in (undistort_detections, undistort_detections.py_func):
+    for kernel in (undistort_detections, plain_python(undistort_detections)):
         out = np.zeros(kp.shape)
         counts = kernel(kp, scores, 0.2, cam.K, cam.dist, out)
         np.testing.assert_array_equal(counts, usable.sum(axis=1))

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from core.types import Frame
+from tests.reference.plain import plain_python, reaches_compiled_code
 from tests.tracker.synthetic import store_like
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
@@ -148,6 +149,12 @@ def test_a_person_hidden_for_two_seconds_gets_the_old_identity_back_with_reid(la
     assert (after == before) is same_id
 
 
+def test_the_plain_reference_of_the_target_update_calls_no_compiled_kernel():
+    # `py_func` alone still calls the compiled triangulation and velocity kernels; the reference must not.
+    assert reaches_compiled_code(update_matched.py_func)
+    assert not reaches_compiled_code(plain_python(update_matched))
+
+
 @pytest.mark.parametrize("config", [CONFIG, CONFIG.replace(reject_factor=2.0, reject_floor_px=5.0),
                                     CONFIG.replace(triangulation=Triangulation.PAPER)])
 def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
@@ -164,7 +171,7 @@ def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
         names = ("pos", "vel", "joint_s", "seen_s", "obs_px", "obs_s", "hist_pos", "hist_s", "hist_next",
                  "last_update_s", "num_updates")
         results = []
-        for kernel in (update_matched, update_matched.py_func):
+        for kernel in (update_matched, plain_python(update_matched)):
             arrays = [getattr(tg, name).copy() for name in names]
             kernel(rows, cols, det_px, c, frame.stamp_s, *arrays, tracker._P, tracker._bones, *tracker._update_params)
             results.append(arrays)

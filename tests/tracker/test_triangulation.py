@@ -4,6 +4,7 @@ and the velocity-compensated variant."""
 import numpy as np
 import pytest
 
+from tests.reference.plain import plain_python
 from tests.tracker.synthetic import ceiling_rig
 from tracker.geometry import project
 from tracker.triangulation import (
@@ -175,7 +176,7 @@ def test_compiled_triangulation_runs_the_same_as_plain_python(rig, velocity):
     starts = np.concatenate([[0], np.cumsum(np.bincount(group, minlength=6))])
     V = rng.normal(0.0, 1.0, (6, 3))
     outputs = []
-    for kernel in (_triangulate_groups, _triangulate_groups.py_func):
+    for kernel in (_triangulate_groups, plain_python(_triangulate_groups)):
         plain, compensated = np.empty((6, 3)), np.empty((6, 3))
         kernel(rig, starts, cam[order], px[order], np.maximum(1.0 - stamps[order], 0.0), V, velocity, 2, 5.0, 3.0,
                10.0, plain, compensated)
