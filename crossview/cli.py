@@ -162,6 +162,7 @@ def _cmd_run(args) -> None:
     pipeline.check_writable(rec_path)
     pipeline.check_writable(tracks_path, inputs=(rec_path,))
     pipeline.check_writable(json_path, inputs=(rec_path, tracks_path))
+    pipeline.tracker_config(args.preset, args.config)  # (a bad tracker config is found before generating)
     progress = not args.no_progress
     gen = pipeline.generate(scenario, rec_path, progress=progress)
     print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
@@ -171,7 +172,7 @@ def _cmd_run(args) -> None:
     )
     print(f"tracked   {trk.path}: {trk.updates} updates at {trk.tracker_fps:.1f} FPS (all cameras once)")
     report, result = pipeline.score(rec_path, tracks_path, progress=progress)
-    pipeline.write_json(result, json_path)
+    pipeline.write_json(result, json_path, inputs=(rec_path, tracks_path))
     print(report.table())
     print(f"score JSON: {json_path}")
 
@@ -226,7 +227,7 @@ def _cmd_score(args) -> None:
     report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress)
     print(report.table())
     if args.json:
-        pipeline.write_json(result, args.json)
+        pipeline.write_json(result, args.json, inputs=(args.recording, args.tracks))
 
 
 def _cmd_info(args) -> None:
@@ -265,7 +266,7 @@ def _cmd_export(args) -> None:
 
     pipeline.check_writable(args.output, inputs=(args.tracks,))
     tracks = recording.open_tracks(args.tracks)
-    write_result_3d(tracks.outputs(), args.output)
+    write_result_3d(tracks.outputs(), args.output, inputs=(args.tracks,))
     print(f"{args.output}: written")
 
 
@@ -273,8 +274,9 @@ def _cmd_convert(args) -> None:
     from crossview import pipeline
     from crossview.datasets import convert
 
-    pipeline.check_writable(args.output, inputs=tuple(Path(args.dataset).glob("*.json")))
-    convert(args.dataset, args.output)
+    inputs = tuple(Path(args.dataset).glob("*.json"))
+    pipeline.check_writable(args.output, inputs=inputs)
+    convert(args.dataset, args.output, inputs=inputs)
     print(f"{args.output}: written")
 
 

@@ -21,6 +21,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import CAMPUS14, COCO17, Camera, Frame
+from crossview.outputs import write_bytes
 from tracker.types import TrackerOutput
 
 CM_TO_M = 0.01
@@ -208,7 +209,7 @@ def campus14_to_coco17(poses: np.ndarray) -> np.ndarray:
     return out
 
 
-def write_result_3d(outputs: Iterable[TrackerOutput], path) -> int:
+def write_result_3d(outputs: Iterable[TrackerOutput], path, inputs: tuple = ()) -> int:
     """Writes tracker outputs in the result_3d.json layout (COCO-17, centimetres, zeros = missing).
 
     Outputs sharing a stamp (several cameras of one synchronised instant) keep the last, the most informed.
@@ -233,12 +234,11 @@ def write_result_3d(outputs: Iterable[TrackerOutput], path) -> int:
             cm = np.where(np.isfinite(pose), pose / CM_TO_M, 0.0)
             poses.append({"id": int(target.id), "points_3d": np.round(cm, 3).tolist()})
         entries.append({"timestamp": stamp if math.isfinite(stamp) else 0.0, "poses": poses})
-    with open(path, "w") as f:
-        json.dump(entries, f)
+    write_bytes(json.dumps(entries).encode("utf-8"), path, inputs)
     return len(entries)
 
 
-def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
+def convert(dataset_dir, out_mcap, source: str = "auto", inputs: tuple = ()) -> int:
     """Writes a dataset of the published layout as a recording (crossview.recording), frames in timestamp order.
 
     Each frame keeps its own camera and stamp (capture = delivery = stamp). With annotation_2d.json the
@@ -277,7 +277,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
     J = skeleton.num_joints
     events = [(t, 0, i) for i, (t, _, _) in enumerate(truth)] + [(f.stamp_s, 1, i) for i, (f, _) in enumerate(frames)]
     events.sort()
-    with RecordingWriter(out_mcap, header, cameras, ()) as writer:
+    with RecordingWriter(out_mcap, header, cameras, (), inputs=inputs) as writer:
         for t, kind, i in events:
             if kind == 0:
                 writer.write(PoseTruth(float(t), truth[i][1], truth[i][2]))
