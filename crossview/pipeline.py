@@ -136,8 +136,10 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
 
         batch: list = []  # written many at a time
         started = math.nan
-        for event in sim.events(scenario.duration_s, with_poses=False, while_starting=open_writer,
-                                frames_of=encoded):
+        # (closed, the simulation worker stopped, when this block ends in any way)
+        events = stack.enter_context(contextlib.closing(sim.events(
+            scenario.duration_s, with_poses=False, while_starting=open_writer, frames_of=encoded)))
+        for event in events:
             if math.isnan(started):  # the first event: the start-up ends
                 started = time.perf_counter() - start
                 writer, bar = opened
