@@ -120,6 +120,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="describe a recording or tracks file")
     p.add_argument("file", type=Path)
     p.add_argument("--allow-truncated", action="store_true", help="report the readable prefix of a cut file")
+    p.add_argument("--summary-only", action="store_true",
+                   help="describe a complete file from its summary alone, without reading every chunk and "
+                        "checking its CRC")
 
     p = sub.add_parser("detector-stats", help="measure the synthetic detector's error statistics in a recording")
     p.add_argument("recording", type=Path)
@@ -233,7 +236,8 @@ def _cmd_score(args) -> None:
 def _cmd_info(args) -> None:
     from crossview import recording
 
-    print(recording.format_info(recording.info(args.file, allow_truncated=args.allow_truncated)))
+    print(recording.format_info(recording.info(args.file, allow_truncated=args.allow_truncated,
+                                                        check=not args.summary_only)))
 
 
 def _cmd_detector_stats(args) -> None:

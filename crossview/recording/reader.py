@@ -68,7 +68,7 @@ class _McapStream:
         if not self.complete and not allow_truncated:
             raise RecordingError(
                 f"{self.path}: truncated MCAP file (no end magic; the writer was interrupted or the copy is "
-                "incomplete); use --allow-truncated to read the readable prefix"
+                f"incomplete); `crossview info --allow-truncated {self.path}` describes its readable prefix"
             )
 
     def records(self) -> Iterator:
@@ -84,8 +84,8 @@ class _McapStream:
                 except _READ_ERRORS as e:
                     if self.allow_truncated:
                         return
-                    raise RecordingError(f"{self.path}: corrupt MCAP data ({_describe(e)}); "
-                                         "use --allow-truncated to read the readable prefix") from None
+                    raise RecordingError(f"{self.path}: corrupt MCAP data ({_describe(e)}); `crossview info "
+                                         f"{self.path}` names the bad chunk") from None
                 if isinstance(record, DataEnd):
                     return
                 yield record

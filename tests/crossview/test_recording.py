@@ -690,3 +690,54 @@ def test_encoded_frames_are_written_as_the_frames_they_encode(tmp_path, world):
     times = np.array([[f.frame.stamp_s, f.truth.capture_s, f.truth.delivery_s]])
     with pytest.raises(ValueError, match=r"frame.scores rows expected \(\d+, 17\), got"):
         recording.encode_frames([f.frame.camera], times, [0, f.frame.num_detections], rows, COCO17)
+
+
+def test_info_reads_every_chunk_and_names_the_corrupt_one(tmp_path, world):
+    """A flipped byte inside one compressed chunk: the summary still reads as healthy, but `info` checks
+    every chunk's CRC and names the bad chunk (number, byte range, message times); `--summary-only`
+    keeps the cheap description."""
+    from mcap.reader import make_reader
+
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events, chunk_size=32 * 1024)
+    assert recording.info(path)["chunks_checked"] > 3
+    with open(path, "rb") as f:
+        indexes = make_reader(f).get_summary().chunk_indexes
+    target = indexes[2]  # a chunk in the middle; its compressed data end the record
+    data = bytearray(path.read_bytes())
+    flip = target.chunk_start_offset + target.chunk_length - 100
+    data[flip] ^= 0xFF
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    first, last = target.message_start_time / 1e9, target.message_end_time / 1e9
+    end = target.chunk_start_offset + target.chunk_length
+    with pytest.raises(RecordingError, match=rf"bad\.mcap: chunk 2 \(bytes {target.chunk_start_offset:,}\.\.{end:,}, "
+                       rf"messages {first:.3f}\.\.{last:.3f} s\) is corrupt"):
+        recording.info(bad)
+    assert recording.info(bad, check=False)["chunks_checked"] is None  # (what the summary says)
+
+
+def test_commands_on_a_cut_or_corrupt_file_give_one_line_with_a_hint_that_works(tmp_path, world, capsys):
+    """A cut recording given to `track`: one line, exit 2, and the hint names a command that has the option
+    (`info --allow-truncated`), which then works; `info` of a corrupt file fails, `--summary-only` does not."""
+    from crossview.cli import EXIT_BAD_INPUT, main
+
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events, chunk_size=32 * 1024)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[: path.stat().st_size // 2])
+    assert main(["--no-progress", "track", str(cut), "-o", str(tmp_path / "t.mcap")]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.endswith(f"`crossview info --allow-truncated {cut}` describes its "
+                                                       "readable prefix"), err
+    assert main(["info", "--allow-truncated", str(cut)]) == 0
+    assert "TRUNCATED" in capsys.readouterr().out
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    assert main(["info", str(bad)]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "bad.mcap: " in err and ("is corrupt" in err or "corrupt MCAP data" in err)
+    assert main(["info", "--summary-only", str(bad)]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap", "cut.mcap", "rec.mcap"]
