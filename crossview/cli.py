@@ -18,6 +18,7 @@ from core.errors import CrossviewError
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
 _ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+MAX_MINUTES = 1440.0  # world-stats' simulated minutes: a day, as a scenario's duration_s
 
 
 class _Ended(BaseException):
@@ -46,7 +47,14 @@ def _positive_float(text: str) -> float:
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not value > 0:
-        raise argparse.ArgumentTypeError(f"{text} must be > 0 seconds")
+        raise argparse.ArgumentTypeError(f"{text} must be > 0")
+    return value
+
+
+def _minutes(text: str) -> float:
+    value = _positive_float(text)
+    if not value <= MAX_MINUTES:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_MINUTES:g} minutes (a day)")
     return value
 
 
@@ -130,7 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
-    p.add_argument("--minutes", type=_positive_float, default=10.0, help="simulated minutes (default 10)")
+    p.add_argument("--minutes", type=_minutes, default=10.0, help=f"simulated minutes (default 10, at most "
+                   f"{MAX_MINUTES:g})")
 
     p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
@@ -245,6 +254,9 @@ def _cmd_detector_stats(args) -> None:
     from crossview.detector_stats import detector_stats, format_detector_stats
 
     rec = recording.open_recording(args.recording)
+    if rec.skeleton.name != "coco17":
+        raise CrossviewError(f"{args.recording}: holds {rec.skeleton.name} joints; detector-stats measures the "
+                             "synthetic COCO-17 detector, so give it a recording made by `crossview generate`")
     print(format_detector_stats(detector_stats(rec.frames(with_poses=True), rec.cameras)))
 
 

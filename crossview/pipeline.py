@@ -91,6 +91,10 @@ class GenerateResult:
 
 
 _WRITE_BATCH = 64  # events handed to the writer at once
+MAX_CAMERA_FRAMES = 5_000_000
+"""Most camera frames one generation may schedule (duration x frame rate x cameras): store_layout2's 28
+cameras for about 5 hours, the supermarket's 60 for 2.3 hours."""
+_SCHEDULE_BYTES_PER_FRAME = 170  # the clock's schedule, as arrays and the lists made of them
 
 
 def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True) -> GenerateResult:
@@ -100,6 +104,13 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
     check_writable(out, inputs=(scenario.source_path or None,))
     start = time.perf_counter()
     sim = Simulation(scenario, scenario.seed)
+    scheduled = scenario.duration_s * scenario.clock.fps * len(sim.cameras)
+    if scheduled > MAX_CAMERA_FRAMES:
+        raise CrossviewError(
+            f"{scenario.source_path or scenario.name}: duration_s = {scenario.duration_s:g} with {len(sim.cameras)} "
+            f"cameras at {scenario.clock.fps:g} fps schedules {scheduled:,.0f} camera frames, more than the "
+            f"{MAX_CAMERA_FRAMES:,} one recording may hold (their schedule is made up front, about "
+            f"{_SCHEDULE_BYTES_PER_FRAME * scheduled / 2**30:.1f} GiB); generate a shorter duration, or several")
     frames = 0
     with contextlib.ExitStack() as stack:
         opened: list = []  # the writer and the progress bar, made while the simulation worker starts
@@ -168,6 +179,10 @@ def make_tracker(method: str, cameras, preset: str, config_path: Path | None, sk
     from tracker.tracker import Tracker
 
     config = tracker_config(preset, config_path)
+    try:
+        config.check_fits(len(cameras), skeleton.num_joints)
+    except CrossviewError as e:
+        raise CrossviewError(f"{config_path or '--preset ' + preset}: {e}") from None
     if method == "crossview":
         return Tracker(cameras, config, skeleton), config
     if method == "baseline":
