@@ -11,6 +11,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from crossview.recording.reader import (
     _READ_ERRORS,
+    FileWithinSize,
     Recording,
     Tracks,
     _Container,
@@ -44,7 +45,9 @@ def check_chunks(path) -> int:
     path = Path(path)
     chunks = 0
     with open(path, "rb") as f:
-        reader = StreamReader(f, emit_chunks=True, validate_crcs=True, record_size_limit=max(path.stat().st_size, 1))
+        size = path.stat().st_size
+        reader = StreamReader(FileWithinSize(f, size), emit_chunks=True, validate_crcs=True,
+                              record_size_limit=max(size, 1))
         records = iter(reader.records)
         start = f.tell()  # where the next record begins (the reader reads exactly what it needs)
         while True:
@@ -92,15 +95,17 @@ def info(path, allow_truncated: bool = False, check: bool = True) -> dict:
     if stream.complete:
         if check:
             chunks = check_chunks(stream.path)
-        with open(stream.path, "rb") as f:
-            reader = make_reader(f)
-            mcap_summary = reader.get_summary()
-            if mcap_summary is None or mcap_summary.statistics is None:
-                raise RecordingError(f"{stream.path}: MCAP file without a summary section")
-            stats = mcap_summary.statistics
-            for channel_id, channel in sorted(mcap_summary.channels.items()):
-                counts[channel.topic] = stats.channel_message_counts.get(channel_id, 0)
-            start_ns, end_ns = stats.message_start_time, stats.message_end_time
+        try:
+            with open(stream.path, "rb") as f:
+                mcap_summary = make_reader(FileWithinSize(f, stream.size)).get_summary()
+        except _READ_ERRORS as e:
+            raise RecordingError(f"{stream.path}: unreadable summary section ({_describe(e)})") from None
+        if mcap_summary is None or mcap_summary.statistics is None:
+            raise RecordingError(f"{stream.path}: MCAP file without a summary section")
+        stats = mcap_summary.statistics
+        for channel_id, channel in sorted(mcap_summary.channels.items()):
+            counts[channel.topic] = stats.channel_message_counts.get(channel_id, 0)
+        start_ns, end_ns = stats.message_start_time, stats.message_end_time
         summary = _read_summary(stream.path)
         people = summary.get("num_people" if kind == KIND_RECORDING else "num_targets")
     else:

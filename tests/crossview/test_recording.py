@@ -741,3 +741,27 @@ def test_commands_on_a_cut_or_corrupt_file_give_one_line_with_a_hint_that_works(
     assert len(err.splitlines()) == 1 and "bad.mcap: " in err and ("is corrupt" in err or "corrupt MCAP data" in err)
     assert main(["info", "--summary-only", str(bad)]) == 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap", "cut.mcap", "rec.mcap"]
+
+
+def test_a_corrupt_length_inside_a_chunk_is_refused_without_allocating_it(tmp_path, world):
+    """A chunk whose compressed-size field says a terabyte (the record's own length, which mcap bounds,
+    unchanged): refused as corrupt, by every reader, instead of a MemoryError."""
+    import struct
+
+    from mcap.reader import make_reader
+
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events, chunk_size=32 * 1024)
+    with open(path, "rb") as f:
+        chunk = make_reader(f).get_summary().chunk_indexes[1].chunk_start_offset
+    data = bytearray(path.read_bytes())
+    # opcode, record length, start and end time, uncompressed size and CRC, then the compression's name
+    name_at = chunk + 1 + 8 + 8 + 8 + 8 + 4
+    size_at = name_at + 4 + struct.unpack_from("<I", data, name_at)[0]
+    struct.pack_into("<Q", data, size_at, 2**40)
+    bad = tmp_path / "bad.mcap"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(RecordingError, match=r"bad\.mcap: "):
+        recording.info(bad)
+    with pytest.raises(RecordingError, match=r"bad\.mcap: corrupt MCAP data"):
+        list(open_recording(bad).events())
