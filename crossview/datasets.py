@@ -36,6 +36,7 @@ MAX_STAMP_S = 4e9
 """Largest timestamp a dataset may hold, seconds (a Unix time until 2096; stamps are stored as int64 ns)."""
 _INT64 = 2 ** 63
 UINT64_END = 2 ** 64
+_MAX_ABS_CM = 1e9  # the largest number a camera pose may hold, centimetres (10,000 km)
 
 
 def read_json(path: Path, what: str = "") -> object:
@@ -140,6 +141,9 @@ def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
             raise DatasetError(f"{path}: camera {name!r}: key {exc} missing or not numeric") from exc
         if K.shape != (3, 3) or Tw.shape != (4, 4):
             raise DatasetError(f"{path}: camera {name!r}: K must be 3x3 and Tw 4x4, got {K.shape} and {Tw.shape}")
+        if not (np.isfinite(K).all() and np.isfinite(Tw).all() and np.abs(Tw).max() <= _MAX_ABS_CM):
+            raise DatasetError(f"{path}: camera {name!r}: K and Tw must hold numbers (no null), Tw's within "
+                               f"{_MAX_ABS_CM:g} cm")
         R_world_from_cam = Tw[:3, :3]
         center_m = Tw[:3, 3] * CM_TO_M
         R = R_world_from_cam.T

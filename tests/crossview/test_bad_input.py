@@ -121,6 +121,8 @@ DATASET_CASES = [
      "key 'frames' (frame name -> frame) must be an object, got list"),
     ("singular-intrinsics", "calibration.json", lambda d: _cam0(d).update(K=[[0, 0, 0], [0, 0, 0], [0, 0, 1]]),
      "is not a pinhole intrinsic matrix"),
+    ("null-in-camera-pose", "calibration.json", lambda d: _cam0(d)["Tw"][0].__setitem__(0, None),
+     "K and Tw must hold numbers (no null)"),
     ("nan-in-calibration", "calibration.json", lambda d: json.dumps(d).replace("1.1945368357487924", "NaN"),
      "calibration.json: NaN is not a JSON number"),
     ("huge-timestamp", "annotation_2d.json", lambda d: next(iter(d["frames"].values())).update(timestamp=1e300),
