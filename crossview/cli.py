@@ -250,11 +250,12 @@ def _cmd_info(args) -> None:
 
 
 def _cmd_detector_stats(args) -> None:
+    from core.types import COCO17
     from crossview import recording
     from crossview.detector_stats import detector_stats, format_detector_stats
 
     rec = recording.open_recording(args.recording)
-    if rec.skeleton.name != "coco17":
+    if rec.skeleton.name != COCO17.name:
         raise CrossviewError(f"{args.recording}: holds {rec.skeleton.name} joints; detector-stats measures the "
                              "synthetic COCO-17 detector, so give it a recording made by `crossview generate`")
     print(format_detector_stats(detector_stats(rec.frames(with_poses=True), rec.cameras)))

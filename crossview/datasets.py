@@ -233,9 +233,12 @@ def load_truth_3d(dataset_dir) -> list[tuple[float, np.ndarray, np.ndarray]]:
                                                                        list)]
         ids = np.asarray([person_id(p.get("id"), path, f"entry {i}") for p in given], dtype=np.int64)
         try:
-            poses = np.asarray([p["points_3d"] for p in given], dtype=np.float64).reshape(-1, 14, 3)
+            poses = np.asarray([p["points_3d"] for p in given], dtype=np.float64).reshape(len(given), -1, 3) \
+                if given else np.zeros((0, 14, 3))
         except (KeyError, TypeError, ValueError) as exc:
             raise DatasetError(f"{path}: entry {i}: key {exc} missing or points_3d not 14x3") from exc
+        if poses.shape != (len(given), 14, 3):
+            raise DatasetError(f"{path}: entry {i}: points_3d must be 14x3 for each pose; got {poses.shape[1:]}")
         if not np.all(np.isfinite(poses)):
             raise DatasetError(f"{path}: entry {i}: points_3d hold a value that is not finite")
         out.append((t, ids, poses * CM_TO_M))

@@ -134,6 +134,8 @@ DATASET_CASES = [
     ("not-utf8", "calibration.json", lambda d: b'{"cameras": "\xff"}', "calibration.json: not UTF-8 text (byte 13)"),
     ("truth-entries-not-objects", "annotation_3d.json", lambda d: [[1]],
      "annotation_3d.json: entry 0 must be an object"),
+    ("truth-pose-empty", "annotation_3d.json", lambda d: d[0]["poses"][0].update(points_3d=[]) if d[0]["poses"]
+     else d[0].update(poses=[{"id": 1, "points_3d": []}]), "points_3d must be 14x3 for each pose"),
     ("missing-calibration", "calibration.json", None, "calibration.json: file not found"),
 ]
 
