@@ -95,6 +95,10 @@ CAMPUS14 = Skeleton(
 SKELETONS = {s.name: s for s in (COCO17, CAMPUS14)}
 
 
+MAX_IMAGE_PX = 100_000
+"""Largest image width or height a camera may have, pixels."""
+
+
 @dataclass(frozen=True, eq=False)
 class Camera:
     """A calibrated camera: OpenCV pinhole model with k1, k2, p1, p2, k3 distortion.
@@ -134,11 +138,16 @@ class Camera:
             raise ValueError(f"Camera {self.name}: R_cam_from_world is not a rotation matrix")
         set_(self, "R_cam_from_world", R)
         set_(self, "t_cam_from_world", _as_array(f"Camera {self.name}: t_cam_from_world", self.t_cam_from_world, (3,)))
-        if self.width_px <= 0 or self.height_px <= 0:
-            raise ValueError(f"Camera {self.name}: image size {self.width_px}x{self.height_px} must be positive")
+        if not (0 < self.width_px <= MAX_IMAGE_PX and 0 < self.height_px <= MAX_IMAGE_PX):
+            raise ValueError(f"Camera {self.name}: image size {self.width_px}x{self.height_px} must be positive and "
+                             f"at most {MAX_IMAGE_PX} pixels a side")
         for a in (self.K, self.dist, self.R_cam_from_world, self.t_cam_from_world):
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"Camera {self.name}: calibration holds NaN or infinite values")
+        K = self.K
+        if not (K[0, 0] > 0 and K[1, 1] > 0 and K[1, 0] == K[2, 0] == K[2, 1] == 0 and K[2, 2] == 1):
+            raise ValueError(f"Camera {self.name}: K = {K.tolist()} is not a pinhole intrinsic matrix (focal lengths "
+                             "fx, fy > 0 pixels on the diagonal, zeros below it, K[2, 2] = 1)")
         # Eq. (7): the projection matrix of the undistorted pinhole model, P = K [R | t].
         set_(self, "P", self.K @ np.hstack([R, self.t_cam_from_world[:, None]]))
 

@@ -91,6 +91,10 @@ def bench_read(rec_path: Path) -> dict:
     return {"read_camera_frames_per_s": count / wall, "bytes_per_camera_frame": rec_path.stat().st_size / count}
 
 
+_CHILD_STOP_S = 10.0
+"""How long an interrupted bench gives its `crossview generate` process to end on SIGTERM, seconds."""
+
+
 def bench_cold_generate(name: str, duration_s: float, out: Path, same_as: Path | None = None) -> dict:
     """`crossview generate` in a new process, timed from its start to its exit: what someone who runs the
     command waits for. Unlike the in-process figure (whose process has imported everything, set numba up
@@ -105,11 +109,20 @@ def bench_cold_generate(name: str, duration_s: float, out: Path, same_as: Path |
     command = [sys.executable, "-m", "crossview.cli", "--no-progress", "generate", name,
                "--duration", repr(float(duration_s)), "-o", str(out)]
     start = time.perf_counter()
-    done = subprocess.run(command, capture_output=True, text=True)
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as process:
+        try:
+            _, stderr = process.communicate()
+        except BaseException:  # interrupted: the command ends as on SIGTERM (worker stopped, temporary removed)
+            process.terminate()
+            try:
+                process.wait(_CHILD_STOP_S)
+            except subprocess.TimeoutExpired:
+                process.kill()
+            raise
     wall = time.perf_counter() - start
-    if done.returncode != 0:
-        last = (done.stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
-        raise RuntimeError(f"{' '.join(command[2:])} exited with {done.returncode}: {last}")
+    if process.returncode != 0:
+        last = (stderr.strip().splitlines() or ["(nothing on stderr)"])[-1]
+        raise RuntimeError(f"{' '.join(command[2:])} exited with {process.returncode}: {last}")
     result = {"cold_generate_s": wall, "cold_generate_realtime_factor": duration_s / wall}
     if same_as is not None:
         result["cold_same_bytes"] = filecmp.cmp(out, same_as, shallow=False)

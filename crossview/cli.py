@@ -18,6 +18,7 @@ from core.errors import CrossviewError
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
 _ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
+MAX_MINUTES = 1440.0  # world-stats' simulated minutes: a day, as a scenario's duration_s
 
 
 class _Ended(BaseException):
@@ -46,7 +47,14 @@ def _positive_float(text: str) -> float:
     except ValueError:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not value > 0:
-        raise argparse.ArgumentTypeError(f"{text} must be > 0 seconds")
+        raise argparse.ArgumentTypeError(f"{text} must be > 0")
+    return value
+
+
+def _minutes(text: str) -> float:
+    value = _positive_float(text)
+    if not value <= MAX_MINUTES:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_MINUTES:g} minutes (a day)")
     return value
 
 
@@ -120,6 +128,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("info", help="describe a recording or tracks file")
     p.add_argument("file", type=Path)
     p.add_argument("--allow-truncated", action="store_true", help="report the readable prefix of a cut file")
+    p.add_argument("--summary-only", action="store_true",
+                   help="describe a complete file from its summary alone, without reading every chunk and "
+                        "checking its CRC")
 
     p = sub.add_parser("detector-stats", help="measure the synthetic detector's error statistics in a recording")
     p.add_argument("recording", type=Path)
@@ -127,7 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
-    p.add_argument("--minutes", type=_positive_float, default=10.0, help="simulated minutes (default 10)")
+    p.add_argument("--minutes", type=_minutes, default=10.0, help=f"simulated minutes (default 10, at most "
+                   f"{MAX_MINUTES:g})")
 
     p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
@@ -162,6 +174,7 @@ def _cmd_run(args) -> None:
     pipeline.check_writable(rec_path)
     pipeline.check_writable(tracks_path, inputs=(rec_path,))
     pipeline.check_writable(json_path, inputs=(rec_path, tracks_path))
+    pipeline.tracker_config(args.preset, args.config)  # (a bad tracker config is found before generating)
     progress = not args.no_progress
     gen = pipeline.generate(scenario, rec_path, progress=progress)
     print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
@@ -171,7 +184,7 @@ def _cmd_run(args) -> None:
     )
     print(f"tracked   {trk.path}: {trk.updates} updates at {trk.tracker_fps:.1f} FPS (all cameras once)")
     report, result = pipeline.score(rec_path, tracks_path, progress=progress)
-    pipeline.write_json(result, json_path)
+    pipeline.write_json(result, json_path, inputs=(rec_path, tracks_path))
     print(report.table())
     print(f"score JSON: {json_path}")
 
@@ -226,20 +239,25 @@ def _cmd_score(args) -> None:
     report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress)
     print(report.table())
     if args.json:
-        pipeline.write_json(result, args.json)
+        pipeline.write_json(result, args.json, inputs=(args.recording, args.tracks))
 
 
 def _cmd_info(args) -> None:
     from crossview import recording
 
-    print(recording.format_info(recording.info(args.file, allow_truncated=args.allow_truncated)))
+    print(recording.format_info(recording.info(args.file, allow_truncated=args.allow_truncated,
+                                                        check=not args.summary_only)))
 
 
 def _cmd_detector_stats(args) -> None:
+    from core.types import COCO17
     from crossview import recording
     from crossview.detector_stats import detector_stats, format_detector_stats
 
     rec = recording.open_recording(args.recording)
+    if rec.skeleton.name != COCO17.name:
+        raise CrossviewError(f"{args.recording}: holds {rec.skeleton.name} joints; detector-stats measures the "
+                             "synthetic COCO-17 detector, so give it a recording made by `crossview generate`")
     print(format_detector_stats(detector_stats(rec.frames(with_poses=True), rec.cameras)))
 
 
@@ -265,7 +283,7 @@ def _cmd_export(args) -> None:
 
     pipeline.check_writable(args.output, inputs=(args.tracks,))
     tracks = recording.open_tracks(args.tracks)
-    write_result_3d(tracks.outputs(), args.output)
+    write_result_3d(tracks.outputs(), args.output, inputs=(args.tracks,))
     print(f"{args.output}: written")
 
 
@@ -273,8 +291,9 @@ def _cmd_convert(args) -> None:
     from crossview import pipeline
     from crossview.datasets import convert
 
-    pipeline.check_writable(args.output, inputs=tuple(Path(args.dataset).glob("*.json")))
-    convert(args.dataset, args.output)
+    inputs = tuple(Path(args.dataset).glob("*.json"))
+    pipeline.check_writable(args.output, inputs=inputs)
+    convert(args.dataset, args.output, inputs=inputs)
     print(f"{args.output}: written")
 
 

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import CrossviewError
-from core.types import CAMPUS14, COCO17, Camera, Frame
+from core.types import CAMPUS14, COCO17, MAX_IMAGE_PX, Camera, Frame
+from crossview.outputs import write_bytes
 from tracker.types import TrackerOutput
 
 CM_TO_M = 0.01
@@ -31,15 +32,64 @@ class DatasetError(CrossviewError):
     """A dataset directory does not follow the published layout; the message names the file and the key."""
 
 
-def _load(path: Path):
+MAX_STAMP_S = 4e9
+"""Largest timestamp a dataset may hold, seconds (a Unix time until 2096; stamps are stored as int64 ns)."""
+_INT64 = 2 ** 63
+UINT64_END = 2 ** 64
+_MAX_ABS_CM = 1e9  # the largest number a camera pose may hold, centimetres (10,000 km)
+
+
+def read_json(path: Path, what: str = "") -> object:
+    """A dataset or result JSON file, strictly: UTF-8, standard JSON (no NaN or Infinity).
+
+    Raises:
+        DatasetError: missing, unreadable, not UTF-8 or not valid JSON; the message names the file.
+    """
+    path = Path(path)
     if not path.is_file():
-        raise DatasetError(f"{path}: not found (expected the crossview dataset layout: calibration.json, "
-                           "detection.json or annotation_2d.json, optional annotation_3d.json)")
+        raise DatasetError(f"{path}: {what or 'file'} not found (expected the crossview dataset layout: "
+                           "calibration.json, detection.json or annotation_2d.json, optional annotation_3d.json)")
     try:
-        with path.open() as f:
-            return json.load(f)
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); JSON files must be UTF-8") from None
+
+    def constant(name: str):
+        raise DatasetError(f"{path}: {name} is not a JSON number; write a finite number or leave the value out")
+
+    try:
+        return json.loads(text, parse_constant=constant)
     except json.JSONDecodeError as exc:
-        raise DatasetError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from exc
+        raise DatasetError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except RecursionError:
+        raise DatasetError(f"{path}: not valid JSON (nested too deeply)") from None
+
+
+def _table(value, path: Path, key: str, kind: type = dict):
+    """`value` if it is a JSON object (`kind` dict) or array (`kind` list), else a DatasetError naming `key`."""
+    if not isinstance(value, kind):
+        want = "an object" if kind is dict else "an array"
+        raise DatasetError(f"{path}: {key} must be {want}, got {type(value).__name__}")
+    return value
+
+
+def stamp_s(value, path: Path, where: str) -> float:
+    """A timestamp, seconds: a finite number in [0, MAX_STAMP_S], else a DatasetError naming `where`."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be a number of seconds")
+    if not 0 <= value <= MAX_STAMP_S:  # (NaN fails too)
+        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be in [0, {MAX_STAMP_S:g}] s")
+    return float(value)
+
+
+def person_id(value, path: Path, where: str, high: int = _INT64) -> int:
+    """A person id: an integer in [-2^63, high) (-1: none; the default `high` makes it fit int64, as 2D and 3D
+    truth store it; result files may use unsigned 64-bit ids), else a DatasetError naming `where`."""
+    if isinstance(value, bool) or not isinstance(value, int) or not -_INT64 <= value < high:
+        raise DatasetError(f"{path}: {where}: id {value!r} must be an integer in [-2^63, 2^{high.bit_length() - 1})")
+    return value
 
 
 def _source_path(dataset_dir: Path, source: str) -> Path:
@@ -57,12 +107,12 @@ def _source_path(dataset_dir: Path, source: str) -> Path:
 def image_size(dataset_dir, source: str = "auto") -> tuple[int, int]:
     """(width, height) in pixels from the 2D file's `image_wh`."""
     path = _source_path(Path(dataset_dir), source)
-    data = _load(path)
-    try:
-        w, h = (int(v) for v in data["image_wh"])
-    except (KeyError, TypeError, ValueError) as exc:
-        raise DatasetError(f"{path}: key 'image_wh' missing or not [width, height]") from exc
-    return w, h
+    data = _table(read_json(path), path, "the file")
+    wh = data.get("image_wh")
+    if not (isinstance(wh, list) and len(wh) == 2
+            and all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_PX for v in wh)):
+        raise DatasetError(f"{path}: key 'image_wh' = {wh!r} must be [width, height], integers in [1, {MAX_IMAGE_PX}]")
+    return wh[0], wh[1]
 
 
 def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
@@ -77,15 +127,12 @@ def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
     """
     dataset_dir = Path(dataset_dir)
     path = dataset_dir / "calibration.json"
-    data = _load(path)
+    data = read_json(path)
     width, height = image_size(dataset_dir)
-    try:
-        entries = data["cameras"]
-    except (KeyError, TypeError) as exc:
-        raise DatasetError(f"{path}: key 'cameras' missing") from exc
+    entries = _table(_table(data, path, "the file").get("cameras"), path, "key 'cameras' (camera name -> {K, Tw})")
     cameras = []
     for name in sorted(entries):
-        entry = entries[name]
+        entry = _table(entries[name], path, f"camera {name!r}")
         try:
             K = np.asarray(entry["K"], dtype=np.float64) * np.array([[width], [height], [1.0]])
             Tw = np.asarray(entry["Tw"], dtype=np.float64)
@@ -94,6 +141,9 @@ def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
             raise DatasetError(f"{path}: camera {name!r}: key {exc} missing or not numeric") from exc
         if K.shape != (3, 3) or Tw.shape != (4, 4):
             raise DatasetError(f"{path}: camera {name!r}: K must be 3x3 and Tw 4x4, got {K.shape} and {Tw.shape}")
+        if not (np.isfinite(K).all() and np.isfinite(Tw).all() and np.abs(Tw).max() <= _MAX_ABS_CM):
+            raise DatasetError(f"{path}: camera {name!r}: K and Tw must hold numbers (no null), Tw's within "
+                               f"{_MAX_ABS_CM:g} cm")
         R_world_from_cam = Tw[:3, :3]
         center_m = Tw[:3, 3] * CM_TO_M
         R = R_world_from_cam.T
@@ -124,20 +174,20 @@ def load_frames(dataset_dir, source: str = "auto") -> list[Frame]:
 def _read_frames(dataset_dir: Path, source: str) -> list[tuple[Frame, np.ndarray]]:
     """Frames sorted by (timestamp, camera), each with the (D,) `id` of its poses (-1 for detections)."""
     path = _source_path(dataset_dir, source)
-    data = _load(path)
-    try:
-        items = data["frames"]
-    except (KeyError, TypeError) as exc:
-        raise DatasetError(f"{path}: key 'frames' missing") from exc
+    data = read_json(path)
+    items = _table(_table(data, path, "the file").get("frames"), path, "key 'frames' (frame name -> frame)")
     num_joints = None
     parsed = []
     for key, item in items.items():
+        item = _table(item, path, f"frame {key!r}")
+        stamp = stamp_s(item.get("timestamp"), path, f"frame {key!r}")
+        poses = [_table(p, path, f"frame {key!r}: a pose") for p in _table(item.get("poses"), path,
+                                                                           f"frame {key!r}: poses", list)]
+        ids = np.asarray([person_id(p.get("id", -1), path, f"frame {key!r}") for p in poses], dtype=np.int64)
         try:
-            camera, stamp = str(item["camera"]), float(item["timestamp"])
-            points = [np.asarray(p["points_2d"], dtype=np.float64) for p in item["poses"]]
-            scores = [np.asarray(p.get("scores", np.ones(len(p["points_2d"]))), dtype=np.float64)
-                      for p in item["poses"]]
-            ids = np.asarray([int(p.get("id", -1)) for p in item["poses"]], dtype=np.int64)
+            camera = str(item["camera"])
+            points = [np.asarray(p["points_2d"], dtype=np.float64) for p in poses]
+            scores = [np.asarray(p.get("scores", np.ones(len(p["points_2d"]))), dtype=np.float64) for p in poses]
         except (KeyError, TypeError, ValueError) as exc:
             raise DatasetError(f"{path}: frame {key!r}: key {exc} missing or malformed "
                                "(expected camera, timestamp, poses[points_2d, scores])") from exc
@@ -174,17 +224,23 @@ def skeleton_of(frames: list[Frame]):
 def load_truth_3d(dataset_dir) -> list[tuple[float, np.ndarray, np.ndarray]]:
     """`annotation_3d.json` as a list, index = frame number: (t_s, ids (P,), poses (P, 14, 3) metres)."""
     path = Path(dataset_dir) / "annotation_3d.json"
-    data = _load(path)
-    if not isinstance(data, list):
-        raise DatasetError(f"{path}: expected a list of {{timestamp, poses}} entries")
+    data = _table(read_json(path), path, "the file (a list of {timestamp, poses} entries)", list)
     out = []
     for i, entry in enumerate(data):
+        entry = _table(entry, path, f"entry {i}")
+        t = stamp_s(entry.get("timestamp"), path, f"entry {i}")
+        given = [_table(p, path, f"entry {i}: a pose") for p in _table(entry.get("poses"), path, f"entry {i}: poses",
+                                                                       list)]
+        ids = np.asarray([person_id(p.get("id"), path, f"entry {i}") for p in given], dtype=np.int64)
         try:
-            t = float(entry["timestamp"])
-            ids = np.asarray([int(p["id"]) for p in entry["poses"]], dtype=np.int64)
-            poses = np.asarray([p["points_3d"] for p in entry["poses"]], dtype=np.float64).reshape(-1, 14, 3)
+            poses = np.asarray([p["points_3d"] for p in given], dtype=np.float64).reshape(len(given), -1, 3) \
+                if given else np.zeros((0, 14, 3))
         except (KeyError, TypeError, ValueError) as exc:
             raise DatasetError(f"{path}: entry {i}: key {exc} missing or points_3d not 14x3") from exc
+        if poses.shape != (len(given), 14, 3):
+            raise DatasetError(f"{path}: entry {i}: points_3d must be 14x3 for each pose; got {poses.shape[1:]}")
+        if not np.all(np.isfinite(poses)):
+            raise DatasetError(f"{path}: entry {i}: points_3d hold a value that is not finite")
         out.append((t, ids, poses * CM_TO_M))
     return out
 
@@ -208,7 +264,7 @@ def campus14_to_coco17(poses: np.ndarray) -> np.ndarray:
     return out
 
 
-def write_result_3d(outputs: Iterable[TrackerOutput], path) -> int:
+def write_result_3d(outputs: Iterable[TrackerOutput], path, inputs: tuple = ()) -> int:
     """Writes tracker outputs in the result_3d.json layout (COCO-17, centimetres, zeros = missing).
 
     Outputs sharing a stamp (several cameras of one synchronised instant) keep the last, the most informed.
@@ -233,12 +289,11 @@ def write_result_3d(outputs: Iterable[TrackerOutput], path) -> int:
             cm = np.where(np.isfinite(pose), pose / CM_TO_M, 0.0)
             poses.append({"id": int(target.id), "points_3d": np.round(cm, 3).tolist()})
         entries.append({"timestamp": stamp if math.isfinite(stamp) else 0.0, "poses": poses})
-    with open(path, "w") as f:
-        json.dump(entries, f)
+    write_bytes(json.dumps(entries).encode("utf-8"), path, inputs)
     return len(entries)
 
 
-def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
+def convert(dataset_dir, out_mcap, source: str = "auto", inputs: tuple = ()) -> int:
     """Writes a dataset of the published layout as a recording (crossview.recording), frames in timestamp order.
 
     Each frame keeps its own camera and stamp (capture = delivery = stamp). With annotation_2d.json the
@@ -277,7 +332,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
     J = skeleton.num_joints
     events = [(t, 0, i) for i, (t, _, _) in enumerate(truth)] + [(f.stamp_s, 1, i) for i, (f, _) in enumerate(frames)]
     events.sort()
-    with RecordingWriter(out_mcap, header, cameras, ()) as writer:
+    with RecordingWriter(out_mcap, header, cameras, (), inputs=inputs) as writer:
         for t, kind, i in events:
             if kind == 0:
                 writer.write(PoseTruth(float(t), truth[i][1], truth[i][2]))

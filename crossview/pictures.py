@@ -10,6 +10,7 @@ import cv2
 import numpy as np
 
 from core.types import Camera
+from crossview.outputs import write_bytes
 from sim.types import Box, BoxKind
 
 # BGR colours of the store's boxes.
@@ -153,14 +154,15 @@ def write_layout_pictures(out_dir: str | Path, names: tuple[str, ...] = ("store_
     from sim import scenario as sc
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     written = []
     for name in names:
         scenario = sc.load(name)
         scale = 60.0 if scenario.store.width_m <= 6 else 40.0 if scenario.store.width_m <= 10 else 30.0
         image = layout_picture(scenario, seconds, px_per_m=scale)
         path = out / f"{name}.png"
-        if not cv2.imwrite(str(path), image, [cv2.IMWRITE_PNG_COMPRESSION, 9]):
-            raise OSError(f"{path}: cannot write PNG")
+        encoded, png = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+        if not encoded:
+            raise OSError(f"{path}: cannot encode PNG")
+        write_bytes(png.tobytes(), path)
         written.append(path)
     return written

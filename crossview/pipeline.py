@@ -11,7 +11,6 @@ import dataclasses
 import json
 import logging
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import CrossviewError
+from crossview import outputs
 from sim import scenario as scenario_mod
 from sim.types import BoxKind, PoseTruth
 
@@ -61,24 +61,10 @@ def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None
 
 
 def check_writable(path: Path, inputs: tuple = ()) -> None:
-    """Fails early, before any work, when `path` cannot be created, or writing it would replace one of
-    `inputs` (the same file under any name) or something that is not a regular file (a device, a pipe)."""
-    path = Path(path)
-    for given in inputs:
-        if given is not None and os.path.realpath(given) == os.path.realpath(path):
-            raise CrossviewError(f"{path}: is also an input ({given}); writing it would destroy the input, "
-                                 "so choose another output")
-    if path.exists() and not path.is_dir() and not path.is_file():
-        raise CrossviewError(f"{path}: is not a regular file (a device or a pipe); choose a file name for the output")
-    folder = path.parent if str(path.parent) else Path(".")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        raise CrossviewError(f"{folder}: output folder cannot be created ({e.strerror})") from None
-    if not os.access(folder, os.W_OK):
-        raise CrossviewError(f"{folder}: output folder is not writable; choose another with --out / -o")
-    if path.is_dir():
-        raise CrossviewError(f"{path}: is a folder; give a file name ending in .mcap")
+    """Fails early, before any work, when `path` cannot be written: it is one of `inputs` (under any name),
+    not a regular file, a folder, or its folder cannot be made (`crossview.outputs.check_output`). No
+    folder is made here: that happens when the output is written, and is undone if writing fails."""
+    outputs.check_output(path, inputs)
 
 
 @dataclass(frozen=True)
@@ -105,6 +91,10 @@ class GenerateResult:
 
 
 _WRITE_BATCH = 64  # events handed to the writer at once
+MAX_CAMERA_FRAMES = 5_000_000
+"""Most camera frames one generation may schedule (duration x frame rate x cameras): store_layout2's 28
+cameras for about 5 hours, the supermarket's 60 for 2.3 hours."""
+_SCHEDULE_BYTES_PER_FRAME = 170  # the clock's schedule, as arrays and the lists made of them
 
 
 def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True) -> GenerateResult:
@@ -114,6 +104,13 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
     check_writable(out, inputs=(scenario.source_path or None,))
     start = time.perf_counter()
     sim = Simulation(scenario, scenario.seed)
+    scheduled = scenario.duration_s * scenario.clock.fps * len(sim.cameras)
+    if scheduled > MAX_CAMERA_FRAMES:
+        raise CrossviewError(
+            f"{scenario.source_path or scenario.name}: duration_s = {scenario.duration_s:g} with {len(sim.cameras)} "
+            f"cameras at {scenario.clock.fps:g} fps schedules {scheduled:,.0f} camera frames, more than the "
+            f"{MAX_CAMERA_FRAMES:,} one recording may hold (their schedule is made up front, about "
+            f"{_SCHEDULE_BYTES_PER_FRAME * scheduled / 2**30:.1f} GiB); generate a shorter duration, or several")
     frames = 0
     with contextlib.ExitStack() as stack:
         opened: list = []  # the writer and the progress bar, made while the simulation worker starts
@@ -135,7 +132,8 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
                 software_version=recording.software_version(),
                 format_version=recording.FORMAT_VERSION,
             )
-            opened.append(stack.enter_context(recording.RecordingWriter(out, header, sim.cameras, sim.boxes)))
+            opened.append(stack.enter_context(recording.RecordingWriter(
+                out, header, sim.cameras, sim.boxes, inputs=(scenario.source_path or None,))))
             opened.append(stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
                                                    disable=not progress, leave=False)))
             recording.warm_up(sim.skeleton)
@@ -149,8 +147,10 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
 
         batch: list = []  # written many at a time
         started = math.nan
-        for event in sim.events(scenario.duration_s, with_poses=False, while_starting=open_writer,
-                                frames_of=encoded):
+        # (closed, the simulation worker stopped, when this block ends in any way)
+        events = stack.enter_context(contextlib.closing(sim.events(
+            scenario.duration_s, with_poses=False, while_starting=open_writer, frames_of=encoded)))
+        for event in events:
             if math.isnan(started):  # the first event: the start-up ends
                 started = time.perf_counter() - start
                 writer, bar = opened
@@ -165,13 +165,24 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
     return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start, started, scenario.duration_s)
 
 
+def tracker_config(preset: str, config_path: Path | None = None):
+    """The tracker configuration of a preset, optionally overridden by a TOML file (validated: a
+    `ConfigError` names the file and the key)."""
+    from tracker.config import TrackerConfig
+
+    return TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
+
+
 def make_tracker(method: str, cameras, preset: str, config_path: Path | None, skeleton):
     """The tracker of `method` configured from a preset and optionally a TOML file."""
     from tracker.baseline import BaselineTracker
-    from tracker.config import TrackerConfig
     from tracker.tracker import Tracker
 
-    config = TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
+    config = tracker_config(preset, config_path)
+    try:
+        config.check_fits(len(cameras), skeleton.num_joints)
+    except CrossviewError as e:
+        raise CrossviewError(f"{config_path or '--preset ' + preset}: {e}") from None
     if method == "crossview":
         return Tracker(cameras, config, skeleton), config
     if method == "baseline":
@@ -229,7 +240,7 @@ def track(
     warm_up_tracker(method, rec, preset, config_path, skeleton)
     updates = 0
     tracker_s = 0.0
-    with recording.TracksWriter(out, header, rec.cameras) as writer:
+    with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path)) as writer:
         for camera_frame in tqdm(rec.frames(), unit="frame", desc="track", disable=not progress, leave=False):
             start = time.perf_counter()
             tracker.update(camera_frame.frame)
@@ -314,14 +325,11 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
     return report, result
 
 
-def write_json(result: dict, path: Path) -> None:
+def write_json(result: dict, path: Path, inputs: tuple = ()) -> None:
     """Writes a JSON document (the score JSON, the bench's figures) atomically."""
-    write_text(json.dumps(result, indent=2, sort_keys=False) + "\n", path)
+    write_text(json.dumps(result, indent=2, sort_keys=False) + "\n", path, inputs)
 
 
-def write_text(text: str, path: Path) -> None:
-    """Writes `text` to `path` atomically (a temporary file in the same folder, renamed at the end)."""
-    check_writable(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+def write_text(text: str, path: Path, inputs: tuple = ()) -> None:
+    """Writes `text` (UTF-8) to `path` atomically (`crossview.outputs.AtomicOutput`)."""
+    outputs.write_bytes(text.encode("utf-8"), path, inputs)

@@ -125,6 +125,8 @@ def load(name_or_path: str | Path | None = None, overrides: dict | None = None) 
         table = tree
         for parent in parents:
             table = table.setdefault(parent, {})
+            if not isinstance(table, dict):
+                raise ScenarioError(f"{path}: {parent} must be a table ([{parent}]), got {table!r}")
         table[leaf] = value
     tree.setdefault("name", path.stem)
     scenario = from_dict(Scenario, tree, str(path), "")

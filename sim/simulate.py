@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import heapq
 import itertools
 import logging
@@ -137,16 +138,19 @@ class Simulation:
                           for b in blocks)
         pending: list = []
         seq = itertools.count()
-        for t, truths, requests, rows, bounds in blocks:  # (a Block)
-            for poses in truths:
-                heapq.heappush(pending, (poses.t_s, _TRUTH_KIND, -1, poses.t_s, next(seq), poses))
-            # A block can hold no capture at all (a short last block, a slow or dropping clock).
-            for request, event in zip(requests, frames_of(requests, rows, bounds) if requests else ()):
-                heapq.heappush(pending, (request.delivery_s, _FRAME_KIND, request.camera, request.capture_s,
-                                         next(seq), event))
-            # Everything later has a log time > t (a later capture is after t, and delivered after it).
-            while pending and pending[0][0] <= t:
-                yield heapq.heappop(pending)[-1]
+        # The blocks are closed (the worker stopped) as soon as this stream ends, however it ends: a failure
+        # here must not leave the worker running while something still holds the traceback.
+        with contextlib.closing(blocks):
+            for t, truths, requests, rows, bounds in blocks:  # (a Block)
+                for poses in truths:
+                    heapq.heappush(pending, (poses.t_s, _TRUTH_KIND, -1, poses.t_s, next(seq), poses))
+                # A block can hold no capture at all (a short last block, a slow or dropping clock).
+                for request, event in zip(requests, frames_of(requests, rows, bounds) if requests else ()):
+                    heapq.heappush(pending, (request.delivery_s, _FRAME_KIND, request.camera, request.capture_s,
+                                             next(seq), event))
+                # Everything later has a log time > t (a later capture is after t, and delivered after it).
+                while pending and pending[0][0] <= t:
+                    yield heapq.heappop(pending)[-1]
         while pending:
             yield heapq.heappop(pending)[-1]
 
@@ -237,9 +241,7 @@ class Simulation:
                     return
         finally:
             receiver.close()
-            if worker.is_alive():
-                worker.terminate()
-            worker.join()
+            _stop(worker)
 
     def _work(self, duration: float, sender) -> None:
         """The worker process: simulates and sends every block, then the detector's counts (or its error)."""
@@ -289,6 +291,26 @@ def _load_draw_kernels(detector: Detector) -> None:
     seen = np.ones((1, J), dtype=bool)
     spare.detection_rows_of([Capture(0, None, 0.0, 0.0, 0.0)], np.ones((1, J, 2)), seen, ~seen, ~seen,
                             person_ids=[np.zeros(1, np.int64)])
+
+
+_STOP_WAIT_S = 5.0
+"""How long a stopping worker is given to end after SIGTERM, then after SIGKILL, seconds."""
+
+
+def _stop(worker) -> None:
+    """Ends the worker process and reaps it: SIGTERM, then SIGKILL if it has not ended in `_STOP_WAIT_S`
+    (it may be stuck, e.g. on a lock a fork copied held), so that stopping never hangs."""
+    if worker.is_alive():
+        worker.terminate()
+        worker.join(_STOP_WAIT_S)
+    if worker.is_alive():
+        log.warning("the simulation worker process did not end on SIGTERM; killing it")
+        worker.kill()
+        worker.join(_STOP_WAIT_S)
+    if worker.exitcode is None:
+        log.warning("the simulation worker process %d could not be reaped", worker.pid)
+    else:
+        worker.join()
 
 
 def _usable_cores() -> int:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -90,6 +91,11 @@ class TrackerConfig:
         reid_speed_m_per_s: assumed walking speed for that reach, m/s.
     Input:
         max_lateness_s: a frame stamped more than this before the newest processed stamp is dropped, s.
+
+    Upper bounds (beyond the lower bounds above): every real value is finite and at most 86400 s, 1000 m,
+    1000 m/s, 1e6 px, 1e6 px/s or 1e6 /s by its unit, 1e6 without one; counts at most 1000, but
+    velocity_history 10000, milp_max_nodes 200 and confirm_min_updates 100000. `check_fits` refuses counts
+    of cameras or joints the input lacks.
     """
 
     w_2d: float = 0.4
@@ -166,6 +172,7 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"TrackerConfig.{name}: {value!r} must be an integer >= {low}")
+        _check_upper_bounds(self)
         if not isinstance(self.normalize_affinity, bool):
             raise ValueError(f"TrackerConfig.normalize_affinity: {self.normalize_affinity!r} must be true or false")
         if self.init_min_top_m >= self.init_max_top_m:
@@ -200,6 +207,8 @@ class TrackerConfig:
                 data = tomllib.load(f)
         except (OSError, tomllib.TOMLDecodeError) as exc:
             raise ConfigError(f"{path}: cannot read tracker config: {exc}") from exc
+        except UnicodeDecodeError as exc:
+            raise ConfigError(f"{path}: cannot read tracker config: not UTF-8 text (byte {exc.start})") from None
         if set(data) == {"tracker"} and isinstance(data["tracker"], dict):
             data = data["tracker"]
         if "preset" in data:
@@ -219,9 +228,43 @@ class TrackerConfig:
         except (ValueError, TypeError) as exc:
             raise ConfigError(f"{path}: {exc}") from exc
 
+    def check_fits(self, num_cameras: int, num_joints: int) -> None:
+        """Raises ConfigError when a count asks for more cameras or joints than the input has (a tracker
+        that could then never triangulate or start a target, silently)."""
+        for name, available, what in (("min_views", num_cameras, "cameras"),
+                                      ("init_min_joints", num_joints, "joints"),
+                                      ("init_min_common_joints", num_joints, "joints"),
+                                      ("init_min_joints_3d", num_joints, "joints")):
+            if getattr(self, name) > available:
+                raise ConfigError(f"TrackerConfig.{name}: {getattr(self, name)} is more than the {available} {what} "
+                                  "of the input; no target could ever be made")
+
     def replace(self, **changes) -> TrackerConfig:
         """A copy with some fields changed (validated)."""
         return dataclasses.replace(self, **changes)
+
+
+# Upper bounds of every number (past them a value can only be a typo or exhaust memory): by unit suffix for
+# the real-valued fields, by name for the counts; every real value must also be finite.
+_MAX_BY_SUFFIX = (("_m_per_s", 1e3), ("_px_per_s", 1e6), ("_per_s", 1e6), ("_px", 1e6), ("_s", 86400.0),
+                  ("_m", 1e3))
+_MAX_UNITLESS = 1e6
+_MAX_COUNT = {"velocity_history": 10_000, "milp_max_nodes": 200, "confirm_min_updates": 100_000}
+_MAX_OTHER_COUNT = 1_000
+
+
+def _check_upper_bounds(config: TrackerConfig) -> None:
+    """Raises ValueError naming the first number of `config` that is not finite or above its upper bound."""
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            continue
+        if f.type in ("int", int):
+            high = _MAX_COUNT.get(f.name, _MAX_OTHER_COUNT)
+        else:
+            high = next((h for suffix, h in _MAX_BY_SUFFIX if f.name.endswith(suffix)), _MAX_UNITLESS)
+        if not (math.isfinite(value) and abs(value) <= high):
+            raise ValueError(f"TrackerConfig.{f.name}: {value!r} must be finite and at most {high:g} in size")
 
 
 def _enum_value(name: str, enum_type, value: str):

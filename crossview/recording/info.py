@@ -1,11 +1,24 @@
-"""`crossview info`: what a recording or tracks file holds, from its summary section."""
+"""`crossview info`: what a recording or tracks file holds, from its summary section, after every chunk's
+CRC is checked."""
 
 from __future__ import annotations
 
-from mcap.reader import make_reader
-from mcap.records import Channel, Message, Metadata
+from pathlib import Path
 
-from crossview.recording.reader import Recording, Tracks, _Container, _McapStream, _read_summary
+from mcap.reader import make_reader
+from mcap.records import Channel, Chunk, Message, Metadata
+from mcap.stream_reader import StreamReader, breakup_chunk
+
+from crossview.recording.reader import (
+    _READ_ERRORS,
+    FileWithinSize,
+    Recording,
+    Tracks,
+    _Container,
+    _describe,
+    _McapStream,
+    _read_summary,
+)
 from crossview.recording.schemas import (
     KIND_RECORDING,
     KIND_TRACKS,
@@ -18,11 +31,51 @@ from crossview.recording.schemas import (
 )
 
 
-def info(path, allow_truncated: bool = False) -> dict:
-    """What `crossview info` prints: kind, duration, cameras, people, messages per channel, size, ...
+def check_chunks(path) -> int:
+    """Reads every record of a complete file, decompressing each chunk and checking its CRC (and the data
+    section's), without decoding the messages.
 
-    A complete file is described from its summary section without reading the messages; a truncated
-    one (with `allow_truncated`) by streaming its readable prefix.
+    Returns:
+        The number of chunks.
+
+    Raises:
+        RecordingError: naming the bad chunk (its number, byte range and message times) or the byte
+            offset of the bad record.
+    """
+    path = Path(path)
+    chunks = 0
+    with open(path, "rb") as f:
+        size = path.stat().st_size
+        reader = StreamReader(FileWithinSize(f, size), emit_chunks=True, validate_crcs=True,
+                              record_size_limit=max(size, 1))
+        records = iter(reader.records)
+        start = f.tell()  # where the next record begins (the reader reads exactly what it needs)
+        while True:
+            try:
+                record = next(records)
+            except StopIteration:
+                return chunks
+            except _READ_ERRORS as e:
+                raise RecordingError(f"{path}: corrupt MCAP data in the record at byte {start:,} (after chunk "
+                                     f"{chunks}; {_describe(e)})") from None
+            end = f.tell()
+            if isinstance(record, Chunk):
+                try:
+                    breakup_chunk(record, validate_crc=True)
+                except _READ_ERRORS as e:
+                    first_s, last_s = record.message_start_time / 1e9, record.message_end_time / 1e9
+                    raise RecordingError(f"{path}: chunk {chunks} (bytes {start:,}..{end:,}, messages {first_s:.3f}"
+                                         f"..{last_s:.3f} s) is corrupt ({_describe(e)})") from None
+                chunks += 1
+            start = end
+
+
+def info(path, allow_truncated: bool = False, check: bool = True) -> dict:
+    """What `crossview info` prints: kind, duration, cameras, people, messages per channel, size, chunks.
+
+    A complete file is first read through, every chunk's CRC checked (`check_chunks`; skipped with
+    `check` False), then described from its summary section; a truncated one (with `allow_truncated`)
+    by streaming its readable prefix.
     """
     stream = _McapStream(path, allow_truncated)
     kind = None
@@ -38,16 +91,21 @@ def info(path, allow_truncated: bool = False) -> dict:
     counts: dict[str, int] = {}
     start_ns = end_ns = None
     summary: dict = {}
+    chunks = None  # checked chunks (None: not checked)
     if stream.complete:
-        with open(stream.path, "rb") as f:
-            reader = make_reader(f)
-            mcap_summary = reader.get_summary()
-            if mcap_summary is None or mcap_summary.statistics is None:
-                raise RecordingError(f"{stream.path}: MCAP file without a summary section")
-            stats = mcap_summary.statistics
-            for channel_id, channel in sorted(mcap_summary.channels.items()):
-                counts[channel.topic] = stats.channel_message_counts.get(channel_id, 0)
-            start_ns, end_ns = stats.message_start_time, stats.message_end_time
+        if check:
+            chunks = check_chunks(stream.path)
+        try:
+            with open(stream.path, "rb") as f:
+                mcap_summary = make_reader(FileWithinSize(f, stream.size)).get_summary()
+        except _READ_ERRORS as e:
+            raise RecordingError(f"{stream.path}: unreadable summary section ({_describe(e)})") from None
+        if mcap_summary is None or mcap_summary.statistics is None:
+            raise RecordingError(f"{stream.path}: MCAP file without a summary section")
+        stats = mcap_summary.statistics
+        for channel_id, channel in sorted(mcap_summary.channels.items()):
+            counts[channel.topic] = stats.channel_message_counts.get(channel_id, 0)
+        start_ns, end_ns = stats.message_start_time, stats.message_end_time
         summary = _read_summary(stream.path)
         people = summary.get("num_people" if kind == KIND_RECORDING else "num_targets")
     else:
@@ -78,6 +136,7 @@ def info(path, allow_truncated: bool = False) -> dict:
         "skeleton": doc["skeleton"]["name"],
         "size_bytes": stream.size,
         "truncated": not stream.complete,
+        "chunks_checked": chunks,
         "start_s": (start_ns or 0) / 1e9,
         "end_s": (end_ns or 0) / 1e9,
         "duration_s": ((end_ns or 0) - (start_ns or 0)) / 1e9,
@@ -118,6 +177,8 @@ def format_info(d: dict) -> str:
         if d.get("summary"):
             lines.append("  summary    " + ", ".join(f"{k}={v}" for k, v in d["summary"].items()))
     lines.append(f"  skeleton   {d['skeleton']}")
+    if d.get("chunks_checked") is not None:
+        lines.append(f"  integrity  {d['chunks_checked']} chunks read, every CRC matches")
     lines.append(f"  messages   {sum(d['messages'].values()):,} on {len(d['messages'])} channels")
     # Per-camera channels are summed over the cameras: /cameras/*/frame and so on.
     grouped: dict[str, list[int]] = {}

@@ -43,7 +43,33 @@ from sim.types import CameraFrame, PoseTruth
 from tracker.types import TrackerOutput
 
 _READ_ERRORS = (McapError, CRCValidationError, struct.error, EOFError, UnicodeDecodeError, RuntimeError,
-                DecodeError, KeyError, ValueError, zlib.error)
+                DecodeError, KeyError, ValueError, zlib.error, OSError)  # (OSError: a seek a corrupt offset asked for)
+
+
+class FileWithinSize:
+    """A binary file whose reads never ask for more than the file holds: a corrupt length field inside a
+    record (which mcap's record size limit does not cover) then reads short and fails as a short read,
+    instead of allocating what the field says (a terabyte). Seeks and tells pass through."""
+
+    def __init__(self, f, size: int):
+        self._f = f
+        self._size = size
+
+    def read(self, n: int = -1) -> bytes:
+        left = max(0, self._size - self._f.tell())
+        return self._f.read(left if n is None or n < 0 else min(n, left))
+
+    def seek(self, offset: int, whence: int = 0) -> int:
+        return self._f.seek(offset, whence)
+
+    def tell(self) -> int:
+        return self._f.tell()
+
+    def seekable(self) -> bool:
+        return True
+
+    def readable(self) -> bool:
+        return True
 
 
 class _McapStream:
@@ -68,13 +94,14 @@ class _McapStream:
         if not self.complete and not allow_truncated:
             raise RecordingError(
                 f"{self.path}: truncated MCAP file (no end magic; the writer was interrupted or the copy is "
-                "incomplete); use --allow-truncated to read the readable prefix"
+                f"incomplete); `crossview info --allow-truncated {self.path}` describes its readable prefix"
             )
 
     def records(self) -> Iterator:
         """Schema, Channel, Message, Metadata records of the data section, in file order."""
         with open(self.path, "rb") as f:
-            reader = StreamReader(f, validate_crcs=True, record_size_limit=max(self.size, 1))
+            reader = StreamReader(FileWithinSize(f, self.size), validate_crcs=True,
+                                  record_size_limit=max(self.size, 1))
             iterator = iter(reader.records)
             while True:
                 try:
@@ -84,8 +111,8 @@ class _McapStream:
                 except _READ_ERRORS as e:
                     if self.allow_truncated:
                         return
-                    raise RecordingError(f"{self.path}: corrupt MCAP data ({_describe(e)}); "
-                                         "use --allow-truncated to read the readable prefix") from None
+                    raise RecordingError(f"{self.path}: corrupt MCAP data ({_describe(e)}); `crossview info "
+                                         f"{self.path}` names the bad chunk") from None
                 if isinstance(record, DataEnd):
                     return
                 yield record
@@ -303,9 +330,12 @@ def _read_summary(path: Path) -> dict:
     """The summary metadata written at close, found through the file's summary section (one seek)."""
     try:
         with open(path, "rb") as f:
-            for metadata in make_reader(f).iter_metadata():
+            for metadata in make_reader(FileWithinSize(f, path.stat().st_size)).iter_metadata():
                 if metadata.name == SUMMARY_METADATA_NAME:
-                    return json.loads(metadata.metadata["json"])
+                    summary = json.loads(metadata.metadata["json"])
+                    if not isinstance(summary, dict):
+                        raise ValueError(f"the summary is a {type(summary).__name__}, not an object")
+                    return summary
     except _READ_ERRORS as e:
         raise RecordingError(f"{path}: unreadable summary section ({_describe(e)})") from None
     return {}

@@ -3,15 +3,14 @@ target folder, fsynced and renamed onto the final name only when complete."""
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
-from pathlib import Path
 
 import numpy as np
 from mcap.writer import Writer
 
 from core.types import SKELETONS, Camera
 from crossview import foxglove
+from crossview.outputs import AtomicOutput
 from crossview.recording.messages import (
     EncodedFrame,
     _tracker_output_to_msg,
@@ -38,7 +37,6 @@ from crossview.recording.schemas import (
     TRUTH_SCENE_PERIOD_S,
     CameraFrameMsg,
     PoseTruthMsg,
-    RecordingError,
     RecordingHeader,
     TrackerOutputMsg,
     TracksHeader,
@@ -54,16 +52,12 @@ from tracker.types import TrackerOutput
 
 
 class _AtomicMcapWriter:
-    """An MCAP writer onto a temporary file in the target folder, renamed onto `path` on clean exit."""
+    """An MCAP writer onto an `AtomicOutput`: the file appears under `path` only when `close` completes."""
 
-    def __init__(self, path, kind: str, header_doc: dict, metadata: dict[str, str], chunk_size: int):
-        self.path = Path(path)
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
-        try:
-            self._file = open(self._tmp, "wb")  # closed in close() or abort()
-        except OSError as e:
-            raise RecordingError(f"{self.path}: cannot write here: {e.strerror or e}") from None
-        self._done = False
+    def __init__(self, path, kind: str, header_doc: dict, metadata: dict[str, str], chunk_size: int,
+                 inputs: tuple = ()):
+        self._file = AtomicOutput(path, inputs)
+        self.path = self._file.path
         try:
             self._writer = Writer(
                 self._file, chunk_size=chunk_size, compression=COMPRESSION, enable_data_crcs=True,
@@ -109,40 +103,17 @@ class _AtomicMcapWriter:
 
     def close(self, summary_metadata: dict[str, str]) -> None:
         """Finishes the file, fsyncs it and renames it onto the final path."""
-        if self._done:
-            return
         try:
             self._writer.add_metadata(SUMMARY_METADATA_NAME, summary_metadata)
             self._writer.finish()
-            self._file.flush()
-            os.fsync(self._file.fileno())
-            self._file.close()
-            os.replace(self._tmp, self.path)
-            self._done = True
         except BaseException:
             self.abort()
             raise
-        try:
-            dir_fd = os.open(self.path.parent, os.O_RDONLY)
-        except OSError:
-            return
-        try:
-            os.fsync(dir_fd)
-        except OSError:
-            pass
-        finally:
-            os.close(dir_fd)
+        self._file.commit()
 
     def abort(self) -> None:
         """Drops the temporary file; nothing appears under the final name."""
-        if self._done:
-            return
-        self._done = True
-        self._file.close()
-        try:
-            os.unlink(self._tmp)
-        except FileNotFoundError:
-            pass
+        self._file.abort()
 
 
 def _flat_metadata(kind: str, header) -> dict[str, str]:
@@ -188,7 +159,7 @@ class RecordingWriter(_WriterContext):
     """
 
     def __init__(self, path, header: RecordingHeader, cameras: Sequence[Camera], boxes: Sequence[Box], *,
-                 chunk_size: int = CHUNK_SIZE):
+                 chunk_size: int = CHUNK_SIZE, inputs: tuple = ()):
         self.header = header
         self.cameras = list(cameras)
         self.boxes = tuple(boxes)
@@ -209,7 +180,8 @@ class RecordingWriter(_WriterContext):
             "cameras": [_camera_json(c) for c in self.cameras],
             "boxes": [_box_json(b) for b in self.boxes],
         }
-        self._out = _AtomicMcapWriter(path, KIND_RECORDING, doc, _flat_metadata(KIND_RECORDING, header), chunk_size)
+        self._out = _AtomicMcapWriter(path, KIND_RECORDING, doc, _flat_metadata(KIND_RECORDING, header), chunk_size,
+                                     inputs)
         try:
             out = self._out
             self._tf = out.protobuf_channel(TOPIC_TF, foxglove.FrameTransforms)
@@ -303,7 +275,8 @@ class TracksWriter(_WriterContext):
     block ends to record tracker timings.
     """
 
-    def __init__(self, path, header: TracksHeader, cameras: Sequence[Camera], *, chunk_size: int = CHUNK_SIZE):
+    def __init__(self, path, header: TracksHeader, cameras: Sequence[Camera], *, chunk_size: int = CHUNK_SIZE,
+                 inputs: tuple = ()):
         self.header = header
         self.cameras = list(cameras)
         self.skeleton = SKELETONS[header.skeleton_name]
@@ -324,7 +297,7 @@ class TracksWriter(_WriterContext):
             _json(header.config)
         except (TypeError, ValueError) as e:
             raise ValueError(f"TracksHeader.config: must be JSON-serialisable without NaN: {e}") from None
-        self._out = _AtomicMcapWriter(path, KIND_TRACKS, doc, _flat_metadata(KIND_TRACKS, header), chunk_size)
+        self._out = _AtomicMcapWriter(path, KIND_TRACKS, doc, _flat_metadata(KIND_TRACKS, header), chunk_size, inputs)
         try:
             self._outputs = self._out.protobuf_channel(TOPIC_OUTPUTS, TrackerOutputMsg)
             self._scene = self._out.protobuf_channel(TOPIC_TRACK_SCENE, foxglove.SceneUpdate)

@@ -13,7 +13,6 @@ per bone group, averaged over actors. Zeros in a result are kept as zeros, as th
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -21,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import CrossviewError
+from crossview.datasets import UINT64_END, DatasetError, person_id, read_json, stamp_s
 from crossview.scoring.pose import PCP_ALPHA, PCP_BONE_GROUPS, coco17_to_campus14, match_nearest, pcp_bones
 
 CAMPUS_TEST_FRAMES = tuple(range(350, 471)) + tuple(range(650, 751))
@@ -31,18 +31,8 @@ RESULT_TIME_TOLERANCE_S = 0.1
 METRES_TO_CM = 100.0
 
 
-class DatasetLayoutError(CrossviewError):
+class DatasetLayoutError(DatasetError):
     """A dataset directory or result file does not follow the crossview dataset layout."""
-
-
-def _load_json(path: Path, what: str):
-    if not path.is_file():
-        raise DatasetLayoutError(f"{path}: {what} not found (expected the crossview dataset layout)")
-    try:
-        with open(path) as f:
-            return json.load(f)
-    except json.JSONDecodeError as e:
-        raise DatasetLayoutError(f"{path}: not valid JSON ({e.msg} at line {e.lineno})") from e
 
 
 def _pose_list(data, path: Path, joints: int) -> tuple[np.ndarray, list[list[tuple[int, np.ndarray]]]]:
@@ -52,7 +42,7 @@ def _pose_list(data, path: Path, joints: int) -> tuple[np.ndarray, list[list[tup
     stamps, entries = [], []
     for i, item in enumerate(data):
         try:
-            stamps.append(float(item["timestamp"]))
+            stamps.append(stamp_s(item["timestamp"], path, f"entry {i}"))
             poses = []
             for p in item["poses"]:
                 pts = np.asarray(p["points_3d"], dtype=np.float64)
@@ -60,9 +50,14 @@ def _pose_list(data, path: Path, joints: int) -> tuple[np.ndarray, list[list[tup
                     raise DatasetLayoutError(
                         f"{path}: entry {i} id {p.get('id')}: points_3d has shape {pts.shape}, expected ({joints}, 3)"
                     )
-                poses.append((int(p["id"]), pts))
+                if not np.all(np.isfinite(pts)):
+                    raise DatasetLayoutError(f"{path}: entry {i} id {p.get('id')}: points_3d hold a value that is "
+                                             "not finite")
+                poses.append((person_id(p["id"], path, f"entry {i}", UINT64_END), pts))
             entries.append(poses)
-        except (KeyError, TypeError) as e:
+        except (KeyError, TypeError, ValueError) as e:
+            if isinstance(e, CrossviewError):
+                raise
             raise DatasetLayoutError(
                 f"{path}: entry {i} lacks {e} (expected timestamp and poses[id, points_3d])"
             ) from e
@@ -112,14 +107,15 @@ def evaluate(
             test_frames, excluded = SHELF_TEST_FRAMES, SHELF_EXCLUDED_ACTORS
         else:
             raise DatasetLayoutError(
-                f"{dataset_dir}: cannot tell Campus from Shelf by the directory name; pass test_frames"
+                f"{dataset_dir}: cannot tell Campus from Shelf by the folder's name; name the folder after its "
+                "dataset (one whose name holds 'campus' or 'shelf') to use that dataset's test frames"
             )
     anno_path = dataset_dir / "annotation_3d.json"
-    anno_stamps, anno = _pose_list(_load_json(anno_path, "annotation_3d.json"), anno_path, 14)
+    anno_stamps, anno = _pose_list(read_json(anno_path, "annotation_3d.json"), anno_path, 14)
     # evaluate.py sorts the annotation by timestamp and indexes it by frame number.
     order = np.argsort(anno_stamps, kind="stable")
     anno_stamps, anno = anno_stamps[order], [anno[i] for i in order]
-    res_stamps, res = _pose_list(_load_json(result_json, "result file"), result_json, 17)
+    res_stamps, res = _pose_list(read_json(result_json, "result file"), result_json, 17)
     order = np.argsort(res_stamps, kind="stable")
     res_stamps, res = res_stamps[order], [res[i] for i in order]
 

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from crossview.datasets import write_result_3d
+from crossview.datasets import DatasetError, write_result_3d
 from crossview.scoring.campus import DatasetLayoutError, evaluate, format_evaluation
 from crossview.scoring.pose import coco17_to_campus14
 from tracker.types import Target, TrackerOutput
@@ -69,7 +69,7 @@ def test_export_writes_centimetres_and_zeros_for_unknown_joints(tmp_path):
 
 
 def test_missing_result_file_is_a_one_line_layout_error(tmp_path):
-    with pytest.raises(DatasetLayoutError, match="result file not found"):
+    with pytest.raises(DatasetError, match="result file not found"):
         evaluate(CAMPUS, tmp_path / "nope.json")
 
 
@@ -82,5 +82,5 @@ def test_result_with_wrong_joint_count_is_rejected(tmp_path):
 def test_unknown_dataset_name_asks_for_test_frames(tmp_path):
     root = _write_dataset(tmp_path / "mystery", [[]])
     (tmp_path / "r.json").write_text("[]")
-    with pytest.raises(DatasetLayoutError, match="pass test_frames"):
+    with pytest.raises(DatasetLayoutError, match="name the folder after its dataset"):
         evaluate(root, tmp_path / "r.json")

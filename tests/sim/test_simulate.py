@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import signal
 
 import numpy as np
 import pytest
@@ -125,3 +126,53 @@ def test_the_worker_process_never_outlives_the_stream(small, monkeypatch):
         list(Simulation(small, seed=4).events(1.0))
     assert any("raised in the simulation worker process" in note for note in failure.value.__notes__)
     assert multiprocessing.active_children() == []
+
+
+def test_a_consumer_failure_mid_stream_stops_the_worker_at_once(small):
+    """An error raised while the consumer turns a block into frames (inside `events`) ends the stream and
+    stops the worker then and there, even while the caller keeps the traceback (as a long-lived process,
+    or pytest, does): nothing is left for a garbage collection to stop later, in whatever process."""
+    import multiprocessing
+
+    calls = []
+
+    def frames_of(requests, rows, bounds):
+        calls.append(len(requests))
+        if len(calls) == 3:
+            raise ArithmeticError("consumer broke")
+        return [None] * len(requests)
+
+    kept = []
+    for seed in range(3):  # (again and again in one process, each failure kept)
+        with pytest.raises(ArithmeticError, match="consumer broke") as failure:
+            for _ in Simulation(small, seed=seed).events(5.0, with_poses=False, frames_of=frames_of):
+                pass
+        kept.append(failure)
+        calls.clear()
+        assert multiprocessing.active_children() == []
+
+
+def test_stopping_a_worker_that_ignores_sigterm_kills_it(monkeypatch):
+    """A worker stuck where SIGTERM cannot end it is killed after the wait, and reaped: stopping never hangs."""
+    import multiprocessing
+
+    from sim import simulate
+
+    monkeypatch.setattr(simulate, "_STOP_WAIT_S", 0.5)
+    context = multiprocessing.get_context("fork")
+    ready = context.Event()
+    worker = context.Process(target=_ignore_sigterm_forever, args=(ready,), daemon=True)
+    worker.start()
+    assert ready.wait(60)  # (it has set SIGTERM aside)
+    simulate._stop(worker)
+    assert worker.exitcode == -signal.SIGKILL
+    assert multiprocessing.active_children() == []
+
+
+def _ignore_sigterm_forever(ready):
+    import time
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    ready.set()
+    while True:
+        time.sleep(1)

@@ -8,6 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from core.types import Frame
+from tests.fuzz import FUZZ
 from tests.tracker.synthetic import store_like
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig
@@ -67,9 +68,9 @@ def _check(tracker, frames):
             known[target.id] = before | finite
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@FUZZ
 @given(st.lists(bad_frames(), min_size=1, max_size=6))
-def test_tracker_survives_bad_frames(frames):
+def test_fuzz_tracker_survives_bad_frames(frames):
     _check(_warm(Tracker), frames)
 
 

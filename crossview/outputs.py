@@ -1,0 +1,173 @@
+"""Every output file of every command, written one way: checked before any work, then written under a
+temporary name in its own folder, fsynced and renamed onto its name only when complete.
+
+On any failure (an error, Ctrl-C or a terminating signal, a full disk) the temporary file is removed and
+the folders made for the output are removed again, so nothing is left under a final name or beside it,
+and the error names the output's path.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from pathlib import Path
+
+from core.errors import CrossviewError
+
+
+class OutputError(CrossviewError):
+    """An output that cannot be written: refused before any work, or failed while writing (e.g. a full
+    disk); the message names the path."""
+
+
+def check_output(path, inputs: tuple = ()) -> None:
+    """Fails early, before any work, when `path` cannot be written.
+
+    That is when writing it would replace one of `inputs` (the same file under any name), something that is
+    not a regular file (a device, a pipe) or a folder, or when its folder neither exists nor can be made
+    (a file stands in the way, or the nearest existing folder is not writable). Nothing is created here:
+    the folders are made when the output is written (`AtomicOutput`).
+
+    Args:
+        path: the output file.
+        inputs: the command's input files (None entries are skipped).
+
+    Raises:
+        OutputError: naming the path and what would be valid.
+    """
+    path = Path(path)
+    for given in inputs:
+        if given is not None and os.path.realpath(given) == os.path.realpath(path):
+            raise OutputError(f"{path}: is also an input ({given}); writing it would destroy the input, "
+                              "so choose another output")
+    if path.is_dir():
+        raise OutputError(f"{path}: is a folder; give a file name for the output")
+    if path.exists() and not path.is_file():
+        raise OutputError(f"{path}: is not a regular file (a device or a pipe); choose a file name for the output")
+    folder = path.parent
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        raise OutputError(f"{folder}: output folder cannot be created ({existing} is a file, not a folder)")
+    if not os.access(existing, os.W_OK | os.X_OK):
+        raise OutputError(f"{folder}: output folder is not writable ({existing}); choose another output")
+
+
+class AtomicOutput:
+    """One output file written atomically: a binary file-like object (`write`, `tell`, `flush`).
+
+    The folders the output needs are made on opening; the data go to `.NAME.PID.tmp` beside the output;
+    `commit` flushes, fsyncs and renames it onto `path` (and fsyncs the folder); `abort` removes it and
+    the folders made for it. As a context manager: commit on a clean exit, abort on any exception
+    (KeyboardInterrupt and signals included). A failure of the file system while writing (a full disk)
+    is an `OutputError` naming `path`, raised after the temporary file is gone.
+
+    Args:
+        path: the output file.
+        inputs: the command's input files, which the output must not be (see `check_output`).
+    """
+
+    def __init__(self, path, inputs: tuple = ()):
+        self.path = Path(path)
+        check_output(self.path, inputs)
+        self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self._made: list[Path] = []  # folders made for this output, outermost first
+        self._file = None
+        self._done = False
+        with self._aborting():
+            missing = []
+            folder = self.path.parent
+            while not folder.exists():
+                missing.append(folder)
+                folder = folder.parent
+            for folder in reversed(missing):
+                folder.mkdir()
+                self._made.append(folder)
+            self._file = open(self.tmp, "wb")
+
+    @contextlib.contextmanager
+    def _aborting(self):
+        """Aborts on any exception; an OSError (a full disk) becomes an `OutputError` naming the output."""
+        try:
+            yield
+        except OSError as e:
+            self.abort()
+            raise OutputError(f"{self.path}: cannot be written ({e.strerror or e}); nothing was kept") from None
+        except BaseException:
+            self.abort()
+            raise
+
+    def write(self, data) -> int:
+        """Appends `data` (bytes)."""
+        with self._aborting():
+            return self._file.write(data)
+
+    def tell(self) -> int:
+        return self._file.tell()
+
+    def flush(self) -> None:
+        with self._aborting():
+            self._file.flush()
+
+    def commit(self) -> None:
+        """Makes the output appear under its name, complete and on disk; a no-op once committed or aborted."""
+        if self._done:
+            return
+        with self._aborting():
+            self._file.flush()
+            os.fsync(self._file.fileno())
+            self._file.close()
+            os.replace(self.tmp, self.path)
+        self._done = True
+        _fsync_folder(self.path.parent)
+
+    def abort(self) -> None:
+        """Removes the temporary file and the folders made for the output; never raises an OSError (the
+        file system's failure that led here is what gets reported). A no-op once committed or aborted."""
+        if self._done:
+            return
+        self._done = True
+        if self._file is not None:
+            try:
+                self._file.close()  # (its flush fails again on a full disk; the descriptor is closed anyway)
+            except OSError:
+                pass
+        try:
+            os.unlink(self.tmp)
+        except OSError:
+            pass
+        for folder in reversed(self._made):
+            try:
+                folder.rmdir()
+            except OSError:  # something else was put there meanwhile
+                break
+
+    def __enter__(self) -> AtomicOutput:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.commit()
+        else:
+            self.abort()
+
+
+def _fsync_folder(folder: Path) -> None:
+    """Makes a rename in `folder` durable (where the system allows opening a folder)."""
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def write_bytes(data: bytes, path, inputs: tuple = ()) -> None:
+    """Writes `data` to `path` atomically (`AtomicOutput`)."""
+    with AtomicOutput(path, inputs) as out:
+        out.write(data)

@@ -1,0 +1,184 @@
+"""Everything a user can type, given wrongly: one line naming the file, key or value and what would be
+valid, exit status 2, no traceback, before any work (no output written). docs/reliability.md lists these
+cases row by row."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from crossview.cli import EXIT_BAD_INPUT, main
+
+CAMPUS = Path(__file__).resolve().parents[1] / "data" / "campus"
+
+
+def _refused(capsys, argv, tmp_path) -> str:
+    """Runs `crossview ARGV`: exit 2, one line, no traceback, nothing written under tmp_path/out."""
+    status = main(["--no-progress", *map(str, argv)])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert not (tmp_path / "out").exists()
+    return err
+
+
+def _file(tmp_path: Path, name: str, content) -> Path:
+    path = tmp_path / name
+    path.write_bytes(content if isinstance(content, bytes) else content.encode())
+    return path
+
+
+# Scenario files and the options that override them: (id, file text or None for a shipped one, options,
+# what the line must say).
+SCENARIO_CASES = [
+    ("wrong-type-in-table", '[crowd]\npeople = "3"\n', [], "crowd.people = '3' must be an integer"),
+    ("table-not-a-table", "crowd = 5\n", ["--people", "2"], "crowd must be a table ([crowd]), got 5"),
+    ("infinite-duration", "duration_s = inf\n", [], "duration_s: inf must be in (0, 86400] s"),
+    ("nan-duration", "duration_s = nan\n", [], "duration_s: nan must be in (0, 86400] s"),
+    ("nan-door-position", "[store]\nentrance_m = [nan, 1.0]\n", [], "entrance_m[0]: nan must be"),
+    ("not-utf8", b'description = "\xff"\n', [], "cannot read scenario: 'utf-8' codec can't decode byte 0xff"),
+    ("million-cameras", None, ["--cameras", "1000000"], "rows: 1000 must be in [1, 100] cameras"),
+    ("huge-seed", None, ["--seed", str(10**30)], f"seed: {10**30} must be in [0, 9223372036854775807]"),
+    ("huge-crowd", None, ["--people", "100000000"], "people: 100000000 must be in [0, 500] people"),
+    ("too-many-camera-frames", None, ["--duration", "86400"],
+     "schedules 10,368,000 camera frames, more than the 5,000,000 one recording may hold"),
+]
+
+
+@pytest.mark.parametrize(("text", "options", "expected"), [c[1:] for c in SCENARIO_CASES],
+                         ids=[c[0] for c in SCENARIO_CASES])
+def test_a_bad_scenario_is_refused_in_one_line(text, options, expected, tmp_path, capsys):
+    scenario = "store_layout1" if text is None else _file(tmp_path, "s.toml", text)
+    err = _refused(capsys, ["generate", scenario, "-o", tmp_path / "out" / "r.mcap", *options], tmp_path)
+    assert expected in err, err
+
+
+# Command-line values outside their type or bound.
+OPTION_CASES = [
+    ("minutes-infinite", ["world-stats", "store_layout1", "--minutes", "inf"], "inf must be at most 1440 minutes"),
+    ("minutes-huge", ["world-stats", "store_layout1", "--minutes", "1e12"], "1e12 must be at most 1440 minutes"),
+    ("duration-nan", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--duration", "nan"], "nan must be > 0"),
+    ("duration-not-a-number", ["run", "--duration", "ten", "--out", "OUT"], "'ten' is not a number"),
+    ("bench-duration-huge", ["bench", "--duration", "1e9", "--json", "OUT/b.json"],
+     "duration_s: 1000000000.0 must be in (0, 86400] s"),
+]
+
+
+@pytest.mark.parametrize(("argv", "expected"), [c[1:] for c in OPTION_CASES], ids=[c[0] for c in OPTION_CASES])
+def test_a_bad_option_is_refused_in_one_line(argv, expected, tmp_path, capsys):
+    argv = [str(tmp_path / "out") + a[3:] if a.startswith("OUT") else a for a in argv]
+    assert expected in _refused(capsys, argv, tmp_path)
+
+
+@pytest.fixture(scope="module")
+def campus_recording(tmp_path_factory) -> Path:
+    """The Campus fixture converted to a recording (3 cameras, 14 joints)."""
+    out = tmp_path_factory.mktemp("campus") / "campus.mcap"
+    assert main(["--no-progress", "convert", str(CAMPUS), "-o", str(out)]) == 0
+    return out
+
+
+# Tracker configuration files.
+CONFIG_CASES = [
+    ("infinite-value", "alpha_3d_m = inf\n", "TrackerConfig.alpha_3d_m: inf must be finite and at most 1000"),
+    ("huge-count", "velocity_history = 100000000000\n", "velocity_history: 100000000000 must be finite and at most"),
+    ("wrong-type", 'w_2d = "x"\n', "TrackerConfig.w_2d: 'x' is not a number"),
+    ("more-views-than-cameras", "min_views = 1000\n", "min_views: 1000 is more than the 3 cameras of the input"),
+    ("more-joints-than-the-skeleton", "init_min_joints = 15\n", "init_min_joints: 15 is more than the 14 joints"),
+    ("not-utf8", b"w_2d = 0.5\n\xff\n", "cannot read tracker config: not UTF-8 text (byte 11)"),
+    ("unknown-key", "w2d = 0.5\n", "unknown key 'w2d'"),
+    ("malformed", "[tracker\n", "cannot read tracker config"),
+]
+
+
+@pytest.mark.parametrize(("text", "expected"), [c[1:] for c in CONFIG_CASES], ids=[c[0] for c in CONFIG_CASES])
+def test_a_bad_tracker_config_is_refused_in_one_line(text, expected, campus_recording, tmp_path, capsys):
+    config = _file(tmp_path, "c.toml", text)
+    err = _refused(capsys, ["track", campus_recording, "-o", tmp_path / "out" / "t.mcap", "--config", config,
+                            "--preset", "campus"], tmp_path)
+    assert "c.toml: " in err and expected in err, err
+
+
+def test_detector_stats_refuses_a_recording_of_other_joints(campus_recording, tmp_path, capsys):
+    err = _refused(capsys, ["detector-stats", campus_recording], tmp_path)
+    assert "campus.mcap: holds campus14 joints; detector-stats measures the synthetic COCO-17 detector" in err
+
+
+def _cam0(d):
+    return next(iter(d["cameras"].values()))
+
+
+def _first_frame_with_poses(d):
+    return next(f for f in d["frames"].values() if f["poses"])
+
+
+# Dataset folders: (id, file, change to its JSON (returns the new document or text), what the line must say).
+DATASET_CASES = [
+    ("cameras-a-list", "calibration.json", lambda d: {"cameras": list(d["cameras"].values())},
+     "key 'cameras' (camera name -> {K, Tw}) must be an object, got list"),
+    ("frames-a-list", "annotation_2d.json", lambda d: {**d, "frames": list(d["frames"].values())},
+     "key 'frames' (frame name -> frame) must be an object, got list"),
+    ("singular-intrinsics", "calibration.json", lambda d: _cam0(d).update(K=[[0, 0, 0], [0, 0, 0], [0, 0, 1]]),
+     "is not a pinhole intrinsic matrix"),
+    ("null-in-camera-pose", "calibration.json", lambda d: _cam0(d)["Tw"][0].__setitem__(0, None),
+     "K and Tw must hold numbers (no null)"),
+    ("nan-in-calibration", "calibration.json", lambda d: json.dumps(d).replace("1.1945368357487924", "NaN"),
+     "calibration.json: NaN is not a JSON number"),
+    ("huge-timestamp", "annotation_2d.json", lambda d: next(iter(d["frames"].values())).update(timestamp=1e300),
+     "timestamp 1e+300 must be in [0, 4e+09] s"),
+    ("huge-id", "annotation_2d.json", lambda d: _first_frame_with_poses(d)["poses"][0].update(id=10**30),
+     f"id {10**30} must be an integer in [-2^63, 2^63)"),
+    ("huge-image", "annotation_2d.json", lambda d: {**d, "image_wh": [10**30, 5]},
+     "key 'image_wh' = [1000000000000000000000000000000, 5] must be [width, height], integers in [1, 100000]"),
+    ("not-utf8", "calibration.json", lambda d: b'{"cameras": "\xff"}', "calibration.json: not UTF-8 text (byte 13)"),
+    ("truth-entries-not-objects", "annotation_3d.json", lambda d: [[1]],
+     "annotation_3d.json: entry 0 must be an object"),
+    ("truth-pose-empty", "annotation_3d.json", lambda d: d[0]["poses"][0].update(points_3d=[]) if d[0]["poses"]
+     else d[0].update(poses=[{"id": 1, "points_3d": []}]), "points_3d must be 14x3 for each pose"),
+    ("missing-calibration", "calibration.json", None, "calibration.json: file not found"),
+]
+
+
+def _dataset(tmp_path: Path, name: str, change) -> Path:
+    folder = tmp_path / "campus"
+    shutil.copytree(CAMPUS, folder)
+    path = folder / name
+    if change is None:
+        path.unlink()
+        return folder
+    data = json.loads(path.read_text())
+    changed = change(data)
+    changed = data if changed is None else changed
+    path.write_bytes(changed if isinstance(changed, bytes) else
+                     (changed if isinstance(changed, str) else json.dumps(changed)).encode())
+    return folder
+
+
+@pytest.mark.parametrize(("name", "change", "expected"), [c[1:] for c in DATASET_CASES],
+                         ids=[c[0] for c in DATASET_CASES])
+def test_a_bad_dataset_folder_is_refused_in_one_line(name, change, expected, tmp_path, capsys):
+    folder = _dataset(tmp_path, name, change)
+    err = _refused(capsys, ["convert", folder, "-o", tmp_path / "out" / "c.mcap"], tmp_path)
+    assert f"{name}: " in err and expected in err, err
+
+
+# Result files given to `evaluate`.
+RESULT_CASES = [
+    ("not-a-list", {"a": 1}, "expected a JSON list of {timestamp, poses} entries"),
+    ("id-a-string", [{"timestamp": 1.0, "poses": [{"id": "x", "points_3d": [[0, 0, 0]] * 17}]}],
+     "entry 0: id 'x' must be an integer"),
+    ("id-too-large", [{"timestamp": 1.0, "poses": [{"id": 2**70, "points_3d": [[0, 0, 0]] * 17}]}],
+     f"entry 0: id {2**70} must be an integer in [-2^63, 2^64)"),
+    ("timestamp-a-string", [{"timestamp": "noon", "poses": []}], "entry 0: timestamp 'noon' must be a number"),
+    ("nan-joint", '[{"timestamp": 1.0, "poses": [{"id": 1, "points_3d": [[NaN, 0, 0]]}]}]', "NaN is not a JSON number"),
+    ("wrong-joint-count", [{"timestamp": 1.0, "poses": [{"id": 1, "points_3d": [[0, 0, 0]] * 14}]}],
+     "points_3d has shape (14, 3), expected (17, 3)"),
+]
+
+
+@pytest.mark.parametrize(("content", "expected"), [c[1:] for c in RESULT_CASES], ids=[c[0] for c in RESULT_CASES])
+def test_a_bad_result_file_is_refused_in_one_line(content, expected, tmp_path, capsys):
+    result = _file(tmp_path, "result.json", content if isinstance(content, str) else json.dumps(content))
+    err = _refused(capsys, ["evaluate", CAMPUS, result], tmp_path)
+    assert "result.json: " in err and expected in err, err

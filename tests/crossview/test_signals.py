@@ -1,0 +1,119 @@
+"""Ctrl-C, SIGTERM and SIGHUP end every command cleanly: exit status 128 + the signal's number, one line
+saying so, no file under a final name or left as a temporary, no process of the command's group left.
+
+Each command is a real process. It is frozen (SIGSTOP) the moment its temporary output appears, given
+the signal, and let go (SIGCONT), so that the signal always lands while it writes."""
+
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from crossview import pipeline
+from crossview.cli import main
+
+CROSSVIEW = [sys.executable, "-c", "from crossview.cli import run; run()", "--no-progress"]
+
+
+@pytest.fixture(scope="module")
+def recording_5s(tmp_path_factory) -> Path:
+    rec = tmp_path_factory.mktemp("rec") / "rec.mcap"
+    assert main(["--no-progress", "generate", "store_layout2", "-o", str(rec), "--duration", "5"]) == 0
+    return rec
+
+
+def _temporaries(folder: Path, part: str = "") -> list[Path]:
+    return [p for p in folder.rglob("*") if p.name.endswith(".tmp") and part in p.name]
+
+
+def _signal_while_writing(argv, watched: Path, signum: int, env=None, part: str = "") -> tuple[str, int]:
+    """Runs `crossview ARGV`, signals it while a temporary output (with `part` in its name) exists under
+    `watched`; returns its stderr and process id (which is its group's)."""
+    process = subprocess.Popen([*CROSSVIEW, *argv], stderr=subprocess.PIPE, text=True, start_new_session=True,
+                               env=env)
+    try:
+        deadline = time.monotonic() + 300
+        while not _temporaries(watched, part) and process.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.002)
+        process.send_signal(signal.SIGSTOP)
+        assert _temporaries(watched, part), f"{argv}: never wrote (exit {process.poll()})"
+        process.send_signal(signum)
+        process.send_signal(signal.SIGCONT)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 128 + signum, err
+    return err, process.pid
+
+
+# Every command that writes, each under one of the three signals (generate under all three).
+CASES = [
+    ("generate", signal.SIGINT),
+    ("generate", signal.SIGTERM),
+    ("generate", signal.SIGHUP),
+    ("track", signal.SIGINT),
+    ("convert", signal.SIGTERM),
+    ("run", signal.SIGHUP),
+    ("bench", signal.SIGTERM),
+    ("bench-cold", signal.SIGTERM),
+]
+
+
+@pytest.mark.parametrize(("command", "signum"), CASES, ids=[f"{c}-{s.name}" for c, s in CASES])
+def test_a_signal_ends_every_command_cleanly(command, signum, tmp_path, recording_5s):
+    out = tmp_path / "out"
+    env = None
+    argv = {
+        "generate": ["generate", "store_layout2", "--duration", "600", "-o", str(out / "g.mcap")],
+        "track": ["track", str(recording_5s), "-o", str(out / "t.mcap")],
+        "convert": ["convert", "tests/data/campus", "-o", str(out / "c.mcap")],
+        "run": ["run", "store_layout2", "--duration", "600", "--out", str(out)],
+        "bench": ["bench", "--duration", "600", "--json", str(out / "b.json")],
+        # (the bench's own `crossview generate` process is writing)
+        "bench-cold": ["bench", "--duration", "5", "--json", str(out / "b.json")],
+    }[command]
+    if command.startswith("bench"):  # its temporary folder goes where it can be watched
+        (tmp_path / "tmp").mkdir()
+        env = {**os.environ, "TMPDIR": str(tmp_path / "tmp")}
+    err, group = _signal_while_writing(argv, tmp_path, signum, env, "-cold" if command == "bench-cold" else "")
+    last = err.strip().splitlines()[-1]
+    if signum == signal.SIGINT:
+        assert last == "crossview: interrupted; no partial output was kept", err
+    else:
+        assert last == f"crossview: ended by {signal.Signals(signum).name}; no partial output was kept", err
+    assert [p for p in tmp_path.rglob("*") if p != tmp_path / "tmp"] == [], err
+    # Nothing of the process group is left (the simulation worker included).
+    time.sleep(0.2)
+    with pytest.raises(ProcessLookupError):
+        os.killpg(group, 0)
+
+
+def test_an_error_mid_generation_in_process_leaves_no_worker_and_no_file(tmp_path, monkeypatch):
+    """An error raised by the consumer in the middle of `generate`, again and again in one long-lived
+    process with every traceback kept: each call returns (the worker stopped at once), leaving nothing."""
+    from crossview import recording
+
+    calls = []
+    encode = recording.RecordingWriter.encode_frames
+
+    def fail_on_the_third_block(self, *args):
+        calls.append(1)
+        if len(calls) % 3 == 0:
+            raise ArithmeticError("encoder broke")
+        return encode(self, *args)
+
+    monkeypatch.setattr(recording.RecordingWriter, "encode_frames", fail_on_the_third_block)
+    kept = []
+    for seed in range(4):
+        scenario = pipeline.load_scenario("store_layout2", duration_s=30.0, seed=seed)
+        with pytest.raises(ArithmeticError, match="encoder broke") as failure:
+            pipeline.generate(scenario, tmp_path / "new" / "g.mcap", progress=False)
+        kept.append(failure)
+        assert multiprocessing.active_children() == []
+        assert list(tmp_path.iterdir()) == []

@@ -1,0 +1,80 @@
+"""Property: any scenario file, however wrong, loads into a valid Scenario or is refused with a
+ScenarioError naming the file; a scenario that loads round-trips through its resolved TOML."""
+
+import dataclasses
+import json
+import math
+import tempfile
+import typing
+from pathlib import Path
+
+from hypothesis import event, given
+from hypothesis import strategies as st
+
+from core.errors import ScenarioError
+from sim import scenario as scenario_mod
+from tests.fuzz import FUZZ
+
+HINTS = typing.get_type_hints(scenario_mod.Scenario)
+SECTIONS = {f.name: HINTS[f.name] for f in dataclasses.fields(scenario_mod.Scenario)
+            if dataclasses.is_dataclass(HINTS[f.name])}
+TOP_KEYS = ("description", "duration_s", "seed")
+
+scalars = st.one_of(
+    st.integers(-2**63, 2**63 - 1), st.integers(-3, 40),
+    st.floats(allow_nan=True, allow_infinity=True), st.floats(-5.0, 100.0),
+    st.booleans(), st.text(max_size=8), st.sampled_from(["typical", "ideal", "clean", "paper", "nan"]),
+)
+values = st.one_of(scalars, st.lists(scalars, max_size=4), st.lists(st.floats(-1.0, 20.0), min_size=2, max_size=2))
+
+
+def _key_values(cls):
+    keys = [f.name for f in dataclasses.fields(cls) if f.init]
+    return st.dictionaries(st.one_of(st.sampled_from(keys), st.sampled_from(["typo", "people "])), values, max_size=4)
+
+
+@st.composite
+def trees(draw):
+    tree = draw(st.dictionaries(st.sampled_from(TOP_KEYS), values, max_size=2))
+    for section in draw(st.lists(st.sampled_from(sorted(SECTIONS)), max_size=3, unique=True)):
+        tree[section] = draw(st.one_of(_key_values(SECTIONS[section]), values))  # (a value where a table goes)
+    return tree
+
+
+def _toml_value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return ("nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")) if not math.isfinite(v) else repr(v)
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, str):
+        return json.dumps(v)
+    return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+
+
+def to_toml(tree: dict) -> str:
+    plain = [f"{json.dumps(k)} = {_toml_value(v)}" for k, v in tree.items() if not isinstance(v, dict)]
+    tables = [f"[{k}]\n" + "".join(f"{json.dumps(kk)} = {_toml_value(vv)}\n" for kk, vv in v.items())
+              for k, v in tree.items() if isinstance(v, dict)]
+    return "\n".join(plain) + "\n" + "\n".join(tables)
+
+
+@FUZZ
+@given(trees())
+def test_fuzz_any_scenario_file_loads_valid_or_is_refused_naming_the_file(tree):
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "s.toml"
+        path.write_text(to_toml(tree), encoding="utf-8")
+        try:
+            scenario = scenario_mod.load(path)
+        except ScenarioError as e:
+            assert str(e).startswith(f"{path}: "), e
+            assert "\n" not in str(e)
+            event("refused")
+            return
+        event("loaded")
+        # A loaded scenario is valid through and through, and its resolved file loads back as the same.
+        again = Path(folder) / "s.toml"
+        again.write_text(scenario_mod.resolved_toml(scenario), encoding="utf-8")
+        assert scenario_mod.load(again) == scenario
