@@ -25,6 +25,7 @@ import cv2
 import motmetrics as mm
 import numpy as np
 
+from core.boxes import box_iou, keypoint_boxes
 from core.types import Camera
 from crossview.scoring.identity import identity_scores
 from sim.types import CameraFrame
@@ -161,28 +162,13 @@ def pose_boxes(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """
     poses = np.asarray(poses, dtype=np.float64)
     n, j = poses.shape[:2]
-    px = project_points(camera, poses.reshape(-1, 3)).reshape(n, j, 2)
-    ok = np.isfinite(px).all(axis=-1, keepdims=True)  # (N, J, 1)
-    lo = np.where(ok, px, np.inf).min(axis=1)
-    hi = np.where(ok, px, -np.inf).max(axis=1)
-    enough = ok[..., 0].sum(axis=1) >= 2
-    boxes = np.where(enough[:, None], np.hstack([lo, hi]), np.nan)
+    boxes = keypoint_boxes(project_points(camera, poses.reshape(-1, 3)).reshape(n, j, 2))
+    lo, hi = boxes[:, :2], boxes[:, 2:]
     size = np.prod(hi - lo, axis=1)
     inside = np.prod(np.clip(np.minimum(hi, (camera.width_px, camera.height_px)) - np.maximum(lo, 0), 0, None), axis=1)
     with np.errstate(invalid="ignore"):
-        visible = enough & (size > 0) & (inside >= MIN_VISIBLE_FRACTION * size)
+        visible = np.isfinite(size) & (size > 0) & (inside >= MIN_VISIBLE_FRACTION * size)
     return boxes, visible
-
-
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, M) IoU of (x0, y0, x1, y1) boxes."""
-    lo = np.maximum(a[:, None, :2], b[None, :, :2])
-    hi = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    inter = np.prod(np.clip(hi - lo, 0, None), axis=-1)
-    area_a = np.prod(a[:, 2:] - a[:, :2], axis=-1)
-    area_b = np.prod(b[:, 2:] - b[:, :2], axis=-1)
-    union = area_a[:, None] + area_b[None, :] - inter
-    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
 
 
 @dataclass
