@@ -13,15 +13,13 @@ from core.boxes import box_iou
 from core.types import Frame
 from tests.tracker.synthetic import look_at_camera
 from tracker.single_view import (
+    Affinity2D,
     SingleViewConfig,
     SingleViewTracker,
-    box_to_z,
+    keypoint_distances,
     kf_predict,
     kf_update,
-    match_boxes,
-    process_noise,
-    transition,
-    z_to_box,
+    match,
 )
 
 # A 2D person template: 17 joints in a unit box (x right, y down), the box's corners among them.
@@ -53,81 +51,94 @@ def walking_box(t_s: float, start_x: float, speed_px_per_s: float, y: float = 20
     return (x, y, x + 80.0, y + 200.0)
 
 
-# ---------------------------------------------------------------- boxes and the Kalman filter
-
-
-def test_box_and_measurement_round_trip():
-    boxes = np.array([[10.0, 20.0, 50.0, 120.0], [-5.0, 3.0, 7.0, 4.5]])
-    np.testing.assert_allclose(z_to_box(box_to_z(boxes)), boxes, atol=1e-12)  # px
+# ---------------------------------------------------------------- the Kalman filter and the matching
 
 
 def test_process_noise_is_the_integral_of_white_acceleration():
-    # Reference: Q = ∫_0^dt F(s) G G^T F(s)^T ds q^2 with G = [0, I] (acceleration drives the velocity).
+    # Reference: Q = ∫_0^dt F(s) G G^T F(s)^T ds q^2 with G = [0, 1] (acceleration drives the velocity).
     dt, q = 0.137, 3.0
-    G = np.vstack([np.zeros((4, 4)), np.eye(4)])
-    reference, _ = quad_vec(lambda s: transition(s) @ G @ G.T @ transition(s).T * q**2, 0.0, dt)
-    np.testing.assert_allclose(process_noise(dt, q), reference, rtol=1e-9, atol=1e-12)
+    G = np.array([[0.0], [1.0]])
+
+    def F(s):
+        return np.array([[1.0, s], [0.0, 1.0]])
+
+    reference, _ = quad_vec(lambda s: F(s) @ G @ G.T @ F(s).T * q**2, 0.0, dt)
+    _, _, Q = kf_predict(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((1, 2, 2)), dt, q)
+    np.testing.assert_allclose(Q[0], reference, rtol=1e-9, atol=1e-12)
 
 
 def test_kalman_update_agrees_with_the_information_form():
-    # Reference: P+^-1 = P^-1 + H^T R^-1 H, x+ = P+ (P^-1 x + H^T R^-1 z).
+    # Reference, per image axis with x = (position, velocity), H = [1, 0]:
+    # P+^-1 = P^-1 + H^T R^-1 H, x+ = P+ (P^-1 x + H^T R^-1 z).
     rng = np.random.default_rng(0)
-    A = rng.normal(size=(8, 8))
-    P = A @ A.T + 8 * np.eye(8)
-    x, z, std = rng.normal(size=8), rng.normal(size=4), 0.7
-    H = np.hstack([np.eye(4), np.zeros((4, 4))])
-    R_inv = np.eye(4) / std**2
-    P_post_ref = np.linalg.inv(np.linalg.inv(P) + H.T @ R_inv @ H)
-    x_post_ref = P_post_ref @ (np.linalg.solve(P, x) + H.T @ R_inv @ z)
-    x_post, P_post = kf_update(x, P, z, std)
-    np.testing.assert_allclose(x_post, x_post_ref, atol=1e-9)
-    np.testing.assert_allclose(P_post, P_post_ref, atol=1e-9)
+    A = rng.normal(size=(3, 2, 2))
+    P = A @ A.transpose(0, 2, 1) + np.eye(2)
+    pos, vel, z, std = rng.normal(size=(3, 2)), rng.normal(size=(3, 2)), rng.normal(size=(3, 2)), 0.7
+    new_pos, new_vel, new_P = kf_update(pos, vel, P, z, std)
+    H = np.array([[1.0, 0.0]])
+    for n in range(3):
+        P_ref = np.linalg.inv(np.linalg.inv(P[n]) + H.T @ H / std**2)
+        np.testing.assert_allclose(new_P[n], P_ref, atol=1e-12)
+        for axis in range(2):
+            x = np.array([pos[n, axis], vel[n, axis]])
+            x_ref = P_ref @ (np.linalg.solve(P[n], x) + H.T[:, 0] * z[n, axis] / std**2)
+            np.testing.assert_allclose([new_pos[n, axis], new_vel[n, axis]], x_ref, atol=1e-12)
 
 
 def test_kalman_filter_learns_a_constant_velocity_from_uneven_intervals():
-    # Noise-free boxes moving at (120, -40) px/s, measured at jittered intervals.
+    # Noise-free joints moving at (120, -40) px/s, measured at jittered intervals.
     rng = np.random.default_rng(1)
-    velocity = np.array([120.0, -40.0, 0.0, 0.0])
-    z0 = np.array([300.0, 200.0, 80.0, 200.0])
-    x, P = np.concatenate([z0, np.zeros(4)]), np.diag([4.0] * 4 + [1e4] * 4)
+    velocity = np.array([120.0, -40.0])
+    start = np.array([[300.0, 200.0], [320.0, 380.0]])
+    pos, vel, P = start.copy(), np.zeros((2, 2)), np.tile(np.diag([4.0, 1e4]), (2, 1, 1))
     t = 0.0
     for _ in range(40):
         dt = 0.1 + rng.uniform(-0.03, 0.03)
         t += dt
-        x, P = kf_predict(x, P, dt, accel_std=5.0)
-        x, P = kf_update(x, P, z0 + velocity * t, measurement_std=2.0)
-    np.testing.assert_allclose(x[4:], velocity, atol=1.0)  # px/s
-    x_next, _ = kf_predict(x, P, 0.5, accel_std=5.0)
-    np.testing.assert_allclose(x_next[:4], z0 + velocity * (t + 0.5), atol=1.0)  # px
+        pos, vel, P = kf_predict(pos, vel, P, dt, accel_std=5.0)
+        pos, vel, P = kf_update(pos, vel, P, start + velocity * t, measurement_std=2.0)
+    np.testing.assert_allclose(vel, np.tile(velocity, (2, 1)), atol=1.0)  # px/s
+    ahead, _, _ = kf_predict(pos, vel, P, 0.5, accel_std=5.0)
+    np.testing.assert_allclose(ahead, start + velocity * (t + 0.5), atol=1.0)  # px
 
 
-def test_match_boxes_agrees_with_brute_force():
+def test_keypoint_distance_by_hand_uses_the_joints_both_know():
+    predicted = np.array([[[0.0, 0.0], [10.0, 0.0], [np.nan, np.nan]]])  # (T=1, J=3, 2)
+    detected = np.array([[[3.0, 4.0], [np.nan, np.nan], [50.0, 50.0]], [[np.nan] * 2, [np.nan] * 2, [1.0, 1.0]]])
+    d = keypoint_distances(predicted, np.array([10.0]), detected)
+    assert d[0, 0] == pytest.approx(5.0 / 10.0)  # only joint 0 in common: 5 px over a 10 px track
+    assert np.isnan(d[0, 1])  # nothing in common
+
+
+def test_match_agrees_with_brute_force():
     rng = np.random.default_rng(2)
     for _ in range(30):
         T, D = (int(n) for n in rng.integers(0, 5, size=2))
         lo = rng.uniform(0, 100, size=(T + D, 2))
         boxes = np.hstack([lo, lo + rng.uniform(20, 60, size=(T + D, 2))])
-        pred, det = boxes[:T], boxes[T:]
-        iou = box_iou(pred, det)
-        # Reference: the one-to-one assignment of the largest total IoU over every permutation, then the
-        # pairs under the threshold dropped.
-        k = min(T, D)
+        iou = box_iou(boxes[:T], boxes[T:])
+        allowed = iou >= 0.1
+        # Reference: the one-to-one assignment of allowed pairs with the largest total IoU, over every
+        # permutation of every subset.
         best, best_pairs = -1.0, set()
-        for rs in itertools.combinations(range(T), k):
-            for cs in itertools.permutations(range(D), k):
-                total = sum(iou[r, c] for r, c in zip(rs, cs))
-                if total > best + 1e-12:
-                    best, best_pairs = total, {(r, c) for r, c in zip(rs, cs) if iou[r, c] >= 0.1}
-        rows, cols = match_boxes(pred, det, min_iou=0.1)
+        for k in range(min(T, D) + 1):
+            for rs in itertools.combinations(range(T), k):
+                for cs in itertools.permutations(range(D), k):
+                    if all(allowed[r, c] for r, c in zip(rs, cs)):
+                        total = sum(iou[r, c] for r, c in zip(rs, cs))
+                        if total > best + 1e-12:
+                            best, best_pairs = total, set(zip(rs, cs))
+        rows, cols = match(1.0 - iou, allowed)
         assert set(zip(rows.tolist(), cols.tolist())) == best_pairs
 
 
 # ---------------------------------------------------------------- the tracker
 
 
-def test_ids_follow_people_through_reordered_detections_and_uneven_stamps(cameras):
+@pytest.mark.parametrize("affinity", list(Affinity2D))
+def test_ids_follow_people_through_reordered_detections_and_uneven_stamps(cameras, affinity):
     rng = np.random.default_rng(3)
-    tracker = SingleViewTracker(cameras, SingleViewConfig(min_hits=3))
+    tracker = SingleViewTracker(cameras, SingleViewConfig(affinity=affinity, min_hits=3))
     t, history = 0.0, []
     for _ in range(30):
         t += 0.1 + rng.normal(0, 0.01)
@@ -151,9 +162,10 @@ def test_ids_follow_people_through_reordered_detections_and_uneven_stamps(camera
         np.testing.assert_allclose(tr.box_px, expected[tr.id], atol=2.0)  # px
 
 
-def test_two_people_crossing_keep_their_ids(cameras):
+@pytest.mark.parametrize("affinity", list(Affinity2D))
+def test_two_people_crossing_keep_their_ids(cameras, affinity):
     # Two people walk past each other at the same height; the velocity carries each through the overlap.
-    tracker = SingleViewTracker(cameras)
+    tracker = SingleViewTracker(cameras, SingleViewConfig(affinity=affinity))
     ids = []
     for k in range(1, 41):
         t = 0.1 * k
@@ -162,6 +174,24 @@ def test_two_people_crossing_keep_their_ids(cameras):
         ids.append(tracker.last_output.detection_track_ids)
     ids = np.array(ids[2:])
     assert len(set(ids[:, 0])) == 1 and len(set(ids[:, 1])) == 1 and ids[0, 0] != ids[0, 1]
+
+
+def test_joints_dropping_out_break_the_box_but_not_the_keypoint_track(cameras):
+    # Every other frame only the head and shoulders are reported (the rest occluded): the box shrinks to a
+    # fifth of its height, under SORT's IoU gate, while the joints that are reported stay where they were.
+    def run(affinity):
+        tracker = SingleViewTracker(cameras, SingleViewConfig(affinity=affinity, min_hits=1))
+        ids = []
+        for k in range(10):
+            f = frame("a", 0.1 * k, [walking_box(0.1 * k, 100, 30.0)])
+            if k % 2:
+                f.keypoints_px[0, 7:] = np.nan
+            tracker.update(f)
+            ids.append(int(tracker.last_output.detection_track_ids[0]))
+        return ids
+
+    assert len(set(run(Affinity2D.KEYPOINTS))) == 1
+    assert len(set(run(Affinity2D.IOU))) > 1
 
 
 def test_death_is_measured_in_seconds_not_frames(cameras):
@@ -225,7 +255,7 @@ def test_bad_frames_are_dropped_with_a_warning_and_bad_config_names_the_field(ca
     assert "unknown camera" in caplog.text and "not finite" in caplog.text
     # Nothing was started by them: the next good frame starts track 0.
     assert tracker.update(frame("a", 0.1, [walking_box(0.0, 100, 0.0)]))[0].id == 0
-    for bad in ({"min_iou": 0.0}, {"min_hits": 0}, {"max_age_s": -1.0}, {"score_threshold": 2.0},
+    for bad in ({"affinity": "iou"}, {"max_joint_distance": 0.0}, {"min_iou": 0.0}, {"min_hits": 0}, {"max_age_s": -1.0}, {"score_threshold": 2.0},
                 {"measurement_std_frac": 0.0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             SingleViewConfig(**bad)
