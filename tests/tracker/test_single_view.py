@@ -255,7 +255,7 @@ def test_bad_frames_are_dropped_with_a_warning_and_bad_config_names_the_field(ca
     assert "unknown camera" in caplog.text and "not finite" in caplog.text
     # Nothing was started by them: the next good frame starts track 0.
     assert tracker.update(frame("a", 0.1, [walking_box(0.0, 100, 0.0)]))[0].id == 0
-    for bad in ({"affinity": "iou"}, {"max_joint_distance": 0.0}, {"min_iou": 0.0}, {"min_hits": 0}, {"max_age_s": -1.0}, {"score_threshold": 2.0},
-                {"measurement_std_frac": 0.0}):
+    for bad in ({"affinity": "iou"}, {"max_joint_distance": 0.0}, {"min_iou": 0.0}, {"min_hits": 0},
+                {"max_age_s": -1.0}, {"score_threshold": 2.0}, {"measurement_std_frac": 0.0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
             SingleViewConfig(**bad)
