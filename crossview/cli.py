@@ -286,12 +286,14 @@ def _cmd_convert(args) -> None:
 
 def _cmd_per_camera(args) -> None:
     from crossview import pipeline
-    from crossview.table5 import per_camera_table
+    from crossview.table5 import paper_means_line, per_camera_table
 
     if args.json:
         pipeline.check_writable(args.json, inputs=(args.recording, args.tracks))
     table = per_camera_table(args.recording, args.tracks)
     print(table.markdown())
+    print()
+    print(paper_means_line())
     if args.json:
         pipeline.write_json(table.to_json(), args.json)
 

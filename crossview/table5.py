@@ -33,6 +33,14 @@ PAPER_TABLE5 = {
 """Chen et al. (CVPR 2020), Table 5, "Tracking performance on the Shelf dataset", MOTA and IDF1 (%)."""
 
 
+def paper_means_line() -> str:
+    """One line with the means over the cameras of the paper's Table 5, to print beside ours."""
+    single = np.mean([v[0] for v in PAPER_TABLE5.values()], axis=0)
+    cross = np.mean([v[1] for v in PAPER_TABLE5.values()], axis=0)
+    return (f"paper, Table 5 (Shelf, {len(PAPER_TABLE5)} cameras, projected), mean: single-view MOTA {single[0]:.1f} "
+            f"IDF1 {single[1]:.1f}, cross-view MOTA {cross[0]:.1f} IDF1 {cross[1]:.1f}")
+
+
 @dataclass
 class PerCameraRow:
     """One camera's row: the single-view and the cross-view tracker on its detections, and the projected

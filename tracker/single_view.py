@@ -300,6 +300,9 @@ class SingleViewTracker:
             self.last_output = SingleViewOutput(t, frame.camera, [], np.full(D, -1, dtype=np.int64))
             return []
         if tracks is None:
+            if D == 0:  # nothing to track yet, and an empty frame may not say how many joints come
+                self.last_output = SingleViewOutput(t, frame.camera, [], np.zeros(0, dtype=np.int64))
+                return []
             tracks = self._tracks[frame.camera] = _CameraTracks(J)
         cfg = self.config
         tracks.keep(t - tracks.last_s <= cfg.max_age_s)  # death (a frame from the past keeps everything)

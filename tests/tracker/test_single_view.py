@@ -237,6 +237,9 @@ def test_detections_without_a_box_and_empty_frames_are_left_unassigned(cameras):
     assert ids[0] >= 0 and ids[1] == -1
     assert tracker.update(Frame("a", 0.1, np.zeros((0, 17, 2)), np.zeros((0, 17)))) == []
     assert tracker.last_output.detection_track_ids.shape == (0,)
+    # An empty first frame of a camera, even one that names no joints, does not fix its joint count.
+    assert tracker.update(Frame("b", 0.1, np.zeros((0, 0, 2)), np.zeros((0, 0)))) == []
+    assert len(tracker.update(frame("b", 0.2, [walking_box(0.0, 100, 0.0)]))) == 1
 
 
 def test_low_scored_joints_are_left_out_of_the_box(cameras):
@@ -255,6 +258,9 @@ def test_bad_frames_are_dropped_with_a_warning_and_bad_config_names_the_field(ca
     assert "unknown camera" in caplog.text and "not finite" in caplog.text
     # Nothing was started by them: the next good frame starts track 0.
     assert tracker.update(frame("a", 0.1, [walking_box(0.0, 100, 0.0)]))[0].id == 0
+    # A frame of another joint layout than the camera's earlier ones is dropped too.
+    assert tracker.update(Frame("a", 0.2, np.ones((1, 5, 2)), np.ones((1, 5)))) == []
+    assert "5 joints where the camera's earlier frames had 17" in caplog.text
     for bad in ({"affinity": "iou"}, {"max_joint_distance": 0.0}, {"min_iou": 0.0}, {"min_hits": 0},
                 {"max_age_s": -1.0}, {"score_threshold": 2.0}, {"measurement_std_frac": 0.0}):
         with pytest.raises(ValueError, match=next(iter(bad))):
