@@ -154,6 +154,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True)
 
+    p = sub.add_parser("per-camera", help="per-camera MOTA and IDF1: single-view baseline against cross-view "
+                       "(the paper's Table 5)")
+    p.add_argument("recording", type=Path)
+    p.add_argument("tracks", type=Path, help="cross-view tracks file made from the recording")
+    p.add_argument("--json", type=Path, help="write the table as JSON here")
+
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
     p.add_argument("--json", type=Path, help="write the figures here")
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
@@ -297,6 +303,20 @@ def _cmd_convert(args) -> None:
     print(f"{args.output}: written")
 
 
+def _cmd_per_camera(args) -> None:
+    from crossview import pipeline
+    from crossview.table5 import paper_means_line, per_camera_table
+
+    if args.json:
+        pipeline.check_writable(args.json, inputs=(args.recording, args.tracks))
+    table = per_camera_table(args.recording, args.tracks)
+    print(table.markdown())
+    print()
+    print(paper_means_line())
+    if args.json:
+        pipeline.write_json(table.to_json(), args.json)
+
+
 def _cmd_bench(args) -> None:
     from crossview import bench
 
@@ -316,6 +336,7 @@ COMMANDS = {
     "evaluate": _cmd_evaluate,
     "export": _cmd_export,
     "convert": _cmd_convert,
+    "per-camera": _cmd_per_camera,
     "bench": _cmd_bench,
 }
 

@@ -288,12 +288,10 @@ def watched_floor(boxes) -> tuple[float, float, float, float] | None:
     return (*xy.min(axis=0).tolist(), *xy.max(axis=0).tolist())
 
 
-def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
-    """Scores a tracks file against the recording it was made from; returns (report, json dict)."""
-    from tqdm import tqdm
-
+def open_run(rec_path: Path, tracks_path: Path):
+    """Opens a recording and a tracks file made from it; (Recording, Tracks). CrossviewError when the tracks
+    were made from another scenario or seed."""
     from crossview import recording
-    from crossview.scoring import score as score_outputs
 
     rec = recording.open_recording(rec_path)
     tracks = recording.open_tracks(tracks_path)
@@ -303,6 +301,16 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
             f"(digest {tracks.header.scenario_digest[:12]}), not from {rec_path} "
             f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
         )
+    return rec, tracks
+
+
+def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
+    """Scores a tracks file against the recording it was made from; returns (report, json dict)."""
+    from tqdm import tqdm
+
+    from crossview.scoring import score as score_outputs
+
+    rec, tracks = open_run(rec_path, tracks_path)
     truth = list(rec.truth())
     outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
     report = score_outputs(truth, outputs, rec.frames(), rec.cameras, scored_area=watched_floor(rec.boxes),

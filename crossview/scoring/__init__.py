@@ -28,9 +28,10 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import COCO17, Camera, Skeleton
-from crossview.scoring.association import SCORED_STATES, association_accuracy, projected_2d_scores
+from crossview.scoring.association import SCORED_STATES, association_accuracy
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
 from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
+from crossview.scoring.per_camera import projected_2d_scores
 from crossview.scoring.pose import PoseAccumulator
 from crossview.scoring.report import JSON_KEYS, ScoreReport
 from sim.types import CameraFrame, PoseTruth

@@ -1,4 +1,4 @@
-"""Per-camera association accuracy (the paper's Figure 4) and per-camera 2D tracking quality (Table 5).
+"""Per-camera association accuracy (the paper's Figure 4), and the projection of 3D poses into a camera as boxes.
 
 Association accuracy: over the run, each person's *carrier* is the target to which most of that
 person's true detections (all cameras) were assigned. A true detection is correctly associated when the
@@ -8,30 +8,25 @@ cameras. False-positive detections (person id -1) are not in the denominator; th
 tracker did assign to a target is reported beside. Camera frames with no tracker output of the same
 camera and stamp (the tracker never processed them) are left out and counted.
 
-2D tracking per camera (the paper scores Shelf this way, following MOTChallenge): for every tracker
-output of a camera, the targets' 3D poses and the true poses at the output's stamp are projected into
-that camera (OpenCV model with distortion); each becomes the bounding box of its projected joints. A
-box counts when at least `MIN_VISIBLE_FRACTION` of it lies inside the image. Boxes match when their
-IoU is at least `IOU_THRESHOLD`; py-motmetrics gives MOTA, IDF1, FP, FN and IDS per camera.
+A 3D pose seen by a camera (`pose_boxes`) is the bounding box of its joints projected with the camera's
+distortion; it counts when at least `MIN_VISIBLE_FRACTION` of it lies inside the image. The per-camera 2D
+tracking scores that use it (the paper's Table 5) are in `crossview.scoring.per_camera`.
 """
 
 from __future__ import annotations
 
 from collections import Counter, defaultdict
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import cv2
-import motmetrics as mm
 import numpy as np
 
+from core.boxes import keypoint_boxes
 from core.types import Camera
-from crossview.scoring.identity import identity_scores
 from sim.types import CameraFrame
 from tracker.types import TargetState, TrackerOutput
 
-IOU_THRESHOLD = 0.5
-"""Smallest IoU of a projected target box and a true box that counts as a match (MOTChallenge)."""
 MIN_VISIBLE_FRACTION = 0.5
 """Fraction of a projected box that must lie inside the image for the box to count."""
 SCORED_STATES = (TargetState.CONFIRMED, TargetState.LOST)
@@ -40,7 +35,8 @@ _MIN_DEPTH_M = 0.1
 _PROJECTION_MARGIN = 0.5  # fraction of the image size outside which undistorted points are not distorted
 
 
-def _stamp_key(camera: str, stamp_s: float) -> tuple[str, int]:
+def stamp_key(camera: str, stamp_s: float) -> tuple[str, int]:
+    """The key that pairs a camera frame with the tracker output made from it: camera and stamp in ns."""
     return camera, int(round(stamp_s * 1e9))
 
 
@@ -72,11 +68,11 @@ def association_accuracy(camera_frames: Iterable[CameraFrame], outputs: Sequence
         camera_frames: delivered frames with per-detection truth.
         outputs: tracker outputs; `detection_target_ids` rows match the frame's detections.
     """
-    assigned = {_stamp_key(o.camera, o.stamp_s): np.asarray(o.detection_target_ids, dtype=np.int64) for o in outputs}
+    assigned = {stamp_key(o.camera, o.stamp_s): np.asarray(o.detection_target_ids, dtype=np.int64) for o in outputs}
     pairs: list[tuple[str, np.ndarray, np.ndarray]] = []
     missing = 0
     for cf in camera_frames:
-        key = _stamp_key(cf.frame.camera, cf.frame.stamp_s)
+        key = stamp_key(cf.frame.camera, cf.frame.stamp_s)
         persons = np.asarray(cf.truth.person_ids, dtype=np.int64)
         if key not in assigned:
             missing += 1
@@ -161,78 +157,10 @@ def pose_boxes(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """
     poses = np.asarray(poses, dtype=np.float64)
     n, j = poses.shape[:2]
-    px = project_points(camera, poses.reshape(-1, 3)).reshape(n, j, 2)
-    ok = np.isfinite(px).all(axis=-1, keepdims=True)  # (N, J, 1)
-    lo = np.where(ok, px, np.inf).min(axis=1)
-    hi = np.where(ok, px, -np.inf).max(axis=1)
-    enough = ok[..., 0].sum(axis=1) >= 2
-    boxes = np.where(enough[:, None], np.hstack([lo, hi]), np.nan)
+    boxes = keypoint_boxes(project_points(camera, poses.reshape(-1, 3)).reshape(n, j, 2))
+    lo, hi = boxes[:, :2], boxes[:, 2:]
     size = np.prod(hi - lo, axis=1)
     inside = np.prod(np.clip(np.minimum(hi, (camera.width_px, camera.height_px)) - np.maximum(lo, 0), 0, None), axis=1)
     with np.errstate(invalid="ignore"):
-        visible = enough & (size > 0) & (inside >= MIN_VISIBLE_FRACTION * size)
+        visible = np.isfinite(size) & (size > 0) & (inside >= MIN_VISIBLE_FRACTION * size)
     return boxes, visible
-
-
-def box_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """(N, M) IoU of (x0, y0, x1, y1) boxes."""
-    lo = np.maximum(a[:, None, :2], b[None, :, :2])
-    hi = np.minimum(a[:, None, 2:], b[None, :, 2:])
-    inter = np.prod(np.clip(hi - lo, 0, None), axis=-1)
-    area_a = np.prod(a[:, 2:] - a[:, :2], axis=-1)
-    area_b = np.prod(b[:, 2:] - b[:, :2], axis=-1)
-    union = area_a[:, None] + area_b[None, :] - inter
-    return np.divide(inter, union, out=np.zeros_like(inter), where=union > 0)
-
-
-@dataclass
-class Camera2DScores:
-    """MOTChallenge-style scores of one camera's projected tracks (the paper's Table 5)."""
-
-    mota: float | None
-    idf1: float | None
-    false_positives: int
-    false_negatives: int
-    id_switches: int
-    num_truth: int
-    num_frames: int
-
-
-def projected_2d_scores(
-    outputs: Sequence[TrackerOutput],
-    cameras: Sequence[Camera],
-    truth_at: Callable[[float], tuple[np.ndarray, np.ndarray]],
-) -> dict[str, Camera2DScores]:
-    """Per-camera 2D MOT scores of projected 3D tracks, see the module docstring.
-
-    Args:
-        outputs: tracker outputs; each is scored in the camera that produced it.
-        cameras: the calibrated cameras.
-        truth_at: t -> (ids (P,), poses (P, J, 3)) true poses at time t.
-
-    Returns:
-        camera name -> scores, for every camera given.
-    """
-    by_name = {c.name: c for c in cameras}
-    accs = {name: mm.MOTAccumulator(auto_id=True) for name in by_name}
-    frames: Counter = Counter()
-    for out in outputs:
-        camera = by_name.get(out.camera)
-        if camera is None:
-            raise ValueError(f"2D scores: tracker output from camera {out.camera!r}, not among {sorted(by_name)}")
-        ids, poses = truth_at(out.stamp_s)
-        t_boxes, t_vis = pose_boxes(camera, poses) if len(ids) else (np.zeros((0, 4)), np.zeros(0, bool))
-        targets = [t for t in out.targets if t.state in SCORED_STATES]
-        h_ids = np.array([t.id for t in targets], dtype=np.int64)
-        h_poses = np.array([t.pose for t in targets], dtype=np.float64) if targets else np.zeros((0, 1, 3))
-        h_boxes, h_vis = pose_boxes(camera, h_poses) if len(h_ids) else (np.zeros((0, 4)), np.zeros(0, bool))
-        iou = box_iou(t_boxes[t_vis], h_boxes[h_vis])
-        dist = np.where(iou >= IOU_THRESHOLD, 1.0 - iou, np.nan)
-        accs[camera.name].update(np.asarray(ids)[t_vis].tolist(), h_ids[h_vis].tolist(), dist)
-        frames[camera.name] += 1
-    result = {}
-    for name in by_name:  # the cameras' own order
-        s = identity_scores(accs[name])
-        result[name] = Camera2DScores(s.mota, s.idf1, s.false_positives, s.false_negatives, s.id_switches,
-                                      s.num_truth, frames[name])
-    return result

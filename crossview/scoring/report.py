@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from crossview.scoring.association import Camera2DScores
+from crossview.scoring.per_camera import Camera2DScores
 
 JSON_KEYS = (
     "scenario", "seed", "num_cameras", "num_people", "duration_s", "pcp", "mpjpe_mm", "pck_100mm", "mota",

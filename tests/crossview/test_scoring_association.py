@@ -6,7 +6,7 @@ import pytest
 
 from core.types import Camera, Frame
 from crossview.scoring import score
-from crossview.scoring.association import association_accuracy, box_iou, pose_boxes, project_points
+from crossview.scoring.association import association_accuracy, pose_boxes, project_points
 from sim.types import CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import Target, TrackerOutput
 
@@ -64,12 +64,6 @@ def test_projection_agrees_with_opencv_from_world_coordinates():
     np.testing.assert_allclose(project_points(cam, pts), ref.reshape(-1, 2), atol=1e-9)  # px
     # Behind the camera: NaN.
     assert np.isnan(project_points(cam, np.array([[0.0, 0.0, 5.0]]))).all()
-
-
-def test_box_iou_by_hand():
-    a = np.array([[0.0, 0.0, 2.0, 2.0]])
-    b = np.array([[1.0, 1.0, 3.0, 3.0], [5.0, 5.0, 6.0, 6.0]])
-    np.testing.assert_allclose(box_iou(a, b), [[1 / 7, 0.0]])
 
 
 def test_box_mostly_outside_the_image_does_not_count():
