@@ -286,12 +286,7 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
 
     rec = recording.open_recording(rec_path)
     tracks = recording.open_tracks(tracks_path)
-    if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
-        raise CrossviewError(
-            f"{tracks_path}: tracks were made from scenario {tracks.header.scenario_name!r} seed {tracks.header.seed} "
-            f"(digest {tracks.header.scenario_digest[:12]}), not from {rec_path} "
-            f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
-        )
+    check_tracks_match(rec, tracks)
     truth = list(rec.truth())
     outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
     report = score_outputs(truth, outputs, rec.frames(), rec.cameras, scored_area=watched_floor(rec.boxes),
@@ -314,6 +309,17 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
     return report, result
 
 
+def check_tracks_match(rec, tracks) -> None:
+    """Raises CrossviewError unless the opened tracks file was made from the opened recording (the same
+    scenario text and seed)."""
+    if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
+        raise CrossviewError(
+            f"{tracks.path}: tracks were made from scenario {tracks.header.scenario_name!r} seed {tracks.header.seed} "
+            f"(digest {tracks.header.scenario_digest[:12]}), not from {rec.path} "
+            f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
+        )
+
+
 def write_json(result: dict, path: Path) -> None:
     """Writes a JSON document (the score JSON, the bench's figures) atomically."""
     write_text(json.dumps(result, indent=2, sort_keys=False) + "\n", path)
@@ -321,7 +327,16 @@ def write_json(result: dict, path: Path) -> None:
 
 def write_text(text: str, path: Path) -> None:
     """Writes `text` to `path` atomically (a temporary file in the same folder, renamed at the end)."""
+    write_bytes(text.encode("utf-8"), path)
+
+
+def write_bytes(data: bytes, path: Path) -> None:
+    """Writes `data` to `path` atomically (a temporary file in the same folder, renamed at the end)."""
+    path = Path(path)
     check_writable(path)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
