@@ -156,6 +156,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True,
                    help="picture (.png, .jpg) or, with --from/--to, clip (.gif, .mp4)")
     p.add_argument("--fps", type=_positive_float, default=10.0, help="images per second of a clip (default 10)")
+    p.add_argument("--tile-width", type=_positive_int, default=320, help="width of a contact sheet's tiles, pixels "
+                   "(default 320)")
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend (default: $MUJOCO_GL when it "
                    "names one, else EGL, then OSMesa)")
 
@@ -308,7 +310,7 @@ def _cmd_render(args) -> None:
     done = render(Request(
         recording=args.recording, output=args.output, tracks=args.tracks, camera=args.camera,
         contact_sheet=args.contact_sheet, top_down=args.top_down, time_s=args.time, from_s=args.from_s,
-        to_s=args.to_s, gl=args.gl, fps=args.fps, progress=not args.no_progress,
+        to_s=args.to_s, gl=args.gl, fps=args.fps, tile_width_px=args.tile_width, progress=not args.no_progress,
     ))
     timing = done.timing
     rendered = (f"; {timing.renders} camera views rendered in {timing.render_s:.2f} s "

@@ -354,6 +354,7 @@ class Request:
         from_s, to_s: the range of a clip or of a top-down map's paths.
         gl: the OpenGL backend, None: the environment's MUJOCO_GL, else probed.
         fps: frame rate of a clip.
+        tile_width_px: width of a contact sheet's tiles.
         progress: show a progress bar.
     """
 

@@ -239,4 +239,10 @@ def test_render_writes_a_view_a_contact_sheet_a_top_down_map_and_a_clip(made, of
     assert "clip.gif: 4 images" in out
     with Image.open(tmp_path / "clip.gif") as gif:
         assert gif.n_frames == 4 and gif.size == (cameras[3].width_px, view.shape[0])
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.gif", "plan.png", "sheet.jpg", "view.png"]
+    # The same as MP4 (OpenCV's writer), of the contact sheet.
+    _cli([rec, "--contact-sheet", "--tile-width", "160", "--from", "0.2", "--to", "0.3", "-o", tmp_path / "clip.mp4"],
+         offscreen_backend)
+    video = cv2.VideoCapture(str(tmp_path / "clip.mp4"))
+    assert video.get(cv2.CAP_PROP_FRAME_COUNT) == 2 and video.get(cv2.CAP_PROP_FRAME_WIDTH) == 7 * (160 + 2)
+    video.release()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.gif", "clip.mp4", "plan.png", "sheet.jpg", "view.png"]
