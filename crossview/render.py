@@ -467,45 +467,67 @@ def _render_clip(request: Request, data: Inputs, indices: list[int]) -> RenderRe
         outputs = {keys[n]: o for n, o in found.items()}
     scene = SceneRenderer(rec)
     timer = _Timer()
-    images = []
     try:
-        for t in tqdm(times, unit="image", desc="render", disable=not request.progress, leave=False):
-            if request.contact_sheet:
-                at = {i: frames[(i, t)] for i in indices if (i, t) in frames}
-                outs = {i: outputs[(i, t)] for i in at if (i, t) in outputs}
-                images.append(_contact_sheet(scene, timer, at, outs, t, request.tile_width_px))
-            elif (indices[0], t) in frames:
-                images.append(_camera_picture(scene, timer, indices[0], frames[(indices[0], t)],
-                                              outputs.get((indices[0], t))))
+        with ClipWriter(request.output, request.fps) as clip:
+            for t in tqdm(times, unit="image", desc="render", disable=not request.progress, leave=False):
+                if request.contact_sheet:
+                    at = {i: frames[(i, t)] for i in indices if (i, t) in frames}
+                    outs = {i: outputs[(i, t)] for i in at if (i, t) in outputs}
+                    if at:
+                        clip.add(_contact_sheet(scene, timer, at, outs, t, request.tile_width_px))
+                elif (indices[0], t) in frames:
+                    clip.add(_camera_picture(scene, timer, indices[0], frames[(indices[0], t)],
+                                             outputs.get((indices[0], t))))
+            if not clip.count:
+                raise RenderError(f"--from {request.from_s:g} --to {request.to_s:g}: no frame of the camera in that "
+                                  "range")
     finally:
         scene.close()
-    if not images:
-        raise RenderError(f"--from {request.from_s:g} --to {request.to_s:g}: no frame of the camera in that range")
-    write_clip(images, request.output, request.fps)
-    return RenderResult(request.output, len(images), timer.result())
+    return RenderResult(request.output, clip.count, timer.result())
 
 
-def write_clip(images: list[np.ndarray], path: Path, fps: float) -> None:
-    """Writes BGR images of one size as a GIF (Pillow) or an MP4 (OpenCV's MPEG-4 writer), atomically."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    tmp = path.with_name(path.stem + ".tmp" + suffix)
-    try:
-        if suffix == ".gif":
+class ClipWriter:
+    """Writes BGR images of one size, one at a time, as a GIF (Pillow; kept as 256-colour frames until the end)
+    or an MP4 (OpenCV's MPEG-4 writer, streamed), under a temporary name renamed only when the clip is complete.
+
+    Args:
+        path: the clip, `.gif` or `.mp4`.
+        fps: images per second.
+    """
+
+    def __init__(self, path: Path, fps: float):
+        self.path = Path(path)
+        self.fps = fps
+        self.count = 0
+        self._tmp = self.path.with_name(self.path.stem + ".tmp" + self.path.suffix.lower())
+        self._gif: list | None = [] if self.path.suffix.lower() == ".gif" else None
+        self._video = None
+
+    def add(self, image: np.ndarray) -> None:
+        if self._gif is not None:
             from PIL import Image
 
-            frames = [Image.fromarray(cv2.cvtColor(im, cv2.COLOR_BGR2RGB)).quantize(colors=256) for im in images]
-            frames[0].save(tmp, save_all=True, append_images=frames[1:], duration=round(1000 / fps), loop=0)
+            self._gif.append(Image.fromarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB)).quantize(colors=256))
         else:
-            h, w = images[0].shape[:2]
-            writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
-            if not writer.isOpened():
-                raise RenderError(f"{path}: OpenCV cannot write MP4 here (its video writer did not open)")
-            try:
-                for image in images:
-                    writer.write(image)
-            finally:
-                writer.release()
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
+            if self._video is None:
+                h, w = image.shape[:2]
+                self._video = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*"mp4v"), self.fps, (w, h))
+                if not self._video.isOpened():
+                    raise RenderError(f"{self.path}: OpenCV cannot write MP4 here (its video writer did not open)")
+            self._video.write(image)
+        self.count += 1
+
+    def __enter__(self) -> ClipWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if self._video is not None:
+                self._video.release()
+            if exc_type is None and self.count:
+                if self._gif is not None:
+                    self._gif[0].save(self._tmp, save_all=True, append_images=self._gif[1:],
+                                      duration=round(1000 / self.fps), loop=0)
+                os.replace(self._tmp, self.path)
+        finally:
+            self._tmp.unlink(missing_ok=True)
