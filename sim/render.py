@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import enum
 import functools
+import importlib.util
 import logging
 import math
 import os
@@ -92,10 +93,13 @@ def choose_backend(requested: str | None = None) -> GLBackend:
             else probes (`probe_backend`).
 
     Raises:
-        RenderingUnavailable: the requested backend is unknown, no backend works here, or mujoco was
-            already imported without one (the one-line message says what to install).
+        RenderingUnavailable: PyOpenGL is missing, the requested backend is unknown, no backend works here, or
+            mujoco was already imported without one (the one-line message says what to install).
     """
     names = ", ".join(b.value for b in GLBackend)
+    if importlib.util.find_spec("OpenGL") is None:
+        raise RenderingUnavailable("PyOpenGL is not installed (MuJoCo's EGL and OSMesa contexts need it): "
+                                   "pip install 'crossview-testbed[render]'")
     if requested is None:
         from_env = os.environ.get("MUJOCO_GL", "").strip().lower()
         requested = from_env if from_env in {b.value for b in GLBackend} else None

@@ -47,3 +47,10 @@ def test_a_backend_after_mujoco_was_imported_without_it_is_refused(monkeypatch):
         choose_backend("osmesa")
     with pytest.raises(RenderingUnavailable, match="--gl glx: unknown OpenGL backend"):
         choose_backend("glx")
+
+
+def test_missing_pyopengl_names_the_extra(monkeypatch):
+    real = render.importlib.util.find_spec
+    monkeypatch.setattr(render.importlib.util, "find_spec", lambda name: None if name == "OpenGL" else real(name))
+    with pytest.raises(RenderingUnavailable, match=r"pip install 'crossview-testbed\[render\]'"):
+        choose_backend("osmesa")
