@@ -160,6 +160,25 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("tracks", type=Path, help="cross-view tracks file made from the recording")
     p.add_argument("--json", type=Path, help="write the table as JSON here")
 
+    p = sub.add_parser("render", help="pictures of what the cameras saw, with the detections and tracks drawn on")
+    p.add_argument("recording", type=Path)
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--camera", metavar="NAME", help="one camera's view")
+    what.add_argument("--contact-sheet", action="store_true", help="every camera's view in a labelled grid")
+    what.add_argument("--top-down", action="store_true", help="the plan: shelves, each camera's field of view on "
+                      "the floor, true and tracked paths (from --from to --to, or 0 to --time), id switches")
+    p.add_argument("--time", type=float, metavar="T", help="the instant, seconds since the recording's start")
+    p.add_argument("--from", dest="from_s", type=float, metavar="T0", help="start of a clip or a top-down range, s")
+    p.add_argument("--to", dest="to_s", type=float, metavar="T1", help="end of a clip or a top-down range, s")
+    p.add_argument("--tracks", type=Path, help="tracks file of the recording: draw the tracked skeletons")
+    p.add_argument("-o", "--output", type=Path, required=True,
+                   help="picture (.png, .jpg) or, with --from/--to, clip (.gif, .mp4)")
+    p.add_argument("--fps", type=_positive_float, default=10.0, help="images per second of a clip (default 10)")
+    p.add_argument("--tile-width", type=_positive_int, default=320, help="width of a contact sheet's tiles, pixels "
+                   "(default 320)")
+    p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend (default: $MUJOCO_GL when it "
+                   "names one, else EGL, then OSMesa)")
+
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
     p.add_argument("--json", type=Path, help="write the figures here")
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
@@ -324,6 +343,20 @@ def _cmd_bench(args) -> None:
                markdown_path=args.markdown)
 
 
+def _cmd_render(args) -> None:
+    from crossview.render import Request, render
+
+    done = render(Request(
+        recording=args.recording, output=args.output, tracks=args.tracks, camera=args.camera,
+        contact_sheet=args.contact_sheet, top_down=args.top_down, time_s=args.time, from_s=args.from_s,
+        to_s=args.to_s, gl=args.gl, fps=args.fps, tile_width_px=args.tile_width, progress=not args.no_progress,
+    ))
+    timing = done.timing
+    rendered = (f"; {timing.renders} camera views rendered in {timing.render_s:.2f} s "
+                f"({1000 * timing.per_image_s:.0f} ms each)") if timing.renders else ""
+    print(f"{done.path}: {done.images} image{'s' if done.images != 1 else ''}{rendered}")
+
+
 COMMANDS = {
     "run": _cmd_run,
     "generate": _cmd_generate,
@@ -338,6 +371,7 @@ COMMANDS = {
     "convert": _cmd_convert,
     "per-camera": _cmd_per_camera,
     "bench": _cmd_bench,
+    "render": _cmd_render,
 }
 
 

@@ -23,10 +23,17 @@ _BOX_BGR = {
     BoxKind.EXIT: (80, 80, 210),
 }
 _MARGIN_PX = 30
+# Opacity of one camera's field of view on the floor; overlapping fields add up.
+_FOV_ALPHA = 0.06
+_FOV_BGR = (200, 140, 60)
 _LEGEND_PX = 40
 
 
-def _person_bgr(person_id: int) -> tuple[int, int, int]:
+# BGR colour of a false positive detection (no true person behind it).
+FALSE_POSITIVE_BGR = (150, 150, 150)
+
+
+def person_bgr(person_id: int) -> tuple[int, int, int]:
     """A stable, distinct colour per person (golden-ratio hues)."""
     r, g, b = colorsys.hsv_to_rgb((person_id * 0.618034) % 1.0, 0.85, 0.8)
     return int(b * 255), int(g * 255), int(r * 255)
@@ -38,15 +45,22 @@ def draw_layout(
     trajectories: dict[int, np.ndarray] | None = None,
     title: str = "",
     px_per_m: float = 40.0,
+    *,
+    fields_of_view: bool = False,
+    tracked: dict[int, np.ndarray] | None = None,
+    switches: list[tuple[float, int, int, float, float]] | None = None,
 ) -> np.ndarray:
     """Draws a store seen from above (x to the right, y up).
 
     Args:
         boxes: the store's boxes (`World.boxes`); the floor box sets the extent.
         cameras: cameras to mark: a dot at the centre and a line to where the optical axis meets the floor.
-        trajectories: person id -> (N, 2) pelvis positions over time, metres.
+        trajectories: person id -> (N, 2) pelvis positions over time, metres (solid lines in the person's colour).
         title: one line printed under the picture.
         px_per_m: scale.
+        fields_of_view: shade where each camera's image meets the floor (darker where more cameras see).
+        tracked: target id -> (N, 2) tracked body roots over time, metres (dotted, in the id's colour, labelled).
+        switches: identity switches (time s, person id, new target id, x m, y m): a red ring, labelled.
 
     Returns:
         (H, W, 3) uint8 BGR image.
@@ -73,8 +87,10 @@ def draw_layout(
         local = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy]])
         return np.array(box.center_m[:2]) + local @ np.array([[c, s], [-s, c]])
 
-    order = (BoxKind.FLOOR, BoxKind.ENTRANCE, BoxKind.EXIT, BoxKind.WALL, BoxKind.SHELF, BoxKind.CHECKOUT)
-    for kind in order:
+    # The floor and the door mats, then the fields of view on them, then what stands on the floor.
+    for kind in (BoxKind.FLOOR, BoxKind.ENTRANCE, BoxKind.EXIT, None, BoxKind.WALL, BoxKind.SHELF, BoxKind.CHECKOUT):
+        if kind is None and fields_of_view:
+            image = _tint_fields_of_view(image, cameras or [], px, footprint(floor))
         for box in boxes:
             if box.kind == kind:
                 cv2.fillPoly(image, [px(footprint(box))], _BOX_BGR[kind], lineType=cv2.LINE_AA)
@@ -82,9 +98,25 @@ def draw_layout(
         xy = np.asarray(xy, float)
         if len(xy) < 2:
             continue
-        colour = _person_bgr(pid)
+        colour = person_bgr(pid)
         cv2.polylines(image, [px(xy)], False, colour, 1, lineType=cv2.LINE_8)  # aliased: PNGs stay small
         cv2.circle(image, tuple(int(v) for v in px(xy[-1])[0]), 3, colour, -1, lineType=cv2.LINE_AA)
+    for tid, xy in sorted((tracked or {}).items()):
+        xy = np.asarray(xy, float)
+        xy = xy[np.all(np.isfinite(xy), axis=1)]
+        if len(xy) < 2:
+            continue
+        colour = track_bgr(tid)
+        for p in px(xy)[::2]:
+            cv2.circle(image, (int(p[0]), int(p[1])), 1, colour, -1)
+        end = px(xy[-1])[0]
+        cv2.putText(image, f"#{tid}", (int(end[0]) + 4, int(end[1]) - 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1,
+                    lineType=cv2.LINE_AA)
+    for t_s, pid, tid, x, y in switches or []:
+        centre = tuple(int(v) for v in px(np.array([x, y]))[0])
+        cv2.circle(image, centre, 9, (0, 0, 220), 2, lineType=cv2.LINE_AA)
+        cv2.putText(image, f"P{pid}->#{tid} {t_s:.1f}s", (centre[0] + 11, centre[1] + 4), cv2.FONT_HERSHEY_SIMPLEX,
+                    0.35, (0, 0, 220), 1, lineType=cv2.LINE_AA)
     for cam in cameras or []:
         centre = cam.center_world
         axis = cam.R_cam_from_world[2]  # optical axis in the world frame
@@ -109,6 +141,100 @@ def draw_layout(
     cv2.putText(image, "1 m", (int(bar[1, 0]) + 4, int(bar[1, 1]) + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
                 (0, 0, 0), 1, lineType=cv2.LINE_AA)
     return image
+
+
+def _tint_fields_of_view(image: np.ndarray, cameras: list[Camera], px, floor_xy: np.ndarray) -> np.ndarray:
+    """`image` with each camera's floor footprint tinting the floor; where several overlap the tint deepens."""
+    seen_by = np.zeros(image.shape[:2], np.float32)
+    for cam in cameras:
+        footprint_xy = floor_footprint(cam)
+        if len(footprint_xy) >= 3:
+            mask = np.zeros(image.shape[:2], np.uint8)
+            cv2.fillPoly(mask, [px(footprint_xy)], 1)
+            seen_by += mask
+    on_floor = np.zeros(image.shape[:2], np.uint8)
+    cv2.fillPoly(on_floor, [px(floor_xy)], 1)
+    tint = ((1.0 - (1.0 - _FOV_ALPHA) ** seen_by) * on_floor)[..., None]
+    return (image * (1.0 - tint) + np.array(_FOV_BGR, np.float32) * tint).astype(np.uint8)
+
+
+def track_bgr(target_id: int) -> tuple[int, int, int]:
+    """A stable colour per tracker id, from another walk around the hue circle than `person_bgr`'s."""
+    r, g, b = colorsys.hsv_to_rgb((target_id * 0.381966 + 0.5) % 1.0, 0.9, 0.65)
+    return int(b * 255), int(g * 255), int(r * 255)
+
+
+def floor_footprint(camera: Camera, samples_per_side: int = 24) -> np.ndarray:
+    """(N, 2) where the border of `camera`'s image meets the floor (z = 0), metres, following the border; rays
+    of the border that do not reach the floor (above the horizon) are left out.
+
+    Each border pixel is undistorted to its ray (OpenCV's lens model, the camera's own) and the ray is cut
+    with the floor plane.
+    """
+    W, H = camera.width_px, camera.height_px
+    s = np.linspace(0.0, 1.0, samples_per_side, endpoint=False)
+    border = np.concatenate([
+        np.stack([s * (W - 1), np.zeros_like(s)], 1), np.stack([np.full_like(s, W - 1), s * (H - 1)], 1),
+        np.stack([(1 - s) * (W - 1), np.full_like(s, H - 1)], 1), np.stack([np.zeros_like(s), (1 - s) * (H - 1)], 1)])
+    rays = cv2.undistortPoints(border.reshape(-1, 1, 2), camera.K, camera.dist).reshape(-1, 2)
+    directions = np.column_stack([rays, np.ones(len(rays))]) @ camera.R_cam_from_world  # world frame, (N, 3)
+    centre = camera.center_world
+    down = directions[:, 2] < -1e-9
+    scale = -centre[2] / directions[down, 2]
+    return centre[:2] + directions[down, :2] * scale[:, None]
+
+
+def top_down_picture(rec, tracks, t0_s: float, t1_s: float, rate_hz: float = 10.0,
+                     px_per_m: float | None = None) -> np.ndarray:
+    """The plan of a recording's store with each camera's field of view on the floor, everybody's true path from
+    `t0_s` to `t1_s` and, with a tracks file, the tracked paths and the identity switches the scoring counts
+    (`crossview.scoring.score` over the whole recording, those in the range).
+
+    Args:
+        rec: an opened recording (`crossview.recording.Recording`).
+        tracks: its opened tracks file, or None.
+        t0_s, t1_s: the time range, seconds.
+        rate_hz: samples per second of the paths.
+        px_per_m: scale; None fits the store to about 1000 pixels across.
+
+    Returns:
+        (H, W, 3) uint8 BGR image.
+    """
+    from crossview.pipeline import watched_floor
+    from crossview.scoring import score
+    from crossview.scoring.identity import body_roots
+
+    skeleton = rec.skeleton
+    truth = list(rec.truth())
+    paths: dict[int, list[np.ndarray]] = {}
+    step = 1.0 / rate_hz
+    next_t = t0_s
+    for tick in truth:
+        if tick.t_s < next_t - 1e-9 or tick.t_s > t1_s + 1e-9:
+            continue
+        next_t = tick.t_s + step
+        for pid, root in zip(tick.person_ids.tolist(), body_roots(tick.poses, skeleton)):
+            paths.setdefault(pid, []).append(root)
+    tracked: dict[int, list[np.ndarray]] = {}
+    switches = None
+    if tracks is not None:
+        outputs = list(tracks.outputs())
+        next_t = t0_s
+        for output in sorted(outputs, key=lambda o: o.stamp_s):
+            if output.stamp_s < next_t - 1e-9 or output.stamp_s > t1_s + 1e-9:
+                continue
+            next_t = output.stamp_s + step
+            for target in output.targets:
+                tracked.setdefault(target.id, []).append(body_roots(target.pose[None], skeleton)[0])
+        report = score(truth, outputs, scored_area=watched_floor(rec.boxes), skeleton=skeleton)
+        switches = [s for s in report.id_switch_events if t0_s <= s[0] <= t1_s]
+    floor = next(b for b in rec.boxes if b.kind == BoxKind.FLOOR)
+    scale = px_per_m or min(120.0, 1000.0 / max(floor.size_m[0], floor.size_m[1]))
+    title = (f"{rec.header.scenario_name} seed {rec.header.seed}: {len(rec.cameras)} cameras, true paths "
+             f"{t0_s:g}-{t1_s:g} s" + (f" (solid), tracked (dotted, #id), {len(switches)} id switches (red)"
+                                      if tracks is not None else ""))
+    return draw_layout(rec.boxes, rec.cameras, {k: np.array(v) for k, v in paths.items()}, title, scale,
+                       fields_of_view=True, tracked={k: np.array(v) for k, v in tracked.items()}, switches=switches)
 
 
 def layout_picture(scenario, seconds: float = 60.0, seed: int | None = None, cameras: list[Camera] | None = None,

@@ -295,12 +295,7 @@ def open_run(rec_path: Path, tracks_path: Path):
 
     rec = recording.open_recording(rec_path)
     tracks = recording.open_tracks(tracks_path)
-    if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
-        raise CrossviewError(
-            f"{tracks_path}: tracks were made from scenario {tracks.header.scenario_name!r} seed {tracks.header.seed} "
-            f"(digest {tracks.header.scenario_digest[:12]}), not from {rec_path} "
-            f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
-        )
+    check_tracks_match(rec, tracks)
     return rec, tracks
 
 
@@ -331,6 +326,17 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
         camera_frames_per_s=frames_per_s,
     )
     return report, result
+
+
+def check_tracks_match(rec, tracks) -> None:
+    """Raises CrossviewError unless the opened tracks file was made from the opened recording (the same
+    scenario text and seed)."""
+    if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
+        raise CrossviewError(
+            f"{tracks.path}: tracks were made from scenario {tracks.header.scenario_name!r} seed {tracks.header.seed} "
+            f"(digest {tracks.header.scenario_digest[:12]}), not from {rec.path} "
+            f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
+        )
 
 
 def write_json(result: dict, path: Path, inputs: tuple = ()) -> None:

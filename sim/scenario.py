@@ -8,6 +8,7 @@ TOML tree against those dataclasses: unknown keys, wrong types and values that a
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import enum
 import hashlib
@@ -116,23 +117,58 @@ def load(name_or_path: str | Path | None = None, overrides: dict | None = None) 
         raise ScenarioError(f"{path}: no such scenario file (shipped scenarios: {shipped})") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError(f"{path}: cannot read scenario: {e}") from None
+    return dataclasses.replace(_from_text(text, overrides, str(path), path.stem), source_path=str(path))
+
+
+_OVERRIDE_NOTE = "\n# override: "
+
+
+def _from_text(text: str, overrides: dict, where: str, name: str) -> Scenario:
+    """The scenario of a file's text with `overrides` applied; its `source_text` is the text with the
+    overrides noted under it."""
     try:
         tree = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{path}: malformed TOML: {e}") from None
+        raise ScenarioError(f"{where}: malformed TOML: {e}") from None
     for dotted, value in overrides.items():
         *parents, leaf = dotted.split(".")
         table = tree
         for parent in parents:
             table = table.setdefault(parent, {})
             if not isinstance(table, dict):
-                raise ScenarioError(f"{path}: {parent} must be a table ([{parent}]), got {table!r}")
+                raise ScenarioError(f"{where}: {parent} must be a table ([{parent}]), got {table!r}")
         table[leaf] = value
-    tree.setdefault("name", path.stem)
-    scenario = from_dict(Scenario, tree, str(path), "")
+    tree.setdefault("name", name)
+    scenario = from_dict(Scenario, tree, where, "")
     # Overrides are part of what was simulated, so they are part of the recorded description.
-    note = "".join(f"\n# override: {k} = {v!r}" for k, v in sorted(overrides.items()))
-    return dataclasses.replace(scenario, source_text=text + note, source_path=str(path))
+    note = "".join(f"{_OVERRIDE_NOTE}{k} = {v!r}" for k, v in sorted(overrides.items()))
+    return dataclasses.replace(scenario, source_text=text + note)
+
+
+def from_source_text(source_text: str, name: str, where: str) -> Scenario:
+    """The scenario whose `source_text` (what a recording keeps) is `source_text`: the file's TOML with the
+    overrides `load` noted under it applied again, so that it simulates what was recorded.
+
+    Args:
+        source_text: a `Scenario.source_text`.
+        name: the scenario's name when the text sets none (the file's stem it was loaded from).
+        where: what error messages name (the recording).
+
+    Raises:
+        ScenarioError: the text is not a valid scenario.
+    """
+    text, *notes = source_text.split(_OVERRIDE_NOTE)
+    overrides = {}
+    for note in notes:
+        key, _, value = note.partition(" = ")
+        try:
+            overrides[key] = ast.literal_eval(value)
+        except (ValueError, SyntaxError):
+            raise ScenarioError(f"{where}: unreadable override note {note!r} in the scenario text") from None
+    scenario = _from_text(text, overrides, where, name)
+    if scenario.source_text != source_text:
+        raise ScenarioError(f"{where}: the scenario text's override notes do not read back as written")
+    return scenario
 
 
 def from_dict(cls, tree: dict, file: str, prefix: str):

@@ -60,3 +60,28 @@ def campus_dir(request) -> Path:
     if request.param == "fixture":
         return DATA / "campus"
     return request.getfixturevalue("campus_full")
+
+
+REQUIRE_RENDERING_ENV = "CROSSVIEW_REQUIRE_RENDERING"  # set in CI: a missing backend fails instead of skipping
+
+
+@pytest.fixture(scope="session")
+def offscreen_backend() -> str:
+    """The MuJoCo offscreen backend that works here ("egl" or "osmesa", probed by `sim.render.probe_backend`,
+    each in a fresh interpreter); the test skips without one, or fails where CI requires rendering.
+    Renders run in a fresh interpreter with MUJOCO_GL set to it (MuJoCo picks its backend at import)."""
+    from sim.render import probe_backend
+
+    backend = probe_backend()
+    if backend is None:
+        reason = ("MuJoCo cannot open an offscreen OpenGL context (install Debian's libosmesa6 for OSMesa, "
+                  "or run where EGL works)")
+        if os.environ.get(REQUIRE_RENDERING_ENV):
+            pytest.fail(f"{reason}; {REQUIRE_RENDERING_ENV} is set, so this may not skip", pytrace=False)
+        pytest.skip(reason)
+    return backend.value
+
+
+def render_env(backend: str) -> dict:
+    """The environment of a fresh interpreter that renders with `backend`."""
+    return {**os.environ, "MUJOCO_GL": backend, "PYOPENGL_PLATFORM": backend}

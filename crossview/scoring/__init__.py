@@ -208,6 +208,7 @@ def score(
     t_start, t_end = timeline.span
     num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
     scored_ticks = 0
+    compared: list[tuple[float, np.ndarray, np.ndarray]] = []  # per identity update: time, person ids, roots
     for k in range(num_ticks):
         tick = t_start + k / eval_rate_hz
         j = int(np.searchsorted(stamps, tick, side="right")) - 1
@@ -216,15 +217,17 @@ def score(
         scored_ticks += 1
         if j >= 0 and tick - stamps[j] <= OUTPUT_MAX_AGE_S:
             t_ids, t_poses = _targets(ordered[j], skeleton)
-            g_ids, g_poses = timeline.at(stamps[j])
+            at = stamps[j]
         else:
             t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, skeleton.num_joints, 3))
-            g_ids, g_poses = timeline.at(tick)
+            at = tick
+        g_ids, g_poses = timeline.at(at)
         if scored_area is not None:
             g_ids, g_poses, t_ids, t_poses = _in_area(g_ids, g_poses, t_ids, t_poses, scored_area,
                                                           root_threshold_m, skeleton)
         pose_acc.update(g_ids, g_poses, t_poses)
         id_acc.update(g_ids, g_poses, t_ids, t_poses)
+        compared.append((float(at), g_ids, body_roots(g_poses, skeleton)))
         hota_truth.append(g_ids)
         hota_targets.append(t_ids)
         hota_sims.append(ground_similarity(body_roots(g_poses, skeleton), body_roots(t_poses, skeleton),
@@ -243,6 +246,10 @@ def score(
     report.idp, report.idr = ident.idp, ident.idr
     report.id_switches, report.false_positives = ident.id_switches, ident.false_positives
     report.false_negatives = ident.false_negatives
+    for switch in id_acc.switches():
+        at, g_ids, roots = compared[switch.update]
+        x, y = roots[list(g_ids).index(switch.person_id), :2]
+        report.id_switch_events.append((at, switch.person_id, switch.target_id, float(x), float(y)))
     if ident.num_truth == 0 and ident.num_predictions == 0:
         report.idf1 = None  # nothing to identify: undefined rather than 0
 

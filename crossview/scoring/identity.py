@@ -9,6 +9,7 @@ identity assignment (Ristani et al. 2016).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import motmetrics as mm
 import numpy as np
@@ -79,6 +80,15 @@ def _finite(x) -> float | None:
     return x if np.isfinite(x) else None
 
 
+class IdSwitch(NamedTuple):
+    """An identity switch as py-motmetrics counts it: at `update` (0-based count of `IdentityAccumulator.update`
+    calls), person `person_id` became matched to `target_id`, another target than at its previous match."""
+
+    update: int
+    person_id: int
+    target_id: int
+
+
 class IdentityAccumulator:
     """Feeds ground-plane comparisons into a py-motmetrics accumulator.
 
@@ -106,6 +116,14 @@ class IdentityAccumulator:
         roots = body_roots(truth_poses, self.skeleton), body_roots(target_poses, self.skeleton)
         d = ground_distances(*roots, self.threshold_m)
         self.acc.update([int(i) for i in truth_ids], [int(i) for i in target_ids], d)
+
+    def switches(self) -> list[IdSwitch]:
+        """The identity switches counted so far, in update order (py-motmetrics' SWITCH events)."""
+        events = self.acc.mot_events
+        rows = events[events["Type"] == "SWITCH"]
+        frames = rows.index.get_level_values("FrameId")
+        # (auto_id numbers the updates from 0.)
+        return [IdSwitch(int(f), int(o), int(h)) for f, o, h in zip(frames, rows["OId"], rows["HId"])]
 
     def result(self) -> IdentityScores:
         """Scores over everything added so far."""

@@ -58,6 +58,9 @@ class ScoreReport:
     id_switches: int | None = None
     false_positives: int | None = None
     false_negatives: int | None = None
+    # Each switch: (time s, person id, the target it switched to, person's root x, y in metres) at the compared
+    # instant (the tracker output's stamp).
+    id_switch_events: list[tuple[float, int, int, float, float]] = field(default_factory=list)
     hota: float | None = None
     deta: float | None = None
     assa: float | None = None

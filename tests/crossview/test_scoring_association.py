@@ -7,6 +7,7 @@ import pytest
 from core.types import Camera, Frame
 from crossview.scoring import score
 from crossview.scoring.association import association_accuracy, pose_boxes, project_points
+from crossview.scoring.identity import body_roots
 from sim.types import CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import Target, TrackerOutput
 
@@ -100,7 +101,13 @@ def test_projected_truth_tracks_score_perfectly_in_2d_and_a_swap_is_one_switch_e
     for t in stamps:
         a, b = (10, 20) if t < 1 else (20, 10)
         swapped.append(_output("top", t, [], [Target(a, _walker(1, t), t), Target(b, _walker(2, t), t)]))
-    assert score(truth, swapped, cameras=[cam]).camera_2d["top"].id_switches == 2
+    swap = score(truth, swapped, cameras=[cam])
+    assert swap.camera_2d["top"].id_switches == 2
+    # On the ground plane too, each switch with its instant and where the person stood.
+    assert swap.id_switches == 2
+    assert [e[:3] for e in swap.id_switch_events] == [(1.0, 1, 20), (1.0, 2, 10)]
+    for (_, pid, _, x, y) in swap.id_switch_events:
+        np.testing.assert_allclose([x, y], body_roots(_walker(pid, 1.0)[None])[0], atol=1e-12)  # m
 
 
 def test_output_without_targets_counts_visible_people_as_misses_in_2d():

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.optimize import linear_sum_assignment
 
-from crossview.scoring.identity import IdentityAccumulator, body_roots
+from crossview.scoring.identity import IdentityAccumulator, IdSwitch, body_roots
 
 
 def _pose_at(x, y):
@@ -44,6 +44,7 @@ def test_hand_counted_story():
     s = acc.result()
     # Counts: 7 true instants; FN = 1 + 1 + 1 = 3; FP = 1 + 1 = 2; one switch (person 1: 10 -> 20).
     assert (s.num_truth, s.false_negatives, s.false_positives, s.id_switches) == (7, 3, 2, 1)
+    assert acc.switches() == [IdSwitch(update=2, person_id=1, target_id=20)]
     assert s.mota == pytest.approx(1 - (3 + 2 + 1) / 7, abs=1e-12)
     # MOTP: distances 0.1, 0.3, 0.0, 0.2 over 4 matches.
     assert s.motp_m == pytest.approx(0.6 / 4, abs=1e-12)

@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
-import functools
 import json
-import os
 import subprocess
 import sys
 
@@ -24,6 +22,7 @@ from sim.cameras import (
     look_at,
     mujoco_camera_pose,
 )
+from tests.conftest import render_env
 from tests.reference import cameras as reference
 
 # The Panoptic dome's 31 HD cameras, shipped with the dome scenario (cut by tests/data/cut_fixtures.py).
@@ -164,78 +163,52 @@ def test_mujoco_pose_axes_are_opencv_axes_flipped(rng):
 _RENDER_SCRIPT = """
 import json, sys
 import numpy as np
+from core.types import Camera
+from sim.render import CameraRenderer, RenderKind, choose_backend
+
+choose_backend(sys.argv[2])
 import mujoco
 
 spec = json.loads(sys.argv[1])
-width, height = spec["width"], spec["height"]
 xml = f\"\"\"
 <mujoco>
-  <visual><global offwidth="{width}" offheight="{height}"/>
-    <headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/></visual>
+  <visual><headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/></visual>
   <asset><material name="glow" emission="1" rgba="1 0 0 1"/></asset>
-  <worldbody>
-    <geom type="sphere" size="{spec['radius']}" pos="{spec['marker']}" material="glow"/>
-    <camera name="c" pos="{spec['pos']}" quat="{spec['quat']}" fovy="{spec['fovy']}"/>
-  </worldbody>
+  <worldbody><geom type="sphere" size="{spec['radius']}" pos="{spec['marker']}" material="glow"/></worldbody>
 </mujoco>\"\"\"
 model = mujoco.MjModel.from_xml_string(xml)
 data = mujoco.MjData(model)
 mujoco.mj_forward(model, data)
-with mujoco.Renderer(model, height, width) as renderer:
-    renderer.update_scene(data, camera="c")
-    weight = renderer.render()[..., 0].astype(np.float64) / 255.0
-rows, cols = np.mgrid[:height, :width]
+c = spec["camera"]
+camera = Camera("c", np.array(c["K"]), np.array(c["dist"]), np.array(c["R"]), np.array(c["t"]), c["width"],
+                c["height"])
+with CameraRenderer(model, [camera]) as renderer:
+    renderer.model.vis.headlight.ambient[:] = 0.0  # (the renderer brightens it; the marker glows alone)
+    renderer.model.vis.headlight.diffuse[:] = 0.0
+    weight = renderer.render(data, 0, RenderKind.RGB)[..., 0].astype(np.float64) / 255.0
+rows, cols = np.mgrid[:weight.shape[0], :weight.shape[1]]
 print(json.dumps([(weight * cols).sum() / weight.sum(), (weight * rows).sum() / weight.sum()]))
 """
 
 
-# MuJoCo picks its OpenGL backend once, at import: each render runs in a fresh interpreter with one chosen.
-_OFFSCREEN_BACKENDS = ("egl", "osmesa")
-_REQUIRE_RENDERING_ENV = "CROSSVIEW_REQUIRE_RENDERING"  # set in CI: a missing backend fails instead of skipping
-
-
-def _render_env(backend: str) -> dict:
-    return {**os.environ, "MUJOCO_GL": backend, "PYOPENGL_PLATFORM": backend}
-
-
-@functools.cache
-def _offscreen_backend() -> str | None:
-    """The first of `_OFFSCREEN_BACKENDS` with which MuJoCo opens an offscreen context here (None: neither)."""
-    probe = "import mujoco; mujoco.GLContext(8, 8).make_current()"
-    for backend in _OFFSCREEN_BACKENDS:
-        done = subprocess.run([sys.executable, "-c", probe], env=_render_env(backend), capture_output=True)
-        if done.returncode == 0:
-            return backend
-    return None
-
-
-def _require_offscreen_backend() -> str:
-    backend = _offscreen_backend()
-    if backend is None:
-        reason = ("MuJoCo cannot open an offscreen OpenGL context (install Debian's libosmesa6 for OSMesa, "
-                  "or run where EGL works)")
-        if os.environ.get(_REQUIRE_RENDERING_ENV):
-            pytest.fail(f"{reason}; {_REQUIRE_RENDERING_ENV} is set, so this may not skip", pytrace=False)
-        pytest.skip(reason)
-    return backend
-
-
 def _render_marker(camera: Camera, marker_m: np.ndarray, radius_m: float, backend: str) -> np.ndarray:
-    """(2,) centroid in pixels of a small glowing sphere rendered by MuJoCo through `mujoco_camera_pose`,
-    in a fresh interpreter with the offscreen `backend` (EGL or OSMesa)."""
-    pos, quat, fovy = mujoco_camera_pose(camera)
-    spec = {"width": camera.width_px, "height": camera.height_px, "radius": radius_m, "fovy": fovy,
-            "marker": " ".join(map(repr, map(float, marker_m))), "pos": " ".join(map(repr, map(float, pos))),
-            "quat": " ".join(map(repr, map(float, quat)))}
-    out = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT, json.dumps(spec)], env=_render_env(backend),
+    """(2,) centroid in pixels of a small glowing sphere rendered by the product's `sim.render.CameraRenderer`
+    (a pinhole placed by `mujoco_camera_pose`, remapped through the camera's lens), in a fresh interpreter with
+    the offscreen `backend` (EGL or OSMesa)."""
+    spec = {"radius": radius_m, "marker": " ".join(map(repr, map(float, marker_m))),
+            "camera": {"K": camera.K.tolist(), "dist": camera.dist.tolist(), "R": camera.R_cam_from_world.tolist(),
+                       "t": camera.t_cam_from_world.tolist(), "width": camera.width_px, "height": camera.height_px}}
+    out = subprocess.run([sys.executable, "-c", _RENDER_SCRIPT, json.dumps(spec), backend], env=render_env(backend),
                          check=True, capture_output=True, text=True)
     return np.array(json.loads(out.stdout))
 
 
-def test_projection_agrees_with_mujoco_renderer(rng):
-    backend = _require_offscreen_backend()
-    # A tilted ceiling camera without lens distortion (MuJoCo renders a pinhole).
-    scenario = _scenario(rows=2, cols=2, width_px=320, height_px=240, hfov_deg=80.0, k1=0.0, k2=0.0, aim_inward=0.5)
+@pytest.mark.parametrize("lens", ["pinhole", "distorted"])
+def test_projection_agrees_with_mujoco_renderer(rng, offscreen_backend, lens):
+    # A tilted ceiling camera: a pinhole (what MuJoCo renders itself), and one with strong barrel distortion that
+    # the renderer remaps into; a marker near the image corner shows the distortion most.
+    k1, k2 = (0.0, 0.0) if lens == "pinhole" else (-0.25, 0.06)
+    scenario = _scenario(rows=2, cols=2, width_px=320, height_px=240, hfov_deg=80.0, k1=k1, k2=k2, aim_inward=0.5)
     camera = build_rig(scenario, rng)[3]
     store = scenario.store
     markers = [np.array([store.width_m / 2, store.depth_m / 2, 1.0]), np.array([1.2, 1.0, 0.4]),
@@ -243,7 +216,7 @@ def test_projection_agrees_with_mujoco_renderer(rng):
     for marker in markers:
         expected, inside = in_image(camera, marker)
         assert inside
-        np.testing.assert_allclose(_render_marker(camera, marker, 0.03, backend), expected, atol=1.0)  # px
+        np.testing.assert_allclose(_render_marker(camera, marker, 0.03, offscreen_backend), expected, atol=1.0)  # px
 
 
 def test_shipped_dome_scenario_takes_the_panoptic_calibration_beside_it(rng):

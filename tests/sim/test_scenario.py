@@ -36,6 +36,17 @@ def test_overrides_are_validated_and_change_the_digest():
         scenario.load(None, {"duration_s": -1.0})
 
 
+def test_source_text_gives_back_the_scenario_with_its_overrides():
+    # What a recording keeps (the file's text with the overrides noted under it) is the scenario that ran.
+    ran = scenario.load("store_layout2", {"duration_s": 10.0, "crowd.people": 3, "cameras.rows": 2,
+                                          "detector.profile": "ideal", "store.entrance_m": [0.0, 1.5]})
+    again = scenario.from_source_text(ran.source_text, ran.name, "rec.mcap")
+    assert again == ran and again.digest == ran.digest
+    assert (again.crowd.people, again.cameras.rows, again.store.entrance_m) == (3, 2, (0.0, 1.5))
+    with pytest.raises(ScenarioError, match="rec.mcap: unreadable override note"):
+        scenario.from_source_text(ran.source_text + "\n# override: crowd.people = three", ran.name, "rec.mcap")
+
+
 def _write(tmp_path: Path, text: str) -> Path:
     path = tmp_path / "bad.toml"
     path.write_text(text)
