@@ -80,7 +80,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
 
     def tracker_options(p):
-        p.add_argument("--method", default="crossview", choices=("crossview", "baseline"))
+        p.add_argument("--method", default="crossview", metavar="METHOD",
+                       help="crossview, baseline, a name registered under the entry-point group crossview.trackers, "
+                       "or package.module:Class of the tracker shape (docs/plugins.md); default crossview")
         p.add_argument(
             "--preset",
             default="store",

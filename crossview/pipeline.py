@@ -24,9 +24,6 @@ from sim.types import BoxKind, PoseTruth
 
 log = logging.getLogger(__name__)
 
-METHODS = ("crossview", "baseline")
-
-
 def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
     """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor.
 
@@ -166,17 +163,14 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
 
 
 def make_tracker(method: str, cameras, preset: str, config_path: Path | None, skeleton):
-    """The tracker of `method` configured from a preset and optionally a TOML file."""
-    from tracker.baseline import BaselineTracker
+    """The tracker `method` names (built in, registered or `package.module:Class`, see `crossview.plugins`),
+    configured from a preset and optionally a TOML file; returns (tracker, config)."""
+    from crossview.plugins import resolve
     from tracker.config import TrackerConfig
-    from tracker.tracker import Tracker
 
+    resolved = resolve(method)
     config = TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
-    if method == "crossview":
-        return Tracker(cameras, config, skeleton), config
-    if method == "baseline":
-        return BaselineTracker(cameras, config, skeleton), config
-    raise CrossviewError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
+    return resolved.make(cameras, config, skeleton), config
 
 
 @dataclass(frozen=True)
@@ -210,8 +204,10 @@ def track(
 
     from core.types import SKELETONS
     from crossview import recording
+    from crossview.plugins import resolve
 
     check_writable(out, inputs=(rec_path, config_path))
+    resolved = resolve(method)
     rec = recording.open_recording(rec_path)
     skeleton = SKELETONS[rec.header.skeleton_name]
     tracker, config = make_tracker(method, rec.cameras, preset, config_path, skeleton)
@@ -231,13 +227,20 @@ def track(
     tracker_s = 0.0
     with recording.TracksWriter(out, header, rec.cameras) as writer:
         for camera_frame in tqdm(rec.frames(), unit="frame", desc="track", disable=not progress, leave=False):
+            frame = camera_frame.frame
             start = time.perf_counter()
-            tracker.update(camera_frame.frame)
+            targets = resolved.update(tracker, frame, updates)
             tracker_s += time.perf_counter() - start
+            writer.write(resolved.output(tracker, targets, frame, updates, skeleton))
             updates += 1
-            writer.write(tracker.last_output)
-        writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras)})
+        writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras),
+                       ASSIGNMENTS_KEY: resolved.reports_assignments(tracker)})
     return TrackResult(out, updates, tracker_s, len(rec.cameras))
+
+
+ASSIGNMENTS_KEY = "detection_assignments"
+"""Key of a tracks file's summary: false when the tracker did not say where each detection went (a plug-in
+without `last_output`); its score then leaves association accuracy out."""
 
 
 WARM_UP_S = 2.0
@@ -250,11 +253,14 @@ def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, ske
     The tracker's numba kernels compile on first use (tens of seconds on a fresh install, then loaded from
     the on-disk cache in under a second); that is not tracking time and must not enter the FPS figure.
     """
+    from crossview.plugins import resolve
+
+    resolved = resolve(method)
     tracker, _ = make_tracker(method, rec.cameras, preset, config_path, skeleton)
-    for camera_frame in rec.frames():
+    for index, camera_frame in enumerate(rec.frames()):
         if camera_frame.frame.stamp_s > WARM_UP_S:
             break
-        tracker.update(camera_frame.frame)
+        resolved.update(tracker, camera_frame.frame, index)
 
 
 def _jsonable(value):
@@ -294,9 +300,10 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
         )
     truth = list(rec.truth())
     outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
-    report = score_outputs(truth, outputs, rec.frames(), rec.cameras, scored_area=watched_floor(rec.boxes),
-                           skeleton=rec.skeleton)
     summary = tracks.summary or {}
+    frames = rec.frames() if summary.get(ASSIGNMENTS_KEY, True) else None
+    report = score_outputs(truth, outputs, frames, rec.cameras, scored_area=watched_floor(rec.boxes),
+                           skeleton=rec.skeleton)
     tracker_s = summary.get("tracker_s") or 0.0
     updates = summary.get("updates") or len(outputs)
     cams = len(rec.cameras)
