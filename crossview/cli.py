@@ -135,10 +135,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
     p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
 
-    p = sub.add_parser("export", help="write tracks in the paper's dataset layout")
-    p.add_argument("tracks", type=Path)
-    p.add_argument("--format", default="crossview-json", choices=("crossview-json",))
-    p.add_argument("-o", "--output", type=Path, required=True)
+    p = sub.add_parser("export", help="write tracks or a whole recording in the paper's dataset layout")
+    p.add_argument("file", type=Path, help="tracks file (crossview-json) or recording (dataset)")
+    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "dataset"),
+                   help="crossview-json: tracks as result_3d.json (default); dataset: a recording as a folder of "
+                   "calibration.json, detection.json, annotation_2d.json, annotation_3d.json, scene.json")
+    p.add_argument("-o", "--output", type=Path, required=True, help="result_3d.json, or a new folder (dataset)")
 
     p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
     p.add_argument("dataset", type=Path)
@@ -263,10 +265,14 @@ def _cmd_evaluate(args) -> None:
 
 def _cmd_export(args) -> None:
     from crossview import pipeline, recording
-    from crossview.datasets import write_result_3d
+    from crossview.datasets import export_dataset, write_result_3d
 
-    pipeline.check_writable(args.output, inputs=(args.tracks,))
-    tracks = recording.open_tracks(args.tracks)
+    if args.format == "dataset":
+        frames = export_dataset(args.file, args.output)
+        print(f"{args.output}: {frames} camera frames written in the dataset layout")
+        return
+    pipeline.check_writable(args.output, inputs=(args.file,))
+    tracks = recording.open_tracks(args.file)
     write_result_3d(tracks.outputs(), args.output)
     print(f"{args.output}: written")
 

@@ -81,11 +81,9 @@ def not_a_class(cameras, config, skeleton):
     return None
 
 
-@pytest.fixture(scope="module")
-def short_recording(tmp_path_factory):
-    path = tmp_path_factory.mktemp("rec") / "store_layout1.mcap"
-    pipeline.generate(pipeline.load_scenario("store_layout1", duration_s=6.0, seed=0), path, progress=False)
-    return path
+@pytest.fixture
+def short_recording(store_recording):
+    return store_recording
 
 
 def test_builtin_names_and_their_module_paths_resolve_to_the_same_class():
