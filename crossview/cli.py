@@ -114,9 +114,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, help="tracks file to write (.mcap)")
     tracker_options(p)
 
-    p = sub.add_parser("score", help="score a tracks file against its recording")
+    p = sub.add_parser("score", help="score a tracks file or a result file against its recording")
     p.add_argument("recording", type=Path)
-    p.add_argument("tracks", type=Path)
+    p.add_argument("tracks", type=Path, help="tracks file (.mcap), result_3d.json or JSON lines "
+                   "(docs/recording-format.md)")
     p.add_argument("--json", type=Path, help="write the score JSON here")
 
     p = sub.add_parser("info", help="describe a recording or tracks file")
@@ -136,11 +137,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
 
     p = sub.add_parser("export", help="write tracks or a whole recording in the paper's dataset layout")
-    p.add_argument("file", type=Path, help="tracks file (crossview-json) or recording (dataset)")
-    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "dataset"),
-                   help="crossview-json: tracks as result_3d.json (default); dataset: a recording as a folder of "
-                   "calibration.json, detection.json, annotation_2d.json, annotation_3d.json, scene.json")
-    p.add_argument("-o", "--output", type=Path, required=True, help="result_3d.json, or a new folder (dataset)")
+    p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl) or recording (dataset)")
+    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "jsonl", "dataset"),
+                   help="crossview-json: tracks as result_3d.json (default); jsonl: tracks as JSON lines; dataset: "
+                   "a recording as a folder of calibration.json, detection.json, annotation_2d.json, "
+                   "annotation_3d.json, scene.json")
+    p.add_argument("-o", "--output", type=Path, required=True, help="the file, or a new folder (dataset)")
 
     p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
     p.add_argument("dataset", type=Path)
@@ -273,7 +275,12 @@ def _cmd_export(args) -> None:
         return
     pipeline.check_writable(args.output, inputs=(args.file,))
     tracks = recording.open_tracks(args.file)
-    write_result_3d(tracks.outputs(), args.output)
+    if args.format == "jsonl":
+        from crossview.results import write_json_lines
+
+        write_json_lines(tracks.outputs(), args.output)
+    else:
+        write_result_3d(tracks.outputs(), args.output)
     print(f"{args.output}: written")
 
 

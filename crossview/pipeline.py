@@ -284,25 +284,37 @@ def watched_floor(boxes) -> tuple[float, float, float, float] | None:
 
 
 def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
-    """Scores a tracks file against the recording it was made from; returns (report, json dict)."""
+    """Scores a tracks file, or a result file (result_3d.json or JSON lines, `crossview.results`), against
+    the recording it was made from; returns (report, json dict).
+
+    A result file holds no detection assignments, cameras or timings: association accuracy, the per-camera
+    table and the FPS figures are then left out (null)."""
     from tqdm import tqdm
 
     from crossview import recording
+    from crossview.results import is_result_file, read_results
+    from crossview.scoring import TruthTimeline
     from crossview.scoring import score as score_outputs
 
     rec = recording.open_recording(rec_path)
-    tracks = recording.open_tracks(tracks_path)
-    if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
-        raise CrossviewError(
-            f"{tracks_path}: tracks were made from scenario {tracks.header.scenario_name!r} seed {tracks.header.seed} "
-            f"(digest {tracks.header.scenario_digest[:12]}), not from {rec_path} "
-            f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
-        )
     truth = list(rec.truth())
-    outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
-    summary = tracks.summary or {}
-    frames = rec.frames() if summary.get(ASSIGNMENTS_KEY, True) else None
-    report = score_outputs(truth, outputs, frames, rec.cameras, scored_area=watched_floor(rec.boxes),
+    summary: dict = {}
+    if is_result_file(tracks_path):
+        outputs = read_results(tracks_path, rec.skeleton, TruthTimeline(truth).span)
+        frames, cameras = None, None
+    else:
+        tracks = recording.open_tracks(tracks_path)
+        if tracks.header.scenario_digest != rec.header.scenario_digest or tracks.header.seed != rec.header.seed:
+            raise CrossviewError(
+                f"{tracks_path}: tracks were made from scenario {tracks.header.scenario_name!r} seed "
+                f"{tracks.header.seed} (digest {tracks.header.scenario_digest[:12]}), not from {rec_path} "
+                f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
+            )
+        outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
+        summary = tracks.summary or {}
+        frames = rec.frames() if summary.get(ASSIGNMENTS_KEY, True) else None
+        cameras = rec.cameras
+    report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
                            skeleton=rec.skeleton)
     tracker_s = summary.get("tracker_s") or 0.0
     updates = summary.get("updates") or len(outputs)
