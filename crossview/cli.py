@@ -148,6 +148,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", type=Path)
     p.add_argument("-o", "--output", type=Path, required=True)
 
+    p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
+    p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")
+    p.add_argument("--tracker", action="append", required=True, metavar="LABEL=SPEC",
+                   help="repeat for each tracker; SPEC is a --method (crossview, baseline, pkg.module:Class, a "
+                   "registered name) with an optional @PRESET, or file:PATH of a result file ({recording} in PATH "
+                   "is the recording's name without .mcap)")
+    p.add_argument("--out", type=Path, required=True, help="folder for compare.md, compare.csv, the charts and tracks")
+
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
     p.add_argument("--json", type=Path, help="write the figures here")
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
@@ -293,6 +301,19 @@ def _cmd_convert(args) -> None:
     print(f"{args.output}: written")
 
 
+def _cmd_compare(args) -> None:
+    from crossview import compare, pipeline
+
+    contenders = [compare.Contender.parse(text) for text in args.tracker]
+    compare.check(contenders, args.recordings)
+    for name in ("compare.md", "compare.csv"):
+        pipeline.check_writable(args.out / name, inputs=tuple(args.recordings))
+    rows = compare.compare_rows(contenders, args.recordings, args.out / "tracks", progress=not args.no_progress)
+    written = compare.write_report(rows, args.out)
+    print(compare.markdown(rows), end="")
+    print(f"written: {', '.join(str(p) for p in written)}")
+
+
 def _cmd_bench(args) -> None:
     from crossview import bench
 
@@ -312,6 +333,7 @@ COMMANDS = {
     "evaluate": _cmd_evaluate,
     "export": _cmd_export,
     "convert": _cmd_convert,
+    "compare": _cmd_compare,
     "bench": _cmd_bench,
 }
 
