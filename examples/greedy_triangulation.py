@@ -50,8 +50,7 @@ class GreedyTriangulationTracker:
         self.latest[c] = (t, px[rows], rows)
         views = [(cam, d) for cam, (s, pts, _) in self.latest.items() if t - s <= WINDOW_S for d in range(len(pts))]
         owner = self._match_people(views)
-        for person in set(owner.values()):
-            self._triangulate(person, [v for v, p in owner.items() if p == person], t)
+        self._triangulate(owner, t)
         self._start_people([v for v in views if v not in owner], owner, t)
         self.people = {p: (pose, seen) for p, (pose, seen) in self.people.items() if t - seen <= FORGET_S}
         assigned = np.full(frame.num_detections, -1, dtype=np.int64)
@@ -68,29 +67,36 @@ class GreedyTriangulationTracker:
 
     def _match_people(self, views) -> dict:
         """Greedy one-to-one matching of people to views (one view per camera per person) by reprojection."""
-        candidates = []
-        for person, (pose, _) in self.people.items():
-            projected = project(self.P, pose)  # (C, J, 2)
-            for view in views:
-                distances = np.linalg.norm(projected[view[0]] - self._points(view), axis=-1)  # (J,)
-                common = np.isfinite(distances)
-                if common.sum() >= MIN_JOINTS and distances[common].mean() < GATE_PX:
-                    candidates.append((distances[common].mean(), person, view))
+        if not self.people or not views:
+            return {}
+        people = list(self.people)
+        poses = np.stack([self.people[p][0] for p in people])  # (T, J, 3)
+        cams = np.array([cam for cam, _ in views])
+        projected = project(self.P, poses)[cams]  # (N, T, J, 2): each person seen by each view's camera
+        distances = np.linalg.norm(projected - np.stack([self._points(v) for v in views])[:, None], axis=-1)
+        common = np.isfinite(distances)  # (N, T, J)
+        mean = np.where(common, distances, 0.0).sum(axis=-1) / np.maximum(common.sum(axis=-1), 1)  # (N, T)
+        n, k = np.nonzero((common.sum(axis=-1) >= MIN_JOINTS) & (mean < GATE_PX))
         owner, taken = {}, set()
-        for _, person, view in sorted(candidates, key=lambda c: c[0]):
+        for i in np.argsort(mean[n, k], kind="stable"):  # smallest distance first
+            view, person = views[n[i]], people[k[i]]
             if view not in owner and (person, view[0]) not in taken:
                 owner[view] = person
                 taken.add((person, view[0]))
         return owner
 
-    def _triangulate(self, person: int, views, t: float) -> None:
-        points = np.full((self.num_joints, len(self.cameras), 2), np.nan)  # (J, C, 2)
-        for view in views:
-            points[:, view[0]] = self._points(view)
-        pose = triangulate(self.P, points)  # (J, 3), NaN for a joint seen by fewer than two views
-        old, seen = self.people[person]
-        if np.isfinite(pose[:, 0]).sum() >= MIN_JOINTS:
-            self.people[person] = (np.where(np.isfinite(pose), pose, old), t)
+    def _triangulate(self, owner: dict, t: float) -> None:
+        """Each matched person from its views (one DLT call for all), where at least `MIN_JOINTS` joints have
+        two views; a joint with fewer keeps its last position."""
+        people = sorted(set(owner.values()))
+        if not people:
+            return
+        points = np.full((len(people), self.num_joints, len(self.cameras), 2), np.nan)  # (T, J, C, 2)
+        for view, person in owner.items():
+            points[people.index(person), :, view[0]] = self._points(view)
+        for person, pose in zip(people, triangulate(self.P, points)):  # (J, 3) each, NaN below two views
+            if np.isfinite(pose[:, 0]).sum() >= MIN_JOINTS:
+                self.people[person] = (np.where(np.isfinite(pose), pose, self.people[person][0]), t)
 
     def _epipolar_px(self, u, v) -> float:
         a, b = self._points(u), self._points(v)
