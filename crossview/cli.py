@@ -138,15 +138,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("export", help="write tracks or a whole recording in the paper's dataset layout")
     p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl) or recording (dataset)")
-    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "jsonl", "dataset"),
+    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "jsonl", "dataset", "openpose"),
                    help="crossview-json: tracks as result_3d.json (default); jsonl: tracks as JSON lines; dataset: "
                    "a recording as a folder of calibration.json, detection.json, annotation_2d.json, "
-                   "annotation_3d.json, scene.json")
+                   "annotation_3d.json, scene.json; openpose: the same with OpenPose JSON folders for detection.json")
     p.add_argument("-o", "--output", type=Path, required=True, help="the file, or a new folder (dataset)")
 
     p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
-    p.add_argument("dataset", type=Path)
+    p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
+                   "one folder of OpenPose *_keypoints.json per camera")
     p.add_argument("-o", "--output", type=Path, required=True)
+    p.add_argument("--fps", type=_positive_float, help="OpenPose folders: frame rate for the stamps that "
+                   "timestamps.json does not give (stamp = frame number / fps)")
 
     p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
     p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")
@@ -275,11 +278,12 @@ def _cmd_evaluate(args) -> None:
 
 def _cmd_export(args) -> None:
     from crossview import pipeline, recording
-    from crossview.datasets import export_dataset, write_result_3d
+    from crossview.datasets import export_dataset, export_openpose, write_result_3d
 
-    if args.format == "dataset":
-        frames = export_dataset(args.file, args.output)
-        print(f"{args.output}: {frames} camera frames written in the dataset layout")
+    if args.format in ("dataset", "openpose"):
+        write = export_dataset if args.format == "dataset" else export_openpose
+        frames = write(args.file, args.output)
+        print(f"{args.output}: {frames} camera frames written in the {args.format} layout")
         return
     pipeline.check_writable(args.output, inputs=(args.file,))
     tracks = recording.open_tracks(args.file)
@@ -296,8 +300,9 @@ def _cmd_convert(args) -> None:
     from crossview import pipeline
     from crossview.datasets import convert
 
-    pipeline.check_writable(args.output, inputs=tuple(Path(args.dataset).glob("*.json")))
-    convert(args.dataset, args.output)
+    pipeline.check_writable(args.output, inputs=(*Path(args.dataset).glob("*.json"),
+                                                 *Path(args.dataset).glob("*/*_keypoints.json")))
+    convert(args.dataset, args.output, fps=args.fps)
     print(f"{args.output}: written")
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import CAMPUS14, COCO17, Camera, Frame
+from crossview import openpose
 from tracker.types import TrackerOutput
 
 CM_TO_M = 0.01
@@ -48,16 +49,22 @@ def _source_path(dataset_dir: Path, source: str) -> Path:
         for name in _SOURCES:
             if (dataset_dir / name).is_file():
                 return dataset_dir / name
-        raise DatasetError(f"{dataset_dir}: neither detection.json nor annotation_2d.json found")
+        raise DatasetError(f"{dataset_dir}: neither detection.json, annotation_2d.json nor a folder of OpenPose "
+                           "*_keypoints.json per camera found")
     names = {"detection": "detection.json", "annotation_2d": "annotation_2d.json", "annotation": "annotation_2d.json"}
     if source not in names:
-        raise DatasetError(f"source {source!r}: expected auto, detection or annotation_2d")
+        raise DatasetError(f"source {source!r}: expected auto, detection, annotation_2d or openpose")
     return dataset_dir / names[source]
 
 
 def image_size(dataset_dir, source: str = "auto") -> tuple[int, int]:
-    """(width, height) in pixels from the 2D file's `image_wh`."""
-    path = _source_path(Path(dataset_dir), source)
+    """(width, height) in pixels from the 2D file's `image_wh`, or from calibration.json's (ours) for a folder
+    whose 2D input is OpenPose output (`crossview.openpose`)."""
+    dataset_dir = Path(dataset_dir)
+    if source in ("auto", "openpose") and not any((dataset_dir / name).is_file() for name in _SOURCES):
+        path = dataset_dir / "calibration.json"
+    else:
+        path = _source_path(dataset_dir, source)
     data = _load(path)
     try:
         w, h = (int(v) for v in data["image_wh"])
@@ -263,7 +270,7 @@ def write_result_3d(outputs: Iterable[TrackerOutput], path) -> int:
     return len(entries)
 
 
-def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
+def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = None) -> int:
     """Writes a dataset of the published layout as a recording (crossview.recording), frames in delivery order.
 
     Each frame keeps its own camera and stamp, and its capture and delivery times where the file gives them
@@ -272,6 +279,8 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
     poses (as `export_dataset` writes); with detection.json alone the ids are -1. The 3D truth of
     annotation_3d.json is written when its poses have the 2D joints' layout (CAMPUS14, or COCO17 as exported).
     calibration.json's `points_2d_distorted` and scene.json are read when present (see `export_dataset`).
+    A folder with no 2D file but one sub-folder of OpenPose output per camera is read with `crossview.openpose`
+    (source "openpose"; `fps` gives the stamps that its timestamps.json does not).
 
     Returns:
         The number of camera frames written.
@@ -286,8 +295,16 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
     distorted = isinstance(calibration, dict) and calibration.get(DISTORTED_KEY) is True
     cameras = load_cameras(dataset_dir, use_distortion=distorted)
     known = {c.name for c in cameras}
-    source_path = _source_path(dataset_dir, source)
-    frames = _read_frames(dataset_dir, source)
+    if source == "openpose" or (source == "auto" and not any((dataset_dir / n).is_file() for n in _SOURCES)
+                                and openpose.camera_folders(dataset_dir)):
+        source_path = dataset_dir
+        frames = [_FrameItem(key, frame, np.full(frame.num_detections, -1, dtype=np.int64), frame.stamp_s, delivery)
+                  for key, frame, delivery in openpose.read_frames(dataset_dir, fps)]
+        inputs = [*sorted(dataset_dir.glob("*/*_keypoints.json")), dataset_dir / openpose.TIMESTAMPS_FILE]
+    else:
+        source_path = _source_path(dataset_dir, source)
+        frames = _read_frames(dataset_dir, source)
+        inputs = [source_path]
     for item in frames:
         if item.frame.camera not in known:
             raise DatasetError(f"{source_path}: camera {item.frame.camera!r} is not in "
@@ -305,9 +322,10 @@ def convert(dataset_dir, out_mcap, source: str = "auto") -> int:
     truth.sort(key=lambda entry: entry[0])
     scene = _load(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
     digest = hashlib.sha256()
-    for name in ("calibration.json", source_path.name, "annotation_3d.json", SCENE_FILE):
-        if (dataset_dir / name).is_file():
-            digest.update((dataset_dir / name).read_bytes())
+    for path in (dataset_dir / "calibration.json", *inputs, dataset_dir / "annotation_3d.json",
+                 dataset_dir / SCENE_FILE):
+        if path.is_file():
+            digest.update(path.read_bytes())
     end_s = max([f.delivery_s for f in frames] + [e[0] for e in truth] + [0.0])
     try:
         header = RecordingHeader(scenario_name=str(scene.get("scenario_name", dataset_dir.resolve().name)),
@@ -346,7 +364,7 @@ def _matching_annotation_2d(dataset_dir: Path, source_path: Path, frames: list[_
     """Per frame key, (ids (D,), true joints (D, J, 2)) from annotation_2d.json when the 2D input is
     detection.json and annotation_2d.json holds the same frames with one pose per detection; else None."""
     path = dataset_dir / "annotation_2d.json"
-    if source_path.name != "detection.json" or not path.is_file():
+    if source_path.name != "detection.json" or not path.is_file():  # (an OpenPose folder: source_path is it)
         return None
     annotated = {item.key: item for item in _read_frames(dataset_dir, "annotation_2d")}
     if set(annotated) != {item.key for item in frames}:
@@ -381,10 +399,63 @@ def export_dataset(rec_path, out_dir) -> int:
     Returns:
         The number of camera frames written.
     """
-    import os
-    import shutil
-    import tempfile
+    rec, files = _open_export(rec_path, out_dir)
+    (width, height), = {(c.width_px, c.height_px) for c in rec.cameras}
+    detections, annotations = {}, {}
+    for index, cf in enumerate(rec.frames()):
+        key = f"{cf.frame.camera}/{index:06d}"
+        head = {"camera": cf.frame.camera, "timestamp": cf.frame.stamp_s, "capture_s": cf.truth.capture_s,
+                "delivery_s": cf.truth.delivery_s}
+        kp, scores = cf.frame.keypoints_px, cf.frame.scores
+        usable = np.isfinite(kp).all(axis=-1)
+        detections[key] = head | {"poses": [
+            {"id": -1, "points_2d": np.where(u[:, None], k, 0.0).tolist(), "scores": np.where(u, s, 0.0).tolist()}
+            for k, s, u in zip(kp, scores, usable)]}
+        true_kp = cf.truth.keypoints_px
+        seen = np.isfinite(true_kp).all(axis=-1)
+        annotations[key] = head | {"poses": [
+            {"id": int(i), "points_2d": np.where(u[:, None], k, 0.0).tolist(), "scores": u.astype(float).tolist()}
+            for i, k, u in zip(cf.truth.person_ids, true_kp, seen)]}
+    files["detection.json"] = {"image_wh": [width, height], "frames": detections}
+    files["annotation_2d.json"] = {"image_wh": [width, height], "frames": annotations}
+    _write_folder(out_dir, files)
+    return len(detections)
 
+
+def export_openpose(rec_path, out_dir) -> int:
+    """Writes a recording as OpenPose's JSON output (`crossview.openpose`) beside the dataset layout's files.
+
+    `out_dir` gets one folder per camera of `CAMERA_NNNNNNNNNNNN_keypoints.json` (BODY_25, NNN the camera's
+    frame number), timestamps.json (each frame's stamp and delivery time by frame number), and
+    calibration.json, annotation_3d.json and scene.json as `export_dataset` writes them; `convert` reads it
+    back into the same frames (no per-detection truth: OpenPose's output has none). Written atomically like
+    `export_dataset`.
+
+    Returns:
+        The number of camera frames written.
+    """
+    rec, files = _open_export(rec_path, out_dir)
+    (width, height), = {(c.width_px, c.height_px) for c in rec.cameras}
+    files["calibration.json"]["image_wh"] = [width, height]  # (no detection.json to hold it)
+    times: dict[str, dict[str, list[float]]] = {c.name: {"stamp_s": [], "delivery_s": []} for c in rec.cameras}
+    count = 0
+    for cf in rec.frames():
+        camera = cf.frame.camera
+        number = len(times[camera]["stamp_s"])
+        times[camera]["stamp_s"].append(cf.frame.stamp_s)
+        times[camera]["delivery_s"].append(cf.truth.delivery_s)
+        people = [{"person_id": [-1], "pose_keypoints_2d": openpose.body_25(k, s)}
+                  for k, s in zip(cf.frame.keypoints_px, cf.frame.scores)]
+        files[f"{camera}/{camera}_{number:012d}_keypoints.json"] = {"version": 1.3, "people": people}
+        count += 1
+    files[openpose.TIMESTAMPS_FILE] = times
+    _write_folder(out_dir, files)
+    return count
+
+
+def _open_export(rec_path, out_dir):
+    """The recording and the files every export holds (calibration.json, annotation_3d.json, scene.json),
+    after checking that `out_dir` is new or empty and that the cameras share one image size."""
     from crossview.recording import box_json, open_recording
 
     out_dir = Path(out_dir)
@@ -394,42 +465,37 @@ def export_dataset(rec_path, out_dir) -> int:
     sizes = {(c.width_px, c.height_px) for c in rec.cameras}
     if len(sizes) != 1:
         raise DatasetError(f"{rec_path}: cameras of {len(sizes)} image sizes; the layout has one image_wh")
-    (width, height), = sizes
+    files = {
+        "calibration.json": {"cameras": {c.name: _calibration_entry(c) for c in rec.cameras}, DISTORTED_KEY: True},
+        "annotation_3d.json": [{"timestamp": p.t_s, "poses": [{"id": int(i), "points_3d": (pose / CM_TO_M).tolist()}
+                                                              for i, pose in zip(p.person_ids, p.poses)]}
+                               for p in rec.truth()],
+        SCENE_FILE: {"scenario_name": rec.header.scenario_name, "seed": rec.header.seed,
+                     "duration_s": rec.header.duration_s, "boxes": [box_json(b) for b in rec.boxes]},
+    }
+    return rec, files
+
+
+def _write_folder(out_dir, files: dict) -> None:
+    """Writes each {relative path: JSON document} under a temporary folder beside `out_dir`, then renames it to
+    `out_dir` (an empty folder of that name is replaced); nothing is left behind on an error or a signal."""
+    import os
+    import shutil
+    import tempfile
+
+    out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
     try:
-        calibration = {"cameras": {c.name: _calibration_entry(c) for c in rec.cameras}, DISTORTED_KEY: True}
-        detections, annotations = {}, {}
-        for index, cf in enumerate(rec.frames()):
-            key = f"{cf.frame.camera}/{index:06d}"
-            head = {"camera": cf.frame.camera, "timestamp": cf.frame.stamp_s, "capture_s": cf.truth.capture_s,
-                    "delivery_s": cf.truth.delivery_s}
-            kp, scores = cf.frame.keypoints_px, cf.frame.scores
-            usable = np.isfinite(kp).all(axis=-1)
-            detections[key] = head | {"poses": [
-                {"id": -1, "points_2d": np.where(u[:, None], k, 0.0).tolist(), "scores": np.where(u, s, 0.0).tolist()}
-                for k, s, u in zip(kp, scores, usable)]}
-            true_kp = cf.truth.keypoints_px
-            seen = np.isfinite(true_kp).all(axis=-1)
-            annotations[key] = head | {"poses": [
-                {"id": int(i), "points_2d": np.where(u[:, None], k, 0.0).tolist(), "scores": u.astype(float).tolist()}
-                for i, k, u in zip(cf.truth.person_ids, true_kp, seen)]}
-        truth = [{"timestamp": p.t_s, "poses": [{"id": int(i), "points_3d": (pose / CM_TO_M).tolist()}
-                                                for i, pose in zip(p.person_ids, p.poses)]} for p in rec.truth()]
-        scene = {"scenario_name": rec.header.scenario_name, "seed": rec.header.seed,
-                 "duration_s": rec.header.duration_s, "boxes": [box_json(b) for b in rec.boxes]}
-        for name, doc in (("calibration.json", calibration),
-                          ("detection.json", {"image_wh": [width, height], "frames": detections}),
-                          ("annotation_2d.json", {"image_wh": [width, height], "frames": annotations}),
-                          ("annotation_3d.json", truth), (SCENE_FILE, scene)):
+        for name, doc in files.items():
+            (tmp / name).parent.mkdir(parents=True, exist_ok=True)
             with open(tmp / name, "w", encoding="utf-8") as f:
                 json.dump(doc, f, separators=(",", ":"), allow_nan=False)
         os.chmod(tmp, 0o755)
-        os.replace(tmp, out_dir)  # (an empty folder of that name is replaced)
+        os.replace(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return len(detections)
 
 
 def _calibration_entry(camera: Camera) -> dict:
