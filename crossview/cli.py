@@ -288,9 +288,9 @@ def _cmd_export(args) -> None:
     pipeline.check_writable(args.output, inputs=(args.file,))
     tracks = recording.open_tracks(args.file)
     if args.format == "jsonl":
-        from crossview.results import write_json_lines
+        from crossview.results import json_lines
 
-        write_json_lines(tracks.outputs(), args.output)
+        pipeline.write_text(json_lines(tracks.outputs()), args.output)
     else:
         write_result_3d(tracks.outputs(), args.output)
     print(f"{args.output}: written")

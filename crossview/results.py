@@ -169,9 +169,9 @@ def _array(path: Path, where: str, value, joint_counts: tuple[int, ...]) -> np.n
     return pose
 
 
-def write_json_lines(outputs, path) -> int:
-    """Writes tracker outputs as JSON lines (one target per line; a line with only the stamp for an output with
-    no target); returns the number of lines. Joints in metres, null for a missing joint."""
+def json_lines(outputs) -> str:
+    """Tracker outputs as JSON lines text (one target per line; a line with only the stamp for an output with no
+    target). Joints in metres, null for a missing joint."""
     lines = []
     for output in outputs:
         if not output.targets:
@@ -179,7 +179,4 @@ def write_json_lines(outputs, path) -> int:
         for target in output.targets:
             joints = [None if not np.isfinite(j).all() else [float(v) for v in j] for j in np.asarray(target.pose)]
             lines.append(json.dumps({"stamp_s": float(output.stamp_s), "id": int(target.id), "joints": joints}))
-    from crossview.pipeline import write_text
-
-    write_text("".join(line + "\n" for line in lines), Path(path))
-    return len(lines)
+    return "".join(line + "\n" for line in lines)

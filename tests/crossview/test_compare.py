@@ -8,7 +8,7 @@ import pytest
 from crossview import recording
 from crossview.cli import EXIT_BAD_INPUT, main
 from crossview.compare import METRICS, Contender, best_values, compare_rows, csv_text, markdown, write_report
-from crossview.results import write_json_lines
+from crossview.results import json_lines
 
 EXAMPLE = "examples.greedy_triangulation:GreedyTriangulationTracker"
 
@@ -47,7 +47,7 @@ def test_trackers_methods_and_result_files_are_scored_alike(store_recording, sto
     # A result file written from the built-in tracker's outputs scores as the built-in tracker (but for the
     # association accuracy and speed, which a result file does not hold).
     name = store_recording.name.removesuffix(".mcap")
-    write_json_lines(recording.open_tracks(store_tracks).outputs(), tmp_path / f"{name}.jsonl")
+    (tmp_path / f"{name}.jsonl").write_text(json_lines(recording.open_tracks(store_tracks).outputs()))
     contenders = [Contender.parse("store=crossview"), Contender.parse(f"greedy={EXAMPLE}"),
                   Contender.parse(f"lines=file:{tmp_path}/{{recording}}.jsonl")]
     rows = compare_rows(contenders, [store_recording], tmp_path / "tracks")

@@ -9,7 +9,7 @@ from core.types import CAMPUS14, COCO17
 from crossview import pipeline, recording
 from crossview.cli import EXIT_BAD_INPUT, main
 from crossview.datasets import write_result_3d
-from crossview.results import ResultError, read_results, write_json_lines
+from crossview.results import ResultError, json_lines, read_results
 from examples import track_dataset
 from tracker.types import Target, TrackerOutput
 
@@ -106,7 +106,9 @@ def test_written_json_lines_read_back_to_the_same_outputs(tmp_path):
     pose[2] = np.nan
     outputs = [TrackerOutput(0.1, "c", [], np.zeros(0, np.int64)),
                TrackerOutput(0.2, "c", [Target(4, pose, 0.2), Target(9, pose + 1, 0.2)], np.zeros(0, np.int64))]
-    assert write_json_lines(outputs, tmp_path / "r.jsonl") == 3
+    text = json_lines(outputs)
+    assert len(text.splitlines()) == 3
+    (tmp_path / "r.jsonl").write_text(text)
     back = read_results(tmp_path / "r.jsonl", COCO17, (0.0, 1.0))
     assert [(o.stamp_s, [t.id for t in o.targets]) for o in back] == [(0.1, []), (0.2, [4, 9])]
     np.testing.assert_array_equal(back[1].targets[1].pose, pose + 1)
