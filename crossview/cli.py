@@ -88,7 +88,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
 
     def tracker_options(p):
-        p.add_argument("--method", default="crossview", choices=("crossview", "baseline"))
+        p.add_argument("--method", default="crossview", metavar="METHOD",
+                       help="crossview, baseline, a name registered under the entry-point group crossview.trackers, "
+                       "or package.module:Class of the tracker shape (docs/plugins.md); default crossview")
         p.add_argument(
             "--preset",
             default="store",
@@ -120,9 +122,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True, help="tracks file to write (.mcap)")
     tracker_options(p)
 
-    p = sub.add_parser("score", help="score a tracks file against its recording")
+    p = sub.add_parser("score", help="score a tracks file or a result file against its recording")
     p.add_argument("recording", type=Path)
-    p.add_argument("tracks", type=Path)
+    p.add_argument("tracks", type=Path, help="tracks file (.mcap), result_3d.json or JSON lines "
+                   "(docs/recording-format.md)")
     p.add_argument("--json", type=Path, help="write the score JSON here")
 
     p = sub.add_parser("info", help="describe a recording or tracks file")
@@ -145,14 +148,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
     p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
 
-    p = sub.add_parser("export", help="write tracks in the paper's dataset layout")
-    p.add_argument("tracks", type=Path)
-    p.add_argument("--format", default="crossview-json", choices=("crossview-json",))
-    p.add_argument("-o", "--output", type=Path, required=True)
+    p = sub.add_parser("export", help="write tracks or a whole recording in the paper's dataset layout")
+    p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl) or recording (dataset)")
+    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "jsonl", "dataset", "openpose"),
+                   help="crossview-json: tracks as result_3d.json (default); jsonl: tracks as JSON lines; dataset: "
+                   "a recording as a folder of calibration.json, detection.json, annotation_2d.json, "
+                   "annotation_3d.json, scene.json; openpose: the same with OpenPose JSON folders for detection.json")
+    p.add_argument("-o", "--output", type=Path, required=True, help="the file, or a new folder (dataset)")
 
     p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
-    p.add_argument("dataset", type=Path)
+    p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
+                   "one folder of OpenPose *_keypoints.json per camera")
     p.add_argument("-o", "--output", type=Path, required=True)
+    p.add_argument("--fps", type=_positive_float, help="OpenPose folders: frame rate for the stamps that "
+                   "timestamps.json does not give (stamp = frame number / fps)")
+
+    p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
+    p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")
+    p.add_argument("--tracker", action="append", required=True, metavar="LABEL=SPEC",
+                   help="repeat for each tracker; SPEC is a --method (crossview, baseline, pkg.module:Class, a "
+                   "registered name) with an optional @PRESET, or file:PATH of a result file ({recording} in PATH "
+                   "is the recording's name without .mcap)")
+    p.add_argument("--out", type=Path, required=True, help="folder for compare.md, compare.csv, the charts and tracks")
 
     p = sub.add_parser("per-camera", help="per-camera MOTA and IDF1: single-view baseline against cross-view "
                        "(the paper's Table 5)")
@@ -304,11 +321,21 @@ def _cmd_evaluate(args) -> None:
 
 def _cmd_export(args) -> None:
     from crossview import pipeline, recording
-    from crossview.datasets import write_result_3d
+    from crossview.datasets import export_dataset, export_openpose, write_result_3d
 
-    pipeline.check_writable(args.output, inputs=(args.tracks,))
-    tracks = recording.open_tracks(args.tracks)
-    write_result_3d(tracks.outputs(), args.output, inputs=(args.tracks,))
+    if args.format in ("dataset", "openpose"):
+        write = export_dataset if args.format == "dataset" else export_openpose
+        frames = write(args.file, args.output)
+        print(f"{args.output}: {frames} camera frames written in the {args.format} layout")
+        return
+    pipeline.check_writable(args.output, inputs=(args.file,))
+    tracks = recording.open_tracks(args.file)
+    if args.format == "jsonl":
+        from crossview.results import json_lines
+
+        pipeline.write_text(json_lines(tracks.outputs()), args.output, inputs=(args.file,))
+    else:
+        write_result_3d(tracks.outputs(), args.output, inputs=(args.file,))
     print(f"{args.output}: written")
 
 
@@ -316,9 +343,9 @@ def _cmd_convert(args) -> None:
     from crossview import pipeline
     from crossview.datasets import convert
 
-    inputs = tuple(Path(args.dataset).glob("*.json"))
+    inputs = (*Path(args.dataset).glob("*.json"), *Path(args.dataset).glob("*/*_keypoints.json"))
     pipeline.check_writable(args.output, inputs=inputs)
-    convert(args.dataset, args.output, inputs=inputs)
+    convert(args.dataset, args.output, fps=args.fps, inputs=inputs)
     print(f"{args.output}: written")
 
 
@@ -334,6 +361,19 @@ def _cmd_per_camera(args) -> None:
     print(paper_means_line())
     if args.json:
         pipeline.write_json(table.to_json(), args.json)
+
+
+def _cmd_compare(args) -> None:
+    from crossview import compare, pipeline
+
+    contenders = [compare.Contender.parse(text) for text in args.tracker]
+    compare.check(contenders, args.recordings)
+    for name in ("compare.md", "compare.csv"):
+        pipeline.check_writable(args.out / name, inputs=tuple(args.recordings))
+    rows = compare.compare_rows(contenders, args.recordings, args.out / "tracks", progress=not args.no_progress)
+    written = compare.write_report(rows, args.out)
+    print(compare.markdown(rows), end="")
+    print(f"written: {', '.join(str(p) for p in written)}")
 
 
 def _cmd_bench(args) -> None:
@@ -370,6 +410,7 @@ COMMANDS = {
     "export": _cmd_export,
     "convert": _cmd_convert,
     "per-camera": _cmd_per_camera,
+    "compare": _cmd_compare,
     "bench": _cmd_bench,
     "render": _cmd_render,
 }

@@ -15,12 +15,14 @@ from __future__ import annotations
 import json
 import math
 from collections.abc import Iterable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from core.errors import CrossviewError
 from core.types import CAMPUS14, COCO17, MAX_IMAGE_PX, Camera, Frame
+from crossview import openpose
 from crossview.outputs import write_bytes
 from tracker.types import TrackerOutput
 
@@ -97,16 +99,22 @@ def _source_path(dataset_dir: Path, source: str) -> Path:
         for name in _SOURCES:
             if (dataset_dir / name).is_file():
                 return dataset_dir / name
-        raise DatasetError(f"{dataset_dir}: neither detection.json nor annotation_2d.json found")
+        raise DatasetError(f"{dataset_dir}: neither detection.json, annotation_2d.json nor a folder of OpenPose "
+                           "*_keypoints.json per camera found")
     names = {"detection": "detection.json", "annotation_2d": "annotation_2d.json", "annotation": "annotation_2d.json"}
     if source not in names:
-        raise DatasetError(f"source {source!r}: expected auto, detection or annotation_2d")
+        raise DatasetError(f"source {source!r}: expected auto, detection, annotation_2d or openpose")
     return dataset_dir / names[source]
 
 
 def image_size(dataset_dir, source: str = "auto") -> tuple[int, int]:
-    """(width, height) in pixels from the 2D file's `image_wh`."""
-    path = _source_path(Path(dataset_dir), source)
+    """(width, height) in pixels from the 2D file's `image_wh`, or from calibration.json's (ours) for a folder
+    whose 2D input is OpenPose output (`crossview.openpose`)."""
+    dataset_dir = Path(dataset_dir)
+    if source in ("auto", "openpose") and not any((dataset_dir / name).is_file() for name in _SOURCES):
+        path = dataset_dir / "calibration.json"
+    else:
+        path = _source_path(dataset_dir, source)
     data = _table(read_json(path), path, "the file")
     wh = data.get("image_wh")
     if not (isinstance(wh, list) and len(wh) == 2
@@ -159,7 +167,10 @@ def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
 
 
 def load_frames(dataset_dir, source: str = "auto") -> list[Frame]:
-    """Every 2D frame of the dataset, sorted by timestamp (then camera name), each with its own camera and stamp.
+    """Every 2D frame of the dataset in the order a tracker receives them, each with its own camera and stamp.
+
+    The order is delivery order when every frame has a `delivery_s` (as `export_dataset` writes), else
+    timestamp order (then camera name).
 
     Args:
         dataset_dir: the dataset directory.
@@ -168,11 +179,23 @@ def load_frames(dataset_dir, source: str = "auto") -> list[Frame]:
     Returns:
         Frames with (D, J, 2) pixels and (D, J) scores; a joint with score 0 is NaN.
     """
-    return [frame for frame, _ in _read_frames(Path(dataset_dir), source)]
+    return [item.frame for item in _read_frames(Path(dataset_dir), source)]
 
 
-def _read_frames(dataset_dir: Path, source: str) -> list[tuple[Frame, np.ndarray]]:
-    """Frames sorted by (timestamp, camera), each with the (D,) `id` of its poses (-1 for detections)."""
+@dataclass(frozen=True, eq=False)
+class _FrameItem:
+    """One frame of a 2D file: the frame, its key, the (D,) `id` of its poses (-1 for detections) and its
+    capture and delivery times (the stamp where the file gives none)."""
+
+    key: str
+    frame: Frame
+    ids: np.ndarray
+    capture_s: float
+    delivery_s: float
+
+
+def _read_frames(dataset_dir: Path, source: str) -> list[_FrameItem]:
+    """The frames of a 2D file in delivery order (see `load_frames`)."""
     path = _source_path(dataset_dir, source)
     data = read_json(path)
     items = _table(_table(data, path, "the file").get("frames"), path, "key 'frames' (frame name -> frame)")
@@ -186,6 +209,8 @@ def _read_frames(dataset_dir: Path, source: str) -> list[tuple[Frame, np.ndarray
         ids = np.asarray([person_id(p.get("id", -1), path, f"frame {key!r}") for p in poses], dtype=np.int64)
         try:
             camera = str(item["camera"])
+            capture = stamp_s(item.get("capture_s", stamp), path, f"frame {key!r}: capture_s")
+            delivery = stamp_s(item.get("delivery_s", stamp), path, f"frame {key!r}: delivery_s")
             points = [np.asarray(p["points_2d"], dtype=np.float64) for p in poses]
             scores = [np.asarray(p.get("scores", np.ones(len(p["points_2d"]))), dtype=np.float64) for p in poses]
         except (KeyError, TypeError, ValueError) as exc:
@@ -198,14 +223,17 @@ def _read_frames(dataset_dir: Path, source: str) -> list[tuple[Frame, np.ndarray
                 num_joints = p.shape[0]
             elif p.shape[0] != num_joints:
                 raise DatasetError(f"{path}: frame {key!r}: {p.shape[0]} joints, earlier frames have {num_joints}")
-        parsed.append((stamp, camera, points, scores, ids))
+        parsed.append((str(key), stamp, camera, points, scores, ids, capture, delivery))
     num_joints = num_joints or COCO17.num_joints
+    delivered = all("delivery_s" in item for item in items.values())
+    order = (lambda x: x[7]) if delivered else (lambda x: (x[1], x[2]))  # (sorted() is stable: file order on ties)
     out = []
-    for stamp, camera, points, scores, ids in sorted(parsed, key=lambda x: (x[0], x[1])):
+    for key, stamp, camera, points, scores, ids, capture, delivery in sorted(parsed, key=order):
         kp = np.stack(points) if points else np.zeros((0, num_joints, 2))
         sc = np.stack(scores) if scores else np.zeros((0, num_joints))
         kp = np.where((sc > 0)[..., None], kp, np.nan)
-        out.append((Frame(camera=camera, stamp_s=stamp, keypoints_px=kp, scores=sc), ids))
+        out.append(_FrameItem(key, Frame(camera=camera, stamp_s=stamp, keypoints_px=kp, scores=sc), ids, capture,
+                              delivery))
     return out
 
 
@@ -221,8 +249,13 @@ def skeleton_of(frames: list[Frame]):
     return COCO17
 
 
-def load_truth_3d(dataset_dir) -> list[tuple[float, np.ndarray, np.ndarray]]:
-    """`annotation_3d.json` as a list, index = frame number: (t_s, ids (P,), poses (P, 14, 3) metres)."""
+def load_truth_3d(dataset_dir, num_joints: int = 14) -> list[tuple[float, np.ndarray, np.ndarray]]:
+    """`annotation_3d.json` as a list, index = frame number: (t_s, ids (P,), poses (P, J, 3) metres).
+
+    Args:
+        dataset_dir: the dataset directory.
+        num_joints: J, the joints of each pose: 14 (Campus, Shelf) or 17 (COCO-17, as `export_dataset` writes).
+    """
     path = Path(dataset_dir) / "annotation_3d.json"
     data = _table(read_json(path), path, "the file (a list of {timestamp, poses} entries)", list)
     out = []
@@ -234,11 +267,12 @@ def load_truth_3d(dataset_dir) -> list[tuple[float, np.ndarray, np.ndarray]]:
         ids = np.asarray([person_id(p.get("id"), path, f"entry {i}") for p in given], dtype=np.int64)
         try:
             poses = np.asarray([p["points_3d"] for p in given], dtype=np.float64).reshape(len(given), -1, 3) \
-                if given else np.zeros((0, 14, 3))
+                if given else np.zeros((0, num_joints, 3))
         except (KeyError, TypeError, ValueError) as exc:
-            raise DatasetError(f"{path}: entry {i}: key {exc} missing or points_3d not 14x3") from exc
-        if poses.shape != (len(given), 14, 3):
-            raise DatasetError(f"{path}: entry {i}: points_3d must be 14x3 for each pose; got {poses.shape[1:]}")
+            raise DatasetError(f"{path}: entry {i}: key {exc} missing or points_3d not {num_joints}x3") from exc
+        if poses.shape != (len(given), num_joints, 3):
+            raise DatasetError(f"{path}: entry {i}: points_3d must be {num_joints}x3 for each pose; got "
+                               f"{poses.shape[1:]}")
         if not np.all(np.isfinite(poses)):
             raise DatasetError(f"{path}: entry {i}: points_3d hold a value that is not finite")
         out.append((t, ids, poses * CM_TO_M))
@@ -293,59 +327,238 @@ def write_result_3d(outputs: Iterable[TrackerOutput], path, inputs: tuple = ()) 
     return len(entries)
 
 
-def convert(dataset_dir, out_mcap, source: str = "auto", inputs: tuple = ()) -> int:
-    """Writes a dataset of the published layout as a recording (crossview.recording), frames in timestamp order.
+def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = None, inputs: tuple = ()) -> int:
+    """Writes a dataset of the published layout as a recording (crossview.recording), frames in delivery order.
 
-    Each frame keeps its own camera and stamp (capture = delivery = stamp). With annotation_2d.json the
-    per-detection truth holds the annotated ids and joints; with detection.json the ids are -1. The 3D truth
-    of annotation_3d.json (14 joints, metres) is written when the 2D joints use the same layout (CAMPUS14).
+    Each frame keeps its own camera and stamp, and its capture and delivery times where the file gives them
+    (else both are the stamp). The per-detection truth holds the ids and joints of annotation_2d.json when
+    its 2D input is that file, or when detection.json comes with an annotation_2d.json of the same frames and
+    poses (as `export_dataset` writes); with detection.json alone the ids are -1. The 3D truth of
+    annotation_3d.json is written when its poses have the 2D joints' layout (CAMPUS14, or COCO17 as exported).
+    calibration.json's `points_2d_distorted` and scene.json are read when present (see `export_dataset`).
+    A folder with no 2D file but one sub-folder of OpenPose output per camera is read with `crossview.openpose`
+    (source "openpose"; `fps` gives the stamps that its timestamps.json does not).
 
     Returns:
         The number of camera frames written.
     """
     import hashlib
 
-    from crossview.recording import RecordingHeader, RecordingWriter
+    from crossview.recording import RecordingHeader, RecordingWriter, box_from_json
     from sim.types import CameraFrame, DetectionTruth, PoseTruth
 
     dataset_dir = Path(dataset_dir)
-    cameras = load_cameras(dataset_dir)
+    calibration = read_json(dataset_dir / "calibration.json")
+    distorted = isinstance(calibration, dict) and calibration.get(DISTORTED_KEY) is True
+    cameras = load_cameras(dataset_dir, use_distortion=distorted)
     known = {c.name for c in cameras}
-    frames = _read_frames(dataset_dir, source)
-    for frame, _ in frames:
-        if frame.camera not in known:
-            raise DatasetError(f"{_source_path(dataset_dir, source)}: camera {frame.camera!r} is not in "
+    if source == "openpose" or (source == "auto" and not any((dataset_dir / n).is_file() for n in _SOURCES)
+                                and openpose.camera_folders(dataset_dir)):
+        source_path = dataset_dir
+        frames = [_FrameItem(key, frame, np.full(frame.num_detections, -1, dtype=np.int64), frame.stamp_s, delivery)
+                  for key, frame, delivery in openpose.read_frames(dataset_dir, fps)]
+        sources = [*sorted(dataset_dir.glob("*/*_keypoints.json")), dataset_dir / openpose.TIMESTAMPS_FILE]
+    else:
+        source_path = _source_path(dataset_dir, source)
+        frames = _read_frames(dataset_dir, source)
+        sources = [source_path]
+    for item in frames:
+        if item.frame.camera not in known:
+            raise DatasetError(f"{source_path}: camera {item.frame.camera!r} is not in "
                                f"calibration.json ({', '.join(sorted(known))})")
-    skeleton = skeleton_of([f for f, _ in frames])
-    truth = load_truth_3d(dataset_dir) if (dataset_dir / "annotation_3d.json").is_file() else []
-    if truth and skeleton.num_joints != 14:
-        truth = []  # the 14-joint truth cannot be stored with COCO-17 frames in one recording
+    truth_2d = _matching_annotation_2d(dataset_dir, source_path, frames)
+    skeleton = skeleton_of([item.frame for item in frames])
+    truth = []
+    if (dataset_dir / "annotation_3d.json").is_file():
+        try:
+            truth = load_truth_3d(dataset_dir, skeleton.num_joints)
+        except DatasetError:
+            if skeleton.num_joints == 14:
+                raise
+            truth = []  # the published 14-joint truth cannot be stored with COCO-17 frames in one recording
     truth.sort(key=lambda entry: entry[0])
+    scene = read_json(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
     digest = hashlib.sha256()
-    for name in ("calibration.json", _source_path(dataset_dir, source).name, "annotation_3d.json"):
-        if (dataset_dir / name).is_file():
-            digest.update((dataset_dir / name).read_bytes())
-    end_s = max([f.stamp_s for f, _ in frames] + [e[0] for e in truth] + [0.0])
-    header = RecordingHeader(scenario_name=dataset_dir.resolve().name, scenario_text="",
-                             scenario_digest=digest.hexdigest(), seed=0, duration_s=float(end_s),
-                             skeleton_name=skeleton.name)
+    for path in (dataset_dir / "calibration.json", *sources, dataset_dir / "annotation_3d.json",
+                 dataset_dir / SCENE_FILE):
+        if path.is_file():
+            digest.update(path.read_bytes())
+    end_s = max([f.delivery_s for f in frames] + [e[0] for e in truth] + [0.0])
+    try:
+        header = RecordingHeader(scenario_name=str(scene.get("scenario_name", dataset_dir.resolve().name)),
+                                 scenario_text="", scenario_digest=digest.hexdigest(), seed=int(scene.get("seed", 0)),
+                                 duration_s=float(scene.get("duration_s", end_s)), skeleton_name=skeleton.name)
+        boxes = [box_from_json(b) for b in scene.get("boxes", [])]
+    except (TypeError, ValueError, KeyError) as exc:
+        raise DatasetError(f"{dataset_dir / SCENE_FILE}: malformed ({exc}); expected scenario_name, seed, "
+                           "duration_s and boxes as a recording's header holds them") from None
     J = skeleton.num_joints
-    events = [(t, 0, i) for i, (t, _, _) in enumerate(truth)] + [(f.stamp_s, 1, i) for i, (f, _) in enumerate(frames)]
+    events = [(t, 0, i) for i, (t, _, _) in enumerate(truth)] + [(f.delivery_s, 1, i) for i, f in enumerate(frames)]
     events.sort()
-    with RecordingWriter(out_mcap, header, cameras, (), inputs=inputs) as writer:
-        for t, kind, i in events:
+    with RecordingWriter(out_mcap, header, cameras, boxes, inputs=(*inputs, *sources)) as writer:
+        for _, kind, i in events:
             if kind == 0:
-                writer.write(PoseTruth(float(t), truth[i][1], truth[i][2]))
+                writer.write(PoseTruth(float(truth[i][0]), truth[i][1], truth[i][2]))
                 continue
-            frame, ids = frames[i]
+            item = frames[i]
+            frame, ids = item.frame, item.ids
             D = frame.num_detections
-            annotated = ids >= 0
-            keypoints = np.where(annotated[:, None, None], frame.keypoints_px, np.nan)
+            if truth_2d is not None:
+                ids, keypoints = truth_2d[item.key]
+            else:
+                keypoints = np.where((ids >= 0)[:, None, None], frame.keypoints_px, np.nan)
             in_image = np.isfinite(keypoints[..., 0])
             none = np.zeros((D, J), dtype=bool)
-            det_truth = DetectionTruth(capture_s=frame.stamp_s, delivery_s=frame.stamp_s, person_ids=ids,
+            det_truth = DetectionTruth(capture_s=item.capture_s, delivery_s=item.delivery_s, person_ids=ids,
                                        keypoints_px=keypoints, in_image=in_image, occluded=none,
                                        self_occluded=none, effects=np.zeros(D, dtype=np.int64))
             # (The poses at capture are not stored: a reader derives them from the truth written here.)
             writer.write(CameraFrame(frame=frame, truth=det_truth, poses_at_capture=None))
     return len(frames)
+
+
+def _matching_annotation_2d(dataset_dir: Path, source_path: Path, frames: list[_FrameItem]):
+    """Per frame key, (ids (D,), true joints (D, J, 2)) from annotation_2d.json when the 2D input is
+    detection.json and annotation_2d.json holds the same frames with one pose per detection; else None."""
+    path = dataset_dir / "annotation_2d.json"
+    if source_path.name != "detection.json" or not path.is_file():  # (an OpenPose folder: source_path is it)
+        return None
+    annotated = {item.key: item for item in _read_frames(dataset_dir, "annotation_2d")}
+    if set(annotated) != {item.key for item in frames}:
+        return None
+    if any(annotated[f.key].frame.keypoints_px.shape != f.frame.keypoints_px.shape for f in frames):
+        return None
+    return {key: (item.ids, item.frame.keypoints_px) for key, item in annotated.items()}
+
+
+DISTORTED_KEY = "points_2d_distorted"
+"""calibration.json: true when the 2D points are the camera's raw (distorted) pixels, to be undistorted with
+`dist_coeffs` (k1 k2 p1 p2 k3); absent in the published datasets, whose points fit the pinhole model."""
+SCENE_FILE = "scene.json"
+"""The exported recording's scenario name, seed, duration and store boxes (the floor is the scored area)."""
+
+
+def export_dataset(rec_path, out_dir) -> int:
+    """Writes a recording in the dataset layout, so that tools written for Campus, Shelf and Store read it.
+
+    Files (see docs/recording-format.md): calibration.json (K normalised by the image size, `Tw`
+    camera-to-world in cm, all five `dist_coeffs`, `points_2d_distorted: true`); detection.json (every
+    delivered frame in delivery order under the key `CAMERA/INDEX`, with its camera, stamp (`timestamp`),
+    `capture_s` and `delivery_s`, and its detections: `id` -1, COCO-17 `points_2d` in distorted pixels, 0
+    where missing, `scores`); annotation_2d.json (the same keys, one pose per detection: the true person
+    `id`, -1 for a false positive, and the true joints, score 1 inside the image); annotation_3d.json (every
+    truth sample: `timestamp`, poses with `id` and `points_3d` in cm); scene.json (scenario name, seed,
+    duration, store boxes). `convert` reads it back into the same frames, truth and store.
+
+    The folder is written under a temporary name beside `out_dir` and renamed when complete; `out_dir` must
+    not exist or be empty.
+
+    Returns:
+        The number of camera frames written.
+    """
+    rec, files = _open_export(rec_path, out_dir)
+    (width, height), = {(c.width_px, c.height_px) for c in rec.cameras}
+    detections, annotations = {}, {}
+    for index, cf in enumerate(rec.frames()):
+        key = f"{cf.frame.camera}/{index:06d}"
+        head = {"camera": cf.frame.camera, "timestamp": cf.frame.stamp_s, "capture_s": cf.truth.capture_s,
+                "delivery_s": cf.truth.delivery_s}
+        kp, scores = cf.frame.keypoints_px, cf.frame.scores
+        usable = np.isfinite(kp).all(axis=-1)
+        detections[key] = head | {"poses": [
+            {"id": -1, "points_2d": np.where(u[:, None], k, 0.0).tolist(), "scores": np.where(u, s, 0.0).tolist()}
+            for k, s, u in zip(kp, scores, usable)]}
+        true_kp = cf.truth.keypoints_px
+        seen = np.isfinite(true_kp).all(axis=-1)
+        annotations[key] = head | {"poses": [
+            {"id": int(i), "points_2d": np.where(u[:, None], k, 0.0).tolist(), "scores": u.astype(float).tolist()}
+            for i, k, u in zip(cf.truth.person_ids, true_kp, seen)]}
+    files["detection.json"] = {"image_wh": [width, height], "frames": detections}
+    files["annotation_2d.json"] = {"image_wh": [width, height], "frames": annotations}
+    _write_folder(out_dir, files)
+    return len(detections)
+
+
+def export_openpose(rec_path, out_dir) -> int:
+    """Writes a recording as OpenPose's JSON output (`crossview.openpose`) beside the dataset layout's files.
+
+    `out_dir` gets one folder per camera of `CAMERA_NNNNNNNNNNNN_keypoints.json` (BODY_25, NNN the camera's
+    frame number), timestamps.json (each frame's stamp and delivery time by frame number), and
+    calibration.json, annotation_3d.json and scene.json as `export_dataset` writes them; `convert` reads it
+    back into the same frames (no per-detection truth: OpenPose's output has none). Written atomically like
+    `export_dataset`.
+
+    Returns:
+        The number of camera frames written.
+    """
+    rec, files = _open_export(rec_path, out_dir)
+    (width, height), = {(c.width_px, c.height_px) for c in rec.cameras}
+    files["calibration.json"]["image_wh"] = [width, height]  # (no detection.json to hold it)
+    times: dict[str, dict[str, list[float]]] = {c.name: {"stamp_s": [], "delivery_s": []} for c in rec.cameras}
+    count = 0
+    for cf in rec.frames():
+        camera = cf.frame.camera
+        number = len(times[camera]["stamp_s"])
+        times[camera]["stamp_s"].append(cf.frame.stamp_s)
+        times[camera]["delivery_s"].append(cf.truth.delivery_s)
+        people = [{"person_id": [-1], "pose_keypoints_2d": openpose.body_25(k, s)}
+                  for k, s in zip(cf.frame.keypoints_px, cf.frame.scores)]
+        files[f"{camera}/{camera}_{number:012d}_keypoints.json"] = {"version": 1.3, "people": people}
+        count += 1
+    files[openpose.TIMESTAMPS_FILE] = times
+    _write_folder(out_dir, files)
+    return count
+
+
+def _open_export(rec_path, out_dir):
+    """The recording and the files every export holds (calibration.json, annotation_3d.json, scene.json),
+    after checking that `out_dir` is new or empty and that the cameras share one image size."""
+    from crossview.recording import box_json, open_recording
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
+        raise DatasetError(f"{out_dir}: exists and is not an empty folder; choose a new folder for the dataset")
+    rec = open_recording(rec_path)
+    sizes = {(c.width_px, c.height_px) for c in rec.cameras}
+    if len(sizes) != 1:
+        raise DatasetError(f"{rec_path}: cameras of {len(sizes)} image sizes; the layout has one image_wh")
+    files = {
+        "calibration.json": {"cameras": {c.name: _calibration_entry(c) for c in rec.cameras}, DISTORTED_KEY: True},
+        "annotation_3d.json": [{"timestamp": p.t_s, "poses": [{"id": int(i), "points_3d": (pose / CM_TO_M).tolist()}
+                                                              for i, pose in zip(p.person_ids, p.poses)]}
+                               for p in rec.truth()],
+        SCENE_FILE: {"scenario_name": rec.header.scenario_name, "seed": rec.header.seed,
+                     "duration_s": rec.header.duration_s, "boxes": [box_json(b) for b in rec.boxes]},
+    }
+    return rec, files
+
+
+def _write_folder(out_dir, files: dict) -> None:
+    """Writes each {relative path: JSON document} under a temporary folder beside `out_dir`, then renames it to
+    `out_dir` (an empty folder of that name is replaced); nothing is left behind on an error or a signal."""
+    import os
+    import shutil
+    import tempfile
+
+    out_dir = Path(out_dir)
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        for name, doc in files.items():
+            (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+            with open(tmp / name, "w", encoding="utf-8") as f:
+                json.dump(doc, f, separators=(",", ":"), allow_nan=False)
+        os.chmod(tmp, 0o755)
+        os.replace(tmp, out_dir)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _calibration_entry(camera: Camera) -> dict:
+    """One camera of calibration.json: K normalised by the image size, Tw camera-to-world in cm, dist_coeffs."""
+    Tw = np.eye(4)
+    Tw[:3, :3] = camera.R_cam_from_world.T
+    Tw[:3, 3] = camera.center_world / CM_TO_M
+    K = camera.K / np.array([[camera.width_px], [camera.height_px], [1.0]])
+    return {"K": K.tolist(), "Tw": Tw.tolist(), "dist_coeffs": camera.dist.tolist()}

@@ -24,9 +24,6 @@ from sim.types import BoxKind, PoseTruth
 
 log = logging.getLogger(__name__)
 
-METHODS = ("crossview", "baseline")
-
-
 def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
     """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor.
 
@@ -174,20 +171,17 @@ def tracker_config(preset: str, config_path: Path | None = None):
 
 
 def make_tracker(method: str, cameras, preset: str, config_path: Path | None, skeleton):
-    """The tracker of `method` configured from a preset and optionally a TOML file."""
-    from tracker.baseline import BaselineTracker
-    from tracker.tracker import Tracker
+    """The tracker `method` names (built in, registered or `package.module:Class`, see `crossview.plugins`),
+    configured from a preset and optionally a TOML file; returns (tracker, config)."""
+    from crossview.plugins import resolve
 
+    resolved = resolve(method)
     config = tracker_config(preset, config_path)
     try:
         config.check_fits(len(cameras), skeleton.num_joints)
     except CrossviewError as e:
         raise CrossviewError(f"{config_path or '--preset ' + preset}: {e}") from None
-    if method == "crossview":
-        return Tracker(cameras, config, skeleton), config
-    if method == "baseline":
-        return BaselineTracker(cameras, config, skeleton), config
-    raise CrossviewError(f"--method: {method!r} is not one of {', '.join(METHODS)}")
+    return resolved.make(cameras, config, skeleton), config
 
 
 @dataclass(frozen=True)
@@ -221,8 +215,10 @@ def track(
 
     from core.types import SKELETONS
     from crossview import recording
+    from crossview.plugins import resolve
 
     check_writable(out, inputs=(rec_path, config_path))
+    resolved = resolve(method)
     rec = recording.open_recording(rec_path)
     skeleton = SKELETONS[rec.header.skeleton_name]
     tracker, config = make_tracker(method, rec.cameras, preset, config_path, skeleton)
@@ -242,13 +238,20 @@ def track(
     tracker_s = 0.0
     with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path)) as writer:
         for camera_frame in tqdm(rec.frames(), unit="frame", desc="track", disable=not progress, leave=False):
+            frame = camera_frame.frame
             start = time.perf_counter()
-            tracker.update(camera_frame.frame)
+            targets = resolved.update(tracker, frame, updates)
             tracker_s += time.perf_counter() - start
+            writer.write(resolved.output(tracker, targets, frame, updates, skeleton))
             updates += 1
-            writer.write(tracker.last_output)
-        writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras)})
+        writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras),
+                       ASSIGNMENTS_KEY: resolved.reports_assignments(tracker)})
     return TrackResult(out, updates, tracker_s, len(rec.cameras))
+
+
+ASSIGNMENTS_KEY = "detection_assignments"
+"""Key of a tracks file's summary: false when the tracker did not say where each detection went (a plug-in
+without `last_output`); its score then leaves association accuracy out."""
 
 
 WARM_UP_S = 2.0
@@ -261,11 +264,14 @@ def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, ske
     The tracker's numba kernels compile on first use (tens of seconds on a fresh install, then loaded from
     the on-disk cache in under a second); that is not tracking time and must not enter the FPS figure.
     """
+    from crossview.plugins import resolve
+
+    resolved = resolve(method)
     tracker, _ = make_tracker(method, rec.cameras, preset, config_path, skeleton)
-    for camera_frame in rec.frames():
+    for index, camera_frame in enumerate(rec.frames()):
         if camera_frame.frame.stamp_s > WARM_UP_S:
             break
-        tracker.update(camera_frame.frame)
+        resolved.update(tracker, camera_frame.frame, index)
 
 
 def _jsonable(value):
@@ -300,17 +306,33 @@ def open_run(rec_path: Path, tracks_path: Path):
 
 
 def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
-    """Scores a tracks file against the recording it was made from; returns (report, json dict)."""
+    """Scores a tracks file, or a result file (result_3d.json or JSON lines, `crossview.results`), against
+    the recording it was made from; returns (report, json dict).
+
+    A result file holds no detection assignments, cameras or timings: association accuracy, the per-camera
+    table and the FPS figures are then left out (null)."""
     from tqdm import tqdm
 
+    from crossview import recording
+    from crossview.results import is_result_file, read_results
+    from crossview.scoring import TruthTimeline
     from crossview.scoring import score as score_outputs
 
-    rec, tracks = open_run(rec_path, tracks_path)
+    rec = recording.open_recording(rec_path)
     truth = list(rec.truth())
-    outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
-    report = score_outputs(truth, outputs, rec.frames(), rec.cameras, scored_area=watched_floor(rec.boxes),
+    summary: dict = {}
+    if is_result_file(tracks_path):
+        outputs = read_results(tracks_path, rec.skeleton, TruthTimeline(truth).span)
+        frames, cameras = None, None
+    else:
+        tracks = recording.open_tracks(tracks_path)
+        check_tracks_match(rec, tracks)
+        outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
+        summary = tracks.summary or {}
+        frames = rec.frames() if summary.get(ASSIGNMENTS_KEY, True) else None
+        cameras = rec.cameras
+    report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
                            skeleton=rec.skeleton)
-    summary = tracks.summary or {}
     tracker_s = summary.get("tracker_s") or 0.0
     updates = summary.get("updates") or len(outputs)
     cams = len(rec.cameras)

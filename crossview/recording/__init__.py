@@ -48,12 +48,15 @@ from crossview.recording.schemas import (
     software_version,
     to_ns,
 )
+from crossview.recording.schemas import _box_from_json as box_from_json  # a store box's JSON form, as the header's
+from crossview.recording.schemas import _box_json as box_json
 from crossview.recording.writer import RecordingWriter, TracksWriter
 
 __all__ = [
     "CHUNK_SIZE", "FORMAT_VERSION", "TOPIC_HEADER", "TOPIC_OUTPUTS", "TOPIC_STORE", "TOPIC_TRACK_SCENE", "TOPIC_TRUTH",
     "TOPIC_TRUTH_SCENE", "EncodedFrame", "PoseTruthMsg", "Recording", "RecordingError", "RecordingHeader",
-    "RecordingWriter", "Tracks", "TracksHeader", "TracksWriter", "camera_frame_bytes", "camera_topic",
+    "RecordingWriter", "Tracks", "TracksHeader", "TracksWriter", "box_from_json", "box_json",
+    "camera_frame_bytes", "camera_topic",
     "encode_camera_frames", "encode_frames", "format_info", "info", "open_recording", "open_tracks",
     "pose_truth_bytes", "software_version", "to_ns", "warm_up",
 ]

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from core.types import CAMPUS14, Frame
+from crossview import pipeline, recording
+from crossview.cli import main
 from crossview.datasets import (
     DatasetError,
     campus14_to_coco17,
@@ -192,3 +194,77 @@ def test_campus_pcp_with_typical_detector_noise(campus, tmp_path):
     root, cams, frames = campus
     result = _campus_pcp(root, cams, _typical_detector(frames, cams, seed=0), tmp_path)
     assert result["average"] >= 0.96  # the paper: 0.966 with a real detector
+
+
+# ---------------------------------------------------------------------------------------------- export
+def _frames_equal(a, b) -> bool:
+    """Same camera, stamp, times, scores and usable joints (a joint with score 0 or NaN is missing in both)."""
+    usable_a = np.isfinite(a.frame.keypoints_px).all(-1) & (a.frame.scores > 0)
+    usable_b = np.isfinite(b.frame.keypoints_px).all(-1) & (b.frame.scores > 0)
+    return (a.frame.camera == b.frame.camera and a.frame.stamp_s == b.frame.stamp_s
+            and (a.truth.capture_s, a.truth.delivery_s) == (b.truth.capture_s, b.truth.delivery_s)
+            and np.array_equal(usable_a, usable_b)
+            and np.array_equal(a.frame.keypoints_px[usable_a], b.frame.keypoints_px[usable_b])
+            and np.array_equal(a.frame.scores[usable_a], b.frame.scores[usable_b])
+            and np.array_equal(a.truth.person_ids, b.truth.person_ids))
+
+
+@pytest.fixture(scope="module")
+def round_trip(store_recording, tmp_path_factory):
+    """The store recording exported to the dataset layout and converted back."""
+    root = tmp_path_factory.mktemp("round_trip")
+    assert main(["--no-progress", "export", str(store_recording), "--format", "dataset", "-o", str(root / "d")]) == 0
+    assert main(["--no-progress", "convert", str(root / "d"), "-o", str(root / "back.mcap")]) == 0
+    return root / "d", root / "back.mcap"
+
+
+def test_the_export_holds_the_published_files_with_frames_in_delivery_order(store_recording, round_trip):
+    folder, _ = round_trip
+    assert sorted(p.name for p in folder.iterdir()) == [
+        "annotation_2d.json", "annotation_3d.json", "calibration.json", "detection.json", "scene.json"]
+    detection = json.loads((folder / "detection.json").read_text())
+    delivered = [f["delivery_s"] for f in detection["frames"].values()]
+    original = list(recording.open_recording(store_recording).frames())
+    assert delivered == [cf.truth.delivery_s for cf in original]
+    assert [f.stamp_s for f in load_frames(folder)] == [cf.frame.stamp_s for cf in original]
+    # The stamps are not in delivery order: the layout's own order (by timestamp) would change the input.
+    assert delivered == sorted(delivered) and [cf.frame.stamp_s for cf in original] != sorted(
+        cf.frame.stamp_s for cf in original)
+
+
+def test_convert_of_the_export_gives_back_the_recording(store_recording, round_trip):
+    _, back = round_trip
+    a, b = recording.open_recording(store_recording), recording.open_recording(back)
+    assert (b.header.scenario_name, b.header.seed, b.header.duration_s) == ("store_layout1", 0, 6.0)
+    assert b.boxes == a.boxes
+    for ca, cb in zip(a.cameras, b.cameras, strict=True):
+        assert ca.name == cb.name and np.array_equal(ca.dist, cb.dist)
+        for x, y in ((ca.K, cb.K), (ca.R_cam_from_world, cb.R_cam_from_world)):
+            np.testing.assert_allclose(x, y, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(ca.t_cam_from_world, cb.t_cam_from_world, rtol=0, atol=1e-12)  # m
+    frames_a, frames_b = list(a.frames()), list(b.frames())
+    assert len(frames_a) == len(frames_b) and all(_frames_equal(x, y) for x, y in zip(frames_a, frames_b))
+    truth_a, truth_b = list(a.truth()), list(b.truth())
+    assert [t.t_s for t in truth_a] == [t.t_s for t in truth_b]
+    for x, y in zip(truth_a, truth_b):
+        assert np.array_equal(x.person_ids, y.person_ids)
+        np.testing.assert_allclose(x.poses, y.poses, rtol=0, atol=1e-12)  # m
+
+
+def test_the_round_trip_tracks_and_scores_the_same(store_recording, store_tracks, round_trip, tmp_path):
+    _, back = round_trip
+    pipeline.track(back, tmp_path / "t.mcap", progress=False)
+    _, original = pipeline.score(store_recording, store_tracks, progress=False)
+    _, again = pipeline.score(back, tmp_path / "t.mcap", progress=False)
+    for key in ("pcp", "pck_100mm", "mota", "idf1", "id_switches", "hota", "association_accuracy", "num_people"):
+        assert again[key] == original[key], key
+    assert again["mpjpe_mm"] == pytest.approx(original["mpjpe_mm"], abs=1e-9)  # the calibration's cm round trip
+
+
+def test_export_refuses_a_folder_that_holds_files_and_leaves_nothing(store_recording, tmp_path, capsys):
+    (tmp_path / "d").mkdir()
+    (tmp_path / "d" / "mine.txt").write_text("keep")
+    status = main(["export", str(store_recording), "--format", "dataset", "-o", str(tmp_path / "d")])
+    err = capsys.readouterr().err.strip()
+    assert status == 2 and "d: exists and is not an empty folder" in err and len(err.splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["d", "mine.txt"]
