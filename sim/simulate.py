@@ -13,6 +13,7 @@ import traceback
 from collections.abc import Iterator
 from typing import NamedTuple
 
+import cv2
 import numpy as np
 
 from core import jit
@@ -208,6 +209,10 @@ class Simulation:
         failures are raised here.
         """
         jit.prepare()  # (once here instead of once in each process)
+        # OpenCV's worker threads do not survive a fork, and one caught holding its pool's lock at the fork
+        # would hang the worker's first parallel OpenCV call (the store's distance transform) on that lock:
+        # OpenCV runs on the calling thread alone from here on (its calls in this project are small).
+        cv2.setNumThreads(0)
         context = multiprocessing.get_context("fork")
         receiver, sender = context.Pipe(duplex=False)
         _widen_pipe(sender)
