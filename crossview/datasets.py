@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from core.errors import CrossviewError
 from core.types import CAMPUS14, COCO17, MAX_IMAGE_PX, Camera, Frame
 from crossview import openpose
+from crossview.json_input import DatasetError, read_json
 from crossview.outputs import write_bytes
 from tracker.types import TrackerOutput
 
@@ -30,43 +30,11 @@ CM_TO_M = 0.01
 _SOURCES = ("detection.json", "annotation_2d.json")
 
 
-class DatasetError(CrossviewError):
-    """A dataset directory does not follow the published layout; the message names the file and the key."""
-
-
 MAX_STAMP_S = 4e9
 """Largest timestamp a dataset may hold, seconds (a Unix time until 2096; stamps are stored as int64 ns)."""
 _INT64 = 2 ** 63
 UINT64_END = 2 ** 64
 _MAX_ABS_CM = 1e9  # the largest number a camera pose may hold, centimetres (10,000 km)
-
-
-def read_json(path: Path, what: str = "") -> object:
-    """A dataset or result JSON file, strictly: UTF-8, standard JSON (no NaN or Infinity).
-
-    Raises:
-        DatasetError: missing, unreadable, not UTF-8 or not valid JSON; the message names the file.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise DatasetError(f"{path}: {what or 'file'} not found (expected the crossview dataset layout: "
-                           "calibration.json, detection.json or annotation_2d.json, optional annotation_3d.json)")
-    try:
-        text = path.read_bytes().decode("utf-8")
-    except OSError as exc:
-        raise DatasetError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    except UnicodeDecodeError as exc:
-        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); JSON files must be UTF-8") from None
-
-    def constant(name: str):
-        raise DatasetError(f"{path}: {name} is not a JSON number; write a finite number or leave the value out")
-
-    try:
-        return json.loads(text, parse_constant=constant)
-    except json.JSONDecodeError as exc:
-        raise DatasetError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
-    except RecursionError:
-        raise DatasetError(f"{path}: not valid JSON (nested too deeply)") from None
 
 
 def _table(value, path: Path, key: str, kind: type = dict):

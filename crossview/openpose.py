@@ -21,6 +21,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import COCO17, Frame
+from crossview.json_input import read_json
 
 # OpenPose's index of each COCO-17 joint (nose, eyes, ears, shoulders, elbows, wrists, hips, knees, ankles).
 BODY_25_FROM_COCO17 = (0, 16, 15, 18, 17, 5, 2, 6, 3, 7, 4, 12, 9, 13, 10, 14, 11)
@@ -56,7 +57,7 @@ def read_frames(dataset_dir, fps: float | None) -> list[tuple[str, Frame, float]
     if not folders:
         raise OpenPoseError(f"{dataset_dir}: no sub-folder holds *_keypoints.json files (expected one folder of "
                             "OpenPose output per camera)")
-    times = _load(dataset_dir / TIMESTAMPS_FILE) if (dataset_dir / TIMESTAMPS_FILE).is_file() else {}
+    times = read_json(dataset_dir / TIMESTAMPS_FILE) if (dataset_dir / TIMESTAMPS_FILE).is_file() else {}
     frames = []
     for folder in folders:
         camera = folder.name
@@ -80,16 +81,9 @@ def read_frames(dataset_dir, fps: float | None) -> list[tuple[str, Frame, float]
     return [(key, frame, delivery) for delivery, _, key, frame in frames]
 
 
-def _load(path: Path):
-    """A JSON file, read as the dataset layout's files are (one line naming the file on any problem)."""
-    from crossview.datasets import read_json  # (datasets reads OpenPose folders through this module)
-
-    return read_json(path)
-
-
 def _frame(path: Path, camera: str, stamp_s: float) -> Frame:
     """One OpenPose file as a COCO-17 frame: (D, 17, 2) pixels, NaN where OpenPose gave 0, 0, 0."""
-    data = _load(path)
+    data = read_json(path)
     people = data.get("people") if isinstance(data, dict) else None
     if not isinstance(people, list):
         raise OpenPoseError(f"{path}: key 'people' missing (expected OpenPose's JSON output)")

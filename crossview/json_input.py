@@ -1,0 +1,41 @@
+"""Reading the JSON files users give (datasets, result files, OpenPose output) strictly, naming the file on
+any problem."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from core.errors import CrossviewError
+
+
+class DatasetError(CrossviewError):
+    """A dataset directory does not follow the published layout; the message names the file and the key."""
+
+
+def read_json(path: Path, what: str = "") -> object:
+    """A dataset or result JSON file, strictly: UTF-8, standard JSON (no NaN or Infinity).
+
+    Raises:
+        DatasetError: missing, unreadable, not UTF-8 or not valid JSON; the message names the file.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DatasetError(f"{path}: {what or 'file'} not found (expected the crossview dataset layout: "
+                           "calibration.json, detection.json or annotation_2d.json, optional annotation_3d.json)")
+    try:
+        text = path.read_bytes().decode("utf-8")
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); JSON files must be UTF-8") from None
+
+    def constant(name: str):
+        raise DatasetError(f"{path}: {name} is not a JSON number; write a finite number or leave the value out")
+
+    try:
+        return json.loads(text, parse_constant=constant)
+    except json.JSONDecodeError as exc:
+        raise DatasetError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    except RecursionError:
+        raise DatasetError(f"{path}: not valid JSON (nested too deeply)") from None
