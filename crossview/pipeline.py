@@ -44,9 +44,14 @@ def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
     return rows, count // rows
 
 
-def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None) -> scenario_mod.Scenario:
-    """Loads a scenario with the command line's overrides applied (validated like the file)."""
-    overrides = {}
+def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None,
+                  overrides: dict | None = None) -> scenario_mod.Scenario:
+    """Loads a scenario with the command line's overrides applied (validated like the file).
+
+    Args:
+        overrides: any further dotted keys (`{"clock.fps": 5.0}`), applied under the named options.
+    """
+    overrides = dict(overrides or {})
     if duration_s is not None:
         overrides["duration_s"] = duration_s
     if seed is not None:
@@ -107,13 +112,19 @@ class GenerateResult:
 _WRITE_BATCH = 64  # events handed to the writer at once
 
 
-def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True) -> GenerateResult:
-    """Simulates `scenario` for its duration and writes the recording to `out` atomically."""
+def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True,
+             worker_process: bool = True) -> GenerateResult:
+    """Simulates `scenario` for its duration and writes the recording to `out` atomically.
+
+    Args:
+        worker_process: simulate in a second process pipelined with the writer (`sim.simulate.Simulation`);
+            False where the cores are already busy (a sweep's cells run side by side). The bytes are the same.
+    """
     from sim.simulate import Simulation  # MuJoCo is only needed for this stage
 
     check_writable(out, inputs=(scenario.source_path or None,))
     start = time.perf_counter()
-    sim = Simulation(scenario, scenario.seed)
+    sim = Simulation(scenario, scenario.seed, worker_process=worker_process)
     frames = 0
     with contextlib.ExitStack() as stack:
         opened: list = []  # the writer and the progress bar, made while the simulation worker starts
@@ -320,8 +331,14 @@ def write_json(result: dict, path: Path) -> None:
 
 
 def write_text(text: str, path: Path) -> None:
-    """Writes `text` to `path` atomically (a temporary file in the same folder, renamed at the end)."""
+    """Writes `text` to `path` atomically, as UTF-8 (see `write_bytes`)."""
+    write_bytes(text.encode("utf-8"), path)
+
+
+def write_bytes(data: bytes, path: Path) -> None:
+    """Writes `data` to `path` atomically (a temporary file in the same folder, renamed at the end)."""
+    path = Path(path)
     check_writable(path)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
+    tmp.write_bytes(data)
     os.replace(tmp, path)
