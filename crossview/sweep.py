@@ -21,6 +21,7 @@ import logging
 import multiprocessing
 import os
 import random
+import re
 import resource
 import socket
 import tempfile
@@ -267,7 +268,8 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
 
     version = software_version()
     base = pipeline.load_scenario(spec.scenario, duration_s=spec.duration_s)
-    text, path = base.source_text, str(Path(base.source_path).resolve())
+    path = str(Path(base.source_path).resolve())
+    text = Path(path).read_text(encoding="utf-8")  # (the file's, without the overrides' notes)
     cells = []
     grid = itertools.product(*(a.values for a in spec.axes), spec.seeds, spec.methods, spec.presets)
     for index, combo in enumerate(grid):
@@ -365,9 +367,16 @@ def run_cell(cell: Cell) -> dict:
                 recording = rec.read_bytes()
         status = "ok"
     except CrossviewError as e:
-        status = _one_line(e)
+        status = _driver_path(_one_line(e), cell)
     timings.update(wall_s=time.perf_counter() - start, peak_memory_mb=_peak_memory_mb())
     return {"key": cell.key, "status": status, "score": score, "timings": timings, "recording": recording}
+
+
+def _driver_path(message: str, cell: Cell) -> str:
+    """`message` naming the scenario file as the driver does, where a worker elsewhere read a copy of it."""
+    copy = re.compile(re.escape(tempfile.gettempdir()) + r"/crossview-cell-[^/]+/" + re.escape(cell.scenario_name)
+                      + r"\.toml")
+    return copy.sub(lambda _: cell.scenario_path, message)
 
 
 def _crashed(cell: Cell, error: BaseException) -> dict:
