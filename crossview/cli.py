@@ -214,8 +214,9 @@ def _cmd_verify(args) -> None:
 
     results = sweep.verify(args.folder, cells=args.cells, progress=not args.no_progress)
     for r in results:
-        print(f"{'ok      ' if r.matches else 'MISMATCH'} {r.file} sha256 {r.actual_sha256[:16]}"
-              + ("" if r.matches else f" (manifest {r.expected_sha256[:16]})"))
+        held = r.file_sha256[:16] if r.file_sha256 else "missing"
+        print(f"{'ok      ' if r.matches else 'MISMATCH'} {r.file}: manifest {r.expected_sha256[:16]}, file {held}, "
+              f"regenerated {r.regenerated_sha256[:16]}")
     bad = sum(not r.matches for r in results)
     if bad:
         raise CrossviewError(f"{args.folder}: {bad} of {len(results)} recordings differ from manifest.json")

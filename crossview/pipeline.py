@@ -232,7 +232,7 @@ def track(
         seed=rec.header.seed,
         method=method,
         preset=preset,
-        config=_jsonable(dataclasses.asdict(config)),
+        config=jsonable(dataclasses.asdict(config)),
         skeleton_name=skeleton.name,
         software_version=recording.software_version(),
         format_version=recording.FORMAT_VERSION,
@@ -268,8 +268,8 @@ def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, ske
         tracker.update(camera_frame.frame)
 
 
-def _jsonable(value):
-    """Config dicts as JSON-safe values (Enums by value, tuples as lists)."""
+def jsonable(value):
+    """Config dicts as JSON-safe values (Enums by value, tuples as lists, anything else as its text)."""
     return json.loads(json.dumps(value, default=lambda v: getattr(v, "value", str(v))))
 
 

@@ -50,7 +50,7 @@ SWEEP_FORMAT = 1
 
 # Environment of Ray workers on a cluster (local workers inherit the driver's, which the CLI sets): one BLAS
 # thread per process, and no MuJoCo rendering back-end to look for.
-_RAY_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
+RAY_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
 
 # Modules a pool's fork server imports once, so that each worker it forks starts with them loaded.
 _PRELOAD = ["crossview.sweep", "crossview.recording", "crossview.scoring", "sim.simulate", "tracker.tracker"]
@@ -232,16 +232,11 @@ def parse_names(option: str, text: str, valid) -> tuple[str, ...]:
 # ---------------------------------------------------------------- the plan
 
 
-def _jsonable(value):
-    """Dataclass dicts as JSON-safe values (Enums by value, tuples as lists, non-finite floats as text)."""
-    return json.loads(json.dumps(value, default=lambda v: getattr(v, "value", str(v))))
-
-
 def resolved_digest(scenario: scenario_mod.Scenario) -> str:
     """sha256 of every resolved value of a scenario (not its file's text: comments do not change a cell)."""
     values = {f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)
               if f.name not in ("source_text", "source_path")}
-    text = json.dumps(_jsonable({k: dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v
+    text = json.dumps(pipeline.jsonable({k: dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v
                                  for k, v in values.items()}), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
@@ -455,7 +450,7 @@ def connect_ray(address: str | None) -> bool:
         _check_reachable(address)
     try:
         if address:
-            ray.init(address=address, runtime_env={"env_vars": _RAY_WORKER_ENV}, log_to_driver=False,
+            ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
                      logging_level=logging.WARNING)
         else:
             ray.init(log_to_driver=False, logging_level=logging.WARNING)
@@ -748,20 +743,22 @@ def write_manifest(out: Path, cells: list[Cell], rows: list[dict]) -> None:
 
 @dataclass(frozen=True)
 class VerifiedRecording:
-    """One regenerated recording: its file, the sha256 the manifest holds and the one made now."""
+    """One checked recording: its file, the sha256 the manifest holds, that of the file in the folder (None
+    where the file is missing) and that of the recording regenerated here."""
 
     file: str
     expected_sha256: str
-    actual_sha256: str
+    file_sha256: str | None
+    regenerated_sha256: str
 
     @property
     def matches(self) -> bool:
-        return self.expected_sha256 == self.actual_sha256
+        return self.file_sha256 == self.expected_sha256 == self.regenerated_sha256
 
 
 def verify(folder: Path, *, cells: int | None = None, progress: bool = True) -> list[VerifiedRecording]:
-    """Regenerates all (or an evenly drawn sample of `cells`) of a kept sweep's recordings and compares their
-    sha256 with the manifest's.
+    """Regenerates all (or a fixed random sample of `cells`) of a kept sweep's recordings and compares the
+    sha256 of each, and of the file kept in `folder`, with the manifest's.
 
     Raises:
         CrossviewError: no readable manifest, or `cells` < 1.
@@ -795,6 +792,8 @@ def verify(folder: Path, *, cells: int | None = None, progress: bool = True) -> 
             scenario = scenario_mod.load(source, entry["overrides"])
             rec = Path(tmp) / "again.mcap"
             pipeline.generate(scenario, rec, progress=False)
-            actual = hashlib.sha256(rec.read_bytes()).hexdigest()
-        results.append(VerifiedRecording(entry["file"], entry["sha256"], actual))
+            regenerated = hashlib.sha256(rec.read_bytes()).hexdigest()
+        kept = Path(folder) / entry["file"]
+        held = hashlib.sha256(kept.read_bytes()).hexdigest() if kept.is_file() else None
+        results.append(VerifiedRecording(entry["file"], entry["sha256"], held, regenerated))
     return results
