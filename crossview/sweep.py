@@ -698,10 +698,11 @@ def write_results(out: Path, wanted: dict, rows: list[dict]) -> None:
     """results.json (deterministic: the same grid gives the same bytes anywhere), timings.json (the speeds,
     wall times and peak memory of each cell) and results.csv (both, one row per cell, for spreadsheets)."""
     result_rows = [result_row(r) for r in rows]
+    columns = list(dict.fromkeys(k for row in result_rows for k in row))
+    result_rows = [{c: row.get(c) for c in columns} for row in result_rows]  # a failed cell's scores are null
     pipeline.write_json({"sweep": wanted, "cells": result_rows}, Path(out) / "results.json")
     timings = [{"key": r["key"], **r["timings"]} for r in rows]
     pipeline.write_json({"cells": timings}, Path(out) / "timings.json")
-    columns = list(dict.fromkeys(k for row in result_rows for k in row))
     timing_columns = list(dict.fromkeys(k for t in timings for k in t if k != "key"))
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
