@@ -421,12 +421,11 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
         yield outcomes()
         finished = True
     finally:
-        pool.shutdown(wait=finished, cancel_futures=True)
         if not finished:
+            pool.shutdown(wait=False, cancel_futures=True)
             for process in multiprocessing.active_children():  # the pool's workers, still running a cell
                 process.terminate()
-            for process in multiprocessing.active_children():
-                process.join()
+        pool.shutdown(wait=True)  # (the workers gone, the pool's own thread and queues end and are released)
 
 
 def connect_ray(address: str | None) -> bool:
