@@ -236,8 +236,8 @@ def resolved_digest(scenario: scenario_mod.Scenario) -> str:
     """sha256 of every resolved value of a scenario (not its file's text: comments do not change a cell)."""
     values = {f.name: getattr(scenario, f.name) for f in dataclasses.fields(scenario)
               if f.name not in ("source_text", "source_path")}
-    text = json.dumps(pipeline.jsonable({k: dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v
-                                 for k, v in values.items()}), sort_keys=True)
+    values = {k: dataclasses.asdict(v) if dataclasses.is_dataclass(v) else v for k, v in values.items()}
+    text = json.dumps(pipeline.jsonable(values), sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -387,6 +387,8 @@ def _crashed(cell: Cell, error: BaseException) -> dict:
 
 @contextlib.contextmanager
 def _serial(cells: list[Cell], started: Callable[[Cell], None]) -> Iterator[Iterator[tuple[Cell, dict]]]:
+    """One cell after another in this process (`started` is told of each as it starts)."""
+
     def outcomes():
         for cell in cells:
             started(cell)

@@ -120,7 +120,7 @@ def plot(wanted: dict, rows: list[dict], field: str, title: str, limit: float | 
         ax.set_xticks(positions, [str(x) for x in xs])
     ax.set_xlabel(first)
     ax.set_ylabel(title)
-    ax.set_title(f"{title}: mean over seeds, bars min–max ({wanted['scenario']}, {wanted['duration_s']:g} s)",
+    ax.set_title(f"{title}\nmean over seeds, bars min–max ({wanted['scenario']}, {wanted['duration_s']:g} s a cell)",
                  fontsize="medium")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize="small")
