@@ -431,8 +431,9 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
 
 
 def connect_ray(address: str | None) -> bool:
-    """Starts or joins Ray before any cell runs: `address` None uses an instance this process is already
-    connected to, or starts a local one (or joins $RAY_ADDRESS); an address joins that cluster.
+    """Starts or joins Ray before any cell runs: `address` None starts a local instance (or joins the one
+    $RAY_ADDRESS names); an address, once something answers there, joins that cluster. Where this process
+    is already connected (a program that called `ray.init` itself), that connection is used.
 
     Returns:
         whether this call connected (and the sweep should disconnect at its end).
@@ -445,10 +446,10 @@ def connect_ray(address: str | None) -> bool:
     except ImportError:
         raise CrossviewError("--ray: Ray is not installed; install the extra: pip install "
                              "'crossview-testbed[ray]' (or pip install -e '.[ray]' in a checkout)") from None
-    if ray.is_initialized():
-        return False
     if address and address != "auto":
         _check_reachable(address)
+    if ray.is_initialized():  # (a program that calls `run_sweep` connected already)
+        return False
     try:
         if address:
             ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
