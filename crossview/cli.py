@@ -200,7 +200,81 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, help="write the figures here")
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
     p.add_argument("--duration", type=_positive_float, default=20.0, help="simulated seconds per case")
+
+    p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
+    p.add_argument("scenario", help="base scenario file or shipped name")
+    p.add_argument("--set", dest="axes", action="append", type=_sweep_axis, default=[], metavar="KEY=V1,V2,...",
+                   help="an axis: any scenario key by its dotted name (crowd.people, clock.fps, ...); repeatable, "
+                   "the first is the x of the plots, the second the lines")
+    p.add_argument("--people", dest="axes", action="append", type=lambda t: ("crowd.people", t), metavar="N1,N2",
+                   help="axis of crowd sizes (--set crowd.people=...)")
+    p.add_argument("--cameras", dest="axes", action="append", type=lambda t: ("cameras", t), metavar="N1,N2",
+                   help="axis of camera counts, each a grid fitted to the floor")
+    p.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
+    p.add_argument("--method", default="crossview", help="comma-separated tracker methods (default crossview)")
+    p.add_argument("--preset", default="store", help="comma-separated tracker presets (default store)")
+    p.add_argument("--duration", type=_positive_float, help="simulated seconds per cell (default: the scenario's)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int, help="local worker processes (default: the cores; 1 runs "
+                       "the cells one after another in this process)")
+    where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS", help="run the cells as Ray tasks: alone, "
+                       "on a local instance; with ADDRESS, on that cluster (pip install '.[ray]')")
+    p.add_argument("--out", type=Path, required=True, help="output folder (a rerun into it resumes)")
+    p.add_argument("--keep-recordings", action="store_true", help="keep each cell's recording and write "
+                   "manifest.json (for crossview verify)")
+
+    p = sub.add_parser("verify", help="regenerate a kept sweep's recordings and check their bytes")
+    p.add_argument("folder", type=Path, help="a sweep folder with manifest.json (sweep --keep-recordings)")
+    p.add_argument("--cells", type=_positive_int, help="check a fixed sample of this many (default: all)")
     return parser
+
+
+def _sweep_axis(text: str) -> tuple[str, str]:
+    key, sep, values = text.partition("=")
+    if not sep or not key.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=V1,V2,... (for example crowd.people=10,25)")
+    return key.strip(), values
+
+
+def _cmd_sweep(args) -> None:
+    from crossview import pipeline, sweep
+    from tracker.config import PRESETS
+
+    axes = tuple(sweep.parse_axis(key, text) for key, text in args.axes)
+    keys = [a.key for a in axes]
+    repeated = next((k for k in keys if keys.count(k) > 1), None)
+    if repeated:
+        raise CrossviewError(f"--set {repeated}: given twice; give one axis per key")
+    if args.duration is not None and "duration_s" in keys:
+        raise CrossviewError("--duration: duration_s is also an axis (--set duration_s=...); give one")
+    spec = sweep.SweepSpec(
+        scenario=args.scenario, axes=axes, seeds=sweep.parse_seeds(args.seeds),
+        methods=sweep.parse_names("--method", args.method, pipeline.METHODS),
+        presets=sweep.parse_names("--preset", args.preset, PRESETS), duration_s=args.duration,
+    )
+    if args.ray is not None:
+        executor = sweep.Executor.RAY
+    else:
+        executor = sweep.Executor.SERIAL if args.workers == 1 else sweep.Executor.POOL
+    summary = sweep.run_sweep(spec, args.out, executor=executor, workers=args.workers, ray_address=args.ray or None,
+                              keep_recordings=args.keep_recordings, progress=not args.no_progress)
+    print(f"sweep: {summary.cells} cells, {summary.skipped} already finished (skipped), {summary.ran} run, "
+          f"{summary.failed} failed, in {summary.wall_s:.1f} s")
+    print(f"results: {summary.out / 'results.json'}, {summary.out / 'results.csv'}, {summary.out / 'report.md'}")
+
+
+def _cmd_verify(args) -> None:
+    from crossview import sweep
+
+    results = sweep.verify(args.folder, cells=args.cells, progress=not args.no_progress)
+    for r in results:
+        held = r.file_sha256[:16] if r.file_sha256 else "missing"
+        print(f"{'ok      ' if r.matches else 'MISMATCH'} {r.file}: manifest {r.expected_sha256[:16]}, file {held}, "
+              f"regenerated {r.regenerated_sha256[:16]}")
+    bad = sum(not r.matches for r in results)
+    if bad:
+        raise CrossviewError(f"{args.folder}: {bad} of {len(results)} recordings differ from manifest.json")
+    print(f"verify: {len(results)} of {len(results)} recordings match manifest.json")
 
 
 def _cmd_run(args) -> None:
@@ -413,6 +487,8 @@ COMMANDS = {
     "compare": _cmd_compare,
     "bench": _cmd_bench,
     "render": _cmd_render,
+    "sweep": _cmd_sweep,
+    "verify": _cmd_verify,
 }
 
 

@@ -41,9 +41,14 @@ def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
     return rows, count // rows
 
 
-def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None) -> scenario_mod.Scenario:
-    """Loads a scenario with the command line's overrides applied (validated like the file)."""
-    overrides = {}
+def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None,
+                  overrides: dict | None = None) -> scenario_mod.Scenario:
+    """Loads a scenario with the command line's overrides applied (validated like the file).
+
+    Args:
+        overrides: any further dotted keys (`{"clock.fps": 5.0}`), applied under the named options.
+    """
+    overrides = dict(overrides or {})
     if duration_s is not None:
         overrides["duration_s"] = duration_s
     if seed is not None:
@@ -94,13 +99,19 @@ cameras for about 5 hours, the supermarket's 60 for 2.3 hours."""
 _SCHEDULE_BYTES_PER_FRAME = 170  # the clock's schedule, as arrays and the lists made of them
 
 
-def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True) -> GenerateResult:
-    """Simulates `scenario` for its duration and writes the recording to `out` atomically."""
+def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True,
+             worker_process: bool = True) -> GenerateResult:
+    """Simulates `scenario` for its duration and writes the recording to `out` atomically.
+
+    Args:
+        worker_process: simulate in a second process pipelined with the writer (`sim.simulate.Simulation`);
+            False where the cores are already busy (a sweep's cells run side by side). The bytes are the same.
+    """
     from sim.simulate import Simulation  # MuJoCo is only needed for this stage
 
     check_writable(out, inputs=(scenario.source_path or None,))
     start = time.perf_counter()
-    sim = Simulation(scenario, scenario.seed)
+    sim = Simulation(scenario, scenario.seed, worker_process=worker_process)
     scheduled = scenario.duration_s * scenario.clock.fps * len(sim.cameras)
     if scheduled > MAX_CAMERA_FRAMES:
         raise CrossviewError(
@@ -228,7 +239,7 @@ def track(
         seed=rec.header.seed,
         method=method,
         preset=preset,
-        config=_jsonable(dataclasses.asdict(config)),
+        config=jsonable(dataclasses.asdict(config)),
         skeleton_name=skeleton.name,
         software_version=recording.software_version(),
         format_version=recording.FORMAT_VERSION,
@@ -274,8 +285,8 @@ def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, ske
         resolved.update(tracker, camera_frame.frame, index)
 
 
-def _jsonable(value):
-    """Config dicts as JSON-safe values (Enums by value, tuples as lists)."""
+def jsonable(value):
+    """Config dicts as JSON-safe values (Enums by value, tuples as lists, anything else as its text)."""
     return json.loads(json.dumps(value, default=lambda v: getattr(v, "value", str(v))))
 
 

@@ -171,6 +171,30 @@ def from_source_text(source_text: str, name: str, where: str) -> Scenario:
     return scenario
 
 
+def check_override(dotted: str, value, file: str = "override") -> None:
+    """Checks that `dotted` names a key of a scenario file and that `value` has its type, as `load` would
+    (its range is left to `load`: whether a value is valid can depend on the rest of the scenario).
+
+    Raises:
+        ScenarioError: an unknown key, a key that is a table, or a value of the wrong type; the message
+            starts with `file` and names the key.
+    """
+    cls, prefix = Scenario, ""
+    names = dotted.split(".")
+    for depth, name in enumerate(names):
+        fields = {f.name for f in _keys(cls)}
+        if name not in fields:
+            raise ScenarioError(f"{file}: unknown key '{prefix}{name}' (valid keys: {', '.join(sorted(fields))})")
+        hint = typing.get_type_hints(cls)[name]
+        if depth < len(names) - 1:
+            if not dataclasses.is_dataclass(hint):
+                raise ScenarioError(f"{file}: '{prefix}{name}' is not a table, so '{dotted}' is not a key")
+            cls, prefix = hint, f"{prefix}{name}."
+    if _is_table(hint):
+        raise ScenarioError(f"{file}: '{dotted}' is a table; name one of its keys")
+    _convert(hint, value, file, dotted)
+
+
 def from_dict(cls, tree: dict, file: str, prefix: str):
     """Builds dataclass `cls` from a TOML table, naming `file` and the dotted key on any error."""
     if not isinstance(tree, dict):

@@ -1,0 +1,176 @@
+"""`crossview sweep` and `crossview verify`: the same grid gives the same results.json serially, in a process
+pool and on Ray; a rerun resumes; bad input is refused before any cell runs; verify finds a changed recording."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import sys
+
+import pytest
+
+from crossview import sweep, sweep_report
+from crossview.cli import EXIT_BAD_INPUT, main
+
+# The small grid: 2 crowd sizes x 2 camera counts x 2 seeds of store_layout1, 1 simulated second each (CI time).
+GRID = ["store_layout1", "--people", "2,3", "--cameras", "6,12", "--seeds", "0,1", "--duration", "1"]
+
+
+def _sweep(out, *extra) -> int:
+    return main(["--no-progress", "sweep", *GRID, "--out", str(out), *extra])
+
+
+def _sha256(path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    """The grid run serially in this process: the reference of the other executors."""
+    out = tmp_path_factory.mktemp("serial")
+    assert _sweep(out, "--workers", "1") == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def ray_instance():
+    """One local Ray instance for the module (its start-up is slow)."""
+    ray = pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": sweep.RAY_WORKER_ENV})
+    yield ray
+    ray.shutdown()
+
+
+def test_serial_sweep_writes_one_row_per_cell_with_scores_and_timings(serial):
+    results = json.loads((serial / "results.json").read_text())
+    cells = results["cells"]
+    # Every cell of the product ran, in grid order (the seed varies fastest).
+    assert [(c["crowd.people"], c["cameras"], c["seed"]) for c in cells] == [
+        (p, k, s) for p in (2, 3) for k in (6, 12) for s in (0, 1)]
+    assert all(c["status"] == "ok" for c in cells)
+    # The scenario was resolved per cell: the camera count and crowd size are what was simulated.
+    assert [c["num_cameras"] for c in cells] == [6, 6, 12, 12] * 2
+    assert all(0 <= c["pcp"] <= 1 and 0 <= c["idf1"] <= 1 for c in cells)
+    # Speeds vary from run to run: they are in timings.json and results.csv, not in results.json.
+    assert "tracker_fps" not in cells[0]
+    timings = json.loads((serial / "timings.json").read_text())["cells"]
+    assert [t["key"] for t in timings] == [c["key"] for c in cells]
+    assert all(t["tracker_fps"] > 0 and t["wall_s"] > 0 and t["peak_memory_mb"] > 0 for t in timings)
+    header = (serial / "results.csv").read_text().splitlines()[0].split(",")
+    assert {"crowd.people", "cameras", "seed", "status", "pcp", "idf1", "tracker_fps", "peak_memory_mb"} <= set(header)
+    assert len((serial / "results.csv").read_text().splitlines()) == 1 + len(cells)
+    # One small score file per cell, the report and its plots.
+    assert len(list((serial / "cells").glob("*.json"))) == len(cells)
+    report = (serial / "report.md").read_text()
+    assert "## Breaking points" in report and "cameras=6:" in report
+    assert all((serial / "plots" / f"{m}.png").read_bytes()[:4] == b"\x89PNG" for m, _, _ in sweep_report.METRICS)
+    assert not list(serial.rglob("*.tmp"))
+
+
+def test_pool_gives_the_same_results_json_bytes_as_serial(serial, tmp_path):
+    assert _sweep(tmp_path, "--workers", "2") == 0
+    assert _sha256(tmp_path / "results.json") == _sha256(serial / "results.json")
+
+
+def test_ray_gives_the_same_results_json_bytes_as_serial(serial, tmp_path, ray_instance):
+    assert _sweep(tmp_path, "--ray") == 0
+    assert _sha256(tmp_path / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_rerun_skips_finished_cells_and_gives_the_same_results(serial, tmp_path, caplog):
+    # An interrupted sweep: three cells' files lost, the results not yet written.
+    out = tmp_path / "resumed"
+    shutil.copytree(serial, out)
+    cells = sorted((out / "cells").glob("*.json"))
+    for lost in cells[:3]:
+        lost.unlink()
+    for written in ("results.json", "results.csv", "timings.json", "report.md"):
+        (out / written).unlink()
+    # The rerun runs only the three missing cells.
+    with caplog.at_level("WARNING", logger="crossview.sweep"):
+        assert _sweep(out, "--workers", "1") == 0
+    assert f"5 of {len(cells)} cells already finished" in caplog.text
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_cell_too_crowded_for_the_floor_fails_alone_and_kept_recordings_verify(tmp_path, capsys):
+    # store_layout1 holds at most a dozen people: the 200-people cell fails with its one-line error.
+    out = tmp_path / "kept"
+    assert main(["--no-progress", "sweep", "store_layout1", "--people", "2,200", "--duration", "1", "--workers", "1",
+                 "--keep-recordings", "--out", str(out)]) == 0
+    cells = json.loads((out / "results.json").read_text())["cells"]
+    assert cells[0]["status"] == "ok"
+    assert "crowd.people: 200 people need" in cells[1]["status"] and cells[1]["pcp"] is None
+    assert "## Failed cells" in (out / "report.md").read_text()
+    # The manifest lists the recording that was made, with its sha256.
+    manifest = json.loads((out / "manifest.json").read_text())["recordings"]
+    assert len(manifest) == 1
+    kept = out / manifest[0]["file"]
+    assert _sha256(kept) == manifest[0]["sha256"]
+    assert "people = 2" in manifest[0]["resolved_scenario"]
+    # verify regenerates it: the same bytes.
+    capsys.readouterr()
+    assert main(["--no-progress", "verify", str(out)]) == 0
+    assert "1 of 1 recordings match" in capsys.readouterr().out
+    # A changed byte in the kept recording is found.
+    data = bytearray(kept.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    kept.write_bytes(bytes(data))
+    assert main(["--no-progress", "verify", str(out), "--cells", "1"]) == EXIT_BAD_INPUT
+    captured = capsys.readouterr()
+    assert "MISMATCH" in captured.out and "1 of 1 recordings differ" in captured.err
+
+
+def _run_bad(capsys, argv):
+    status = main(["--no-progress", *argv])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT, err
+    assert len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    return err
+
+
+@pytest.mark.parametrize(("args", "named"), [
+    (["--set", "crowd.peeple=1,2"], "unknown key 'crowd.peeple'"),
+    (["--set", "crowd.people=2,many"], "crowd.people = 'many' must be an integer"),
+    (["--set", "detector.profile=typical,rough"], "is not one of ['ideal', 'typical', 'harsh']"),
+    (["--set", "clock.fps="], "--set clock.fps: '' is an empty axis"),
+    (["--people", "2,,3"], "empty value"),
+    (["--seeds", "0,one"], "--seeds: '0,one' is not a comma-separated list"),
+    (["--cameras", "0"], "--cameras: 0 is not a camera count"),
+    (["--method", "crossview,magic"], "--method: 'magic' is not one of"),
+    (["--set", "crowd.people=2", "--people", "3"], "--set crowd.people: given twice"),
+    (["--ray", "127.0.0.1:1"], "--ray 127.0.0.1:1: unreachable"),
+])
+def test_bad_input_is_one_line_exit_2_before_any_cell(tmp_path, capsys, args, named):
+    out = tmp_path / "out"
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", *args, "--out", str(out)])
+    assert named in err
+    assert not out.exists()
+
+
+def test_ray_asked_for_but_not_installed_names_the_extra(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # what `import ray` meets where it is not installed
+    out = tmp_path / "out"
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", "--ray", "--out", str(out)])
+    assert "Ray is not installed" in err and "crossview-testbed[ray]" in err
+    assert not out.exists()
+
+
+def test_a_folder_holding_another_sweep_is_refused(serial, tmp_path, capsys):
+    out = tmp_path / "other"
+    shutil.copytree(serial, out)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--people", "2,4", "--duration", "1", "--out", str(out)])
+    assert "holds another sweep's results" in err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_verify_without_a_manifest_is_refused(tmp_path, capsys):
+    err = _run_bad(capsys, ["verify", str(tmp_path)])
+    assert "manifest.json: no manifest" in err
+
+
+def test_axis_values_are_read_as_toml_values_with_text_as_a_fallback():
+    assert sweep.parse_values("--set k", "10,2.5,true,typical,[1, 2]") == (10, 2.5, True, "typical", [1, 2])
