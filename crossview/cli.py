@@ -237,7 +237,7 @@ def _sweep_axis(text: str) -> tuple[str, str]:
 
 
 def _cmd_sweep(args) -> None:
-    from crossview import pipeline, sweep
+    from crossview import plugins, sweep
     from tracker.config import PRESETS
 
     axes = tuple(sweep.parse_axis(key, text) for key, text in args.axes)
@@ -247,9 +247,12 @@ def _cmd_sweep(args) -> None:
         raise CrossviewError(f"--set {repeated}: given twice; give one axis per key")
     if args.duration is not None and "duration_s" in keys:
         raise CrossviewError("--duration: duration_s is also an axis (--set duration_s=...); give one")
+    methods = sweep.parse_names("--method", args.method)
+    for method in methods:  # each a tracker `crossview track` can run (a bad one is named before any cell runs)
+        plugins.resolve(method)
     spec = sweep.SweepSpec(
         scenario=args.scenario, axes=axes, seeds=sweep.parse_seeds(args.seeds),
-        methods=sweep.parse_names("--method", args.method, pipeline.METHODS),
+        methods=methods,
         presets=sweep.parse_names("--preset", args.preset, PRESETS), duration_s=args.duration,
     )
     if args.ray is not None:

@@ -85,7 +85,7 @@ class SweepSpec:
         scenario: the base scenario (a file or a shipped name).
         axes: the axes in the order given; the first is the x of the plots, the second the lines.
         seeds: seeds of the scenario's random generator.
-        methods: tracker methods (`crossview.pipeline.METHODS`).
+        methods: tracker methods, each a `--method` of `crossview track` (built in, registered or a plug-in).
         presets: tracker presets (`tracker.config.PRESETS`).
         duration_s: simulated seconds per cell; None keeps the scenario's.
     """
@@ -218,11 +218,11 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     return seeds
 
 
-def parse_names(option: str, text: str, valid) -> tuple[str, ...]:
-    """A comma-separated list of names, each one of `valid`."""
+def parse_names(option: str, text: str, valid=None) -> tuple[str, ...]:
+    """A comma-separated list of names, each one of `valid` (when given)."""
     names = tuple(part.strip() for part in text.split(","))
     for name in names:
-        if name not in valid:
+        if valid is not None and name not in valid:
             raise CrossviewError(f"{option}: {name!r} is not one of {', '.join(sorted(valid))}")
     if len(set(names)) != len(names):
         raise CrossviewError(f"{option}: {text!r} repeats a name")

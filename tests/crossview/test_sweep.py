@@ -139,7 +139,7 @@ def _run_bad(capsys, argv):
     (["--people", "2,,3"], "empty value"),
     (["--seeds", "0,one"], "--seeds: '0,one' is not a comma-separated list"),
     (["--cameras", "0"], "--cameras: 0 is not a camera count"),
-    (["--method", "crossview,magic"], "--method: 'magic' is not one of"),
+    (["--method", "crossview,magic"], "--method 'magic': not a known tracker"),
     (["--set", "crowd.people=2", "--people", "3"], "--set crowd.people: given twice"),
     (["--ray", "127.0.0.1:1"], "--ray 127.0.0.1:1: unreachable"),
 ])
