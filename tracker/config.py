@@ -36,6 +36,10 @@ class TrackerConfig:
         alpha_2d_floor_px: least 2D distance threshold of eq. (2), pixels; 0 is the paper (see
             tracker.affinity.affinity_2d).
         score_threshold: joints with a detector score below this are ignored everywhere, [0, 1].
+        view_margin_m: a target whose predicted body lies farther than this outside a camera's view volume is
+            not scored against that camera's frame, and two cameras whose views (in the band of heights where
+            joints can be) do not come this close are never linked at initialisation, metres (see
+            tracker.visibility). At least alpha_3d_m, so that no pair left out could have a positive 3D term.
         normalize_affinity: False sums eq. (1) over joints as the paper writes it; True divides the sum by the
             number of joints compared (a detection with few joints then counts as much as a full one).
         velocity_window_s: history span for the linear least-squares joint velocity of eq. (5), s.
@@ -100,6 +104,7 @@ class TrackerConfig:
     alpha_2d_floor_px: float = 0.0
     score_threshold: float = 0.2
     normalize_affinity: bool = False
+    view_margin_m: float = 0.5
     velocity_window_s: float = 0.3
     velocity_history: int = 48
     max_speed_m_per_s: float = 6.0
@@ -142,7 +147,7 @@ class TrackerConfig:
         nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "alpha_2d_floor_px", "lambda_t_per_s", "max_predict_s",
                   "init_window_s", "confirm_min_age_s", "max_lateness_s", "reid_max_m", "reid_speed_m_per_s",
                   "reject_factor")
-        positive = ("alpha_2d_px_per_s", "alpha_3d_m", "velocity_window_s", "max_speed_m_per_s",
+        positive = ("alpha_2d_px_per_s", "alpha_3d_m", "view_margin_m", "velocity_window_s", "max_speed_m_per_s",
                     "max_observation_age_s", "alpha_epipolar_px", "reject_floor_px", "max_bone_m", "stale_after_s",
                     "init_max_reprojection_px", "init_max_bone_m",
                     "tentative_timeout_s", "lost_after_s", "remove_after_s")
@@ -171,6 +176,9 @@ class TrackerConfig:
         if self.init_min_top_m >= self.init_max_top_m:
             raise ValueError(f"TrackerConfig.init_min_top_m: {self.init_min_top_m} must be below "
                              f"init_max_top_m {self.init_max_top_m}")
+        if not self.view_margin_m >= self.alpha_3d_m:
+            raise ValueError(f"TrackerConfig.view_margin_m: {self.view_margin_m} must be >= alpha_3d_m "
+                             f"{self.alpha_3d_m}")
         if self.lost_after_s > self.remove_after_s:
             raise ValueError(f"TrackerConfig.lost_after_s: {self.lost_after_s} must not exceed "
                              f"remove_after_s {self.remove_after_s}")

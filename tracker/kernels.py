@@ -19,7 +19,7 @@ MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apa
 @jit
 def update_matched(
     rows, cols, det_px, camera, stamp_s,
-    pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
+    pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
     P, bones,
     max_observation_age_s, lambda_t_per_s, use_velocity, min_views, reject_factor, reject_floor_px, max_bone_m,
     velocity_window_s, max_speed_m_per_s, stale_after_s, max_predict_s,
@@ -41,8 +41,10 @@ def update_matched(
     Args:
         rows: (M,) matched target rows; cols: (M,) their detections in det_px (D, J, 2) undistorted pixels.
         camera: the frame's camera index; stamp_s: its stamp t, s.
-        pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates: the
-            target arrays of `tracker._Targets` (updated in place).
+        pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next, last_update_s, num_updates:
+            the target arrays of `tracker._Targets` (updated in place); cam_s (T, C) is the stamp of the last
+            frame of each camera matched to the target (NaN none), >= every obs_s of that camera, so that only
+            the cameras with a fresh point are visited per joint.
         P: (C, 3, 4) projection matrices; bones: (B, 2) joint pairs.
         The rest: `TrackerConfig` fields.
     """
@@ -64,6 +66,7 @@ def update_matched(
     update = np.empty(J, dtype=np.bool_)
     hit = np.empty(J, dtype=np.bool_)
     values = np.empty(J)
+    fresh = np.empty(C, dtype=np.int64)
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
@@ -73,13 +76,20 @@ def update_matched(
                 obs_px[r, camera, j, 0] = det_px[d, j, 0]
                 obs_px[r, camera, j, 1] = det_px[d, j, 1]
                 obs_s[r, camera, j] = stamp_s
+        cam_s[r, camera] = stamp_s
+        num_fresh = 0
+        for k in range(C):
+            if stamp_s - cam_s[r, k] <= max_observation_age_s:  # False for NaN (never matched)
+                fresh[num_fresh] = k
+                num_fresh += 1
         # 2. Eq. (6)-(11) for the joints the detection holds.
         for j in range(J):
             update[j] = False
             if not np.isfinite(det_px[d, j, 0]):
                 continue
             num = 0
-            for k in range(C):
+            for f in range(num_fresh):
+                k = fresh[f]
                 if stamp_s - obs_s[r, k, j] <= max_observation_age_s:  # False for NaN (no point)
                     cams[num] = k
                     points[num, 0] = obs_px[r, k, j, 0]

@@ -2,7 +2,9 @@
 
 States are held as small integer codes in the tracker's arrays; `to_state` maps them to `TargetState`.
 - born TENTATIVE (from an initialisation cluster);
-- TENTATIVE -> CONFIRMED once it has `confirm_min_updates` matched detections and `confirm_min_age_s` of age;
+- TENTATIVE -> CONFIRMED once it has `confirm_min_updates` matched detections, `confirm_min_age_s` of age and
+  a body: its root (both hips) and `init_min_joints_3d` joints triangulated (so no output is a partial body
+  whose missing joints would be guessed from a few);
 - TENTATIVE -> REMOVED when not updated for `tentative_timeout_s`;
 - CONFIRMED -> LOST when not updated for `lost_after_s` (lost targets are still matched, not output);
 - LOST -> CONFIRMED when matched again;
@@ -45,15 +47,19 @@ def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: 
 
 
 def on_match(
-    state: np.ndarray, born_s: np.ndarray, num_updates: np.ndarray, now_s: float, config: TrackerConfig
+    state: np.ndarray, born_s: np.ndarray, num_updates: np.ndarray, now_s: float, config: TrackerConfig,
+    has_body: np.ndarray | None = None,
 ) -> np.ndarray:
     """Transitions caused by a matched detection: returns the new (M,) state codes of the matched targets.
 
     Args:
         state, born_s, num_updates: (M,) codes, birth times (s) and matched-detection counts (after this match).
+        has_body: (M,) whether each has its hips and enough joints triangulated; None: all have.
     """
     new = state.copy()
     ready = (num_updates >= config.confirm_min_updates) & (now_s - born_s >= config.confirm_min_age_s)
+    if has_body is not None:
+        ready &= has_body
     new[(state == TENTATIVE) & ready] = CONFIRMED
     new[state == LOST] = CONFIRMED
     return new

@@ -9,7 +9,7 @@ from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
 from tracker.kernels import update_matched
 from tracker.tracker import Tracker
-from tracker.types import TargetState
+from tracker.types import JointState, TargetState
 
 CONFIG = TrackerConfig.preset("store")
 
@@ -161,7 +161,7 @@ def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
         rows, cols = tracker._associate(c, det_px, frame.stamp_s)
         assert rows.size
         tg = tracker._targets
-        names = ("pos", "vel", "joint_s", "seen_s", "obs_px", "obs_s", "hist_pos", "hist_s", "hist_next",
+        names = ("pos", "vel", "joint_s", "seen_s", "obs_px", "obs_s", "cam_s", "hist_pos", "hist_s", "hist_next",
                  "last_update_s", "num_updates")
         results = []
         for kernel in (update_matched, update_matched.py_func):
@@ -178,3 +178,39 @@ def test_two_cameras_with_one_name_are_refused(tracker_type):
     cams = store_like("layout1", 0.2, seed=0)[0]
     with pytest.raises(ValueError, match=f"{tracker_type.__name__}: camera names must be unique"):
         tracker_type([cams[0], cams[1], cams[0]])
+
+
+def _without(frames, joints):
+    """The frames with some joints never detected."""
+    out = []
+    for f in frames:
+        kp, sc = f.keypoints_px.copy(), f.scores.copy()
+        kp[:, joints] = np.nan
+        sc[:, joints] = 0.0
+        out.append(Frame(f.camera, f.stamp_s, kp, sc))
+    return out
+
+
+def test_joints_never_seen_are_inferred_never_nan(layout1):
+    cams, walkers, frames, _ = layout1
+    hidden = [7, 9]  # the left elbow and wrist: no camera ever sees them
+    outputs = _run(Tracker(cams, CONFIG), _without(frames, hidden))
+    targets = [t for out in outputs for t in out.targets]
+    assert len(targets) > 1000
+    for t in targets:
+        assert np.isfinite(t.pose).all()
+        assert t.joint_state.shape == (17,)
+        assert (t.joint_state[hidden] == JointState.INFERRED.value).all()
+    seen = np.array([t.joint_state for t in targets])
+    assert (seen[:, [11, 12]] != JointState.INFERRED.value).all()  # confirmed with their hips
+    assert np.mean(seen[:, 0] == JointState.OBSERVED.value) > 0.9
+    # The inferred arm hangs where a person's arm is: within a forearm's length of the truth.
+    truth = walkers.poses(outputs[-1].stamp_s)
+    for t in outputs[-1].targets:
+        nearest = truth[np.argmin(np.linalg.norm(truth[:, 11] - t.pose[11], axis=-1))]
+        assert np.linalg.norm(nearest[hidden] - t.pose[hidden], axis=-1).max() < 0.3
+
+
+def test_a_body_without_hips_is_never_confirmed(layout1):
+    cams, _, frames, _ = layout1
+    assert not any(out.targets for out in _run(Tracker(cams, CONFIG), _without(frames, [11, 12])))
