@@ -17,7 +17,7 @@ from core.types import SKELETONS, Camera, Skeleton
 from crossview import foxglove
 from sim.types import Box, BoxKind
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 3  # 3: a tracks file's targets carry joint_state (format 2 files are read too)
 OLDEST_RECORDING_VERSION = 2  # format 1 stored every frame's poses at capture; this reader derives them
 MAGIC = b"\x89MCAP0\r\n"
 CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: the unit of reading and of CRC checks
@@ -113,6 +113,7 @@ def _project_file() -> descriptor_pb2.FileDescriptorProto:
         ("stamp_s", _F.TYPE_DOUBLE, False),
         ("state", _F.TYPE_STRING, False),  # tracker.types.TargetState value
         ("pose_m", _F.TYPE_DOUBLE, True),  # (J, 3)
+        ("joint_state", _F.TYPE_UINT32, True),  # (J,) tracker.types.JointState values; absent in format 2
     ])
     message("TrackerOutput", [
         ("stamp_s", _F.TYPE_DOUBLE, False),

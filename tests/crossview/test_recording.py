@@ -319,7 +319,9 @@ def make_outputs(rng: np.random.Generator, n: int) -> list[TrackerOutput]:
         for tid in range(int(rng.integers(0, 4))):
             pose = rng.normal(0, 1, (17, 3))
             pose[rng.random(17) < 0.1] = np.nan
-            targets.append(Target(id=tid + 1, pose=pose, stamp_s=k * 0.05, state=TargetState.CONFIRMED))
+            codes = rng.integers(0, 3, 17).astype(np.uint8) if rng.random() < 0.7 else None  # None: format 2
+            targets.append(Target(id=tid + 1, pose=pose, stamp_s=k * 0.05, state=TargetState.CONFIRMED,
+                                  joint_state=codes))
         outputs.append(TrackerOutput(stamp_s=k * 0.05 - 0.001, camera=f"cam{k % 3:02d}", targets=targets,
                                      detection_target_ids=rng.integers(-1, 4, int(rng.integers(0, 5)))))
     return outputs
@@ -346,6 +348,8 @@ def test_tracks_round_trip_with_summary(tmp_path):
         for ta, tb in zip(a.targets, b.targets):
             assert ta.state is tb.state and ta.stamp_s == tb.stamp_s
             assert_same_arrays(ta.pose, tb.pose)
+            assert (ta.joint_state is None and tb.joint_state is None) or np.array_equal(ta.joint_state,
+                                                                                        tb.joint_state)
     # The tracker's skeletons are Foxglove SceneUpdates, readable independently.
     seen = read_independently(path)
     assert seen["/tracker/skeletons"][0] == "foxglove.SceneUpdate"
@@ -717,3 +721,24 @@ def test_encoded_frames_are_written_as_the_frames_they_encode(tmp_path, world):
     times = np.array([[f.frame.stamp_s, f.truth.capture_s, f.truth.delivery_s]])
     with pytest.raises(ValueError, match=r"frame.scores rows expected \(\d+, 17\), got"):
         recording.encode_frames([f.frame.camera], times, [0, f.frame.num_detections], rows, COCO17)
+
+
+def test_tracker_output_bytes_are_protobufs_own():
+    from crossview.recording.messages import _tracker_output_to_msg, tracker_output_bytes
+
+    rng = np.random.default_rng(11)
+    outputs = make_outputs(rng, 30)
+    outputs.append(TrackerOutput(stamp_s=0.0, camera="", targets=[
+        Target(id=0, pose=np.zeros((17, 3)), stamp_s=0.0, state=TargetState.LOST,
+               joint_state=np.zeros(17, dtype=np.uint8)),
+        Target(id=2**40, pose=np.full((17, 3), np.nan), stamp_s=-1.5, state=TargetState.TENTATIVE)],
+        detection_target_ids=np.array([-1, 0, 2**40])))
+    outputs.append(TrackerOutput(stamp_s=1.0, camera="c", targets=[
+        Target(id=-3, pose=np.ones((17, 3)), stamp_s=1.0)], detection_target_ids=np.zeros(0, dtype=np.int64)))
+    for output in outputs:
+        assert tracker_output_bytes(output, 17) == _tracker_output_to_msg(output, 17).SerializeToString()
+    bad = TrackerOutput(stamp_s=1.0, camera="c", targets=[
+        Target(id=1, pose=np.ones((17, 3)), stamp_s=1.0, joint_state=np.full(17, 7))],
+        detection_target_ids=np.zeros(0, dtype=np.int64))
+    with pytest.raises(ValueError, match="joint_state"):
+        tracker_output_bytes(bad, 17)
