@@ -92,6 +92,16 @@ class TrackerConfig:
             with arrivals and departures (store_layout1, seed 1) a newcomer took a departed person's identity
             (IDF1 0.99 -> 0.87).
         reid_speed_m_per_s: assumed walking speed for that reach, m/s.
+    Evidence against ghosts (beyond the paper; see docs/tracker.md "No ghosts"):
+        ghost_window_s: time constant of the decaying counts of a target's expected and actual sightings, s.
+        ghost_inside_m: a camera is expected to see a target when the target's predicted hip centre lies at
+            least this far inside the camera's view volume, metres.
+        ghost_min_expected: the decayed count of expected sightings before the next rule may act.
+        ghost_min_seen_ratio: a target matched in fewer than this share of the frames expected to see it is
+            removed (a ghost: cameras that should see a person there see nobody), in [0, 1]; 0 disables.
+        implausible_after_s: a target whose observed body stays implausible this long (the init_* limits of
+            height above the floor, bone length and median reprojection error, checked at every match) is
+            removed, s.
     Input:
         max_lateness_s: a frame stamped more than this before the newest processed stamp is dropped, s.
     """
@@ -136,6 +146,11 @@ class TrackerConfig:
     remove_after_s: float = 3.0
     reid_max_m: float = 0.0
     reid_speed_m_per_s: float = 1.5
+    ghost_window_s: float = 1.0
+    ghost_inside_m: float = 0.3
+    ghost_min_expected: float = 10.0
+    ghost_min_seen_ratio: float = 0.2
+    implausible_after_s: float = 0.5
     max_lateness_s: float = 0.5
 
     def __post_init__(self):
@@ -146,8 +161,9 @@ class TrackerConfig:
                              f"{[m.value for m in Triangulation]}")
         nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "alpha_2d_floor_px", "lambda_t_per_s", "max_predict_s",
                   "init_window_s", "confirm_min_age_s", "max_lateness_s", "reid_max_m", "reid_speed_m_per_s",
-                  "reject_factor")
-        positive = ("alpha_2d_px_per_s", "alpha_3d_m", "view_margin_m", "velocity_window_s", "max_speed_m_per_s",
+                  "reject_factor", "ghost_inside_m", "ghost_min_expected")
+        positive = ("ghost_window_s", "implausible_after_s", "alpha_2d_px_per_s", "alpha_3d_m", "view_margin_m",
+                    "velocity_window_s", "max_speed_m_per_s",
                     "max_observation_age_s", "alpha_epipolar_px", "reject_floor_px", "max_bone_m", "stale_after_s",
                     "init_max_reprojection_px", "init_max_bone_m",
                     "tentative_timeout_s", "lost_after_s", "remove_after_s")
@@ -163,6 +179,8 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
                 raise ValueError(f"TrackerConfig.{name}: {value!r} is not a number")
+        if not 0.0 <= self.ghost_min_seen_ratio <= 1.0:
+            raise ValueError(f"TrackerConfig.ghost_min_seen_ratio: {self.ghost_min_seen_ratio} must be in [0, 1]")
         if not 0.0 <= self.score_threshold <= 1.0:
             raise ValueError(f"TrackerConfig.score_threshold: {self.score_threshold} must be in [0, 1]")
         ints = {"velocity_history": 2, "min_views": 2, "init_min_joints": 1, "init_min_common_joints": 1,

@@ -8,7 +8,10 @@ States are held as small integer codes in the tracker's arrays; `to_state` maps 
 - TENTATIVE -> REMOVED when not updated for `tentative_timeout_s`;
 - CONFIRMED -> LOST when not updated for `lost_after_s` (lost targets are still matched, not output);
 - LOST -> CONFIRMED when matched again;
-- LOST -> REMOVED when not updated for `remove_after_s`. Removed targets are deleted; ids are never reused.
+- LOST -> REMOVED when not updated for `remove_after_s`. Removed targets are deleted; ids are never reused;
+- any state -> REMOVED when the cameras' evidence says it is a ghost (`ghost`, from the tracker: matched in
+  fewer than `ghost_min_seen_ratio` of the frames of cameras that should see it, or an observed body that
+  stayed implausible for `implausible_after_s`).
 """
 
 from __future__ import annotations
@@ -32,14 +35,18 @@ def to_state(code: int) -> TargetState:
     return _STATES[int(code)]
 
 
-def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: TrackerConfig) -> np.ndarray:
+def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: TrackerConfig,
+            ghost: np.ndarray | None = None) -> np.ndarray:
     """Transitions caused by time passing (no match): returns the new (T,) state codes.
 
     Args:
         state: (T,) codes; last_update_s: (T,) time of each target's last matched detection, s; now_s: s.
+        ghost: (T,) whether the cameras' evidence marks the target a ghost; None: none is.
     """
     idle = now_s - last_update_s
     new = state.copy()
+    if ghost is not None:
+        new[ghost] = REMOVED
     new[(state == TENTATIVE) & (idle > config.tentative_timeout_s)] = REMOVED
     new[(state == CONFIRMED) & (idle > config.lost_after_s)] = LOST
     new[(new == LOST) & (idle > config.remove_after_s)] = REMOVED

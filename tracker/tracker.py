@@ -20,6 +20,7 @@ A frame whose joint count differs from the skeleton's is a programming error: Va
 from __future__ import annotations
 
 import logging
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -61,12 +62,17 @@ class _Targets:
         self.hist_pos = np.zeros((0, H, J, 3))  # ring buffer of past joint estimates for the velocity fit
         self.hist_s = np.zeros((0, H, J))
         self.hist_next = np.zeros(0, dtype=np.int64)
+        self.expected = np.zeros(0)  # decayed count of frames of cameras that should have seen the target
+        self.sighted = np.zeros(0)  # of those, decayed count of the frames that matched it
+        self.evidence_s = np.zeros(0)  # time of the last count
+        self.implausible_s = np.zeros(0)  # since when the observed body is implausible, NaN when it is not
 
     def __len__(self) -> int:
         return self.ids.size
 
     _FIELDS = ("ids", "state", "born_s", "last_update_s", "num_updates", "pos", "joint_s", "seen_s", "vel", "obs_px",
-               "obs_s", "cam_s", "hist_pos", "hist_s", "hist_next")
+               "obs_s", "cam_s", "hist_pos", "hist_s", "hist_next", "expected", "sighted", "evidence_s",
+               "implausible_s")
 
     def keep(self, mask: np.ndarray) -> None:
         for name in self._FIELDS:
@@ -168,6 +174,7 @@ class Tracker:
         self._newest_s = max(self._newest_s, t)
         self._advance_lifecycle(t)
         if D == 0:
+            self._record_evidence(c, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, J, 2)), t)
             self._set_pool(c, np.zeros((0, J, 2)), np.zeros(0, dtype=np.int64), t)
             return self._emit(t, frame.camera, np.zeros(0, dtype=np.int64))
 
@@ -175,6 +182,7 @@ class Tracker:
         matched_rows, matched_cols = self._associate(c, det_px, t)
         if matched_rows.size:
             self._update_targets(c, matched_rows, matched_cols, det_px, t)
+        self._record_evidence(c, matched_rows, matched_cols, det_px, t)
         # (D,) matched target ids, and the unmatched detections with enough joints to start a target
         assigned, unmatched = split_detections(usable, self._init_min_joints, matched_rows, matched_cols,
                                                self._targets.ids)
@@ -212,7 +220,15 @@ class Tracker:
         tg = self._targets
         if not len(tg):
             return
-        tg.state = lifecycle.on_time(tg.state, tg.last_update_s, t, self.config).astype(np.int8)
+        cfg = self.config
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # A LOST target is already out of the output and goes by the time rule (it may be a person hidden).
+            unseen = (tg.expected >= cfg.ghost_min_expected) & (tg.sighted < cfg.ghost_min_seen_ratio * tg.expected)
+            unseen &= tg.state != lifecycle.LOST
+        ghost = unseen | (t - tg.implausible_s >= cfg.implausible_after_s)  # False for NaN
+        if ghost.any():
+            logger.debug("removing ghost targets %s", tg.ids[ghost].tolist())
+        tg.state = lifecycle.on_time(tg.state, tg.last_update_s, t, cfg, ghost).astype(np.int8)
         removed = tg.state == lifecycle.REMOVED
         if removed.any():
             tg.keep(~removed)
@@ -255,6 +271,65 @@ class Tracker:
                        *self._update_params)
         tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, self.config,
                                             self._has_body(rows))
+
+    def _record_evidence(self, c: int, rows: np.ndarray, cols: np.ndarray, det_px: np.ndarray, t: float) -> None:
+        """What camera c's frame says about each target (docs/tracker.md, "No ghosts").
+
+        1. Sightings: every target whose predicted hip centre lies `ghost_inside_m` inside the camera's view
+           volume should have been seen; its decayed counts of expected and matched frames (time constant
+           `ghost_window_s`) are updated.
+        2. Plausibility: each matched target's observed joints (triangulated within `stale_after_s`) are checked
+           against the init_* limits (height above the floor, longest bone, median reprojection error in this
+           frame); `implausible_s` holds since when they fail, NaN while they pass.
+
+        Args:
+            rows, cols: (M,) the matched targets and their detections in det_px (D, J, 2).
+        """
+        tg, cfg = self._targets, self.config
+        if not len(tg) or self._hips.size == 0:
+            return
+        hips = aff.predict_positions(tg.pos[:, self._hips], tg.vel[:, self._hips], tg.joint_s[:, self._hips], t,
+                                     cfg.max_predict_s).mean(axis=1)  # (T, 3), NaN without both hips
+        planes = self._planes[c]
+        depth_in = np.min(hips @ planes[:, :3].T + planes[:, 3], axis=1)  # (T,) distance inside, NaN unknown
+        expected = depth_in >= cfg.ghost_inside_m
+        matched = np.zeros(len(tg), dtype=bool)
+        matched[rows] = True
+        counted = expected | matched
+        if counted.any():
+            decay = np.exp(-np.maximum(t - tg.evidence_s[counted], 0.0) / cfg.ghost_window_s)
+            tg.expected[counted] = tg.expected[counted] * decay + 1.0
+            tg.sighted[counted] = tg.sighted[counted] * decay + matched[counted]
+            tg.evidence_s[counted] = t
+        if rows.size:
+            bad = self._implausible(rows, cols, det_px, c, t)
+            start = bad & np.isnan(tg.implausible_s[rows])
+            tg.implausible_s[rows[start]] = t
+            tg.implausible_s[rows[~bad]] = np.nan
+
+    def _implausible(self, rows: np.ndarray, cols: np.ndarray, det_px: np.ndarray, c: int, t: float) -> np.ndarray:
+        """(M,) whether each matched target's observed body breaks a limit of `PlausibilityLimits`."""
+        tg, lim = self._targets, self._limits
+        pos = tg.pos[rows]  # (M, J, 3)
+        observed = (t - tg.seen_s[rows] <= self.config.stale_after_s) & np.isfinite(pos[..., 0])
+        z = np.where(observed, pos[..., 2], np.nan)
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: nothing observed, nothing checked
+            top, bottom = np.nanmax(z, axis=1), np.nanmin(z, axis=1)
+            a, b = self._bones[:, 0], self._bones[:, 1]
+            both = observed[:, a] & observed[:, b]
+            lengths = np.where(both, np.linalg.norm(pos[:, a] - pos[:, b], axis=-1), 0.0)
+            longest = lengths.max(axis=1) if lengths.shape[1] else np.zeros(rows.size)
+            P = self._P[c]
+            h = pos @ P[:, :3].T + P[:, 3]  # (M, J, 3)
+            px = h[..., :2] / h[..., 2:3]
+            err = np.linalg.norm(px - det_px[cols], axis=-1)  # NaN where the detection lacks the joint
+            err = np.where(observed, err, np.nan)
+            median = np.nanmedian(err, axis=1)
+            bad = (top < lim.min_top_m) | (top > lim.max_top_m) | (bottom < lim.min_bottom_m)
+            bad |= longest > lim.max_bone_m
+            bad |= median > lim.max_reprojection_px
+        return bad
 
     @staticmethod
     def _hip_joints(skeleton: Skeleton) -> np.ndarray:
@@ -356,6 +431,7 @@ class Tracker:
             last_update_s=np.array([t]), num_updates=np.array([num_updates]), pos=pose[None],
             joint_s=np.where(known, t, -np.inf)[None], seen_s=np.where(known, t, -np.inf)[None],
             vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s, cam_s=cam_s,
+            expected=np.zeros(1), sighted=np.zeros(1), evidence_s=np.array([t]), implausible_s=np.array([np.nan]),
             hist_pos=hist_pos, hist_s=hist_s, hist_next=np.array([1]))
         tg = self._targets
         last = np.array([len(tg) - 1])

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from core.types import Frame
-from tests.tracker.synthetic import store_like
+from tests.tracker.synthetic import Walkers, make_frames, store_like
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
+from tracker.geometry import project_distorted
 from tracker.kernels import update_matched
 from tracker.tracker import Tracker
 from tracker.types import JointState, TargetState
@@ -214,3 +215,60 @@ def test_joints_never_seen_are_inferred_never_nan(layout1):
 def test_a_body_without_hips_is_never_confirmed(layout1):
     cams, _, frames, _ = layout1
     assert not any(out.targets for out in _run(Tracker(cams, CONFIG), _without(frames, [11, 12])))
+
+
+class _Rising(Walkers):
+    """Walkers of which person 0 floats up at 0.8 m/s after 1.5 s (an implausible body)."""
+
+    def poses(self, t: float) -> np.ndarray:
+        poses = super().poses(t)
+        poses[0, :, 2] += 0.8 * max(t - 1.5, 0.0)
+        return poses
+
+
+def _near(targets, pose, within_m=0.5):
+    return [t for t in targets if np.linalg.norm(t.pose[11:13].mean(axis=0) - pose[11:13].mean(axis=0)) < within_m]
+
+
+def test_a_body_that_stays_implausible_is_removed():
+    cams, walkers, _, _ = store_like("layout1", 0.1, seed=0)
+    rising = _Rising(walkers.centers, walkers.radii, walkers.phases, walkers.speeds_m_per_s)
+    frames, _ = make_frames(cams, rising, 4.0, 10.0, np.random.default_rng(1))
+    tracker = Tracker(cams, CONFIG)
+    outputs = _run(tracker, frames)
+    at = {round(out.stamp_s, 1): out for out in outputs}
+    assert _near(at[1.4].targets, rising.poses(1.4)[0])  # tracked while plausible
+    final = outputs[-1]
+    truth = rising.poses(final.stamp_s)
+    assert truth[0, :, 2].max() > 3.5  # (far above any head)
+    assert not _near(final.targets, truth[0], within_m=1.0)
+    assert all(_near(final.targets, truth[p]) for p in (1, 2, 3))
+    # Without the rule the floating body stays an output.
+    outputs = _run(Tracker(cams, CONFIG.replace(implausible_after_s=1e9)), frames)
+    assert _near(outputs[-1].targets, truth[0], within_m=1.0)
+
+
+def test_a_target_seen_by_too_few_of_the_cameras_that_should_see_it_is_removed(layout1):
+    cams, walkers, frames, _ = layout1
+    index = {c.name: c for c in cams}
+    thinned = []
+    # After 1.5 s person 0 is detected by four cameras of the twelve that should see them: with a ratio of one
+    # half required (the default asks less, for people behind shelves) the target is a ghost.
+    for f in frames:
+        if f.stamp_s > 1.5 and f.camera not in ("cam00", "cam01", "cam02", "cam03") and f.keypoints_px.shape[0]:
+            proj = project_distorted(index[f.camera], walkers.poses(f.stamp_s)[0])
+            err = np.nanmean(np.linalg.norm(f.keypoints_px - proj, axis=-1), axis=1)
+            keep = ~(err < 20.0)
+            f = Frame(f.camera, f.stamp_s, f.keypoints_px[keep], f.scores[keep])
+        thinned.append(f)
+    def id_of_person_0(outputs):
+        at = next(out for out in outputs if out.stamp_s > 1.4)
+        return _near(at.targets, walkers.poses(at.stamp_s)[0])[0].id
+
+    outputs = _run(Tracker(cams, CONFIG.replace(ghost_min_seen_ratio=0.5)), thinned)
+    final = outputs[-1]
+    assert id_of_person_0(outputs) not in {t.id for t in final.targets}  # removed
+    truth = walkers.poses(final.stamp_s)
+    assert all(_near(final.targets, truth[p]) for p in (1, 2, 3))
+    kept = _run(Tracker(cams, CONFIG.replace(ghost_min_seen_ratio=0.0)), thinned)
+    assert id_of_person_0(kept) in {t.id for t in kept[-1].targets}
