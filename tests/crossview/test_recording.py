@@ -742,3 +742,18 @@ def test_tracker_output_bytes_are_protobufs_own():
         detection_target_ids=np.zeros(0, dtype=np.int64))
     with pytest.raises(ValueError, match="joint_state"):
         tracker_output_bytes(bad, 17)
+
+
+def test_tracks_of_format_2_are_read_without_joint_states(tmp_path):
+    rng = np.random.default_rng(4)
+    outputs = [TrackerOutput(o.stamp_s, o.camera, [dataclasses.replace(t, joint_state=None) for t in o.targets],
+                             o.detection_target_ids) for o in make_outputs(rng, 10)]
+    path = tmp_path / "old.mcap"
+    with TracksWriter(path, make_tracks_header(format_version=2), make_cameras(2, rng)) as writer:
+        for output in outputs:
+            writer.write(output)
+        writer.finish({})
+    tracks = open_tracks(path)
+    assert tracks.header.format_version == 2
+    read = [t for out in tracks.outputs() for t in out.targets]
+    assert read and all(t.joint_state is None for t in read)
