@@ -41,6 +41,9 @@ logger = logging.getLogger(__name__)
 
 _DEFAULT_CONFIG = TrackerConfig()
 
+IMPLAUSIBLE_SHARE = 0.25
+"""Share of a target's observed joints (or bones) out of the birth limits that makes its body implausible."""
+
 
 class _Targets:
     """Array storage of all live targets (rows), grown on demand and compacted on removal."""
@@ -308,26 +311,27 @@ class Tracker:
             tg.implausible_s[rows[~bad]] = np.nan
 
     def _implausible(self, rows: np.ndarray, cols: np.ndarray, det_px: np.ndarray, c: int, t: float) -> np.ndarray:
-        """(M,) whether each matched target's observed body breaks a limit of `PlausibilityLimits`."""
+        """(M,) whether each matched target's observed body is implausible: more than `IMPLAUSIBLE_SHARE` of its
+        observed joints outside the heights [init_min_bottom_m, init_max_top_m] or of its observed bones longer
+        than init_max_bone_m, or a median reprojection error in this frame above init_max_reprojection_px.
+        (Shares, not single joints: one joint badly triangulated for a moment is the tracker's own business.)"""
         tg, lim = self._targets, self._limits
         pos = tg.pos[rows]  # (M, J, 3)
         observed = (t - tg.seen_s[rows] <= self.config.stale_after_s) & np.isfinite(pos[..., 0])
-        z = np.where(observed, pos[..., 2], np.nan)
+        count = np.maximum(observed.sum(axis=1), 1)
+        z = pos[..., 2]
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: nothing observed, nothing checked
-            top, bottom = np.nanmax(z, axis=1), np.nanmin(z, axis=1)
+            off_height = observed & ((z < lim.min_bottom_m) | (z > lim.max_top_m))
             a, b = self._bones[:, 0], self._bones[:, 1]
             both = observed[:, a] & observed[:, b]
-            lengths = np.where(both, np.linalg.norm(pos[:, a] - pos[:, b], axis=-1), 0.0)
-            longest = lengths.max(axis=1) if lengths.shape[1] else np.zeros(rows.size)
+            long = both & (np.linalg.norm(pos[:, a] - pos[:, b], axis=-1) > lim.max_bone_m)
             P = self._P[c]
             h = pos @ P[:, :3].T + P[:, 3]  # (M, J, 3)
-            px = h[..., :2] / h[..., 2:3]
-            err = np.linalg.norm(px - det_px[cols], axis=-1)  # NaN where the detection lacks the joint
-            err = np.where(observed, err, np.nan)
-            median = np.nanmedian(err, axis=1)
-            bad = (top < lim.min_top_m) | (top > lim.max_top_m) | (bottom < lim.min_bottom_m)
-            bad |= longest > lim.max_bone_m
+            err = np.linalg.norm(h[..., :2] / h[..., 2:3] - det_px[cols], axis=-1)  # NaN where the detection lacks it
+            median = np.nanmedian(np.where(observed, err, np.nan), axis=1)
+            bad = off_height.sum(axis=1) > IMPLAUSIBLE_SHARE * count
+            bad |= long.sum(axis=1) > IMPLAUSIBLE_SHARE * np.maximum(both.sum(axis=1), 1)
             bad |= median > lim.max_reprojection_px
         return bad
 
