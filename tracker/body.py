@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.jit import jit, sort_prefix
 from core.types import Skeleton
 from tracker.types import JointState
 
@@ -43,34 +44,70 @@ def fill_unknown(pose: np.ndarray, model: np.ndarray, bones: np.ndarray) -> np.n
 
     Args:
         pose: (J, 3) metres, NaN unknown; at least one joint known.
-        model: (J, 3) `mean_body`; bones: (B, 2) joint pairs.
+        model: (J, 3) `mean_body`; bones: (B, 2) int64 joint pairs.
 
     Returns:
         (J, 3) pose without NaN.
     """
-    known = np.all(np.isfinite(pose), axis=-1)
-    if known.all() or not known.any():
-        return pose
-    a, b = bones[:, 0], bones[:, 1]
-    both = known[a] & known[b]
-    scale = 1.0
-    if both.any():
-        ratio = np.linalg.norm(pose[a[both]] - pose[b[both]], axis=-1) / np.maximum(
-            np.linalg.norm(model[a[both]] - model[b[both]], axis=-1), 1e-6)
-        scale = float(np.clip(np.median(ratio), *SCALE_RANGE))
-    src = model[known] * scale
-    dst = pose[known]
-    src_mean, dst_mean = src.mean(axis=0), dst.mean(axis=0)
-    yaw = 0.0
-    if known.sum() >= 2:
-        s, d = src[:, :2] - src_mean[:2], dst[:, :2] - dst_mean[:2]
-        cross, dot = np.sum(s[:, 0] * d[:, 1] - s[:, 1] * d[:, 0]), np.sum(s[:, 0] * d[:, 0] + s[:, 1] * d[:, 1])
-        yaw = float(np.arctan2(cross, dot))
-    c, sn = np.cos(yaw), np.sin(yaw)
-    R = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
-    out = pose.copy()
-    out[~known] = (model[~known] * scale - src_mean) @ R.T + dst_mean
-    return out
+    out = np.ascontiguousarray(pose, dtype=np.float64).copy()[None]
+    fill_poses(out, np.ascontiguousarray(model, dtype=np.float64), np.ascontiguousarray(bones, dtype=np.int64))
+    return out[0]
+
+
+@jit
+def fill_poses(poses, model, bones):
+    """`fill_unknown` of every pose of (T, J, 3) in place (compiled kernel); poses without a known joint or
+    without an unknown one are left as they are."""
+    T, J, B = poses.shape[0], poses.shape[1], bones.shape[0]
+    ratios = np.empty(max(B, 1))
+    for t in range(T):
+        count = 0
+        for j in range(J):
+            if np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                count += 1
+        if count == 0 or count == J:
+            continue
+        n = 0
+        for b in range(B):
+            a, e = bones[b, 0], bones[b, 1]
+            if np.isfinite(poses[t, a, 0] + poses[t, a, 1] + poses[t, a, 2] + poses[t, e, 0] + poses[t, e, 1]
+                           + poses[t, e, 2]):
+                got = np.sqrt((poses[t, a, 0] - poses[t, e, 0]) ** 2 + (poses[t, a, 1] - poses[t, e, 1]) ** 2
+                              + (poses[t, a, 2] - poses[t, e, 2]) ** 2)
+                ref = np.sqrt((model[a, 0] - model[e, 0]) ** 2 + (model[a, 1] - model[e, 1]) ** 2
+                              + (model[a, 2] - model[e, 2]) ** 2)
+                ratios[n] = got / max(ref, 1e-6)
+                n += 1
+        scale = 1.0
+        if n:
+            sort_prefix(ratios, n)
+            scale = min(max((ratios[(n - 1) // 2] + ratios[n // 2]) / 2.0, SCALE_RANGE[0]), SCALE_RANGE[1])
+        sm0 = sm1 = sm2 = dm0 = dm1 = dm2 = 0.0
+        for j in range(J):
+            if np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                sm0 += model[j, 0] * scale
+                sm1 += model[j, 1] * scale
+                sm2 += model[j, 2] * scale
+                dm0 += poses[t, j, 0]
+                dm1 += poses[t, j, 1]
+                dm2 += poses[t, j, 2]
+        sm0, sm1, sm2, dm0, dm1, dm2 = sm0 / count, sm1 / count, sm2 / count, dm0 / count, dm1 / count, dm2 / count
+        cross = dot = 0.0
+        if count >= 2:
+            for j in range(J):
+                if np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                    s0, s1 = model[j, 0] * scale - sm0, model[j, 1] * scale - sm1
+                    d0, d1 = poses[t, j, 0] - dm0, poses[t, j, 1] - dm1
+                    cross += s0 * d1 - s1 * d0
+                    dot += s0 * d0 + s1 * d1
+        yaw = np.arctan2(cross, dot) if count >= 2 else 0.0
+        c, sn = np.cos(yaw), np.sin(yaw)
+        for j in range(J):
+            if not np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                x, y, z = model[j, 0] * scale - sm0, model[j, 1] * scale - sm1, model[j, 2] * scale - sm2
+                poses[t, j, 0] = c * x - sn * y + dm0
+                poses[t, j, 1] = sn * x + c * y + dm1
+                poses[t, j, 2] = z + dm2
 
 
 def joint_states(seen_s: np.ndarray, known: np.ndarray, stamp_s: float, stale_after_s: float) -> np.ndarray:

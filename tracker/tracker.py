@@ -20,7 +20,6 @@ A frame whose joint count differs from the skeleton's is a programming error: Va
 from __future__ import annotations
 
 import logging
-import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -29,13 +28,13 @@ from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
 from tracker import lifecycle
 from tracker.association import associate
-from tracker.body import fill_unknown, joint_states, mean_body
+from tracker.body import fill_poses, joint_states, mean_body
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.kernels import poses_in_state, split_detections, update_matched
+from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
 from tracker.types import Target, TrackerOutput
-from tracker.visibility import all_view_planes, overlapping_views, targets_in_view
+from tracker.visibility import all_view_planes, count_sightings, overlapping_views, targets_in_view
 
 logger = logging.getLogger(__name__)
 
@@ -281,59 +280,32 @@ class Tracker:
         1. Sightings: every target whose predicted hip centre lies `ghost_inside_m` inside the camera's view
            volume should have been seen; its decayed counts of expected and matched frames (time constant
            `ghost_window_s`) are updated.
-        2. Plausibility: each matched target's observed joints (triangulated within `stale_after_s`) are checked
-           against the init_* limits (height above the floor, longest bone, median reprojection error in this
-           frame); `implausible_s` holds since when they fail, NaN while they pass.
+        2. Plausibility: each matched target's observed body (joints triangulated within `stale_after_s`) is
+           implausible when more than `IMPLAUSIBLE_SHARE` of its observed joints lie outside the heights
+           [init_min_bottom_m, init_max_top_m] or of its observed bones are longer than init_max_bone_m, or its
+           median reprojection error in this frame exceeds init_max_reprojection_px (shares, not single joints:
+           one joint badly triangulated for a moment is the tracker's own business); `implausible_s` holds
+           since when it is, NaN while it is not.
 
         Args:
             rows, cols: (M,) the matched targets and their detections in det_px (D, J, 2).
         """
-        tg, cfg = self._targets, self.config
+        tg, cfg, lim = self._targets, self.config, self._limits
         if not len(tg) or self._hips.size == 0:
             return
-        hips = aff.predict_positions(tg.pos[:, self._hips], tg.vel[:, self._hips], tg.joint_s[:, self._hips], t,
-                                     cfg.max_predict_s).mean(axis=1)  # (T, 3), NaN without both hips
-        planes = self._planes[c]
-        depth_in = np.min(hips @ planes[:, :3].T + planes[:, 3], axis=1)  # (T,) distance inside, NaN unknown
-        expected = depth_in >= cfg.ghost_inside_m
-        matched = np.zeros(len(tg), dtype=bool)
+        matched = np.zeros(len(tg), dtype=np.bool_)
         matched[rows] = True
-        counted = expected | matched
-        if counted.any():
-            decay = np.exp(-np.maximum(t - tg.evidence_s[counted], 0.0) / cfg.ghost_window_s)
-            tg.expected[counted] = tg.expected[counted] * decay + 1.0
-            tg.sighted[counted] = tg.sighted[counted] * decay + matched[counted]
-            tg.evidence_s[counted] = t
+        count_sightings(self._planes[c], self._hips, tg.pos, tg.vel, tg.joint_s, t, float(cfg.max_predict_s),
+                        float(cfg.ghost_inside_m), float(cfg.ghost_window_s), matched, tg.expected, tg.sighted,
+                        tg.evidence_s)
         if rows.size:
-            bad = self._implausible(rows, cols, det_px, c, t)
+            bad = np.empty(rows.size, dtype=np.bool_)
+            implausible_bodies(rows, cols, det_px, self._P[c], tg.pos, tg.seen_s, t, float(cfg.stale_after_s),
+                               self._bones, float(lim.min_bottom_m), float(lim.max_top_m), float(lim.max_bone_m),
+                               float(lim.max_reprojection_px), IMPLAUSIBLE_SHARE, bad)
             start = bad & np.isnan(tg.implausible_s[rows])
             tg.implausible_s[rows[start]] = t
             tg.implausible_s[rows[~bad]] = np.nan
-
-    def _implausible(self, rows: np.ndarray, cols: np.ndarray, det_px: np.ndarray, c: int, t: float) -> np.ndarray:
-        """(M,) whether each matched target's observed body is implausible: more than `IMPLAUSIBLE_SHARE` of its
-        observed joints outside the heights [init_min_bottom_m, init_max_top_m] or of its observed bones longer
-        than init_max_bone_m, or a median reprojection error in this frame above init_max_reprojection_px.
-        (Shares, not single joints: one joint badly triangulated for a moment is the tracker's own business.)"""
-        tg, lim = self._targets, self._limits
-        pos = tg.pos[rows]  # (M, J, 3)
-        observed = (t - tg.seen_s[rows] <= self.config.stale_after_s) & np.isfinite(pos[..., 0])
-        count = np.maximum(observed.sum(axis=1), 1)
-        z = pos[..., 2]
-        with np.errstate(invalid="ignore"), warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows: nothing observed, nothing checked
-            off_height = observed & ((z < lim.min_bottom_m) | (z > lim.max_top_m))
-            a, b = self._bones[:, 0], self._bones[:, 1]
-            both = observed[:, a] & observed[:, b]
-            long = both & (np.linalg.norm(pos[:, a] - pos[:, b], axis=-1) > lim.max_bone_m)
-            P = self._P[c]
-            h = pos @ P[:, :3].T + P[:, 3]  # (M, J, 3)
-            err = np.linalg.norm(h[..., :2] / h[..., 2:3] - det_px[cols], axis=-1)  # NaN where the detection lacks it
-            median = np.nanmedian(np.where(observed, err, np.nan), axis=1)
-            bad = off_height.sum(axis=1) > IMPLAUSIBLE_SHARE * count
-            bad |= long.sum(axis=1) > IMPLAUSIBLE_SHARE * np.maximum(both.sum(axis=1), 1)
-            bad |= median > lim.max_reprojection_px
-        return bad
 
     @staticmethod
     def _hip_joints(skeleton: Skeleton) -> np.ndarray:
@@ -471,8 +443,7 @@ class Tracker:
         rows = np.flatnonzero(tg.state == lifecycle.CONFIRMED)
         known = np.isfinite(poses[..., 0])
         codes = joint_states(tg.seen_s[rows], known, t, self.config.stale_after_s)
-        for i in np.flatnonzero(~known.all(axis=1)):  # joints never triangulated: from the target's own body
-            poses[i] = fill_unknown(poses[i], self._mean_body, self._bones)
+        fill_poses(poses, self._mean_body, self._bones)  # joints never triangulated: from the target's own body
         state = lifecycle.to_state(lifecycle.CONFIRMED)
         targets = [Target(target_id, pose, t, state, code)
                    for target_id, pose, code in zip(ids.tolist(), poses, codes)]

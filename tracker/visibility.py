@@ -169,3 +169,29 @@ def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, stamp_s, max_predi
             out[n] = t
             n += 1
     return n
+
+
+@jit
+def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, inside_m, window_s, matched, expected,
+                    sighted, evidence_s):
+    """Counts what one camera frame says about each target (in place): a target whose predicted hip centre
+    (eq. 5, both hips known) lies at least `inside_m` inside the camera's view volume (planes (5, 4)) was
+    expected to be seen; expected (T,) and sighted (T,) are counts decayed with time constant `window_s` since
+    evidence_s (T,), the latter counting the frames that matched it (matched (T,) bool)."""
+    T = pos.shape[0]
+    for r in range(T):
+        c = np.zeros(3)
+        for h in range(hips.size):
+            j = hips[h]
+            horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
+            for k in range(3):
+                c[k] += (pos[r, j, k] + vel[r, j, k] * horizon) / hips.size
+        depth = np.inf
+        for p in range(planes.shape[0]):
+            depth = min(depth, planes[p, 0] * c[0] + planes[p, 1] * c[1] + planes[p, 2] * c[2] + planes[p, 3])
+        seen = depth >= inside_m  # False for NaN (a hip unknown)
+        if seen or matched[r]:
+            decay = np.exp(-max(stamp_s - evidence_s[r], 0.0) / window_s)
+            expected[r] = expected[r] * decay + 1.0
+            sighted[r] = sighted[r] * decay + (1.0 if matched[r] else 0.0)
+            evidence_s[r] = stamp_s

@@ -3,7 +3,7 @@
 import numpy as np
 
 from core.types import CAMPUS14, COCO17
-from tracker.body import fill_unknown, joint_states, mean_body
+from tracker.body import fill_poses, fill_unknown, joint_states, mean_body
 from tracker.types import JointState
 
 BONES = np.asarray(COCO17.bones, dtype=np.int64)
@@ -51,3 +51,15 @@ def test_joint_states():
     codes = joint_states(seen, known, 10.0, 0.3)
     assert codes.tolist() == [[JointState.OBSERVED.value, JointState.PREDICTED.value, JointState.INFERRED.value,
                                JointState.OBSERVED.value]]
+
+
+def test_compiled_fill_runs_the_same_as_plain_python():
+    rng = np.random.default_rng(3)
+    poses = _placed(1.05, 0.4, [1.0, 1.0, 0.0])[None] + rng.normal(0, 0.05, (6, 17, 3))
+    poses[rng.random((6, 17)) < 0.4] = np.nan
+    poses[0] = np.nan  # nothing known: left alone
+    compiled, plain = poses.copy(), poses.copy()
+    fill_poses(compiled, mean_body(COCO17), BONES)
+    fill_poses.py_func(plain, mean_body(COCO17), BONES)
+    np.testing.assert_allclose(compiled, plain, rtol=0, atol=1e-12)
+    assert np.isnan(compiled[0]).all() and np.isfinite(compiled[1:]).all()
