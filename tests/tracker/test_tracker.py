@@ -273,3 +273,38 @@ def test_a_target_seen_by_too_few_of_the_cameras_that_should_see_it_is_removed(l
     assert all(_near(final.targets, truth[p]) for p in (1, 2, 3))
     kept = _run(Tracker(cams, CONFIG.replace(ghost_min_seen_ratio=0.0)), thinned)
     assert id_of_person_0(kept) in {t.id for t in kept[-1].targets}
+
+
+def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
+    from tracker.kernels import implausible_bodies
+    from tracker.tracker import IMPLAUSIBLE_SHARE
+    from tracker.visibility import count_sightings
+
+    cams, _, frames, _ = layout1
+    tracker = Tracker(cams, CONFIG)
+    _run(tracker, frames[:150])
+    lim, tg = tracker._limits, tracker._targets
+    for frame in frames[150:160]:
+        c = tracker._index[frame.camera]
+        det_px, _ = tracker._clean(frame, c)
+        rows, cols = tracker._associate(c, det_px, frame.stamp_s)
+        matched = np.zeros(len(tg), dtype=bool)
+        matched[rows] = True
+        pos = tg.pos.copy()
+        pos[0, :4, 2] = 3.5  # a few joints too high, to exercise the rule
+        counts, bads = [], []
+        for sightings, bodies in ((count_sightings, implausible_bodies),
+                                  (count_sightings.py_func, implausible_bodies.py_func)):
+            arrays = [tg.expected.copy(), tg.sighted.copy(), tg.evidence_s.copy()]
+            sightings(tracker._planes[c], tracker._hips, pos, tg.vel, tg.joint_s, frame.stamp_s, 0.5, 0.3, 1.0,
+                      matched, *arrays)
+            bad = np.empty(rows.size, dtype=bool)
+            bodies(rows, cols, det_px, tracker._P[c], pos, tg.seen_s, frame.stamp_s, 0.3, tracker._bones,
+                   lim.min_bottom_m, lim.max_top_m, lim.max_bone_m, lim.max_reprojection_px, IMPLAUSIBLE_SHARE, bad)
+            counts.append(arrays)
+            bads.append(bad)
+        for compiled, plain in zip(*counts):
+            np.testing.assert_allclose(compiled, plain, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(*bads)
+        assert counts[0][0].sum() > 0
+        tracker.update(frame)
