@@ -17,7 +17,8 @@ from core.types import SKELETONS, Camera, Skeleton
 from crossview import foxglove
 from sim.types import Box, BoxKind
 
-FORMAT_VERSION = 3  # 3: a tracks file's targets carry joint_state (format 2 files are read too)
+FORMAT_VERSION = 2  # of recordings
+TRACKS_FORMAT_VERSION = 3  # of tracks files; 3: targets carry joint_state (formats 1 and 2 are read too)
 OLDEST_RECORDING_VERSION = 2  # format 1 stored every frame's poses at capture; this reader derives them
 MAGIC = b"\x89MCAP0\r\n"
 CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: the unit of reading and of CRC checks
@@ -222,7 +223,7 @@ class TracksHeader:
     config: dict
     skeleton_name: str
     software_version: str = field(default_factory=software_version)
-    format_version: int = FORMAT_VERSION
+    format_version: int = TRACKS_FORMAT_VERSION
 
     def __post_init__(self):
         _check_skeleton_name(self.skeleton_name)

@@ -16,6 +16,7 @@ from core.types import COCO17, Camera, Frame
 from crossview import recording
 from crossview.recording import (
     FORMAT_VERSION,
+    TRACKS_FORMAT_VERSION,
     RecordingError,
     RecordingHeader,
     RecordingWriter,
@@ -308,7 +309,7 @@ def test_log_times_are_nanoseconds_of_truth_and_delivery_times(tmp_path, world):
 def make_tracks_header(**overrides) -> TracksHeader:
     fields = dict(scenario_name="synthetic", scenario_digest="ab" * 32, seed=7, method="crossview", preset="store",
                   config={"alpha_2d_px": 25.0, "lambda_t": 5.0, "mode": "paper", "nested": {"x": [1, 2.5]}},
-                  skeleton_name="coco17", software_version="9.9.9", format_version=FORMAT_VERSION)
+                  skeleton_name="coco17", software_version="9.9.9", format_version=TRACKS_FORMAT_VERSION)
     return TracksHeader(**(fields | overrides))
 
 
