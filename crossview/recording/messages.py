@@ -242,14 +242,27 @@ def tracker_output_bytes(output: TrackerOutput, num_joints: int) -> bytes:
     from crossview import wire  # (numba: loaded for writing only)
 
     T, J = len(output.targets), num_joints
-    poses = np.empty((T, J, 3))
+    try:  # the targets' arrays stacked at once; a wrong shape is found and named below
+        poses = np.ascontiguousarray(np.stack([t.pose for t in output.targets]) if T else np.zeros((0, J, 3)),
+                                     dtype=np.float64)
+    except ValueError:
+        poses = None
+    if poses is None or poses.shape != (T, J, 3):
+        for target in output.targets:
+            _checked_pose(output, target, J)
+    has_states = np.array([t.joint_state is not None for t in output.targets], dtype=np.bool_)
     codes = np.zeros((T, J), dtype=np.uint8)
-    has_states = np.zeros(T, dtype=np.bool_)
-    for i, target in enumerate(output.targets):
-        poses[i] = _checked_pose(output, target, J)
-        if target.joint_state is not None:
-            codes[i] = _checked_joint_state(output, target, J)
-            has_states[i] = True
+    if has_states.any():
+        try:
+            given = np.stack([t.joint_state for t in output.targets if t.joint_state is not None])
+        except ValueError:
+            given = None
+        if given is None or given.shape != (int(has_states.sum()), J) or given.size and (
+                given.min() < 0 or given.max() >= len(JointState)):
+            for target in output.targets:
+                if target.joint_state is not None:
+                    _checked_joint_state(output, target, J)
+        codes[has_states] = given
     ids = np.array([int(t.id) for t in output.targets], dtype=np.int64)
     if (ids < 0).any():
         return _tracker_output_to_msg(output, num_joints).SerializeToString()
