@@ -267,7 +267,8 @@ def campus14_to_coco17(poses: np.ndarray) -> np.ndarray:
 
 
 def write_result_3d(outputs: Iterable[TrackerOutput], path, inputs: tuple = ()) -> int:
-    """Writes tracker outputs in the result_3d.json layout (COCO-17, centimetres, zeros = missing).
+    """Writes tracker outputs in the result_3d.json layout (COCO-17, centimetres; a joint the tracker does not
+    know is written as missing, [null, null, null], never as a point at the origin).
 
     Outputs sharing a stamp (several cameras of one synchronised instant) keep the last, the most informed.
     Poses with 14 joints (CAMPUS14) are written as COCO-17 with `campus14_to_coco17`.
@@ -288,8 +289,10 @@ def write_result_3d(outputs: Iterable[TrackerOutput], path, inputs: tuple = ()) 
             if pose.shape != (17, 3):
                 raise ValueError(f"write_result_3d: target {target.id} at {stamp} s has pose {pose.shape}; "
                                  "expected (17, 3) COCO-17 or (14, 3) Campus joints")
-            cm = np.where(np.isfinite(pose), pose / CM_TO_M, 0.0)
-            poses.append({"id": int(target.id), "points_3d": np.round(cm, 3).tolist()})
+            cm = np.round(pose / CM_TO_M, 3).tolist()
+            missing = ~np.all(np.isfinite(pose), axis=-1)
+            points = [[None, None, None] if gone else xyz for xyz, gone in zip(cm, missing.tolist())]
+            poses.append({"id": int(target.id), "points_3d": points})
         entries.append({"timestamp": stamp if math.isfinite(stamp) else 0.0, "poses": poses})
     write_bytes(json.dumps(entries).encode("utf-8"), path, inputs)
     return len(entries)

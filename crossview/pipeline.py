@@ -242,7 +242,7 @@ def track(
         config=jsonable(dataclasses.asdict(config)),
         skeleton_name=skeleton.name,
         software_version=recording.software_version(),
-        format_version=recording.FORMAT_VERSION,
+        format_version=recording.TRACKS_FORMAT_VERSION,
     )
     warm_up_tracker(method, rec, preset, config_path, skeleton)
     updates = 0

@@ -107,6 +107,17 @@ def _put_doubles(out, pos, field, values):
 
 
 @_jit
+def _put_string(out, pos, field, data):
+    """A string (or bytes) field of the UTF-8 bytes `data`, left out when empty."""
+    if data.size == 0:
+        return pos
+    pos = _put_key(out, pos, field, _LEN)
+    pos = _put_varint(out, pos, data.size)
+    out[pos:pos + data.size] = data
+    return pos + data.size
+
+
+@_jit
 def _put_bools(out, pos, field, values):
     flat = values.reshape(-1)
     if flat.size == 0:
@@ -160,12 +171,7 @@ def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores,
     for v in effects:
         if v < 0 or v >= 1 << 32:
             return -1
-    pos = 0
-    if camera.size:
-        pos = _put_key(out, pos, 1, _LEN)
-        pos = _put_varint(out, pos, camera.size)
-        out[pos:pos + camera.size] = camera
-        pos += camera.size
+    pos = _put_string(out, 0, 1, camera)
     pos = _put_double_field(out, pos, 2, stamp_s)
     pos = _put_double_field(out, pos, 3, capture_s)
     pos = _put_double_field(out, pos, 4, delivery_s)
@@ -179,6 +185,56 @@ def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores,
     pos = _put_bools(out, pos, 12, occluded)
     pos = _put_bools(out, pos, 13, self_occluded)
     return _put_varints(out, pos, 14, effects, False)
+
+
+@_jit
+def tracker_output(out, stamp_s, camera, ids, stamps, state_names, state_ends, state_index, poses, joint_states,
+                   has_states, detection_target_ids):
+    """`crossview.TrackerOutput` into `out` (uint8, at least `tracker_output_capacity`); returns its size.
+
+    camera: the camera name's UTF-8 bytes; ids (T,) int64 >= 0; stamps (T,); state_names: the UTF-8 bytes of
+    the state names one after another, name i ending at state_ends[i]; state_index (T,) each target's name;
+    poses (T, J, 3); joint_states (T, J) uint8 codes (< 128), written for the targets with has_states (T,);
+    detection_target_ids (D,) int64.
+    """
+    T, J = poses.shape[0], poses.shape[1]
+    pos = _put_double_field(out, 0, 1, stamp_s)
+    pos = _put_string(out, pos, 2, camera)
+    pos = _put_uint_field(out, pos, 3, J)
+    for t in range(T):
+        start = state_ends[state_index[t] - 1] if state_index[t] > 0 else 0
+        name_size = state_ends[state_index[t]] - start
+        size = 0
+        if ids[t] != 0:
+            size += 1 + _varint_size(ids[t])
+        if not _is_zero_bits(stamps[t]):
+            size += 9
+        if name_size:
+            size += 1 + _varint_size(name_size) + name_size
+        if J:
+            size += 1 + _varint_size(24 * J) + 24 * J
+            if has_states[t]:
+                size += 1 + _varint_size(J) + J
+        pos = _put_key(out, pos, 4, _LEN)
+        pos = _put_varint(out, pos, size)
+        if ids[t] != 0:
+            pos = _put_key(out, pos, 1, _VARINT)
+            pos = _put_varint(out, pos, ids[t])
+        pos = _put_double_field(out, pos, 2, stamps[t])
+        pos = _put_string(out, pos, 3, state_names[start:start + name_size])
+        pos = _put_doubles(out, pos, 4, poses[t])
+        if J and has_states[t]:
+            pos = _put_key(out, pos, 5, _LEN)
+            pos = _put_varint(out, pos, J)
+            for j in range(J):
+                out[pos + j] = joint_states[t, j]
+            pos += J
+    return _put_varints(out, pos, 5, detection_target_ids, True)
+
+
+def tracker_output_capacity(T: int, J: int, D: int, name_bytes: int, state_bytes: int) -> int:
+    """An upper bound of the bytes of `tracker_output` (varints counted at their longest)."""
+    return 64 + name_bytes + T * (48 + state_bytes + 25 * J) + 11 * D
 
 
 def camera_frame_capacity(D: int, J: int, name_bytes: int) -> int:

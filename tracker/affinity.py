@@ -119,7 +119,7 @@ def combine(a2d: np.ndarray | None, a3d: np.ndarray, normalize: bool) -> np.ndar
 def affinity_matrix(
     positions, velocities, joint_stamp_s, seen_stamp_s, prev_px, prev_stamp_s, camera, det_px, world_from_pixel, center,
     stamp_s, w_2d, alpha_2d_px_per_s, alpha_2d_floor_px, w_3d, alpha_3d_m, lambda_a_per_s, max_predict_s, normalize,
-    out,
+    rows, out,
 ):
     """Eq. (1)-(5) in one pass from the tracker's target arrays: `combine` of `affinity_2d` and `affinity_3d`
     after `predict_positions` and `geometry.ray_directions` (compiled kernel, no intermediate (T, D, J) arrays).
@@ -133,9 +133,10 @@ def affinity_matrix(
         world_from_pixel: (3, 3) R^T K^-1 of the camera; center: (3,) its centre (eq. 3).
         stamp_s: t, s. The weights and thresholds as in `affinity_2d`, `affinity_3d` and `predict_positions`.
         normalize: as `combine`.
-        out: (T, D) the affinity matrix, written.
+        rows: (R,) the target rows to score (those in the camera's view, `visibility.targets_in_view`).
+        out: (R, D) the affinity matrix of those rows, written.
     """
-    T, J = positions.shape[0], positions.shape[1]
+    J = positions.shape[1]
     D = det_px.shape[0]
     rays = np.empty((D, J, 3))
     for d in range(D):
@@ -149,7 +150,8 @@ def affinity_matrix(
     sum_3d = np.empty(D)
     sum_2d = np.empty(D)
     count = np.empty(D)
-    for t in range(T):
+    for i in range(rows.size):
+        t = rows[i]
         sum_3d[:] = 0.0
         sum_2d[:] = 0.0
         count[:] = 0.0
@@ -185,7 +187,7 @@ def affinity_matrix(
             total = sum_3d[d] + sum_2d[d]
             if normalize:
                 total = total / count[d] if count[d] > 0 else 0.0
-            out[t, d] = total
+            out[i, d] = total
 
 
 def epipolar_affinity(
@@ -222,9 +224,14 @@ def epipolar_affinity(
 
 
 def epipolar_affinity_matrix(
-    points: np.ndarray, cameras: np.ndarray, F: np.ndarray, alpha_px: float, min_common_joints: int
+    points: np.ndarray, cameras: np.ndarray, F: np.ndarray, alpha_px: float, min_common_joints: int,
+    linked: np.ndarray | None = None,
 ) -> np.ndarray:
     """Eq. (S2) between every two detections of a pool, -inf within one camera (Algorithm S1).
+
+    Two cameras whose views share no part of the space people occupy (`linked` False, from
+    `visibility.overlapping_views`) cannot see one person: their detections get 0, no edge of the graph
+    (an epipolar line of one crosses the other's image anyway, so eq. S2 alone would link them by chance).
 
     Args:
         points: (n, J, 2) undistorted pixels of the pooled detections (NaN missing).
@@ -232,19 +239,23 @@ def epipolar_affinity_matrix(
         F: (C, C, 3, 3) fundamental matrices, F[a, b] with x_b^T F[a, b] x_a = 0 (any value on the diagonal).
         alpha_px: threshold α, pixels.
         min_common_joints: pairs sharing fewer joints get -inf.
+        linked: (C, C) bool, whether two cameras' views overlap; None: all do.
 
     Returns:
         (n, n) symmetric affinity matrix.
     """
     n = points.shape[0]
+    if linked is None:
+        linked = np.ones(F.shape[:2], dtype=bool)
     A = np.empty((n, n))
     _epipolar_matrix(np.ascontiguousarray(points, dtype=np.float64), np.asarray(cameras, dtype=np.int64),
-                     np.ascontiguousarray(F, dtype=np.float64), float(alpha_px), int(min_common_joints), A)
+                     np.ascontiguousarray(F, dtype=np.float64), float(alpha_px), int(min_common_joints),
+                     np.ascontiguousarray(linked, dtype=np.bool_), A)
     return A
 
 
 @jit
-def _epipolar_matrix(points, cameras, F, alpha_px, min_common_joints, out):
+def _epipolar_matrix(points, cameras, F, alpha_px, min_common_joints, linked, out):
     """`epipolar_affinity_matrix` into out (n, n) (compiled kernel; `epipolar_affinity` per pair of detections)."""
     n, J = points.shape[0], points.shape[1]
     for a in range(n):
@@ -252,6 +263,9 @@ def _epipolar_matrix(points, cameras, F, alpha_px, min_common_joints, out):
             ka, kb = cameras[a], cameras[b]
             out[a, b] = -np.inf
             if ka == kb:
+                continue
+            if not linked[ka, kb]:
+                out[a, b] = 0.0
                 continue
             total = 0.0
             common = 0

@@ -37,6 +37,10 @@ class TrackerConfig:
         alpha_2d_floor_px: least 2D distance threshold of eq. (2), pixels; 0 is the paper (see
             tracker.affinity.affinity_2d).
         score_threshold: joints with a detector score below this are ignored everywhere, [0, 1].
+        view_margin_m: a target whose predicted body lies farther than this outside a camera's view volume is
+            not scored against that camera's frame, and two cameras whose views (in the band of heights where
+            joints can be) do not come this close are never linked at initialisation, metres (see
+            tracker.visibility). At least alpha_3d_m, so that no pair left out could have a positive 3D term.
         normalize_affinity: False sums eq. (1) over joints as the paper writes it; True divides the sum by the
             number of joints compared (a detection with few joints then counts as much as a full one).
         velocity_window_s: history span for the linear least-squares joint velocity of eq. (5), s.
@@ -89,6 +93,16 @@ class TrackerConfig:
             with arrivals and departures (store_layout1, seed 1) a newcomer took a departed person's identity
             (IDF1 0.99 -> 0.87).
         reid_speed_m_per_s: assumed walking speed for that reach, m/s.
+    Evidence against ghosts (beyond the paper; see docs/tracker.md "No ghosts"):
+        ghost_window_s: time constant of the decaying counts of a target's expected and actual sightings, s.
+        ghost_inside_m: a camera is expected to see a target when the target's predicted hip centre lies at
+            least this far inside the camera's view volume, metres.
+        ghost_min_expected: the decayed count of expected sightings before the next rule may act.
+        ghost_min_seen_ratio: a target matched in fewer than this share of the frames expected to see it is
+            removed (a ghost: cameras that should see a person there see nobody), in [0, 1]; 0 disables.
+        implausible_after_s: a target whose observed body stays implausible this long (the init_* limits of
+            height above the floor, bone length and median reprojection error, checked at every match) is
+            removed, s.
     Input:
         max_lateness_s: a frame stamped more than this before the newest processed stamp is dropped, s.
 
@@ -106,6 +120,7 @@ class TrackerConfig:
     alpha_2d_floor_px: float = 0.0
     score_threshold: float = 0.2
     normalize_affinity: bool = False
+    view_margin_m: float = 0.5
     velocity_window_s: float = 0.3
     velocity_history: int = 48
     max_speed_m_per_s: float = 6.0
@@ -137,6 +152,11 @@ class TrackerConfig:
     remove_after_s: float = 3.0
     reid_max_m: float = 0.0
     reid_speed_m_per_s: float = 1.5
+    ghost_window_s: float = 1.0
+    ghost_inside_m: float = 0.3
+    ghost_min_expected: float = 10.0
+    ghost_min_seen_ratio: float = 0.2
+    implausible_after_s: float = 0.5
     max_lateness_s: float = 0.5
 
     def __post_init__(self):
@@ -147,8 +167,9 @@ class TrackerConfig:
                              f"{[m.value for m in Triangulation]}")
         nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "alpha_2d_floor_px", "lambda_t_per_s", "max_predict_s",
                   "init_window_s", "confirm_min_age_s", "max_lateness_s", "reid_max_m", "reid_speed_m_per_s",
-                  "reject_factor")
-        positive = ("alpha_2d_px_per_s", "alpha_3d_m", "velocity_window_s", "max_speed_m_per_s",
+                  "reject_factor", "ghost_inside_m", "ghost_min_expected")
+        positive = ("ghost_window_s", "implausible_after_s", "alpha_2d_px_per_s", "alpha_3d_m", "view_margin_m",
+                    "velocity_window_s", "max_speed_m_per_s",
                     "max_observation_age_s", "alpha_epipolar_px", "reject_floor_px", "max_bone_m", "stale_after_s",
                     "init_max_reprojection_px", "init_max_bone_m",
                     "tentative_timeout_s", "lost_after_s", "remove_after_s")
@@ -164,6 +185,8 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
                 raise ValueError(f"TrackerConfig.{name}: {value!r} is not a number")
+        if not 0.0 <= self.ghost_min_seen_ratio <= 1.0:
+            raise ValueError(f"TrackerConfig.ghost_min_seen_ratio: {self.ghost_min_seen_ratio} must be in [0, 1]")
         if not 0.0 <= self.score_threshold <= 1.0:
             raise ValueError(f"TrackerConfig.score_threshold: {self.score_threshold} must be in [0, 1]")
         ints = {"velocity_history": 2, "min_views": 2, "init_min_joints": 1, "init_min_common_joints": 1,
@@ -178,6 +201,9 @@ class TrackerConfig:
         if self.init_min_top_m >= self.init_max_top_m:
             raise ValueError(f"TrackerConfig.init_min_top_m: {self.init_min_top_m} must be below "
                              f"init_max_top_m {self.init_max_top_m}")
+        if not self.view_margin_m >= self.alpha_3d_m:
+            raise ValueError(f"TrackerConfig.view_margin_m: {self.view_margin_m} must be >= alpha_3d_m "
+                             f"{self.alpha_3d_m}")
         if self.lost_after_s > self.remove_after_s:
             raise ValueError(f"TrackerConfig.lost_after_s: {self.lost_after_s} must not exceed "
                              f"remove_after_s {self.remove_after_s}")

@@ -11,7 +11,11 @@ affinity is -inf, Algorithm S1). The greedy result is cycle-consistent by constr
 A component whose every pair has a positive affinity (two detections joined by one edge, most often) is
 one cluster without a solver: joining all of it takes every term of (S3) and breaks no (S5). A component of
 up to `ENUMERATE_MAX_NODES` detections is solved exactly by scoring every partition of it at once (203 for
-six), which is what milp would return at a hundredth of its set-up cost (ties aside).
+six), which is what milp would return at a hundredth of its set-up cost (ties aside). A larger component
+(up to `max_exact_nodes`) is solved exactly by a compiled branch and bound over its partitions, started from
+the greedy merge's value and bounded by the positive affinities not yet placed; milp takes over only when
+that search runs past `BRANCH_AND_BOUND_MAX_STEPS` (a crowd puts one person in ten or more views at once,
+where milp's set-up alone cost more than the whole search).
 """
 
 from __future__ import annotations
@@ -25,6 +29,7 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
+from core.jit import jit
 from core.types import Skeleton
 from tracker.triangulation import reprojection_error_px, triangulate_incremental
 
@@ -32,6 +37,9 @@ logger = logging.getLogger(__name__)
 
 ENUMERATE_MAX_NODES = 6
 """Components up to this many detections are solved by enumerating their partitions instead of milp."""
+
+BRANCH_AND_BOUND_MAX_STEPS = 200_000
+"""Branching steps the exact search may take on one component before milp solves it instead."""
 
 
 def partition_graph(affinity: np.ndarray, max_exact_nodes: int = 14) -> list[np.ndarray]:
@@ -65,7 +73,9 @@ def partition_graph(affinity: np.ndarray, max_exact_nodes: int = 14) -> list[np.
         if nodes.size <= min(max_exact_nodes, ENUMERATE_MAX_NODES):
             parts = _partition_enumerated(sub)
         elif nodes.size <= max_exact_nodes:
-            parts = _partition_milp(sub)
+            parts = _partition_branch_and_bound(sub)
+            if parts is None:
+                parts = _partition_milp(sub)
         if parts is None:
             parts = _partition_greedy(sub)
         clusters.extend(nodes[p] for p in parts)
@@ -109,6 +119,89 @@ def _partition_enumerated(a: np.ndarray) -> list[np.ndarray]:
     objective[together[:, forbidden].any(axis=1)] = -np.inf  # one camera twice in a cluster
     best = labels[int(np.argmax(objective))]
     return [np.flatnonzero(best == c) for c in range(best.max() + 1)]
+
+
+def _objective(a: np.ndarray, parts: list[np.ndarray]) -> float:
+    """(S3): the total affinity within the clusters of a partition."""
+    total = 0.0
+    for p in parts:
+        sub = a[np.ix_(p, p)]
+        total += float(np.sum(np.triu(sub, 1)))
+    return total
+
+
+def _partition_branch_and_bound(a: np.ndarray) -> list[np.ndarray] | None:
+    """Exact (S3)-(S5) on one component by branch and bound; None if it needs more than
+    `BRANCH_AND_BOUND_MAX_STEPS` steps. Starts from the greedy merge, which it returns when nothing beats it."""
+    greedy = _partition_greedy(a)
+    n = a.shape[0]
+    labels = np.empty(n, dtype=np.int64)
+    for c, p in enumerate(greedy):
+        labels[p] = c
+    w = np.where(np.isfinite(a), a, -np.inf).astype(np.float64)
+    solved = _branch_and_bound(np.ascontiguousarray(w), _objective(a, greedy), labels, BRANCH_AND_BOUND_MAX_STEPS)
+    if not solved:
+        return None
+    return [np.flatnonzero(labels == c) for c in np.unique(labels)]
+
+
+@jit
+def _branch_and_bound(w, best_value, best_labels, max_steps):
+    """Depth-first search over the partitions of n nodes (node k joins one of the clusters of nodes 0..k-1 or
+    opens the next), pruning a branch whose value plus every positive affinity still to place cannot beat
+    `best_value`; a cluster holding a -inf pair (one camera twice) is never formed. Writes the best labels
+    found into `best_labels` (left alone when nothing beats `best_value`); returns whether the search ended
+    within `max_steps`."""
+    n = w.shape[0]
+    bound = np.zeros(n + 1)  # bound[k]: the positive affinities between node j >= k and the nodes before it
+    for j in range(n - 1, -1, -1):
+        s = 0.0
+        for i in range(j):
+            if w[i, j] > 0.0:
+                s += w[i, j]
+        bound[j] = bound[j + 1] + s
+    labels = np.full(n, -1, dtype=np.int64)
+    value = np.zeros(n + 1)  # value[k]: (S3) of nodes 0..k-1 as labelled
+    used = np.zeros(n + 1, dtype=np.int64)  # used[k]: clusters opened by nodes 0..k-1
+    labels[0] = 0
+    used[1] = 1
+    k = 1
+    steps = 0
+    while k >= 1:
+        if k == n:
+            if value[n] > best_value:
+                best_value = value[n]
+                best_labels[:] = labels
+            k -= 1
+            continue
+        c = labels[k] + 1
+        advanced = False
+        while c <= used[k]:
+            steps += 1
+            gain = 0.0
+            allowed = True
+            for i in range(k):
+                if labels[i] == c:
+                    if w[i, k] == -np.inf:
+                        allowed = False
+                        break
+                    gain += w[i, k]
+            if allowed and value[k] + gain + bound[k + 1] > best_value:
+                labels[k] = c
+                value[k + 1] = value[k] + gain
+                used[k + 1] = max(used[k], c + 1)
+                k += 1
+                if k < n:
+                    labels[k] = -1
+                advanced = True
+                break
+            c += 1
+        if not advanced:
+            labels[k] = -1
+            k -= 1
+        if steps > max_steps:
+            return False
+    return True
 
 
 def _partition_milp(a: np.ndarray) -> list[np.ndarray] | None:

@@ -19,7 +19,7 @@ MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apa
 @jit
 def update_matched(
     rows, cols, det_px, camera, stamp_s,
-    pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
+    pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
     P, bones,
     max_observation_age_s, lambda_t_per_s, use_velocity, min_views, reject_factor, reject_floor_px, max_bone_m,
     velocity_window_s, max_speed_m_per_s, stale_after_s, max_predict_s,
@@ -41,8 +41,10 @@ def update_matched(
     Args:
         rows: (M,) matched target rows; cols: (M,) their detections in det_px (D, J, 2) undistorted pixels.
         camera: the frame's camera index; stamp_s: its stamp t, s.
-        pos, vel, joint_s, seen_s, obs_px, obs_s, hist_pos, hist_s, hist_next, last_update_s, num_updates: the
-            target arrays of `tracker._Targets` (updated in place).
+        pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next, last_update_s, num_updates:
+            the target arrays of `tracker._Targets` (updated in place); cam_s (T, C) is the stamp of the last
+            frame of each camera matched to the target (NaN none), >= every obs_s of that camera, so that only
+            the cameras with a fresh point are visited per joint.
         P: (C, 3, 4) projection matrices; bones: (B, 2) joint pairs.
         The rest: `TrackerConfig` fields.
     """
@@ -64,6 +66,7 @@ def update_matched(
     update = np.empty(J, dtype=np.bool_)
     hit = np.empty(J, dtype=np.bool_)
     values = np.empty(J)
+    fresh = np.empty(C, dtype=np.int64)
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
@@ -73,13 +76,20 @@ def update_matched(
                 obs_px[r, camera, j, 0] = det_px[d, j, 0]
                 obs_px[r, camera, j, 1] = det_px[d, j, 1]
                 obs_s[r, camera, j] = stamp_s
+        cam_s[r, camera] = stamp_s
+        num_fresh = 0
+        for k in range(C):
+            if stamp_s - cam_s[r, k] <= max_observation_age_s:  # False for NaN (never matched)
+                fresh[num_fresh] = k
+                num_fresh += 1
         # 2. Eq. (6)-(11) for the joints the detection holds.
         for j in range(J):
             update[j] = False
             if not np.isfinite(det_px[d, j, 0]):
                 continue
             num = 0
-            for k in range(C):
+            for f in range(num_fresh):
+                k = fresh[f]
                 if stamp_s - obs_s[r, k, j] <= max_observation_age_s:  # False for NaN (no point)
                     cams[num] = k
                     points[num, 0] = obs_px[r, k, j, 0]
@@ -250,3 +260,45 @@ def poses_in_state(state, code, ids, pos, vel, joint_s, stamp_s, max_predict_s):
             for k in range(3):
                 out[i, j, k] = pos[r, j, k] + vel[r, j, k] * horizon
     return ids[rows], out
+
+
+@jit
+def implausible_bodies(rows, cols, det_px, P, pos, seen_s, stamp_s, stale_after_s, bones, min_bottom_m, max_top_m,
+                       max_bone_m, max_reprojection_px, share, out):
+    """out[m] = whether matched target rows[m]'s observed body is implausible (see `Tracker._record_evidence`):
+    more than `share` of its observed joints (triangulated within `stale_after_s`) outside
+    [min_bottom_m, max_top_m] or of its observed bones longer than `max_bone_m`, or a median reprojection
+    error (through P (3, 4), against detection cols[m] of det_px (D, J, 2)) above `max_reprojection_px`."""
+    J, B = pos.shape[1], bones.shape[0]
+    observed = np.empty(J, dtype=np.bool_)
+    errors = np.empty(J)
+    for m in range(rows.size):
+        r, d = rows[m], cols[m]
+        count = off = n = 0
+        for j in range(J):
+            observed[j] = stamp_s - seen_s[r, j] <= stale_after_s and np.isfinite(pos[r, j, 0])
+            if not observed[j]:
+                continue
+            count += 1
+            z = pos[r, j, 2]
+            if z < min_bottom_m or z > max_top_m:
+                off += 1
+            h0 = P[0, 0] * pos[r, j, 0] + P[0, 1] * pos[r, j, 1] + P[0, 2] * pos[r, j, 2] + P[0, 3]
+            h1 = P[1, 0] * pos[r, j, 0] + P[1, 1] * pos[r, j, 1] + P[1, 2] * pos[r, j, 2] + P[1, 3]
+            h2 = P[2, 0] * pos[r, j, 0] + P[2, 1] * pos[r, j, 1] + P[2, 2] * pos[r, j, 2] + P[2, 3]
+            e = np.sqrt((h0 / h2 - det_px[d, j, 0]) ** 2 + (h1 / h2 - det_px[d, j, 1]) ** 2)
+            if not np.isnan(e):
+                errors[n] = e
+                n += 1
+        both = long = 0
+        for b in range(B):
+            a, e = bones[b, 0], bones[b, 1]
+            if observed[a] and observed[e]:
+                both += 1
+                if _distance(pos, r, a, e) > max_bone_m:
+                    long += 1
+        bad = off > share * max(count, 1) or long > share * max(both, 1)
+        if n:
+            sort_prefix(errors, n)
+            bad = bad or (errors[(n - 1) // 2] + errors[n // 2]) / 2.0 > max_reprojection_px
+        out[m] = bad

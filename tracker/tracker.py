@@ -28,15 +28,20 @@ from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
 from tracker import lifecycle
 from tracker.association import associate
+from tracker.body import fill_poses, joint_states, mean_body
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
-from tracker.kernels import poses_in_state, split_detections, update_matched
+from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
 from tracker.types import Target, TrackerOutput
+from tracker.visibility import all_view_planes, count_sightings, overlapping_views, targets_in_view
 
 logger = logging.getLogger(__name__)
 
 _DEFAULT_CONFIG = TrackerConfig()
+
+IMPLAUSIBLE_SHARE = 0.25
+"""Share of a target's observed joints (or bones) out of the birth limits that makes its body implausible."""
 
 
 class _Targets:
@@ -55,15 +60,21 @@ class _Targets:
         self.vel = np.zeros((0, J, 3))  # V_t' per joint (eq. 5)
         self.obs_px = np.zeros((0, C, J, 2))  # last matched undistorted joint per camera (eq. 2, 6)
         self.obs_s = np.zeros((0, C, J))  # its stamp, NaN none
+        self.cam_s = np.zeros((0, C))  # stamp of the last frame of each camera matched to the target, NaN none
         self.hist_pos = np.zeros((0, H, J, 3))  # ring buffer of past joint estimates for the velocity fit
         self.hist_s = np.zeros((0, H, J))
         self.hist_next = np.zeros(0, dtype=np.int64)
+        self.expected = np.zeros(0)  # decayed count of frames of cameras that should have seen the target
+        self.sighted = np.zeros(0)  # of those, decayed count of the frames that matched it
+        self.evidence_s = np.zeros(0)  # time of the last count
+        self.implausible_s = np.zeros(0)  # since when the observed body is implausible, NaN when it is not
 
     def __len__(self) -> int:
         return self.ids.size
 
     _FIELDS = ("ids", "state", "born_s", "last_update_s", "num_updates", "pos", "joint_s", "seen_s", "vel", "obs_px",
-               "obs_s", "hist_pos", "hist_s", "hist_next")
+               "obs_s", "cam_s", "hist_pos", "hist_s", "hist_next", "expected", "sighted", "evidence_s",
+               "implausible_s")
 
     def keep(self, mask: np.ndarray) -> None:
         for name in self._FIELDS:
@@ -115,6 +126,11 @@ class Tracker:
             for b in range(C):
                 if a != b:
                     self._F[a, b] = fundamental_matrix(self.cameras[a], self.cameras[b])
+        # View volumes (which targets a frame is scored against) and the camera pairs whose views share part
+        # of the band of heights where joints can be (the only pairs initialisation links).
+        self._planes = all_view_planes(self.cameras)
+        self._linked = overlapping_views(self.cameras, config.init_min_bottom_m, config.init_max_top_m,
+                                         config.view_margin_m)
         self._targets = _Targets(C, J, config.velocity_history)
         self._next_id = 0
         self._camera_last_s = np.full(C, -np.inf)
@@ -127,6 +143,8 @@ class Tracker:
             max_reprojection_px=config.init_max_reprojection_px, min_joints_3d=config.init_min_joints_3d,
             max_bone_m=config.init_max_bone_m, min_top_m=config.init_min_top_m, max_top_m=config.init_max_top_m,
             min_bottom_m=config.init_min_bottom_m)
+        self._mean_body = mean_body(skeleton)
+        self._hips = self._hip_joints(skeleton)
         self.last_output = TrackerOutput(stamp_s=0.0, camera="", targets=[],
                                          detection_target_ids=np.zeros(0, dtype=np.int64))
 
@@ -158,6 +176,7 @@ class Tracker:
         self._newest_s = max(self._newest_s, t)
         self._advance_lifecycle(t)
         if D == 0:
+            self._record_evidence(c, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, J, 2)), t)
             self._set_pool(c, np.zeros((0, J, 2)), np.zeros(0, dtype=np.int64), t)
             return self._emit(t, frame.camera, np.zeros(0, dtype=np.int64))
 
@@ -165,6 +184,7 @@ class Tracker:
         matched_rows, matched_cols = self._associate(c, det_px, t)
         if matched_rows.size:
             self._update_targets(c, matched_rows, matched_cols, det_px, t)
+        self._record_evidence(c, matched_rows, matched_cols, det_px, t)
         # (D,) matched target ids, and the unmatched detections with enough joints to start a target
         assigned, unmatched = split_detections(usable, self._init_min_joints, matched_rows, matched_cols,
                                                self._targets.ids)
@@ -202,22 +222,38 @@ class Tracker:
         tg = self._targets
         if not len(tg):
             return
-        tg.state = lifecycle.on_time(tg.state, tg.last_update_s, t, self.config).astype(np.int8)
+        cfg = self.config
+        with np.errstate(invalid="ignore", divide="ignore"):
+            # A LOST target is already out of the output and goes by the time rule (it may be a person hidden).
+            unseen = (tg.expected >= cfg.ghost_min_expected) & (tg.sighted < cfg.ghost_min_seen_ratio * tg.expected)
+            unseen &= tg.state != lifecycle.LOST
+        ghost = unseen | (t - tg.implausible_s >= cfg.implausible_after_s)  # False for NaN
+        if ghost.any():
+            logger.debug("removing ghost targets %s", tg.ids[ghost].tolist())
+        tg.state = lifecycle.on_time(tg.state, tg.last_update_s, t, cfg, ghost).astype(np.int8)
         removed = tg.state == lifecycle.REMOVED
         if removed.any():
             tg.keep(~removed)
 
     def _associate(self, c: int, det_px: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarray]:
         """Eq. (1)-(5) affinity of every (target, detection) pair, then the Hungarian algorithm."""
-        tg = self._targets
+        tg, cfg = self._targets, self.config
         if not len(tg):
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+        # Only the targets this camera can see (tracker.visibility): the others have no positive affinity.
+        rows = np.empty(len(tg), dtype=np.int64)
+        rows = rows[:targets_in_view(self._planes[c], c, tg.pos, tg.vel, tg.joint_s, tg.obs_s, t,
+                                     float(cfg.max_predict_s), float(cfg.view_margin_m),
+                                     float(cfg.max_observation_age_s), rows)]
+        if not rows.size:
+            return rows, np.zeros(0, dtype=np.int64)
         # Eq. (4)'s time penalty counts from the joint's last observation t', also for a joint carried with
         # the body since (its position is a guess, so it keeps losing weight as in the paper).
-        matrix = np.empty((len(tg), det_px.shape[0]))
+        matrix = np.empty((rows.size, det_px.shape[0]))
         aff.affinity_matrix(tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s, c, det_px,
-                            self._world_from_pixel[c], self._centers[c], t, *self._affinity_params, matrix)
-        return associate(matrix)  # eq. (1), (T, D)
+                            self._world_from_pixel[c], self._centers[c], t, *self._affinity_params, rows, matrix)
+        matched, cols = associate(matrix)  # eq. (1), (T, D)
+        return rows[matched], cols
 
     def _update_targets(self, c: int, rows: np.ndarray, cols: np.ndarray, det_px: np.ndarray, t: float) -> None:
         """Incremental 3D reconstruction (eq. 6-11) of the matched targets, then velocity and lifecycle.
@@ -232,10 +268,58 @@ class Tracker:
             rows: (M,) matched targets; cols: (M,) their detections in det_px (D, J, 2).
         """
         tg = self._targets
-        update_matched(rows, cols, det_px, c, t, tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s,
+        update_matched(rows, cols, det_px, c, t, tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s, tg.cam_s,
                        tg.hist_pos, tg.hist_s, tg.hist_next, tg.last_update_s, tg.num_updates, self._P, self._bones,
                        *self._update_params)
-        tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, self.config)
+        tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, self.config,
+                                            self._has_body(rows))
+
+    def _record_evidence(self, c: int, rows: np.ndarray, cols: np.ndarray, det_px: np.ndarray, t: float) -> None:
+        """What camera c's frame says about each target (docs/tracker.md, "No ghosts").
+
+        1. Sightings: every target whose predicted hip centre lies `ghost_inside_m` inside the camera's view
+           volume should have been seen; its decayed counts of expected and matched frames (time constant
+           `ghost_window_s`) are updated.
+        2. Plausibility: each matched target's observed body (joints triangulated within `stale_after_s`) is
+           implausible when more than `IMPLAUSIBLE_SHARE` of its observed joints lie outside the heights
+           [init_min_bottom_m, init_max_top_m] or of its observed bones are longer than init_max_bone_m, or its
+           median reprojection error in this frame exceeds init_max_reprojection_px (shares, not single joints:
+           one joint badly triangulated for a moment is the tracker's own business); `implausible_s` holds
+           since when it is, NaN while it is not.
+
+        Args:
+            rows, cols: (M,) the matched targets and their detections in det_px (D, J, 2).
+        """
+        tg, cfg, lim = self._targets, self.config, self._limits
+        if not len(tg) or self._hips.size == 0:
+            return
+        matched = np.zeros(len(tg), dtype=np.bool_)
+        matched[rows] = True
+        count_sightings(self._planes[c], self._hips, tg.pos, tg.vel, tg.joint_s, t, float(cfg.max_predict_s),
+                        float(cfg.ghost_inside_m), float(cfg.ghost_window_s), matched, tg.expected, tg.sighted,
+                        tg.evidence_s)
+        if rows.size:
+            bad = np.empty(rows.size, dtype=np.bool_)
+            implausible_bodies(rows, cols, det_px, self._P[c], tg.pos, tg.seen_s, t, float(cfg.stale_after_s),
+                               self._bones, float(lim.min_bottom_m), float(lim.max_top_m), float(lim.max_bone_m),
+                               float(lim.max_reprojection_px), IMPLAUSIBLE_SHARE, bad)
+            start = bad & np.isnan(tg.implausible_s[rows])
+            tg.implausible_s[rows[start]] = t
+            tg.implausible_s[rows[~bad]] = np.nan
+
+    @staticmethod
+    def _hip_joints(skeleton: Skeleton) -> np.ndarray:
+        """The root joints a target needs before confirmation: the hips, or none in a layout without them."""
+        try:
+            return np.asarray(skeleton.hips, dtype=np.int64)
+        except ValueError:
+            return np.zeros(0, dtype=np.int64)
+
+    def _has_body(self, rows: np.ndarray) -> np.ndarray:
+        """(M,) whether each target has its root (both hips) and `init_min_joints_3d` joints triangulated: the
+        body a confirmation needs (its other joints can then be inferred from it, tracker.body)."""
+        known = np.isfinite(self._targets.pos[rows, :, 0])
+        return known[:, self._hips].all(axis=1) & (known.sum(axis=1) >= self.config.init_min_joints_3d)
 
     def _set_pool(self, c: int, px: np.ndarray, frame_index: np.ndarray, t: float) -> None:
         self._pool_px[c] = px
@@ -256,7 +340,7 @@ class Tracker:
         node_cam = np.concatenate([np.full(self._pool_px[k].shape[0], k) for k in cams])
         node_pos = np.concatenate([np.arange(self._pool_px[k].shape[0]) for k in cams])
         A = aff.epipolar_affinity_matrix(np.concatenate([self._pool_px[k] for k in cams]), node_cam, self._F,
-                                         cfg.alpha_epipolar_px, cfg.init_min_common_joints)  # eq. (S2)
+                                         cfg.alpha_epipolar_px, cfg.init_min_common_joints, self._linked)  # eq. (S2)
         created: list[tuple[int, np.ndarray]] = []
         used: dict[int, list[int]] = {}
         for cluster in partition_graph(A, cfg.milp_max_nodes):
@@ -300,6 +384,8 @@ class Tracker:
         obs_s = np.full((1, C, J), np.nan)
         obs_px[0, ks] = pts
         obs_s[0, ks] = np.where(np.isfinite(pts[..., 0]), stamps[:, None], np.nan)
+        cam_s = np.full((1, C), np.nan)
+        cam_s[0, ks] = stamps
         known = np.all(np.isfinite(pose), axis=-1)
         hist_pos = np.full((1, H, J, 3), np.nan)
         hist_s = np.full((1, H, J), np.nan)
@@ -320,10 +406,13 @@ class Tracker:
             ids=np.array([new_id]), state=np.array([state], dtype=np.int8), born_s=np.array([born_s]),
             last_update_s=np.array([t]), num_updates=np.array([num_updates]), pos=pose[None],
             joint_s=np.where(known, t, -np.inf)[None], seen_s=np.where(known, t, -np.inf)[None],
-            vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s,
+            vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s, cam_s=cam_s,
+            expected=np.zeros(1), sighted=np.zeros(1), evidence_s=np.array([t]), implausible_s=np.array([np.nan]),
             hist_pos=hist_pos, hist_s=hist_s, hist_next=np.array([1]))
         tg = self._targets
-        tg.state[-1:] = lifecycle.on_match(tg.state[-1:], tg.born_s[-1:], tg.num_updates[-1:], t, self.config)
+        last = np.array([len(tg) - 1])
+        tg.state[last] = lifecycle.on_match(tg.state[last], tg.born_s[last], tg.num_updates[last], t, self.config,
+                                            self._has_body(last))
         return new_id
 
     def _lost_nearby(self, pose: np.ndarray, t: float) -> int | None:
@@ -351,7 +440,12 @@ class Tracker:
         tg = self._targets
         ids, poses = poses_in_state(tg.state, lifecycle.CONFIRMED, tg.ids, tg.pos, tg.vel, tg.joint_s, t,
                                     self._update_params[-1])  # eq. (5)
+        rows = np.flatnonzero(tg.state == lifecycle.CONFIRMED)
+        known = np.isfinite(poses[..., 0])
+        codes = joint_states(tg.seen_s[rows], known, t, self.config.stale_after_s)
+        fill_poses(poses, self._mean_body, self._bones)  # joints never triangulated: from the target's own body
         state = lifecycle.to_state(lifecycle.CONFIRMED)
-        targets = [Target(target_id, pose, t, state) for target_id, pose in zip(ids.tolist(), poses)]
+        targets = [Target(target_id, pose, t, state, code)
+                   for target_id, pose, code in zip(ids.tolist(), poses, codes)]
         self.last_output = TrackerOutput(stamp_s=t, camera=camera, targets=targets, detection_target_ids=assigned)
         return targets

@@ -21,21 +21,32 @@ class TargetState(enum.Enum):
     REMOVED = "removed"
 
 
+class JointState(enum.Enum):
+    """Where an output joint comes from; its value is the per-joint code of `Target.joint_state`."""
+
+    OBSERVED = 0  # triangulated from cameras' points within the last `stale_after_s`
+    PREDICTED = 1  # triangulated earlier, carried with the body's motion since (eq. 5)
+    INFERRED = 2  # never triangulated: from the target's own body (tracker.body.fill_unknown)
+
+
 @dataclass(frozen=True, eq=False)
 class Target:
     """One tracked person as the tracker reports it.
 
     Attributes:
         id: identity, never reused within a run.
-        pose: (J, 3) joint positions in the world frame, metres; NaN for a joint not yet known.
+        pose: (J, 3) joint positions in the world frame, metres; the tracker's outputs hold no NaN (a joint not
+            yet triangulated is inferred, see `joint_state`); a target read from an old tracks file may.
         stamp_s: the time the pose refers to (the stamp of the frame that produced this output).
         state: lifecycle state.
+        joint_state: (J,) uint8 `JointState` values per joint; None when unknown (tracks files of format 2).
     """
 
     id: int
     pose: np.ndarray
     stamp_s: float
     state: TargetState = TargetState.CONFIRMED
+    joint_state: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)

@@ -40,6 +40,7 @@ from crossview.recording.schemas import (
     TOPIC_TRACK_SCENE,
     TOPIC_TRUTH,
     TOPIC_TRUTH_SCENE,
+    TRACKS_FORMAT_VERSION,
     PoseTruthMsg,
     RecordingError,
     RecordingHeader,
@@ -53,7 +54,8 @@ from crossview.recording.schemas import _box_json as box_json
 from crossview.recording.writer import RecordingWriter, TracksWriter
 
 __all__ = [
-    "CHUNK_SIZE", "FORMAT_VERSION", "TOPIC_HEADER", "TOPIC_OUTPUTS", "TOPIC_STORE", "TOPIC_TRACK_SCENE", "TOPIC_TRUTH",
+    "CHUNK_SIZE", "FORMAT_VERSION", "TRACKS_FORMAT_VERSION", "TOPIC_HEADER", "TOPIC_OUTPUTS", "TOPIC_STORE",
+    "TOPIC_TRACK_SCENE", "TOPIC_TRUTH",
     "TOPIC_TRUTH_SCENE", "EncodedFrame", "PoseTruthMsg", "Recording", "RecordingError", "RecordingHeader",
     "RecordingWriter", "Tracks", "TracksHeader", "TracksWriter", "box_from_json", "box_json",
     "camera_frame_bytes", "camera_topic",

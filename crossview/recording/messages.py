@@ -13,7 +13,7 @@ from core.types import Frame, Skeleton
 from crossview import foxglove
 from crossview.recording.schemas import TrackerOutputMsg, to_ns
 from sim.types import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
-from tracker.types import Target, TargetState, TrackerOutput
+from tracker.types import JointState, Target, TargetState, TrackerOutput
 
 
 def pose_truth_bytes(truth: PoseTruth) -> bytes:
@@ -230,15 +230,77 @@ def _camera_frame_from_msg(msg, poses_at_capture: PoseTruth | None = None) -> Ca
     return CameraFrame(frame=frame, truth=truth, poses_at_capture=poses_at_capture)
 
 
+_STATE_NAMES = [state.value for state in TargetState]
+_STATE_BYTES = np.frombuffer("".join(_STATE_NAMES).encode(), dtype=np.uint8)
+_STATE_ENDS = np.cumsum([len(name.encode()) for name in _STATE_NAMES]).astype(np.int64)
+
+
+def tracker_output_bytes(output: TrackerOutput, num_joints: int) -> bytes:
+    """`crossview.TrackerOutput` wire bytes of one tracker output, written by a compiled loop (the same bytes as
+    protobuf's serialisation of `_tracker_output_to_msg`, which the tests check). A negative target id (which
+    this encoder does not write) goes through protobuf."""
+    from crossview import wire  # (numba: loaded for writing only)
+
+    T, J = len(output.targets), num_joints
+    try:  # the targets' arrays stacked at once; a wrong shape is found and named below
+        poses = np.ascontiguousarray(np.stack([t.pose for t in output.targets]) if T else np.zeros((0, J, 3)),
+                                     dtype=np.float64)
+    except ValueError:
+        poses = None
+    if poses is None or poses.shape != (T, J, 3):
+        for target in output.targets:
+            _checked_pose(output, target, J)
+    has_states = np.array([t.joint_state is not None for t in output.targets], dtype=np.bool_)
+    codes = np.zeros((T, J), dtype=np.uint8)
+    if has_states.any():
+        try:
+            given = np.stack([t.joint_state for t in output.targets if t.joint_state is not None])
+        except ValueError:
+            given = None
+        if given is None or given.shape != (int(has_states.sum()), J) or given.size and (
+                given.min() < 0 or given.max() >= len(JointState)):
+            for target in output.targets:
+                if target.joint_state is not None:
+                    _checked_joint_state(output, target, J)
+        codes[has_states] = given
+    ids = np.array([int(t.id) for t in output.targets], dtype=np.int64)
+    if (ids < 0).any():
+        return _tracker_output_to_msg(output, num_joints).SerializeToString()
+    stamps = np.array([float(t.stamp_s) for t in output.targets], dtype=np.float64)
+    states = np.array([_STATE_NAMES.index(TargetState(t.state).value) for t in output.targets], dtype=np.int64)
+    camera = _utf8(output.camera)
+    det_ids = np.ascontiguousarray(output.detection_target_ids, dtype=np.int64).ravel()
+    out = _scratch(wire.tracker_output_capacity(T, J, det_ids.size, camera.size, _STATE_BYTES.size))
+    size = wire.tracker_output(out, float(output.stamp_s), camera, ids, stamps, _STATE_BYTES, _STATE_ENDS, states,
+                               poses, codes, has_states, det_ids)
+    return out[:size].tobytes()
+
+
+def _checked_pose(output: TrackerOutput, target: Target, num_joints: int) -> np.ndarray:
+    pose = np.asarray(target.pose, dtype=np.float64)
+    if pose.shape != (num_joints, 3):
+        raise ValueError(f"TrackerOutput@{output.stamp_s}: target {target.id} pose expected ({num_joints}, 3), "
+                         f"got {pose.shape}")
+    return pose
+
+
+def _checked_joint_state(output: TrackerOutput, target: Target, num_joints: int) -> np.ndarray:
+    codes = np.asarray(target.joint_state)
+    valid = {state.value for state in JointState}
+    if codes.shape != (num_joints,) or not np.isin(codes, list(valid)).all():
+        raise ValueError(f"TrackerOutput@{output.stamp_s}: target {target.id} joint_state expected ({num_joints},) "
+                         f"codes in {sorted(valid)}, got {codes!r}")
+    return codes
+
+
 def _tracker_output_to_msg(output: TrackerOutput, num_joints: int):
     msg = TrackerOutputMsg(stamp_s=float(output.stamp_s), camera=output.camera, num_joints=num_joints)
     for target in output.targets:
-        pose = np.asarray(target.pose, dtype=np.float64)
-        if pose.shape != (num_joints, 3):
-            raise ValueError(f"TrackerOutput@{output.stamp_s}: target {target.id} pose expected ({num_joints}, 3), "
-                             f"got {pose.shape}")
+        pose = _checked_pose(output, target, num_joints)
         t = msg.targets.add(id=int(target.id), stamp_s=float(target.stamp_s), state=TargetState(target.state).value)
         t.pose_m.extend(pose.ravel().tolist())
+        if target.joint_state is not None:
+            t.joint_state.extend(_checked_joint_state(output, target, num_joints).tolist())
     msg.detection_target_ids.extend(np.asarray(output.detection_target_ids, dtype=np.int64).ravel().tolist())
     return msg
 
@@ -247,7 +309,8 @@ def _tracker_output_from_msg(msg) -> TrackerOutput:
     J = msg.num_joints
     targets = [
         Target(id=t.id, pose=np.array(t.pose_m, dtype=np.float64).reshape(J, 3), stamp_s=t.stamp_s,
-               state=TargetState(t.state))
+               state=TargetState(t.state),
+               joint_state=np.array(t.joint_state, dtype=np.uint8) if len(t.joint_state) == J and J else None)
         for t in msg.targets
     ]
     return TrackerOutput(

@@ -28,6 +28,7 @@ from crossview.recording.schemas import (
     OLDEST_RECORDING_VERSION,
     SUMMARY_METADATA_NAME,
     TOPIC_HEADER,
+    TRACKS_FORMAT_VERSION,
     CameraFrameMsg,
     PoseTruthMsg,
     RecordingError,
@@ -152,9 +153,10 @@ class _Container:
                 f"{self.path}: format version {version} is older than this software reads (recordings: "
                 f"{OLDEST_RECORDING_VERSION} to {FORMAT_VERSION}); generate it again with `crossview generate`"
             )
-        if version > FORMAT_VERSION:
+        newest = FORMAT_VERSION if kind == KIND_RECORDING else TRACKS_FORMAT_VERSION
+        if version > newest:
             raise RecordingError(
-                f"{self.path}: format version {version} is newer than this software reads ({FORMAT_VERSION}); "
+                f"{self.path}: format version {version} is newer than this software reads ({newest}); "
                 f"upgrade crossview-testbed (this is {software_version()})"
             )
 

@@ -17,7 +17,8 @@ from core.types import SKELETONS, Camera, Skeleton
 from crossview import foxglove
 from sim.types import Box, BoxKind
 
-FORMAT_VERSION = 2
+FORMAT_VERSION = 2  # of recordings
+TRACKS_FORMAT_VERSION = 3  # of tracks files; 3: targets carry joint_state (formats 1 and 2 are read too)
 OLDEST_RECORDING_VERSION = 2  # format 1 stored every frame's poses at capture; this reader derives them
 MAGIC = b"\x89MCAP0\r\n"
 CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: the unit of reading and of CRC checks
@@ -113,6 +114,7 @@ def _project_file() -> descriptor_pb2.FileDescriptorProto:
         ("stamp_s", _F.TYPE_DOUBLE, False),
         ("state", _F.TYPE_STRING, False),  # tracker.types.TargetState value
         ("pose_m", _F.TYPE_DOUBLE, True),  # (J, 3)
+        ("joint_state", _F.TYPE_UINT32, True),  # (J,) tracker.types.JointState values; absent in format 2
     ])
     message("TrackerOutput", [
         ("stamp_s", _F.TYPE_DOUBLE, False),
@@ -221,7 +223,7 @@ class TracksHeader:
     config: dict
     skeleton_name: str
     software_version: str = field(default_factory=software_version)
-    format_version: int = FORMAT_VERSION
+    format_version: int = TRACKS_FORMAT_VERSION
 
     def __post_init__(self):
         _check_skeleton_name(self.skeleton_name)

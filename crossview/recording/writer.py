@@ -13,10 +13,10 @@ from crossview import foxglove
 from crossview.outputs import AtomicOutput
 from crossview.recording.messages import (
     EncodedFrame,
-    _tracker_output_to_msg,
     encode_camera_frames,
     encode_frames,
     pose_truth_bytes,
+    tracker_output_bytes,
 )
 from crossview.recording.schemas import (
     CHUNK_SIZE,
@@ -313,8 +313,7 @@ class TracksWriter(_WriterContext):
     def write(self, output: TrackerOutput) -> None:
         """Appends the tracker's output after one frame."""
         t_ns = to_ns(max(0.0, float(output.stamp_s)))
-        msg = _tracker_output_to_msg(output, self.skeleton.num_joints)
-        self._out.add(self._outputs, t_ns, msg.SerializeToString())
+        self._out.add(self._outputs, t_ns, tracker_output_bytes(output, self.skeleton.num_joints))
         if t_ns >= self._next_scene_ns:
             scene = foxglove.tracker_skeletons(output, self.skeleton, t_ns)
             self._out.add(self._scene, t_ns, scene.SerializeToString())

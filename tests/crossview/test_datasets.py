@@ -102,8 +102,12 @@ def test_result_file_round_trips_through_the_published_mapping(tmp_path):
     assert [e["timestamp"] for e in data] == [0.0, 0.04]
     np.testing.assert_allclose(np.array(data[1]["poses"][0]["points_3d"]), (coco + 1.0) * 100, atol=1e-3)  # cm
     # 14-joint poses come back through evaluate.py's COCO-17 mapping with their limbs unchanged.
-    back = coco17_to_campus14(np.array(data[0]["poses"][0]["points_3d"]) / 100)
+    written = np.array(data[0]["poses"][0]["points_3d"], dtype=np.float64)  # null -> NaN
+    back = coco17_to_campus14(written / 100)
     np.testing.assert_allclose(back[:12], campus[:12], atol=1e-5)  # m
+    # The face joints Campus lacks are written as missing (null), never as a point at the origin.
+    assert data[0]["poses"][0]["points_3d"][1] == [None, None, None]
+    assert not np.any(np.all(written == 0.0, axis=-1))
 
 
 def test_campus14_to_coco17_keeps_a_head_on_the_evaluated_line():

@@ -17,6 +17,7 @@ from core.types import COCO17, Camera, Frame
 from crossview import recording
 from crossview.recording import (
     FORMAT_VERSION,
+    TRACKS_FORMAT_VERSION,
     RecordingError,
     RecordingHeader,
     RecordingWriter,
@@ -309,7 +310,7 @@ def test_log_times_are_nanoseconds_of_truth_and_delivery_times(tmp_path, world):
 def make_tracks_header(**overrides) -> TracksHeader:
     fields = dict(scenario_name="synthetic", scenario_digest="ab" * 32, seed=7, method="crossview", preset="store",
                   config={"alpha_2d_px": 25.0, "lambda_t": 5.0, "mode": "paper", "nested": {"x": [1, 2.5]}},
-                  skeleton_name="coco17", software_version="9.9.9", format_version=FORMAT_VERSION)
+                  skeleton_name="coco17", software_version="9.9.9", format_version=TRACKS_FORMAT_VERSION)
     return TracksHeader(**(fields | overrides))
 
 
@@ -320,7 +321,9 @@ def make_outputs(rng: np.random.Generator, n: int) -> list[TrackerOutput]:
         for tid in range(int(rng.integers(0, 4))):
             pose = rng.normal(0, 1, (17, 3))
             pose[rng.random(17) < 0.1] = np.nan
-            targets.append(Target(id=tid + 1, pose=pose, stamp_s=k * 0.05, state=TargetState.CONFIRMED))
+            codes = rng.integers(0, 3, 17).astype(np.uint8) if rng.random() < 0.7 else None  # None: format 2
+            targets.append(Target(id=tid + 1, pose=pose, stamp_s=k * 0.05, state=TargetState.CONFIRMED,
+                                  joint_state=codes))
         outputs.append(TrackerOutput(stamp_s=k * 0.05 - 0.001, camera=f"cam{k % 3:02d}", targets=targets,
                                      detection_target_ids=rng.integers(-1, 4, int(rng.integers(0, 5)))))
     return outputs
@@ -347,6 +350,8 @@ def test_tracks_round_trip_with_summary(tmp_path):
         for ta, tb in zip(a.targets, b.targets):
             assert ta.state is tb.state and ta.stamp_s == tb.stamp_s
             assert_same_arrays(ta.pose, tb.pose)
+            assert (ta.joint_state is None and tb.joint_state is None) or np.array_equal(ta.joint_state,
+                                                                                        tb.joint_state)
     # The tracker's skeletons are Foxglove SceneUpdates, readable independently.
     seen = read_independently(path)
     assert seen["/tracker/skeletons"][0] == "foxglove.SceneUpdate"
@@ -765,3 +770,39 @@ def test_a_corrupt_length_inside_a_chunk_is_refused_without_allocating_it(tmp_pa
         recording.info(bad)
     with pytest.raises(RecordingError, match=r"bad\.mcap: corrupt MCAP data"):
         list(open_recording(bad).events())
+
+
+def test_tracker_output_bytes_are_protobufs_own():
+    from crossview.recording.messages import _tracker_output_to_msg, tracker_output_bytes
+
+    rng = np.random.default_rng(11)
+    outputs = make_outputs(rng, 30)
+    outputs.append(TrackerOutput(stamp_s=0.0, camera="", targets=[
+        Target(id=0, pose=np.zeros((17, 3)), stamp_s=0.0, state=TargetState.LOST,
+               joint_state=np.zeros(17, dtype=np.uint8)),
+        Target(id=2**40, pose=np.full((17, 3), np.nan), stamp_s=-1.5, state=TargetState.TENTATIVE)],
+        detection_target_ids=np.array([-1, 0, 2**40])))
+    outputs.append(TrackerOutput(stamp_s=1.0, camera="c", targets=[
+        Target(id=-3, pose=np.ones((17, 3)), stamp_s=1.0)], detection_target_ids=np.zeros(0, dtype=np.int64)))
+    for output in outputs:
+        assert tracker_output_bytes(output, 17) == _tracker_output_to_msg(output, 17).SerializeToString()
+    bad = TrackerOutput(stamp_s=1.0, camera="c", targets=[
+        Target(id=1, pose=np.ones((17, 3)), stamp_s=1.0, joint_state=np.full(17, 7))],
+        detection_target_ids=np.zeros(0, dtype=np.int64))
+    with pytest.raises(ValueError, match="joint_state"):
+        tracker_output_bytes(bad, 17)
+
+
+def test_tracks_of_format_2_are_read_without_joint_states(tmp_path):
+    rng = np.random.default_rng(4)
+    outputs = [TrackerOutput(o.stamp_s, o.camera, [dataclasses.replace(t, joint_state=None) for t in o.targets],
+                             o.detection_target_ids) for o in make_outputs(rng, 10)]
+    path = tmp_path / "old.mcap"
+    with TracksWriter(path, make_tracks_header(format_version=2), make_cameras(2, rng)) as writer:
+        for output in outputs:
+            writer.write(output)
+        writer.finish({})
+    tracks = open_tracks(path)
+    assert tracks.header.format_version == 2
+    read = [t for out in tracks.outputs() for t in out.targets]
+    assert read and all(t.joint_state is None for t in read)

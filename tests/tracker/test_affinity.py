@@ -120,8 +120,13 @@ def test_compiled_affinity_matrix_equals_the_per_equation_functions(normalize):
     for kernel in (affinity_matrix, plain_python(affinity_matrix)):
         out = np.full((T, D), np.nan)
         kernel(pos, vel, joint_s, seen_s, prev_px, prev_s, c, det, M, cam.center_world, t, w2, a2, floor, w3, a3, lam,
-               horizon, normalize, out)
+               horizon, normalize, np.arange(T), out)
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12)
+        some = np.array([3, 1])
+        part = np.full((2, D), np.nan)
+        kernel(pos, vel, joint_s, seen_s, prev_px, prev_s, c, det, M, cam.center_world, t, w2, a2, floor, w3, a3, lam,
+               horizon, normalize, some, part)
+        np.testing.assert_allclose(part, expected[some], rtol=1e-12, atol=1e-12)
 
 
 def test_pool_affinity_matrix_equals_the_pairwise_epipolar_affinity():

@@ -9,7 +9,9 @@ from scipy.sparse.csgraph import connected_components
 from core.types import COCO17
 from tracker.initialization import (
     PlausibilityLimits,
+    _branch_and_bound,
     _component_labels,
+    _partition_branch_and_bound,
     _partition_greedy,
     _partition_milp,
     check_plausible,
@@ -52,6 +54,29 @@ def test_exact_partition_matches_brute_force_optimum():
         got = partition_graph(A, max_exact_nodes=10)  # connected parts enumerated
         assert _objective(A, got) == pytest.approx(best)
         assert _objective(A, _partition_milp(A)) == pytest.approx(best)  # the solver used above six nodes
+
+
+def test_branch_and_bound_matches_brute_force_and_milp():
+    rng = np.random.default_rng(7)
+    for n, cams, shift in ((7, 4, 0.0), (8, 5, 0.8), (8, 8, 0.3)):
+        for _ in range(4):
+            A = _random_problem(rng, n, cams) + shift
+            best = max(_objective(A, p) for p in _set_partitions(list(range(n))))
+            assert _objective(A, _partition_branch_and_bound(A)) == pytest.approx(best)
+    for _ in range(5):  # beyond brute force: against milp
+        A = _random_problem(rng, 12, 6) + 0.5
+        assert _objective(A, _partition_branch_and_bound(A)) == pytest.approx(_objective(A, _partition_milp(A)))
+        assert _objective(A, partition_graph(A, max_exact_nodes=14)) == pytest.approx(_objective(A, _partition_milp(A)))
+
+
+def test_branch_and_bound_plain_python_agrees_and_gives_up_past_its_budget():
+    rng = np.random.default_rng(8)
+    A = _random_problem(rng, 9, 9) + 0.2
+    w = np.where(np.isfinite(A), A, -np.inf)
+    labels_c, labels_p = np.zeros(9, dtype=np.int64), np.zeros(9, dtype=np.int64)
+    assert _branch_and_bound(w, -np.inf, labels_c, 10**7) and _branch_and_bound.py_func(w, -np.inf, labels_p, 10**7)
+    np.testing.assert_array_equal(labels_c, labels_p)
+    assert not _branch_and_bound(w, -np.inf, labels_c, 5)
 
 
 def test_mostly_positive_problems_and_their_all_positive_components_stay_exact():

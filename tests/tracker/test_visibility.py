@@ -1,0 +1,84 @@
+"""View volumes: planes against projection, overlap of views, gating of targets, and that gating changes nothing."""
+
+import numpy as np
+import pytest
+
+from core.types import COCO17
+from tests.tracker.synthetic import Walkers, look_at_camera, make_frames
+from tracker.config import TrackerConfig
+from tracker.geometry import project
+from tracker.tracker import Tracker
+from tracker.visibility import overlapping_views, targets_in_view, view_planes
+
+
+def _corridor(num_cameras=8, spacing_m=2.0):
+    """Cameras 3 m up along a corridor, each looking (nearly) straight down: each sees a few metres of it."""
+    return [look_at_camera(f"c{k}", [1.0 + spacing_m * k, 2.0, 3.0], [1.0 + spacing_m * k, 2.3, 0.0], f_px=600.0)
+            for k in range(num_cameras)]
+
+
+def test_planes_agree_with_projection():
+    cam = look_at_camera("a", [0.0, 0.0, 3.0], [1.0, 0.5, 0.0], dist=np.array([-0.2, 0.05, 0.0, 0.0, 0.0]))
+    planes = view_planes(cam)
+    rng = np.random.default_rng(0)
+    X = rng.uniform([-8, -8, -1], [8, 8, 4], (4000, 3))
+    inside = np.all(X @ planes[:, :3].T + planes[:, 3] >= 0, axis=1)
+    px = project(cam.P, X)
+    depth = X @ cam.R_cam_from_world[2] + cam.t_cam_from_world[2]
+    # Everything the undistorted pinhole puts in the image (in front) is inside; nothing behind the camera is.
+    in_image = (depth > 0.05) & (px[:, 0] >= 0) & (px[:, 0] <= cam.width_px) & (px[:, 1] >= 0) & \
+        (px[:, 1] <= cam.height_px)
+    assert inside[in_image].all()
+    assert not inside[depth < 0].any()
+    assert in_image.sum() > 100 and (~inside).sum() > 100
+
+
+def test_overlap_links_neighbours_only():
+    cams = _corridor()
+    linked = overlapping_views(cams, -0.5, 2.6, 0.5)
+    assert linked.shape == (8, 8) and np.array_equal(linked, linked.T) and linked.diagonal().all()
+    assert linked[0, 1] and linked[3, 4]
+    assert not linked[0, 7] and not linked[1, 6]
+    assert overlapping_views(cams, -0.5, 2.6, 1e3).all()  # a huge margin links everything
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_targets_in_view_keeps_the_near_and_the_recent(compiled):
+    kernel = targets_in_view if compiled else targets_in_view.py_func
+    cam = _corridor()[0]  # sees x in about [-1.5, 3.5] at the floor
+    planes = view_planes(cam)
+    J = 17
+    pos = np.full((4, J, 3), np.nan)
+    for r, x in enumerate([1.0, 12.0, 3.9, 20.0]):
+        pos[r, :, :] = [x, 2.0, 1.0]
+        pos[r, :, 2] = np.linspace(0.1, 1.7, J)
+    pos[3, :, :] = np.nan  # nothing known
+    vel = np.zeros_like(pos)
+    joint_s = np.zeros((4, J))
+    obs_s = np.full((4, 2, J), np.nan)
+    obs_s[1, 0, 3] = 0.9  # target 1 (far) was matched by this camera 0.1 s ago
+    out = np.empty(4, dtype=np.int64)
+    n = kernel(planes, 0, pos, vel, joint_s, obs_s, 1.0, 0.5, 0.5, 1.0, out)
+    assert out[:n].tolist() == [0, 1, 2]
+    n = kernel(planes, 0, pos, vel, joint_s, obs_s, 3.0, 0.5, 0.5, 1.0, out)  # the match is now too old
+    assert out[:n].tolist() == [0, 2]
+
+
+def test_gating_changes_no_output():
+    """Within the cameras' views nothing changes: the same run with a margin that lets every target and camera
+    pair in (the tracker without gating) gives the same targets and poses at every frame."""
+    cams = _corridor()
+    rng = np.random.default_rng(4)
+    walkers = Walkers.random(5, 16.0, 4.0, rng)
+    frames, _ = make_frames(cams, walkers, 4.0, 10.0, rng)
+    config = TrackerConfig.preset("store")
+    gated, open_ = Tracker(cams, config, COCO17), Tracker(cams, config.replace(view_margin_m=1e3), COCO17)
+    assert not gated._linked.all() and open_._linked.all()
+    outputs = 0
+    for frame in frames:
+        a, b = gated.update(frame), open_.update(frame)
+        assert [t.id for t in a] == [t.id for t in b]
+        for ta, tb in zip(a, b):
+            np.testing.assert_allclose(ta.pose, tb.pose, rtol=0, atol=1e-9)
+        outputs += len(a)
+    assert outputs > 100

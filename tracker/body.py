@@ -1,0 +1,124 @@
+"""A target's joints that no camera has triangulated yet, inferred from its own body: a mean body model fitted
+to the joints it has (translation, heading and the scale of its known bones), and the per-joint state codes
+of the output (observed, predicted, inferred)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from core.jit import jit, sort_prefix
+from core.types import Skeleton
+from tracker.types import JointState
+
+# A standing adult in the body frame (x forward, y left, z up), metres, by joint name: the mean body the
+# unseen joints are taken from (COCO-17 names, and the Campus/Shelf head joints).
+MEAN_BODY_M = {
+    "nose": (0.10, 0.00, 1.62), "left_eye": (0.08, 0.03, 1.66), "right_eye": (0.08, -0.03, 1.66),
+    "left_ear": (0.02, 0.07, 1.64), "right_ear": (0.02, -0.07, 1.64),
+    "left_shoulder": (0.00, 0.19, 1.42), "right_shoulder": (0.00, -0.19, 1.42),
+    "left_elbow": (0.00, 0.23, 1.13), "right_elbow": (0.00, -0.23, 1.13),
+    "left_wrist": (0.02, 0.24, 0.87), "right_wrist": (0.02, -0.24, 0.87),
+    "left_hip": (0.00, 0.11, 0.93), "right_hip": (0.00, -0.11, 0.93),
+    "left_knee": (0.02, 0.11, 0.50), "right_knee": (0.02, -0.11, 0.50),
+    "left_ankle": (0.00, 0.11, 0.07), "right_ankle": (0.00, -0.11, 0.07),
+    "bottom_head": (0.02, 0.00, 1.52), "top_head": (0.02, 0.00, 1.78),
+}
+
+SCALE_RANGE = (0.8, 1.25)
+"""The fitted body scale is clipped to this range of the mean body's."""
+
+
+def mean_body(skeleton: Skeleton) -> np.ndarray:
+    """(J, 3) the mean body in the skeleton's joint order, metres; a joint the model lacks sits at the hips'
+    height on the body axis."""
+    return np.array([MEAN_BODY_M.get(name, (0.0, 0.0, 0.93)) for name in skeleton.joints], dtype=np.float64)
+
+
+def fill_unknown(pose: np.ndarray, model: np.ndarray, bones: np.ndarray) -> np.ndarray:
+    """The pose with its unknown (NaN) joints taken from the mean body fitted to its known joints.
+
+    The fit: scale = median ratio of the known bones to the model's (clipped to SCALE_RANGE, 1 without a known
+    bone); heading = the rotation about z that best aligns the model's known joints with the pose's in the
+    floor plane (2D Procrustes; none with fewer than two known joints); translation = the difference of the
+    means of the known joints. Known joints are returned unchanged.
+
+    Args:
+        pose: (J, 3) metres, NaN unknown; at least one joint known.
+        model: (J, 3) `mean_body`; bones: (B, 2) int64 joint pairs.
+
+    Returns:
+        (J, 3) pose without NaN.
+    """
+    out = np.ascontiguousarray(pose, dtype=np.float64).copy()[None]
+    fill_poses(out, np.ascontiguousarray(model, dtype=np.float64), np.ascontiguousarray(bones, dtype=np.int64))
+    return out[0]
+
+
+@jit
+def fill_poses(poses, model, bones):
+    """`fill_unknown` of every pose of (T, J, 3) in place (compiled kernel); poses without a known joint or
+    without an unknown one are left as they are."""
+    T, J, B = poses.shape[0], poses.shape[1], bones.shape[0]
+    ratios = np.empty(max(B, 1))
+    for t in range(T):
+        count = 0
+        for j in range(J):
+            if np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                count += 1
+        if count == 0 or count == J:
+            continue
+        n = 0
+        for b in range(B):
+            a, e = bones[b, 0], bones[b, 1]
+            if np.isfinite(poses[t, a, 0] + poses[t, a, 1] + poses[t, a, 2] + poses[t, e, 0] + poses[t, e, 1]
+                           + poses[t, e, 2]):
+                got = np.sqrt((poses[t, a, 0] - poses[t, e, 0]) ** 2 + (poses[t, a, 1] - poses[t, e, 1]) ** 2
+                              + (poses[t, a, 2] - poses[t, e, 2]) ** 2)
+                ref = np.sqrt((model[a, 0] - model[e, 0]) ** 2 + (model[a, 1] - model[e, 1]) ** 2
+                              + (model[a, 2] - model[e, 2]) ** 2)
+                ratios[n] = got / max(ref, 1e-6)
+                n += 1
+        scale = 1.0
+        if n:
+            sort_prefix(ratios, n)
+            scale = min(max((ratios[(n - 1) // 2] + ratios[n // 2]) / 2.0, SCALE_RANGE[0]), SCALE_RANGE[1])
+        sm0 = sm1 = sm2 = dm0 = dm1 = dm2 = 0.0
+        for j in range(J):
+            if np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                sm0 += model[j, 0] * scale
+                sm1 += model[j, 1] * scale
+                sm2 += model[j, 2] * scale
+                dm0 += poses[t, j, 0]
+                dm1 += poses[t, j, 1]
+                dm2 += poses[t, j, 2]
+        sm0, sm1, sm2, dm0, dm1, dm2 = sm0 / count, sm1 / count, sm2 / count, dm0 / count, dm1 / count, dm2 / count
+        cross = dot = 0.0
+        if count >= 2:
+            for j in range(J):
+                if np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                    s0, s1 = model[j, 0] * scale - sm0, model[j, 1] * scale - sm1
+                    d0, d1 = poses[t, j, 0] - dm0, poses[t, j, 1] - dm1
+                    cross += s0 * d1 - s1 * d0
+                    dot += s0 * d0 + s1 * d1
+        yaw = np.arctan2(cross, dot) if count >= 2 else 0.0
+        c, sn = np.cos(yaw), np.sin(yaw)
+        for j in range(J):
+            if not np.isfinite(poses[t, j, 0] + poses[t, j, 1] + poses[t, j, 2]):
+                x, y, z = model[j, 0] * scale - sm0, model[j, 1] * scale - sm1, model[j, 2] * scale - sm2
+                poses[t, j, 0] = c * x - sn * y + dm0
+                poses[t, j, 1] = sn * x + c * y + dm1
+                poses[t, j, 2] = z + dm2
+
+
+def joint_states(seen_s: np.ndarray, known: np.ndarray, stamp_s: float, stale_after_s: float) -> np.ndarray:
+    """(T, J) `JointState` codes: OBSERVED when triangulated within `stale_after_s` of `stamp_s`, PREDICTED when
+    triangulated earlier (carried with the body since), INFERRED when never triangulated (`fill_unknown`).
+
+    Args:
+        seen_s: (T, J) last time each joint was triangulated from observations (-inf never); known: (T, J) whether
+            the tracker holds an estimate of the joint.
+    """
+    codes = np.full(seen_s.shape, JointState.PREDICTED.value, dtype=np.uint8)
+    codes[stamp_s - seen_s <= stale_after_s] = JointState.OBSERVED.value
+    codes[~known] = JointState.INFERRED.value
+    return codes

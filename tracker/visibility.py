@@ -1,0 +1,197 @@
+"""What each camera can see: view volumes from the calibration, which targets lie in them, which views overlap.
+
+A camera's view volume is the pyramid through its centre and the edges of its undistorted image (the
+bounding box of the undistorted image border, widened by a pixel margin), cut by a near plane. It is held as
+five planes n·X + d >= 0 (unit n, world frame, metres), so the signed distance of a point to each plane is
+one dot product.
+
+Why gating by it is exact where it matters: a detection's ray lies inside its camera's volume, so a joint
+farther than m outside the volume is farther than m from every ray of the frame, and with m >= α3D its
+3D term of eq. (4) is not positive. A target whose whole predicted body (a sphere around its known joints)
+lies farther than `margin_m` outside therefore has no positive 3D term with any detection of the frame;
+targets that this camera matched recently (which could still win on the 2D term of eq. 2) are kept
+regardless (`targets_in_view`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from core.jit import jit
+from core.types import Camera
+from tracker.geometry import undistort_points
+
+NEAR_M = 0.05
+"""Distance of the near plane in front of the camera centre, metres."""
+
+
+def undistorted_bounds_px(camera: Camera, samples: int = 33) -> tuple[float, float, float, float]:
+    """(u_min, v_min, u_max, v_max) of the image border mapped to undistorted pixels.
+
+    Lens distortion moves the border, so the undistorted image is not the (0, 0)-(W, H) rectangle; its
+    bounding box holds every undistorted detection.
+    """
+    W, H = float(camera.width_px), float(camera.height_px)
+    s = np.linspace(0.0, 1.0, samples)
+    border = np.concatenate([
+        np.stack([s * W, np.zeros_like(s)], axis=-1), np.stack([s * W, np.full_like(s, H)], axis=-1),
+        np.stack([np.zeros_like(s), s * H], axis=-1), np.stack([np.full_like(s, W), s * H], axis=-1),
+    ])
+    und = undistort_points(camera, border)
+    und = und[np.all(np.isfinite(und), axis=-1)]
+    if not und.size:
+        return 0.0, 0.0, W, H
+    lo, hi = np.minimum(und.min(axis=0), 0.0), np.maximum(und.max(axis=0), [W, H])
+    return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
+
+
+def view_planes(camera: Camera, margin_px: float = 0.0) -> np.ndarray:
+    """(5, 4) planes (n_x, n_y, n_z, d) bounding the camera's view volume: n·X + d >= 0 inside, |n| = 1.
+
+    Rows: near plane, left, right, top, bottom edge of the undistorted image widened by `margin_px`.
+    """
+    K, R, t = camera.K, camera.R_cam_from_world, camera.t_cam_from_world
+    u0, v0, u1, v1 = undistorted_bounds_px(camera)
+    u0, v0, u1, v1 = u0 - margin_px, v0 - margin_px, u1 + margin_px, v1 + margin_px
+    # In camera coordinates a point is right of the column u when (K X)_0 - u (K X)_2 >= 0 (z > 0), etc.
+    rows_cam = [np.array([0.0, 0.0, 1.0]), K[0] - u0 * K[2], u1 * K[2] - K[0], K[1] - v0 * K[2], v1 * K[2] - K[1]]
+    offsets = [-NEAR_M, 0.0, 0.0, 0.0, 0.0]
+    planes = np.empty((5, 4))
+    for i, (n_cam, off) in enumerate(zip(rows_cam, offsets)):
+        norm = np.linalg.norm(n_cam)
+        n_cam = n_cam / norm
+        # n_cam·(R X + t) + off = (R^T n_cam)·X + n_cam·t + off
+        planes[i, :3] = R.T @ n_cam
+        planes[i, 3] = n_cam @ t + off
+    return planes
+
+
+def all_view_planes(cameras: Sequence[Camera], margin_px: float = 0.0) -> np.ndarray:
+    """(C, 5, 4) `view_planes` of every camera."""
+    return np.stack([view_planes(c, margin_px) for c in cameras]) if cameras else np.zeros((0, 5, 4))
+
+
+def overlapping_views(cameras: Sequence[Camera], min_z_m: float, max_z_m: float, margin_m: float,
+                      grid: int = 12, max_depth_m: float = 40.0) -> np.ndarray:
+    """(C, C) bool: whether two cameras' views share a point of the band min_z_m <= z <= max_z_m (where
+    people's joints are), within `margin_m`; the diagonal is True.
+
+    Each camera's part of the band is sampled along the rays of a grid x grid of pixels over its
+    undistorted image, at depths up to `max_depth_m`; a pair overlaps when a sample of one lies inside
+    the other's view volume widened by `margin_m` (and the same the other way round is not needed: a
+    shared point is a sample of either camera's rays within the sampling step, which the margin covers).
+    """
+    C = len(cameras)
+    planes = all_view_planes(cameras)
+    samples = [_band_samples(cam, min_z_m, max_z_m, grid, max_depth_m) for cam in cameras]
+    overlap = np.eye(C, dtype=bool)
+    for a in range(C):
+        pts = samples[a]
+        if not pts.shape[0]:
+            continue
+        # (C, 5, N) signed distances of a's samples to every camera's planes
+        dist = np.einsum("cpk,nk->cpn", planes[:, :, :3], pts) + planes[:, :, 3:4]
+        inside = np.all(dist >= -margin_m, axis=1).any(axis=1)
+        overlap[a] |= inside
+    return overlap | overlap.T
+
+
+def _band_samples(camera: Camera, min_z_m: float, max_z_m: float, grid: int, max_depth_m: float) -> np.ndarray:
+    """(N, 3) points on the rays of a pixel grid of the camera, spaced about 0.25 m, inside the z band."""
+    u0, v0, u1, v1 = undistorted_bounds_px(camera)
+    u, v = np.meshgrid(np.linspace(u0, u1, grid), np.linspace(v0, v1, grid))
+    pix = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=-1)
+    dirs = pix @ (camera.R_cam_from_world.T @ np.linalg.inv(camera.K)).T  # unnormalised: depth along the axis
+    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+    depths = np.arange(NEAR_M, max_depth_m, 0.25)
+    pts = camera.center_world + depths[:, None, None] * dirs[None, :, :]
+    pts = pts.reshape(-1, 3)
+    return pts[(pts[:, 2] >= min_z_m) & (pts[:, 2] <= max_z_m)]
+
+
+@jit
+def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, stamp_s, max_predict_s, margin_m, recent_s, out):
+    """The rows of the targets a camera's frame is scored against; returns how many were written to `out`.
+
+    A target is in when its predicted body (eq. 5), the sphere around the mean of its known joints through
+    the farthest one, comes within `margin_m` of the camera's view volume, or when the camera saw one of its
+    joints within `recent_s` (its 2D term of eq. 2 may still count). Targets without a known joint are out
+    (their affinity is 0 with every detection).
+
+    Args:
+        planes: (5, 4) `view_planes` of the camera; camera: its index in obs_s.
+        pos, vel: (T, J, 3) X_t' and V_t'; joint_s: (T, J) t', s; obs_s: (T, C, J) stamps of the last matched
+            point per camera (NaN none).
+        stamp_s: t, s; max_predict_s: the horizon of eq. (5), s.
+        out: (T,) int64, the rows written first.
+    """
+    T, J = pos.shape[0], pos.shape[1]
+    pred = np.empty((J, 3))
+    n = 0
+    for t in range(T):
+        recent = False
+        for j in range(J):
+            if stamp_s - obs_s[t, camera, j] <= recent_s:  # False for NaN
+                recent = True
+                break
+        if recent:
+            out[n] = t
+            n += 1
+            continue
+        count = 0
+        c0 = c1 = c2 = 0.0
+        for j in range(J):
+            horizon = min(max(stamp_s - joint_s[t, j], 0.0), max_predict_s)
+            for k in range(3):
+                pred[j, k] = pos[t, j, k] + vel[t, j, k] * horizon
+            if np.isfinite(pred[j, 0] + pred[j, 1] + pred[j, 2]):
+                c0 += pred[j, 0]
+                c1 += pred[j, 1]
+                c2 += pred[j, 2]
+                count += 1
+        if count == 0:
+            continue
+        c0, c1, c2 = c0 / count, c1 / count, c2 / count
+        radius_sq = 0.0
+        for j in range(J):
+            if np.isfinite(pred[j, 0] + pred[j, 1] + pred[j, 2]):
+                dx, dy, dz = pred[j, 0] - c0, pred[j, 1] - c1, pred[j, 2] - c2
+                radius_sq = max(radius_sq, dx * dx + dy * dy + dz * dz)
+        reach = np.sqrt(radius_sq) + margin_m
+        inside = True
+        for p in range(planes.shape[0]):
+            if planes[p, 0] * c0 + planes[p, 1] * c1 + planes[p, 2] * c2 + planes[p, 3] < -reach:
+                inside = False
+                break
+        if inside:
+            out[n] = t
+            n += 1
+    return n
+
+
+@jit
+def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, inside_m, window_s, matched, expected,
+                    sighted, evidence_s):
+    """Counts what one camera frame says about each target (in place): a target whose predicted hip centre
+    (eq. 5, both hips known) lies at least `inside_m` inside the camera's view volume (planes (5, 4)) was
+    expected to be seen; expected (T,) and sighted (T,) are counts decayed with time constant `window_s` since
+    evidence_s (T,), the latter counting the frames that matched it (matched (T,) bool)."""
+    T = pos.shape[0]
+    for r in range(T):
+        c = np.zeros(3)
+        for h in range(hips.size):
+            j = hips[h]
+            horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
+            for k in range(3):
+                c[k] += (pos[r, j, k] + vel[r, j, k] * horizon) / hips.size
+        depth = np.inf
+        for p in range(planes.shape[0]):
+            depth = min(depth, planes[p, 0] * c[0] + planes[p, 1] * c[1] + planes[p, 2] * c[2] + planes[p, 3])
+        seen = depth >= inside_m  # False for NaN (a hip unknown)
+        if seen or matched[r]:
+            decay = np.exp(-max(stamp_s - evidence_s[r], 0.0) / window_s)
+            expected[r] = expected[r] * decay + 1.0
+            sighted[r] = sighted[r] * decay + (1.0 if matched[r] else 0.0)
+            evidence_s[r] = stamp_s
