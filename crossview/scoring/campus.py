@@ -51,9 +51,12 @@ def _pose_list(data, path: Path, joints: int) -> tuple[np.ndarray, list[list[tup
                     raise DatasetLayoutError(
                         f"{path}: entry {i} id {p.get('id')}: points_3d has shape {pts.shape}, expected ({joints}, 3)"
                     )
-                if not np.all(np.isfinite(pts)):
-                    raise DatasetLayoutError(f"{path}: entry {i} id {p.get('id')}: points_3d hold a value that is "
-                                             "not finite")
+                # A joint is three finite numbers, or [null, null, null]: missing (what `crossview export`
+                # writes for a joint the tracker does not know; it never counts as a correct part).
+                missing = np.isnan(pts)
+                if np.isinf(pts).any() or not np.array_equal(missing.all(axis=1), missing.any(axis=1)):
+                    raise DatasetLayoutError(f"{path}: entry {i} id {p.get('id')}: points_3d hold a joint that is "
+                                             "neither three finite numbers nor [null, null, null] (missing)")
                 poses.append((person_id(p["id"], path, f"entry {i}", UINT64_END), pts))
             entries.append(poses)
         except (KeyError, TypeError, ValueError) as e:

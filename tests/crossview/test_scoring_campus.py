@@ -57,7 +57,7 @@ def test_exported_tracks_score_pcp_one_on_their_own_truth(tmp_path):
     assert result["actors"] == {1: pytest.approx(1.0), 2: pytest.approx(1.0)}
 
 
-def test_export_writes_centimetres_and_zeros_for_unknown_joints(tmp_path):
+def test_export_writes_centimetres_and_nulls_for_unknown_joints(tmp_path):
     pose = np.full((17, 3), 1.5)
     pose[4] = np.nan
     out = TrackerOutput(0.5, "c", [Target(3, pose, 0.5)], np.zeros(0, dtype=np.int64))
@@ -65,7 +65,7 @@ def test_export_writes_centimetres_and_zeros_for_unknown_joints(tmp_path):
     entry = json.loads((tmp_path / "r.json").read_text())[0]
     assert entry["timestamp"] == 0.5 and entry["poses"][0]["id"] == 3
     pts = np.asarray(entry["poses"][0]["points_3d"])
-    assert pts[0].tolist() == [150.0, 150.0, 150.0] and pts[4].tolist() == [0.0, 0.0, 0.0]
+    assert pts[0].tolist() == [150.0, 150.0, 150.0] and pts[4].tolist() == [None, None, None]  # missing
 
 
 def test_missing_result_file_is_a_one_line_layout_error(tmp_path):
@@ -84,3 +84,14 @@ def test_unknown_dataset_name_asks_for_test_frames(tmp_path):
     (tmp_path / "r.json").write_text("[]")
     with pytest.raises(DatasetLayoutError, match="name the folder after its dataset"):
         evaluate(root, tmp_path / "r.json")
+
+
+def test_a_result_joint_is_three_numbers_or_three_nulls(tmp_path):
+    points = [[0.0, 0.0, 0.0]] * 17
+    missing = [*points[:3], [None, None, None], *points[4:]]  # as `crossview export` writes an unknown joint
+    (tmp_path / "r.json").write_text(json.dumps([{"timestamp": 0.0, "poses": [{"id": 1, "points_3d": missing}]}]))
+    evaluate(CAMPUS, tmp_path / "r.json")  # read: the missing joint is no correct part, not an error
+    half = [*points[:3], [None, 0.0, 0.0], *points[4:]]
+    (tmp_path / "r.json").write_text(json.dumps([{"timestamp": 0.0, "poses": [{"id": 1, "points_3d": half}]}]))
+    with pytest.raises(DatasetLayoutError, match=r"entry 0 id 1: points_3d hold a joint that is neither three finite"):
+        evaluate(CAMPUS, tmp_path / "r.json")

@@ -252,7 +252,7 @@ def test_a_body_that_stays_implausible_is_removed():
     assert not _near(final.targets, truth[0], within_m=1.0)
     assert all(_near(final.targets, truth[p]) for p in (1, 2, 3))
     # Without the rule the floating body stays an output.
-    outputs = _run(Tracker(cams, CONFIG.replace(implausible_after_s=1e9)), frames)
+    outputs = _run(Tracker(cams, CONFIG.replace(implausible_after_s=86400.0)), frames)
     assert _near(outputs[-1].targets, truth[0], within_m=1.0)
 
 
