@@ -51,6 +51,7 @@ from scipy.optimize import linear_sum_assignment
 
 from core.boxes import box_iou, keypoint_boxes
 from core.types import Camera, Frame, camera_index
+from tracker.rows import Rows
 
 logger = logging.getLogger(__name__)
 
@@ -223,7 +224,7 @@ def match(cost: np.ndarray, allowed: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return rows[keep].astype(np.int64), cols[keep].astype(np.int64)
 
 
-class _CameraTracks:
+class _CameraTracks(Rows):
     """The tracks of one camera as a struct of arrays (N tracks, J joints)."""
 
     def __init__(self, num_joints: int):
@@ -237,14 +238,6 @@ class _CameraTracks:
         self.time_s = np.zeros(0)  # time the state refers to
 
     _FIELDS = ("ids", "pos", "vel", "P", "hits", "last_s", "time_s")
-
-    def keep(self, mask: np.ndarray) -> None:
-        for name in self._FIELDS:
-            setattr(self, name, getattr(self, name)[mask])
-
-    def append(self, **rows) -> None:
-        for name in self._FIELDS:
-            setattr(self, name, np.concatenate([getattr(self, name), rows[name]]))
 
 
 def _scales(boxes: np.ndarray) -> np.ndarray:

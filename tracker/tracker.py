@@ -33,6 +33,7 @@ from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
 from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
+from tracker.rows import Rows
 from tracker.types import Target, TrackerOutput
 from tracker.visibility import all_view_planes, count_sightings, overlapping_views, targets_in_view
 
@@ -44,7 +45,7 @@ IMPLAUSIBLE_SHARE = 0.25
 """Share of a target's observed joints (or bones) out of the birth limits that makes its body implausible."""
 
 
-class _Targets:
+class _Targets(Rows):
     """Array storage of all live targets (rows), grown on demand and compacted on removal."""
 
     def __init__(self, num_cameras: int, num_joints: int, history: int):
@@ -69,20 +70,9 @@ class _Targets:
         self.evidence_s = np.zeros(0)  # time of the last count
         self.implausible_s = np.zeros(0)  # since when the observed body is implausible, NaN when it is not
 
-    def __len__(self) -> int:
-        return self.ids.size
-
     _FIELDS = ("ids", "state", "born_s", "last_update_s", "num_updates", "pos", "joint_s", "seen_s", "vel", "obs_px",
                "obs_s", "cam_s", "hist_pos", "hist_s", "hist_next", "expected", "sighted", "evidence_s",
                "implausible_s")
-
-    def keep(self, mask: np.ndarray) -> None:
-        for name in self._FIELDS:
-            setattr(self, name, getattr(self, name)[mask])
-
-    def append(self, **rows) -> None:
-        for name in self._FIELDS:
-            setattr(self, name, np.concatenate([getattr(self, name), rows[name]]))
 
 
 class Tracker:
