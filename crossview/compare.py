@@ -13,13 +13,13 @@ from __future__ import annotations
 import csv
 import io
 import logging
-import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from core.errors import CrossviewError
+from crossview.outputs import write_bytes
 
 log = logging.getLogger(__name__)
 
@@ -215,9 +215,9 @@ def bar_charts(rows: Sequence[dict], out_dir: Path) -> list[Path]:
         ax.set_title(f"{metric.heading} ({'higher' if metric.higher_is_better else 'lower'} is better)")
         fig.legend(fontsize="small", loc="outside right upper")
         path = Path(out_dir) / f"{metric.key}.png"
-        tmp = path.with_name(path.name + ".tmp.png")
-        fig.savefig(tmp, dpi=100, metadata={"Software": None})
-        os.replace(tmp, path)
+        png = io.BytesIO()
+        fig.savefig(png, format="png", dpi=100, metadata={"Software": None})
+        write_bytes(png.getvalue(), path)
         paths.append(path)
     return paths
 
