@@ -87,12 +87,9 @@ def open_inputs(rec_path: Path, tracks_path: Path | None) -> Inputs:
     """Opens the recording and the tracks file and checks that the tracks were made from the recording."""
     from crossview import recording
 
-    rec = recording.open_recording(rec_path)
-    tracks = None
-    if tracks_path is not None:
-        tracks = recording.open_tracks(tracks_path)
-        pipeline.check_tracks_match(rec, tracks)
-    return Inputs(rec, tracks)
+    if tracks_path is None:
+        return Inputs(recording.open_recording(rec_path), None)
+    return Inputs(*pipeline.open_run(rec_path, tracks_path))
 
 
 def frames_nearest(rec, cameras: list[int], times_s: list[float]) -> dict[tuple[int, float], CameraFrame]:
