@@ -23,19 +23,29 @@ def read_json(path: Path, what: str = "") -> object:
     if not path.is_file():
         raise DatasetError(f"{path}: {what or 'file'} not found (expected the crossview dataset layout: "
                            "calibration.json, detection.json or annotation_2d.json, optional annotation_3d.json)")
+    return parse_json(read_text(path), path)
+
+
+def read_text(path: Path, error: type[CrossviewError] = DatasetError) -> str:
+    """The UTF-8 text of a file the user gave; `error` naming the file when it cannot be read or decoded."""
     try:
-        text = path.read_bytes().decode("utf-8")
+        return Path(path).read_bytes().decode("utf-8")
     except OSError as exc:
-        raise DatasetError(f"{path}: cannot read ({exc.strerror or exc})") from None
+        raise error(f"{path}: cannot read ({exc.strerror or exc})") from None
     except UnicodeDecodeError as exc:
-        raise DatasetError(f"{path}: not UTF-8 text (byte {exc.start}); JSON files must be UTF-8") from None
+        raise error(f"{path}: not UTF-8 text (byte {exc.start}); JSON files must be UTF-8") from None
+
+
+def parse_json(text: str, path: Path, where: str = "", error: type[CrossviewError] = DatasetError) -> object:
+    """Standard JSON (no NaN or Infinity) of `text` read from `path`; `error` naming the file and `where` (a
+    prefix such as "line 3: ") when it is not."""
 
     def constant(name: str):
-        raise DatasetError(f"{path}: {name} is not a JSON number; write a finite number or leave the value out")
+        raise error(f"{path}: {where}{name} is not a JSON number; write a finite number or leave the value out")
 
     try:
         return json.loads(text, parse_constant=constant)
     except json.JSONDecodeError as exc:
-        raise DatasetError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        raise error(f"{path}: {where}not valid JSON ({exc.msg} at line {exc.lineno})") from None
     except RecursionError:
-        raise DatasetError(f"{path}: not valid JSON (nested too deeply)") from None
+        raise error(f"{path}: {where}not valid JSON (nested too deeply)") from None

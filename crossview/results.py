@@ -17,6 +17,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import CAMPUS14, COCO17, Skeleton
+from crossview.json_input import parse_json, read_text
 from tracker.types import Target, TrackerOutput
 
 CM_TO_M = 0.01
@@ -36,10 +37,10 @@ def is_result_file(path) -> bool:
 def read_results(path, skeleton: Skeleton, span_s: tuple[float, float]) -> list[TrackerOutput]:
     """The outputs of a result file, one per stamp in file order, targets checked.
 
-    A file whose first character is `[` is the dataset layout's result_3d.json (COCO-17 in cm, 0, 0, 0 for a
-    missing joint; mapped to the 14 Campus joints for a CAMPUS14 recording); one whose first character is `{`
-    is JSON lines, one target per line (`stamp_s`, `id`, `joints` in metres, null for a missing joint), or a
-    line with only `stamp_s` for an output with no target.
+    A file whose first character is `[` is the dataset layout's result_3d.json (COCO-17 in cm; [null, null,
+    null] or 0, 0, 0 for a missing joint; mapped to the 14 Campus joints for a CAMPUS14 recording); one whose
+    first character is `{` is JSON lines, one target per line (`stamp_s`, `id`, `joints` in metres, null for a
+    missing joint), or a line with only `stamp_s` for an output with no target.
 
     Args:
         path: the result file.
@@ -51,7 +52,7 @@ def read_results(path, skeleton: Skeleton, span_s: tuple[float, float]) -> list[
         ResultError: naming the file and the entry at fault.
     """
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
+    text = read_text(path, ResultError)
     first = text.lstrip()[:1]
     if first == "[":
         entries = _result_3d_entries(path, text)
@@ -87,17 +88,9 @@ def read_results(path, skeleton: Skeleton, span_s: tuple[float, float]) -> list[
             for stamp, targets in by_stamp.items()]
 
 
-def _load_json(path: Path, text: str, where: str):
-    try:
-        return json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ResultError(f"{path}: {where}not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno})"
-                          ) from None
-
-
 def _result_3d_entries(path: Path, text: str):
     """(where, stamp, id, joints) of result_3d.json; `joints(skeleton, where)` gives the (J, 3) pose, metres."""
-    data = _load_json(path, text, "")
+    data = parse_json(text, path, "", ResultError)
     for i, entry in enumerate(data):
         where = f"entry {i}"
         if not isinstance(entry, dict) or "timestamp" not in entry or not isinstance(entry.get("poses"), list):
@@ -130,7 +123,7 @@ def _json_lines_entries(path: Path, text: str):
         if not line.strip():
             continue
         where = f"line {n}"
-        item = _load_json(path, line, f"{where}: ")
+        item = parse_json(line, path, f"{where}: ", ResultError)
         if not isinstance(item, dict) or "stamp_s" not in item:
             raise ResultError(f"{path}: {where}: expected {{\"stamp_s\": seconds, \"id\": int, \"joints\": Jx3 m}}")
         if "id" not in item and "joints" not in item:

@@ -80,7 +80,7 @@ def test_result_3d_poses_map_to_the_campus_joints_of_a_campus_recording(tmp_path
     (_line(stamp="now"), "line 1: stamp 'now' is not a finite number"),
     (_line(joints=[[0, 0, 1]] * 14), "line 1: 14 joints, the recording's coco17 has 17"),
     (_line(joints=[[0, 0]] * 17), "line 1: joints have shape (17, 2), expected (17, 3)"),
-    (_line(joints=[[0, 0, float("nan")]] * 17), "line 1: a joint is infinite or NaN in some coordinates only"),
+    (_line(joints=[[0, 0, None]] * 17), "line 1: a joint is infinite or NaN in some coordinates only"),
     (_line() + "\n" + _line(), "line 2: id 0 appears twice at stamp 1.0 s"),
     (_line() + "\n{not json", "line 2: not valid JSON"),
     ('{"id": 1}', "line 1: expected {\"stamp_s\": seconds"),
@@ -114,3 +114,12 @@ def test_written_json_lines_read_back_to_the_same_outputs(tmp_path):
     np.testing.assert_array_equal(back[1].targets[1].pose, pose + 1)
     with pytest.raises(ResultError):
         read_results(tmp_path / "r.jsonl", CAMPUS14, (0.0, 1.0))
+
+
+def test_a_result_file_that_is_not_utf8_or_holds_nan_is_one_line(tmp_path):
+    (tmp_path / "r.json").write_bytes(b"\xff\xfe[")
+    with pytest.raises(ResultError, match=r"r\.json: not UTF-8 text \(byte 0\)"):
+        read_results(tmp_path / "r.json", COCO17, (0.0, 1.0))
+    (tmp_path / "r.jsonl").write_text('{"stamp_s": 0.5, "id": 1, "joints": [[NaN, NaN, NaN]]}\n')
+    with pytest.raises(ResultError, match=r"r\.jsonl: line 1: NaN is not a JSON number"):
+        read_results(tmp_path / "r.jsonl", COCO17, (0.0, 1.0))
