@@ -15,13 +15,30 @@ from core.errors import ConfigError
 class Triangulation(enum.Enum):
     """How a target's joints are re-estimated from the latest point of each camera.
 
-    PAPER: eq. (6)-(11), every camera's latest point constrains X(t), weighted by e^(-λt (t - t_i)).
+    PAPER: eq. (6)-(11), every camera's latest point constrains X(t), its rows weighted by
+        w_i = e^(-λt (t - t_i)) / ||c_i|| (eq. 11).
     VELOCITY: beyond the paper: an older point constrains X(t) - V (t - t_i), V the target's joint
         velocity, so stale points of unsynchronised cameras are moved forward instead of only down-weighted.
+    UNNORMALIZED: eq. (6)-(10) with w_i = e^(-λt (t - t_i)), without eq. (11)'s division by the row norm
+        (Table 4's "Ours, w/o norm"; an ablation).
+    CONVENTIONAL: the same points with unit weights, as if all were taken at one instant (eq. 8-9, the
+        paper's "conventional triangulation" of Table 4 and Figure 5; an ablation).
     """
 
     PAPER = "paper"
     VELOCITY = "velocity"
+    UNNORMALIZED = "unnormalized"
+    CONVENTIONAL = "conventional"
+
+    @property
+    def normalizes_rows(self) -> bool:
+        """Whether each row is divided by its norm (eq. 11)."""
+        return self in (Triangulation.PAPER, Triangulation.VELOCITY)
+
+    @property
+    def weighs_time(self) -> bool:
+        """Whether older points weigh less, e^(-λt (t - t_i)) (eq. 11)."""
+        return self is not Triangulation.CONVENTIONAL
 
 
 @dataclass(frozen=True)
@@ -57,7 +74,8 @@ class TrackerConfig:
             2D error triangulated), metres; beyond the paper.
     Triangulation, eq. (6)-(11):
         lambda_t_per_s: time penalty rate λt of eq. (11), 1/s.
-        triangulation: PAPER (eq. 6-11) or VELOCITY (stale points moved forward with the joint velocity).
+        triangulation: PAPER (eq. 6-11), VELOCITY (stale points moved forward with the joint velocity), or the
+            ablations UNNORMALIZED and CONVENTIONAL (see `Triangulation`).
         max_observation_age_s: a camera's last point older than this is left out of eq. (6), s.
         min_views: least number of cameras a joint needs to be triangulated (the paper: 2).
         reject_factor: beyond the paper: after eq. (6)-(11), a view whose reprojection error exceeds both

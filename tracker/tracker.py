@@ -106,8 +106,10 @@ class Tracker:
         self._affinity_params = (float(cfg.w_2d), float(cfg.alpha_2d_px_per_s), float(cfg.alpha_2d_floor_px),
                                  float(cfg.w_3d), float(cfg.alpha_3d_m), float(cfg.lambda_a_per_s),
                                  float(cfg.max_predict_s), bool(cfg.normalize_affinity))
-        self._update_params = (float(cfg.max_observation_age_s), float(cfg.lambda_t_per_s),
-                               cfg.triangulation is Triangulation.VELOCITY, int(cfg.min_views),
+        mode = cfg.triangulation
+        self._update_params = (float(cfg.max_observation_age_s),
+                               float(cfg.lambda_t_per_s) if mode.weighs_time else 0.0,
+                               mode is Triangulation.VELOCITY, mode.normalizes_rows, int(cfg.min_views),
                                float(cfg.reject_factor), float(cfg.reject_floor_px), float(cfg.max_bone_m),
                                float(cfg.velocity_window_s), float(cfg.max_speed_m_per_s), float(cfg.stale_after_s),
                                float(cfg.max_predict_s))

@@ -233,13 +233,16 @@ def triangulate_observations_robust(
     min_views: int,
     reject_factor: float,
     reject_floor_px: float,
+    normalize_rows: bool = True,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """`triangulate_observations`, then once more without the views whose reprojection error exceeds both
     `reject_floor_px` and `reject_factor` times the median error of the point's views (beyond the paper).
 
     The error of an observation taken at t_i is measured against the estimate moved back to t_i with the
     velocity when velocities are given. A point keeps its first estimate if fewer than `min_views` views
-    would remain. Arguments as `triangulate_observations`; reject_factor 0 disables the second pass.
+    would remain. Arguments as `triangulate_observations`; reject_factor 0 disables the second pass;
+    normalize_rows False leaves out eq. (11)'s division by the row norm (an ablation, Table 4), and λt = 0
+    gives every point unit time weight (with it, the conventional DLT over the points).
     """
     P = np.ascontiguousarray(P, dtype=np.float64)
     group = np.asarray(group, dtype=np.int64)
@@ -253,14 +256,14 @@ def triangulate_observations_robust(
     plain = np.empty((num_groups, 3))
     compensated = np.empty((num_groups, 3))
     _triangulate_groups(P, starts, np.asarray(cam, dtype=np.int64)[order], points, dts, V, use_velocity,
-                        int(min_views), float(lambda_t_per_s), float(reject_factor), float(reject_floor_px), plain,
-                        compensated)
+                        int(min_views), float(lambda_t_per_s), float(reject_factor), float(reject_floor_px),
+                        bool(normalize_rows), plain, compensated)
     return plain, compensated if use_velocity else None
 
 
 @jit
 def _triangulate_groups(P, starts, cam, points_px, dts, V, use_velocity, min_views, lambda_t_per_s, reject_factor,
-                        reject_floor_px, plain, compensated):
+                        reject_floor_px, normalize_rows, plain, compensated):
     """`triangulate_point` for each group of observations cam/points_px/dts[starts[n]:starts[n + 1]]."""
     work = np.empty((3, 4, 4))
     size = 4
@@ -278,14 +281,14 @@ def _triangulate_groups(P, starts, cam, points_px, dts, V, use_velocity, min_vie
             decays_n[i] = np.exp(-2.0 * lambda_t_per_s * dts[a + i])
         V_n[0], V_n[1], V_n[2] = V[n, 0], V[n, 1], V[n, 2]
         triangulate_point(P, cam_n, points_n, dts_n, decays_n, num, V_n, use_velocity, min_views, reject_factor,
-                          reject_floor_px, plain_n, compensated_n, work, scratch)
+                          reject_floor_px, normalize_rows, plain_n, compensated_n, work, scratch)
         for k in range(3):
             plain[n, k], compensated[n, k] = plain_n[k], compensated_n[k]
 
 
 @jit
 def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, reject_factor, reject_floor_px,
-                      plain, compensated, work, scratch):
+                      normalize_rows, plain, compensated, work, scratch):
     """Eq. (6)-(11) for one point from its `num` observations, with the robust second pass (compiled kernel).
 
     Args:
@@ -294,12 +297,12 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
         decays: (≥num,) e^(-2 λt (t - t_i)), the squared time factors of the eq. (11) weights.
         V: (3,) the point's velocity, m/s (read only when use_velocity).
         use_velocity: also compute the velocity-compensated estimate.
-        min_views, reject_factor, reject_floor_px: as `triangulate_observations_robust`.
+        min_views, reject_factor, reject_floor_px, normalize_rows: as `triangulate_observations_robust`.
         plain, compensated: (3,) outputs, NaN when not determined (compensated untouched without velocity).
         work: (3, 4, 4) and scratch: (4, 8) work space.
     """
-    _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, plain, compensated, work,
-                        scratch)
+    _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, normalize_rows, plain,
+                        compensated, work, scratch)
     if reject_factor <= 0.0 or num == 0:
         return
     X = compensated if use_velocity else plain
@@ -335,8 +338,8 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
         decays2[i] = decays[keep[i]]
     plain2 = np.empty(3)
     compensated2 = np.empty(3)
-    _solve_observations(P, cam2, points2, dts2, decays2, kept, V, use_velocity, min_views, plain2, compensated2, work,
-                        scratch)
+    _solve_observations(P, cam2, points2, dts2, decays2, kept, V, use_velocity, min_views, normalize_rows, plain2,
+                        compensated2, work, scratch)
     if np.isfinite(plain2[0]):
         plain[:] = plain2
         if use_velocity:
@@ -344,9 +347,10 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
 
 
 @jit
-def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, plain, compensated, work,
-                        scratch):
-    """The normal matrices of eq. (8), (10) with the weights of eq. (11), and their smallest eigenvectors."""
+def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, normalize_rows, plain,
+                        compensated, work, scratch):
+    """The normal matrices of eq. (8), (10) with the weights of eq. (11) (without its row norms unless
+    `normalize_rows`), and their smallest eigenvectors."""
     plain[0] = plain[1] = plain[2] = np.nan
     if use_velocity:
         compensated[0] = compensated[1] = compensated[2] = np.nan
@@ -362,10 +366,12 @@ def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, mi
                           x0 * P[k, 2, 3] - P[k, 0, 3])
         b0, b1, b2, b3 = (x1 * P[k, 2, 0] - P[k, 1, 0], x1 * P[k, 2, 1] - P[k, 1, 1], x1 * P[k, 2, 2] - P[k, 1, 2],
                           x1 * P[k, 2, 3] - P[k, 1, 3])
-        # Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||².
+        # Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||² (the ablations: without the norm).
         decay = decays[i]
-        w0 = decay / (a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
-        w1 = decay / (b0 * b0 + b1 * b1 + b2 * b2 + b3 * b3)
+        w0, w1 = decay, decay
+        if normalize_rows:
+            w0 = decay / (a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
+            w1 = decay / (b0 * b0 + b1 * b1 + b2 * b2 + b3 * b3)
         # Eq. (8), (10): Σ w² r rᵀ, and with velocities its moments Σ dt_i (.) and Σ dt_i² (.).
         e = (w0 * a0 * a0 + w1 * b0 * b0, w0 * a0 * a1 + w1 * b0 * b1, w0 * a0 * a2 + w1 * b0 * b2,
              w0 * a0 * a3 + w1 * b0 * b3, w0 * a1 * a1 + w1 * b1 * b1, w0 * a1 * a2 + w1 * b1 * b2,

@@ -68,3 +68,15 @@ def test_every_field_is_documented():
     doc = TrackerConfig.__doc__
     missing = [f.name for f in dataclasses.fields(TrackerConfig) if f.name not in doc]
     assert not missing
+
+
+@pytest.mark.parametrize("mode, lambda_t, velocity, normalize", [
+    ("paper", 5.0, False, True), ("velocity", 5.0, True, True), ("unnormalized", 5.0, False, False),
+    ("conventional", 0.0, False, False)])
+def test_each_triangulation_reaches_the_update_kernel_as_its_weights(mode, lambda_t, velocity, normalize):
+    from tests.tracker.synthetic import ceiling_rig
+    from tracker.tracker import Tracker
+
+    config = TrackerConfig.preset("store").replace(triangulation=mode)
+    params = Tracker(ceiling_rig(4, 5.0, 4.0), config)._update_params
+    assert params[1:4] == (lambda_t, velocity, normalize)

@@ -53,7 +53,8 @@ def test_tracks_every_walker_with_one_identity_each(layout1, method):
         person_of.setdefault(target_id, set()).add(person)
     assert all(len(p) == 1 for p in person_of.values())
     assert sorted(p.pop() for p in person_of.values()) == [0, 1, 2, 3]
-    assert np.mean([e for *_, e in rows]) < 0.08  # m
+    # Unit weights let points up to max_observation_age_s old pull the estimate back (Figure 5's point).
+    assert np.mean([e for *_, e in rows]) < (0.15 if method is Triangulation.CONVENTIONAL else 0.08)  # m
     # The last output holds every person, with no NaN joints, all confirmed.
     last = outputs[-1]
     assert len(last.targets) == 4
@@ -315,3 +316,12 @@ def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
         np.testing.assert_array_equal(*bads)
         assert counts[0][0].sum() > 0
         tracker.update(frame)
+
+
+def test_time_weighting_beats_the_conventional_dlt_on_unsynchronised_cameras(layout1):
+    # Table 4 and Figure 5: the same points, unit weights (conventional) against eq. (11)'s.
+    cams, walkers, frames, _ = layout1
+    error = {m: np.mean([e for *_, e in _errors(_run(Tracker(cams, CONFIG.replace(triangulation=m)), frames),
+                                                walkers, after_s=1.0)])
+             for m in (Triangulation.PAPER, Triangulation.CONVENTIONAL)}
+    assert error[Triangulation.CONVENTIONAL] > 1.5 * error[Triangulation.PAPER]

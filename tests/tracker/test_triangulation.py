@@ -26,8 +26,9 @@ def rig():
     return np.stack([c.P for c in cams])
 
 
-def _reference_dlt(P, x, weights=None):
-    """Independent per-point DLT: stack the two rows of eq. (9) per view, SVD, dehomogenise."""
+def _reference_dlt(P, x, weights=None, normalize=True):
+    """Independent per-point DLT: stack the two rows of eq. (9) per view (each divided by its norm unless
+    `normalize` is False), SVD, dehomogenise."""
     rows = []
     for c in range(len(P)):
         if np.isnan(x[c]).any():
@@ -35,7 +36,8 @@ def _reference_dlt(P, x, weights=None):
         r1 = x[c, 0] * P[c, 2] - P[c, 0]
         r2 = x[c, 1] * P[c, 2] - P[c, 1]
         w = 1.0 if weights is None else weights[c]
-        rows += [w * r1 / np.linalg.norm(r1), w * r2 / np.linalg.norm(r2)]
+        n1, n2 = (np.linalg.norm(r1), np.linalg.norm(r2)) if normalize else (1.0, 1.0)
+        rows += [w * r1 / n1, w * r2 / n2]
     _, _, vt = np.linalg.svd(np.array(rows))
     return vt[-1, :3] / vt[-1, 3]
 
@@ -85,6 +87,22 @@ def test_incremental_weights_match_an_independent_weighted_svd(rig):
     stamps = 1.0 - rng.uniform(0, 0.3, len(rig))
     got = triangulate_incremental(rig, x, stamps, 1.0, 10.0)
     np.testing.assert_allclose(got, _reference_dlt(rig, x, np.exp(-10.0 * (1.0 - stamps))), atol=1e-8)
+
+
+@pytest.mark.parametrize("lambda_t, normalize", [(10.0, False), (0.0, False), (0.0, True)])
+def test_the_ablations_weights_match_an_independent_svd(rig, lambda_t, normalize):
+    # Table 4's "w/o norm" (λt, no row norms) and the conventional DLT (unit weights, λt = 0), point by point.
+    rng = np.random.default_rng(9)
+    X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (5, 3))
+    x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0.0, 2.0, (5, len(rig), 2))
+    stamps = 1.0 - rng.uniform(0.0, 0.3, (5, len(rig)))
+    got, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 5, 1.0, lambda_t, None, 2, 0.0, 10.0,
+                                             normalize_rows=normalize)
+    for n in range(5):
+        expected = _reference_dlt(rig, x[n], np.exp(-lambda_t * (1.0 - stamps[n])), normalize=normalize)
+        np.testing.assert_allclose(got[n], expected, atol=1e-7)  # m
+    if not normalize and lambda_t == 0.0:
+        np.testing.assert_allclose(got, triangulate(rig, x, normalize_rows=False), atol=1e-7)  # m
 
 
 def test_stale_views_pull_the_paper_estimate_back_and_velocity_compensation_removes_it(rig):
@@ -179,7 +197,7 @@ def test_compiled_triangulation_runs_the_same_as_plain_python(rig, velocity):
     for kernel in (_triangulate_groups, plain_python(_triangulate_groups)):
         plain, compensated = np.empty((6, 3)), np.empty((6, 3))
         kernel(rig, starts, cam[order], px[order], np.maximum(1.0 - stamps[order], 0.0), V, velocity, 2, 5.0, 3.0,
-               10.0, plain, compensated)
+               10.0, True, plain, compensated)
         outputs.append(plain if not velocity else compensated)
     np.testing.assert_allclose(outputs[0], outputs[1], atol=1e-12)  # m
     assert np.isfinite(outputs[0]).all()
