@@ -56,6 +56,8 @@ def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None
     if people is not None:
         overrides["crowd.people"] = people
     scenario = scenario_mod.load(path, overrides)
+    if cameras is not None and scenario.cameras.calibration:  # a real rig: that many of its cameras
+        return scenario_mod.load(path, {**overrides, "cameras.calibration_count": cameras})
     if cameras is not None:
         rows, cols = camera_grid(cameras, scenario.store.width_m, scenario.store.depth_m)
         scenario = scenario_mod.load(path, {**overrides, "cameras.rows": rows, "cameras.cols": cols})
@@ -173,21 +175,35 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
     return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start, started, scenario.duration_s)
 
 
-def tracker_config(preset: str, config_path: Path | None = None):
-    """The tracker configuration of a preset, optionally overridden by a TOML file (validated: a
-    `ConfigError` names the file and the key)."""
+def tracker_config(preset: str, config_path: Path | None = None, overrides: dict | None = None):
+    """The tracker configuration of a preset, optionally overridden by a TOML file and then by `overrides`
+    (field -> value, as a sweep's `tracker.*` axes give them); validated: a `ConfigError` names the file or
+    the field."""
+    from core.errors import ConfigError
     from tracker.config import TrackerConfig
 
-    return TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
+    config = TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
+    if overrides:
+        names = {f.name for f in dataclasses.fields(TrackerConfig)}
+        for key, value in overrides.items():
+            if key not in names:
+                raise ConfigError(f"tracker.{key}: unknown tracker setting; valid: {', '.join(sorted(names))}")
+            try:
+                config = config.replace(**{key: value})
+            except (ValueError, TypeError) as e:
+                raise ConfigError(f"tracker.{key} = {value!r}: {e}") from None
+    return config
 
 
-def make_tracker(method: str, cameras, preset: str, config_path: Path | None, skeleton):
+def make_tracker(method: str, cameras, preset: str, config_path: Path | None, skeleton,
+                 overrides: dict | None = None):
     """The tracker `method` names (built in, registered or `package.module:Class`, see `crossview.plugins`),
-    configured from a preset and optionally a TOML file; returns (tracker, config)."""
+    configured from a preset, optionally a TOML file and `overrides` (`tracker_config`); returns (tracker,
+    config)."""
     from crossview.plugins import resolve
 
     resolved = resolve(method)
-    config = tracker_config(preset, config_path)
+    config = tracker_config(preset, config_path, overrides)
     try:
         config.check_fits(len(cameras), skeleton.num_joints)
     except CrossviewError as e:
@@ -219,9 +235,11 @@ def track(
     method: str = "crossview",
     preset: str = "store",
     config_path: Path | None = None,
+    overrides: dict | None = None,
     progress: bool = True,
 ) -> TrackResult:
-    """Runs a tracker over a recording's frames in delivery order and writes the tracks file."""
+    """Runs a tracker over a recording's frames in delivery order and writes the tracks file (configured by
+    `tracker_config(preset, config_path, overrides)`)."""
     from tqdm import tqdm
 
     from core.types import SKELETONS
@@ -232,7 +250,7 @@ def track(
     resolved = resolve(method)
     rec = recording.open_recording(rec_path)
     skeleton = SKELETONS[rec.header.skeleton_name]
-    tracker, config = make_tracker(method, rec.cameras, preset, config_path, skeleton)
+    tracker, config = make_tracker(method, rec.cameras, preset, config_path, skeleton, overrides)
     header = recording.TracksHeader(
         scenario_name=rec.header.scenario_name,
         scenario_digest=rec.header.scenario_digest,
@@ -244,7 +262,7 @@ def track(
         software_version=recording.software_version(),
         format_version=recording.TRACKS_FORMAT_VERSION,
     )
-    warm_up_tracker(method, rec, preset, config_path, skeleton)
+    warm_up_tracker(method, rec, preset, config_path, skeleton, overrides)
     updates = 0
     tracker_s = 0.0
     with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path)) as writer:
@@ -269,7 +287,8 @@ WARM_UP_S = 2.0
 """Stamps of the frames a throwaway tracker sees before timing starts (see `warm_up_tracker`), seconds."""
 
 
-def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, skeleton) -> None:
+def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, skeleton,
+                    overrides: dict | None = None) -> None:
     """Runs a throwaway tracker over the first `WARM_UP_S` of frames, untimed.
 
     The tracker's numba kernels compile on first use (tens of seconds on a fresh install, then loaded from
@@ -278,7 +297,7 @@ def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, ske
     from crossview.plugins import resolve
 
     resolved = resolve(method)
-    tracker, _ = make_tracker(method, rec.cameras, preset, config_path, skeleton)
+    tracker, _ = make_tracker(method, rec.cameras, preset, config_path, skeleton, overrides)
     for index, camera_frame in enumerate(rec.frames()):
         if camera_frame.frame.stamp_s > WARM_UP_S:
             break

@@ -29,16 +29,20 @@ import time
 import tomllib
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from core.errors import CrossviewError, ScenarioError
 from crossview import outputs, pipeline
 from sim import scenario as scenario_mod
+from tracker.config import PRESETS
 
 log = logging.getLogger(__name__)
 
 CAMERAS_AXIS = "cameras"
+TRACKER_PREFIX = "tracker."
+"""Axes named `tracker.FIELD` set a field of the tracker's configuration (`tracker.config.TrackerConfig`)
+over its preset, not a scenario key."""
 """The axis of camera counts (`--cameras`): each count becomes a grid of cameras fitted to the floor."""
 PEOPLE_AXIS = "crowd.people"
 
@@ -69,7 +73,8 @@ class Axis:
     """One dimension of the grid.
 
     Attributes:
-        key: a scenario key by its dotted name (`crowd.people`), or `cameras` for camera counts.
+        key: a scenario key by its dotted name (`crowd.people`), `cameras` for camera counts, or
+            `tracker.FIELD` for a field of the tracker's configuration (`tracker.w_2d`).
         values: the values in the order given, each of the key's type.
     """
 
@@ -116,6 +121,7 @@ class Cell:
         overrides: the dotted keys applied to the base scenario (the axis values, the seed, the duration,
             the camera grid's rows and columns).
         version: the package version the cell was planned with (workers must have the same).
+        tracker_overrides: fields of the tracker's configuration set over its preset (the `tracker.*` axes).
         error: why the cell's scenario is invalid (a failed cell that needs no worker); None if it is valid.
         keep_recording: return the recording's bytes.
         worker_process: simulate in a second process (`crossview.pipeline.generate`).
@@ -136,6 +142,7 @@ class Cell:
     error: str | None = None
     keep_recording: bool = False
     worker_process: bool = False
+    tracker_overrides: dict = field(default_factory=dict)
 
     def load_scenario(self, folder: Path) -> scenario_mod.Scenario:
         """The cell's resolved scenario, from the driver's file where it is here, else from a copy in `folder`."""
@@ -198,9 +205,28 @@ def parse_axis(key: str, text: str) -> Axis:
         if key == CAMERAS_AXIS:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise CrossviewError(f"--cameras: {value!r} is not a camera count (an integer >= 1)")
+        elif key.startswith(TRACKER_PREFIX):
+            _check_tracker_value(option, key, value, PRESETS)
         else:
             scenario_mod.check_override(key, value, option)
     return Axis(key, values)
+
+
+def _check_tracker_value(option: str, key: str, value, presets) -> None:
+    """Refuses a `tracker.*` axis value that no preset of `presets` takes (one some take fails only the
+    cells of the others, when planned).
+
+    Raises:
+        CrossviewError: an unknown field, or a value no preset takes, named with its option.
+    """
+    errors = []
+    for preset in presets:
+        try:
+            pipeline.tracker_config(preset, None, {key[len(TRACKER_PREFIX):]: value})
+            return
+        except CrossviewError as e:
+            errors.append(e)
+    raise CrossviewError(f"{option}: {errors[0]}")
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:
@@ -257,12 +283,16 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
     floor holds) fails when it runs.
 
     Raises:
-        CrossviewError: the base scenario cannot be loaded.
+        CrossviewError: the base scenario cannot be loaded, or a `tracker.*` value suits none of the presets.
     """
     from crossview.recording import software_version
 
     version = software_version()
     base = pipeline.load_scenario(spec.scenario, duration_s=spec.duration_s)
+    for axis in spec.axes:
+        if axis.key.startswith(TRACKER_PREFIX):
+            for value in axis.values:
+                _check_tracker_value(f"--set {axis.key}", axis.key, value, spec.presets)
     path = str(Path(base.source_path).resolve())
     text = Path(path).read_text(encoding="utf-8")  # (the file's, without the overrides' notes)
     cells = []
@@ -270,7 +300,8 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
     for index, combo in enumerate(grid):
         *axis_values, seed, method, preset = combo
         values = tuple((a.key, v) for a, v in zip(spec.axes, axis_values))
-        overrides = {k: v for k, v in values if k != CAMERAS_AXIS}
+        tracker = {k[len(TRACKER_PREFIX):]: v for k, v in values if k.startswith(TRACKER_PREFIX)}
+        overrides = {k: v for k, v in values if k != CAMERAS_AXIS and not k.startswith(TRACKER_PREFIX)}
         cameras = dict(values).get(CAMERAS_AXIS)
         error = None
         try:
@@ -282,11 +313,18 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
             error = _one_line(e)
             resolved = {**overrides, "seed": seed}
             identity = _key(base.name, resolved, spec.duration_s, cameras)
+        if tracker and error is None:
+            try:
+                pipeline.tracker_config(preset, None, tracker)
+            except CrossviewError as e:
+                error = _one_line(e)
+        # (A cell without tracker axes keeps the key it had before they existed: finished cells stay found.)
+        identity_parts = (identity, seed, method, preset, version) + ((tracker,) if tracker else ())
         cells.append(Cell(
-            index=index, key=_key(identity, seed, method, preset, version), label=_label(values, seed, method, preset),
+            index=index, key=_key(*identity_parts), label=_label(values, seed, method, preset),
             values=values, seed=seed, method=method, preset=preset, scenario_name=base.name, scenario_text=text,
             scenario_path=path, overrides=resolved, version=version, error=error, keep_recording=keep_recordings,
-            worker_process=worker_process,
+            worker_process=worker_process, tracker_overrides=tracker,
         ))
     return cells
 
@@ -296,7 +334,9 @@ def _applied_overrides(scenario, overrides: dict, seed: int, duration_s, cameras
     resolved = {**overrides, "seed": seed}
     if duration_s is not None:
         resolved["duration_s"] = duration_s
-    if cameras is not None:
+    if cameras is not None and scenario.cameras.calibration:
+        resolved["cameras.calibration_count"] = cameras
+    elif cameras is not None:
         resolved["cameras.rows"] = scenario.cameras.rows
         resolved["cameras.cols"] = scenario.cameras.cols
     return resolved
@@ -352,7 +392,8 @@ def run_cell(cell: Cell) -> dict:
             rec, tracks = Path(tmp) / f"{scenario.name}.mcap", Path(tmp) / f"{scenario.name}.tracks.mcap"
             gen = pipeline.generate(scenario, rec, progress=False, worker_process=cell.worker_process)
             t0 = time.perf_counter()
-            trk = pipeline.track(rec, tracks, method=cell.method, preset=cell.preset, progress=False)
+            trk = pipeline.track(rec, tracks, method=cell.method, preset=cell.preset,
+                                 overrides=cell.tracker_overrides or None, progress=False)
             t1 = time.perf_counter()
             _, score = pipeline.score(rec, tracks, progress=False)
             timings.update(generate_s=gen.wall_s, generate_realtime_factor=gen.realtime_factor, track_s=t1 - t0,

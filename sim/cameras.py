@@ -93,6 +93,8 @@ class CameraRigConfig:
             scenario built in code).
         calibration_kind: camera type to take from the calibration file ("hd" for Panoptic).
         calibration_origin_m: where the calibration's world origin lies in the store frame.
+        calibration_count: how many of the calibration's cameras to use, spread evenly over the file's
+            order (the first, the last and evenly between); 0 uses them all.
     """
 
     rows: int = bounded(3, 1, MAX_GRID, unit="cameras")
@@ -114,6 +116,7 @@ class CameraRigConfig:
     calibration: str = ""
     calibration_kind: str = "hd"
     calibration_origin_m: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), -MAX_FLOOR_M, MAX_FLOOR_M)
+    calibration_count: int = bounded(0, 0, MAX_GRID * MAX_GRID, unit="cameras")
 
     def __post_init__(self):
         check_ranges(self)
@@ -179,6 +182,7 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
             raise ScenarioError(
                 f"{scenario.where}: cameras.calibration: cannot use {config.calibration!r}: {e}"
             ) from None
+        cameras = spread_subset(cameras, config.calibration_count, f"{scenario.where}: cameras.calibration_count")
         key = "cameras.calibration"
     elif config.placements:
         cameras = []
@@ -396,6 +400,20 @@ def _mat_to_quat(R: np.ndarray) -> np.ndarray:
 # Panoptic's world has y pointing down; ours has z up: (x, y, z)_ours = (x, z, -y)_panoptic.
 _Z_UP_FROM_PANOPTIC = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 _CM = 0.01
+
+
+def spread_subset(cameras: list, count: int, where: str) -> list:
+    """`count` of `cameras` spread evenly over their order (the first and the last among them); 0 keeps all.
+
+    Raises:
+        ScenarioError: `count` exceeds the cameras there are (`where` names the key).
+    """
+    if count == 0:
+        return list(cameras)
+    if count > len(cameras):
+        raise ScenarioError(f"{where}: {count} is more than the {len(cameras)} cameras of the calibration")
+    picked = np.unique(np.round(np.linspace(0, len(cameras) - 1, count)).astype(int))
+    return [cameras[i] for i in picked]
 
 
 def load_panoptic(path, kind: str = "hd", *, origin_m=(0.0, 0.0, 0.0), z_up: bool = True) -> list[Camera]:

@@ -142,6 +142,9 @@ def _run_bad(capsys, argv):
     (["--method", "crossview,magic"], "--method 'magic': not a known tracker"),
     (["--set", "crowd.people=2", "--people", "3"], "--set crowd.people: given twice"),
     (["--ray", "127.0.0.1:1"], "--ray 127.0.0.1:1: unreachable"),
+    (["--set", "tracker.w_2e=0.4"], "tracker.w_2e: unknown tracker setting"),
+    (["--set", "tracker.triangulation=paper,sideways"], "'sideways' is not one of"),
+    (["--set", "tracker.alpha_3d_m=0.1,-1"], "alpha_3d_m: -1 must be > 0"),
 ])
 def test_bad_input_is_one_line_exit_2_before_any_cell(tmp_path, capsys, args, named):
     out = tmp_path / "out"
@@ -174,3 +177,32 @@ def test_verify_without_a_manifest_is_refused(tmp_path, capsys):
 
 def test_axis_values_are_read_as_toml_values_with_text_as_a_fallback():
     assert sweep.parse_values("--set k", "10,2.5,true,typical,[1, 2]") == (10, 2.5, True, "typical", [1, 2])
+
+
+def test_tracker_axes_set_the_tracker_of_each_cell_and_only_its_key():
+    spec = sweep.SweepSpec("store_layout1", axes=(sweep.parse_axis("tracker.triangulation", "paper,conventional"),),
+                           duration_s=1.0)
+    paper, conventional = sweep.plan(spec)
+    assert paper.tracker_overrides == {"triangulation": "paper"}
+    assert conventional.tracker_overrides == {"triangulation": "conventional"}
+    assert paper.overrides == conventional.overrides  # the same recording
+    assert paper.key != conventional.key and paper.error is None and conventional.error is None
+    # Without tracker axes a cell keeps the key it had before they existed.
+    plain, = sweep.plan(sweep.SweepSpec("store_layout1", duration_s=1.0))
+    assert plain.tracker_overrides == {} and plain.key not in (paper.key, conventional.key)
+
+
+def test_a_tracker_value_invalid_with_the_cells_preset_fails_that_cell_alone():
+    # view_margin_m must be >= alpha_3d_m: 0.2 is fine for "campus" (alpha_3d_m 0.1), not for "store" (0.25).
+    spec = sweep.SweepSpec("store_layout1", axes=(sweep.parse_axis("tracker.view_margin_m", "0.2"),),
+                           presets=("campus", "store"), duration_s=1.0)
+    campus, store = sweep.plan(spec)
+    assert campus.error is None
+    assert "view_margin_m: 0.2 must be >= alpha_3d_m 0.25" in store.error
+
+
+def test_cameras_of_a_calibrated_rig_are_that_many_of_its_cameras():
+    spec = sweep.SweepSpec("panoptic_dome", axes=(sweep.parse_axis("cameras", "6,31"),), duration_s=1.0)
+    six, all_ = sweep.plan(spec)
+    assert six.overrides["cameras.calibration_count"] == 6 and all_.overrides["cameras.calibration_count"] == 31
+    assert six.error is None and all_.error is None

@@ -232,6 +232,14 @@ def test_shipped_dome_scenario_takes_the_panoptic_calibration_beside_it(rng):
     np.testing.assert_allclose([c.center_world for c in direct], [c.center_world for c in cams])
 
 
+def test_calibration_count_takes_cameras_spread_over_the_rig(rng):
+    every = build_rig(scenario_mod.load("panoptic_dome"), rng)
+    six = build_rig(scenario_mod.load("panoptic_dome", {"cameras.calibration_count": 6}), rng)
+    assert [c.name for c in six] == [every[i].name for i in (0, 6, 12, 18, 24, 30)]
+    with pytest.raises(ScenarioError, match="cameras.calibration_count: 40 is more than the 31 cameras"):
+        build_rig(scenario_mod.load("panoptic_dome", {"cameras.calibration_count": 40}), rng)
+
+
 def test_calibration_path_is_taken_from_the_scenario_file_folder(tmp_path, rng):
     (tmp_path / "rigs").mkdir()
     (tmp_path / "rigs" / "dome.json").write_bytes(PANOPTIC.read_bytes())
