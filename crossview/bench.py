@@ -32,7 +32,8 @@ def _round_times(update_s: list[float], num_cameras: int) -> list[float]:
 
 
 def bench_tracker(
-    rec_path: Path, method: str = "crossview", preset: str = "store", max_stamp_s: float = float("inf")
+    rec_path: Path, method: str = "crossview", preset: str = "store", max_stamp_s: float = float("inf"),
+    min_stamp_s: float = 0.0, warm_up_s: float = pipeline.WARM_UP_S,
 ) -> dict:
     """Times every tracker update over a recording's frames (decoded beforehand, so I/O is excluded).
 
@@ -40,11 +41,18 @@ def bench_tracker(
         rec_path: the recording.
         method, preset: which tracker.
         max_stamp_s: only frames stamped before this (the all-pairs baseline is too slow for long runs).
+        min_stamp_s: frames stamped before this go through the tracker untimed (it starts its targets there).
+        warm_up_s: stamps of the frames a throwaway tracker sees first (`pipeline.warm_up_tracker`), s.
     """
     rec = recording.open_recording(rec_path)
-    frames = [cf.frame for cf in rec.frames() if cf.frame.stamp_s < max_stamp_s]
-    pipeline.warm_up_tracker(method, rec, preset, None, _skeleton(rec))  # (first-use compiles stay out)
+    every = [cf.frame for cf in rec.frames() if cf.frame.stamp_s < max_stamp_s]
+    pipeline.warm_up_tracker(method, rec, preset, None, _skeleton(rec), until_s=warm_up_s)  # (compiles stay out)
     tracker, _ = pipeline.make_tracker(method, rec.cameras, preset, None, _skeleton(rec))
+    for frame in every:
+        if frame.stamp_s >= min_stamp_s:
+            break
+        tracker.update(frame)
+    frames = [f for f in every if f.stamp_s >= min_stamp_s]
     update_s = []
     for frame in frames:
         start = time.perf_counter()

@@ -223,10 +223,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-recordings", action="store_true", help="keep each cell's recording and write "
                    "manifest.json (for crossview verify)")
 
+    p = sub.add_parser("ablate", help="the paper's ablations (Tables S1, 4, 5, Figures 5, 6) into one report")
+    p.add_argument("experiments", nargs="*", metavar="EXPERIMENT",
+                   help="affinity, reconstruction, frame-rate, speed, single-view (default: all)")
+    p.add_argument("--quick", action="store_true", help="one seed, short runs, fewer points (about 2 minutes)")
+    p.add_argument("--workers", type=_positive_int, help="local worker processes of the sweeps (default: the "
+                   "cores; 1 runs them in this process)")
+    p.add_argument("--out", type=Path, required=True, help="output folder (a rerun into it resumes)")
+
     p = sub.add_parser("verify", help="regenerate a kept sweep's recordings and check their bytes")
     p.add_argument("folder", type=Path, help="a sweep folder with manifest.json (sweep --keep-recordings)")
     p.add_argument("--cells", type=_positive_int, help="check a fixed sample of this many (default: all)")
     return parser
+
+
+def _cmd_ablate(args) -> None:
+    from crossview import ablate
+
+    command = " ".join(["crossview ablate", *args.experiments, *(["--quick"] if args.quick else []), "--out DIR"])
+    summary = ablate.run(args.out, args.experiments, quick=args.quick, workers=args.workers,
+                         progress=not args.no_progress, command=command)
+    print(f"ablate: {len(summary.experiments)} experiments in {summary.wall_s / 60:.1f} min; report: {summary.report}")
 
 
 def _sweep_axis(text: str) -> tuple[str, str]:
@@ -492,6 +509,7 @@ COMMANDS = {
     "render": _cmd_render,
     "sweep": _cmd_sweep,
     "verify": _cmd_verify,
+    "ablate": _cmd_ablate,
 }
 
 

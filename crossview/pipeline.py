@@ -288,7 +288,7 @@ WARM_UP_S = 2.0
 
 
 def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, skeleton,
-                    overrides: dict | None = None) -> None:
+                    overrides: dict | None = None, until_s: float = WARM_UP_S) -> None:
     """Runs a throwaway tracker over the first `WARM_UP_S` of frames, untimed.
 
     The tracker's numba kernels compile on first use (tens of seconds on a fresh install, then loaded from
@@ -299,7 +299,7 @@ def warm_up_tracker(method: str, rec, preset: str, config_path: Path | None, ske
     resolved = resolve(method)
     tracker, _ = make_tracker(method, rec.cameras, preset, config_path, skeleton, overrides)
     for index, camera_frame in enumerate(rec.frames()):
-        if camera_frame.frame.stamp_s > WARM_UP_S:
+        if camera_frame.frame.stamp_s > until_s:
             break
         resolved.update(tracker, camera_frame.frame, index)
 

@@ -557,7 +557,8 @@ def _ray(cells: list[Cell]) -> Iterator[Iterator[tuple[Cell, dict]]]:
 
 @dataclass(frozen=True)
 class SweepSummary:
-    """What a sweep did: cells in all, found finished, run now, failed (of all), its wall time (s)."""
+    """What a sweep did: cells in all, found finished, run now, failed (of all), its wall time (s), and each
+    cell's stored outcome in the grid's order (its values, status, whole score JSON and timings)."""
 
     cells: int
     skipped: int
@@ -565,6 +566,7 @@ class SweepSummary:
     failed: int
     wall_s: float
     out: Path
+    rows: list[dict] = field(default_factory=list)
 
 
 def definition(spec: SweepSpec, cells: list[Cell]) -> dict:
@@ -713,7 +715,8 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
     if keep_recordings:
         write_manifest(out, cells, rows)
     failed = sum(r["status"] != "ok" for r in rows)
-    return SweepSummary(len(cells), len(cells) - len(pending), len(pending), failed, time.perf_counter() - start, out)
+    return SweepSummary(len(cells), len(cells) - len(pending), len(pending), failed, time.perf_counter() - start, out,
+                        rows)
 
 
 def _usable_cores() -> int:

@@ -10,7 +10,7 @@ def test_bench_tracker_times_every_update_after_an_untimed_warm_up(tmp_path, mon
     gen = pipeline.generate(scenario, tmp_path / "r.mcap", progress=False)
     warmed = []
     original = pipeline.warm_up_tracker
-    monkeypatch.setattr(pipeline, "warm_up_tracker", lambda *a: (warmed.append(a[0]), original(*a)))
+    monkeypatch.setattr(pipeline, "warm_up_tracker", lambda *a, **k: (warmed.append(a[0]), original(*a, **k)))
     result = bench.bench_tracker(tmp_path / "r.mcap")
     assert warmed == ["crossview"]  # first-use compiles never enter the timed rounds
     assert result["camera_frames"] == gen.num_frames
