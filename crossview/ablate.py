@@ -200,10 +200,12 @@ def frame_rate(ctx: Context) -> dict:
         scenario = pipeline.load_scenario(FRAME_RATE_SCENARIO, seed=s.seeds[0], duration_s=s.spread_s,
                                           overrides={"clock.fps": fps})
         rec = _cached_recording(ctx.out / "frame-rate" / "recordings", scenario, ctx.progress)
+        by_method = _by(at_rate, "tracker.triangulation")
         rows.append({"fps": fps, "spread_s": point_set_spread_s(rec, max_age_s),
-                     "pcp": {m: _mean(c, "pcp") for m, c in _by(at_rate, "tracker.triangulation").items()},
-                     "lower_arms": {m: _mean(c, "pcp_per_group", "lower_arms")
-                                    for m, c in _by(at_rate, "tracker.triangulation").items()}})
+                     "pcp": {m: _mean(c, "pcp") for m, c in by_method.items()},
+                     "lower_arms": {m: _mean(c, "pcp_per_group", "lower_arms") for m, c in by_method.items()},
+                     "idf1": {m: _mean(c, "idf1") for m, c in by_method.items()},
+                     "mpjpe_mm": {m: _mean(c, "mpjpe_mm") for m, c in by_method.items()}})
     return {"scenario": FRAME_RATE_SCENARIO, "seeds": list(s.seeds), "duration_s": s.duration_s,
             "max_observation_age_s": max_age_s, "rows": rows}
 
