@@ -229,6 +229,7 @@ def _frame_rate_section(result: dict) -> list[str]:
 def speed_plot(result: dict, timings: dict) -> bytes:
     """Time per round against cameras, log-log, one line per method with its fitted exponent."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullLocator
 
     counts = result["camera_counts"]
     figure = Figure(figsize=(6.4, 4.0), dpi=100, layout="constrained")
@@ -239,6 +240,7 @@ def speed_plot(result: dict, timings: dict) -> bytes:
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xticks(counts, [str(c) for c in counts])
+    ax.xaxis.set_minor_locator(NullLocator())  # (log-scale minor labels would overlap the counts)
     ax.set_xlabel("cameras of the Panoptic dome")
     ax.set_ylabel("time per round, every camera once (ms)")
     ax.grid(True, which="both", alpha=0.3)
