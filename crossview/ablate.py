@@ -70,7 +70,7 @@ class Settings:
 TABLE_S1_WEIGHTS = ((1.0, 0.0), (0.8, 0.2), (0.6, 0.4), (0.4, 0.6), (0.2, 0.8), (0.0, 1.0))
 
 FULL = Settings(
-    seeds=(0, 1, 2), duration_s=30.0, affinity_scenario="store_layout2", weights=TABLE_S1_WEIGHTS,
+    seeds=(0, 1, 2), duration_s=20.0, affinity_scenario="store_layout2", weights=TABLE_S1_WEIGHTS,
     reconstruction_scenarios=("store_layout1", "store_layout2"), frame_rates=(10.0, 5.0, 10.0 / 3.0, 2.5, 2.0),
     frame_rate_triangulations=("paper", "conventional", "velocity"), spread_s=20.0,
     camera_counts=(6, 11, 16, 21, 26, 31), speed_s=4.5,
