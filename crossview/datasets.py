@@ -20,10 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from core.types import CAMPUS14, COCO17, MAX_IMAGE_PX, Camera, Frame
+from core.types import CAMPUS14, COCO17, Camera, Frame
 from crossview import openpose
 from crossview.json_input import DatasetError, read_json
 from crossview.outputs import write_bytes
+from sim.cameras import calibration_image_wh, dataset_cameras
 from tracker.types import TrackerOutput
 
 CM_TO_M = 0.01
@@ -34,7 +35,6 @@ MAX_STAMP_S = 4e9
 """Largest timestamp a dataset may hold, seconds (a Unix time until 2096; stamps are stored as int64 ns)."""
 _INT64 = 2 ** 63
 UINT64_END = 2 ** 64
-_MAX_ABS_CM = 1e9  # the largest number a camera pose may hold, centimetres (10,000 km)
 
 
 def _table(value, path: Path, key: str, kind: type = dict):
@@ -84,15 +84,15 @@ def image_size(dataset_dir, source: str = "auto") -> tuple[int, int]:
     else:
         path = _source_path(dataset_dir, source)
     data = _table(read_json(path), path, "the file")
-    wh = data.get("image_wh")
-    if not (isinstance(wh, list) and len(wh) == 2
-            and all(isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_IMAGE_PX for v in wh)):
-        raise DatasetError(f"{path}: key 'image_wh' = {wh!r} must be [width, height], integers in [1, {MAX_IMAGE_PX}]")
-    return wh[0], wh[1]
+    try:
+        return calibration_image_wh(data.get("image_wh"))
+    except ValueError as exc:
+        raise DatasetError(f"{path}: {exc}") from None
 
 
 def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
-    """The cameras of `calibration.json` in metres, sorted by name.
+    """The cameras of `calibration.json` in metres, sorted by name (parsed by `sim.cameras.dataset_cameras`, which
+    scenarios use for the same files).
 
     K is de-normalised with the image size of the 2D file; `Tw` (camera-to-world, cm) is inverted into
     R_cam_from_world and t_cam_from_world (m).
@@ -105,33 +105,10 @@ def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
     path = dataset_dir / "calibration.json"
     data = read_json(path)
     width, height = image_size(dataset_dir)
-    entries = _table(_table(data, path, "the file").get("cameras"), path, "key 'cameras' (camera name -> {K, Tw})")
-    cameras = []
-    for name in sorted(entries):
-        entry = _table(entries[name], path, f"camera {name!r}")
-        try:
-            K = np.asarray(entry["K"], dtype=np.float64) * np.array([[width], [height], [1.0]])
-            Tw = np.asarray(entry["Tw"], dtype=np.float64)
-            dist = np.asarray(entry.get("dist_coeffs", []), dtype=np.float64) if use_distortion else np.zeros(5)
-        except (KeyError, TypeError, ValueError) as exc:
-            raise DatasetError(f"{path}: camera {name!r}: key {exc} missing or not numeric") from exc
-        if K.shape != (3, 3) or Tw.shape != (4, 4):
-            raise DatasetError(f"{path}: camera {name!r}: K must be 3x3 and Tw 4x4, got {K.shape} and {Tw.shape}")
-        if not (np.isfinite(K).all() and np.isfinite(Tw).all() and np.abs(Tw).max() <= _MAX_ABS_CM):
-            raise DatasetError(f"{path}: camera {name!r}: K and Tw must hold numbers (no null), Tw's within "
-                               f"{_MAX_ABS_CM:g} cm")
-        R_world_from_cam = Tw[:3, :3]
-        center_m = Tw[:3, 3] * CM_TO_M
-        R = R_world_from_cam.T
-        # Tw's rotation is orthonormal only to the precision the file was written with.
-        u, _, vt = np.linalg.svd(R)
-        R = u @ vt
-        try:
-            cameras.append(Camera(name=str(name), K=K, dist=dist, R_cam_from_world=R, t_cam_from_world=-R @ center_m,
-                                  width_px=width, height_px=height))
-        except ValueError as exc:
-            raise DatasetError(f"{path}: camera {name!r}: {exc}") from exc
-    return cameras
+    try:
+        return dataset_cameras(data, width, height, use_distortion=use_distortion)
+    except ValueError as exc:
+        raise DatasetError(f"{path}: {exc}") from None
 
 
 def load_frames(dataset_dir, source: str = "auto") -> list[Frame]:

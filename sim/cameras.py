@@ -1,13 +1,15 @@
-"""Ceiling camera rigs: placement, intrinsics from resolution and field of view, lens distortion.
+"""Camera rigs: placement, intrinsics from resolution and field of view, lens distortion, calibration files.
 
 Owns the camera side of the sensor model: building the rig a scenario asks for (a ceiling grid,
-explicit placements or a real calibration file), projecting world points to distorted pixels with
-OpenCV's camera model, and the one conversion from the OpenCV camera frame (x right, y down,
-z forward) to MuJoCo's (looks down -z, y up).
+explicit placements or a real calibration file: the CMU Panoptic dome's, or the dataset layout's
+calibration.json of Campus, Shelf and the Store datasets, which `crossview.datasets` reads with the same
+parser), projecting world points to distorted pixels with OpenCV's camera model, and the one conversion
+from the OpenCV camera frame (x right, y down, z forward) to MuJoCo's (looks down -z, y up).
 """
 
 from __future__ import annotations
 
+import enum
 import functools
 import json
 import math
@@ -21,6 +23,7 @@ from numba.extending import intrinsic
 
 from core.errors import ScenarioError
 from core.jit import jit
+from core.types import MAX_IMAGE_PX as MAX_CALIBRATION_IMAGE_PX
 from core.types import Camera
 from sim.config import bounded, check_ranges
 from sim.store import MAX_FLOOR_M
@@ -62,6 +65,13 @@ class CameraPlacement:
             )
 
 
+class CalibrationFormat(enum.Enum):
+    """What kind of file `cameras.calibration` names."""
+
+    PANOPTIC = "panoptic"  # a CMU Panoptic calibration_*.json (`load_panoptic`)
+    DATASET = "dataset"  # the dataset layout's calibration.json (`load_dataset_calibration`)
+
+
 @dataclass(frozen=True)
 class CameraRigConfig:
     """[cameras]: where the cameras hang and what lenses they have.
@@ -88,10 +98,15 @@ class CameraRigConfig:
         aim_inward: fraction of the way from below the camera to the store centre.
         position_jitter_m: std of a random displacement of each grid camera (x and y).
         placements: explicit cameras ([[cameras.placements]] tables); when given they replace the grid.
-        calibration: path of a real calibration file (the Panoptic dome format); replaces the grid.
-            A relative path is taken from the scenario file's folder (from the working directory for a
-            scenario built in code).
-        calibration_kind: camera type to take from the calibration file ("hd" for Panoptic).
+        calibration: path of a real calibration file (see `calibration_format`); replaces the grid and
+            `width_px` ... `k3`. A relative path is taken from the scenario file's folder (from the working
+            directory for a scenario built in code). Its cameras stand where the real rig has them, over the
+            floor or around it (outside the walls), above the ground and below the ceiling; each must see
+            some of the floor.
+        calibration_format: "panoptic" (a CMU Panoptic calibration file) or "dataset" (the calibration.json
+            of the dataset layout of Campus, Shelf and the Store datasets; its normalised K needs the
+            image size, which the file's `image_wh` = [width, height] gives).
+        calibration_kind: camera type to take from a Panoptic calibration file ("hd": its 1920x1080 cameras).
         calibration_origin_m: where the calibration's world origin lies in the store frame.
         calibration_count: how many of the calibration's cameras to use, spread evenly over the file's
             order (the first, the last and evenly between); 0 uses them all.
@@ -114,6 +129,7 @@ class CameraRigConfig:
     position_jitter_m: float = bounded(0.0, 0.0, MAX_FLOOR_M)
     placements: tuple[CameraPlacement, ...] = ()
     calibration: str = ""
+    calibration_format: CalibrationFormat = CalibrationFormat.PANOPTIC
     calibration_kind: str = "hd"
     calibration_origin_m: tuple[float, float, float] = bounded((0.0, 0.0, 0.0), -MAX_FLOOR_M, MAX_FLOOR_M)
     calibration_count: int = bounded(0, 0, MAX_GRID * MAX_GRID, unit="cameras")
@@ -166,7 +182,8 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
         rng: the "cameras" generator (used for `position_jitter_m`).
 
     Raises:
-        ScenarioError: a camera lies outside the store, or the calibration file cannot be used.
+        ScenarioError: a placed or grid camera lies outside the store, a calibrated camera below the floor,
+            above the ceiling or seeing none of the floor, or the calibration file cannot be used.
     """
 
     config: CameraRigConfig = scenario.cameras
@@ -177,11 +194,16 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
         if not path.is_absolute() and scenario.source_path:  # relative to the scenario file
             path = Path(scenario.source_path).parent / path
         try:
-            cameras = load_panoptic(path, config.calibration_kind, origin_m=config.calibration_origin_m)
-        except (OSError, ValueError, KeyError, TypeError) as e:
-            raise ScenarioError(
-                f"{scenario.where}: cameras.calibration: cannot use {config.calibration!r}: {e}"
-            ) from None
+            if config.calibration_format is CalibrationFormat.DATASET:
+                cameras = load_dataset_calibration(path, origin_m=config.calibration_origin_m)
+            else:
+                cameras = load_panoptic(path, config.calibration_kind, origin_m=config.calibration_origin_m)
+        except FileNotFoundError:
+            raise ScenarioError(f"{scenario.where}: cameras.calibration: {config.calibration!r}: no such file "
+                                f"({path})") from None
+        except (OSError, ValueError) as e:  # (json's and UTF-8's decode errors are ValueErrors)
+            raise ScenarioError(f"{scenario.where}: cameras.calibration: cannot use {config.calibration!r} "
+                                f"as a {config.calibration_format.value} calibration: {e}") from None
         cameras = spread_subset(cameras, config.calibration_count, f"{scenario.where}: cameras.calibration_count")
         key = "cameras.calibration"
     elif config.placements:
@@ -198,6 +220,9 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
         key = "cameras.rows/cols"
     for i, cam in enumerate(cameras):
         c = cam.center_world
+        if key == "cameras.calibration":
+            _check_calibrated(scenario.where, f"{key}[{i}]", cam, store)
+            continue
         inside = (
             0 <= c[0] <= store.width_m
             and 0 <= c[1] <= store.depth_m
@@ -210,6 +235,31 @@ def build_rig(scenario, rng: np.random.Generator) -> list[Camera]:
                 f"is outside the store [0, {store.width_m}] x [0, {store.depth_m}] x [0, {store.ceiling_m}] m"
             )
     return cameras
+
+
+# The floor points (FLOOR_PROBES x FLOOR_PROBES, at FLOOR_PROBE_HEIGHT_M) of which a calibrated camera must see one.
+FLOOR_PROBES = 41
+FLOOR_PROBE_HEIGHT_M = 1.0
+
+
+def _check_calibrated(where: str, key: str, camera: Camera, store) -> None:
+    """A calibrated camera stands where the real rig has it, over the floor or around it (Campus's stand on the
+    edges of an open square), but above the ground, below the ceiling and seeing some of the floor: a camera
+    that sees none of it is a wrong `calibration_origin_m` or a file in other units.
+
+    Raises:
+        ScenarioError: naming the scenario, the camera's key and where it stands.
+    """
+    c = camera.center_world
+    at = f"camera {camera.name} at ({c[0]:.2f}, {c[1]:.2f}, {c[2]:.2f}) m"
+    if not 0 < c[2] <= store.ceiling_m:
+        raise ScenarioError(f"{where}: {key}: {at} must stand above the floor and at most at the ceiling "
+                            f"(0 < z <= {store.ceiling_m} m); check cameras.calibration_origin_m")
+    u, v = np.meshgrid(np.linspace(0.0, store.width_m, FLOOR_PROBES), np.linspace(0.0, store.depth_m, FLOOR_PROBES))
+    probes = np.stack([u, v, np.full(u.shape, FLOOR_PROBE_HEIGHT_M)], axis=-1)
+    if not in_image(camera, probes)[1].any():
+        raise ScenarioError(f"{where}: {key}: {at} sees none of the floor [0, {store.width_m}] x "
+                            f"[0, {store.depth_m}] m; check cameras.calibration_origin_m and the file's units")
 
 
 def _grid(config: CameraRigConfig, store, K: np.ndarray, rng: np.random.Generator) -> list[Camera]:
@@ -426,28 +476,133 @@ def load_panoptic(path, kind: str = "hd", *, origin_m=(0.0, 0.0, 0.0), z_up: boo
         z_up: convert Panoptic's y-down world to ours (z up); False keeps Panoptic's axes (in metres).
 
     Raises:
-        ValueError: no camera of that kind in the file.
+        OSError: the file cannot be read.
+        ValueError: the file is not JSON or not of this format (the message names the key), or holds no
+            camera of that kind.
     """
     with open(path, encoding="utf-8") as f:
         calibration = json.load(f)
+    entries = calibration.get("cameras") if isinstance(calibration, dict) else None
+    if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+        raise ValueError("key 'cameras' must be an array of camera objects (the Panoptic format; a dataset "
+                         "layout's calibration.json, whose 'cameras' is an object, takes calibration_format = "
+                         "\"dataset\")")
     world_from_pan = _Z_UP_FROM_PANOPTIC if z_up else np.eye(3)
     origin = np.asarray(origin_m, dtype=np.float64)
     cameras = []
-    for entry in calibration["cameras"]:
-        if entry["type"] != kind:
+    for i, entry in enumerate(entries):
+        if entry.get("type") != kind:
             continue
-        R_pan = np.asarray(entry["R"], dtype=np.float64)
-        t_m = np.asarray(entry["t"], dtype=np.float64).ravel() * _CM
-        # X_pan = world_from_pan.T (X - origin)  =>  R_cam = R_pan world_from_pan.T, t = t - R_cam origin.
-        R = R_pan @ world_from_pan.T
-        R = _orthonormalise(R)
-        width, height = entry["resolution"]
-        cameras.append(Camera(f"{kind}_{entry['name']}", np.asarray(entry["K"]), np.asarray(entry["distCoef"]),
-                              R, t_m - R @ origin, int(width), int(height)))
+        try:
+            R_pan = np.asarray(entry["R"], dtype=np.float64)
+            t_m = np.asarray(entry["t"], dtype=np.float64).ravel() * _CM
+            # X_pan = world_from_pan.T (X - origin)  =>  R_cam = R_pan world_from_pan.T, t = t - R_cam origin.
+            R = R_pan @ world_from_pan.T
+            R = _orthonormalise(R)
+            width, height = entry["resolution"]
+            cameras.append(Camera(f"{kind}_{entry['name']}", np.asarray(entry["K"], dtype=np.float64),
+                                  np.asarray(entry["distCoef"], dtype=np.float64), R, t_m - R @ origin, int(width),
+                                  int(height)))
+        except KeyError as e:
+            raise ValueError(f"cameras[{i}]: key {e} missing (expected name, type, resolution, K, distCoef, R, t)") \
+                from None
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"cameras[{i}]: {e}") from None
     if not cameras:
-        kinds = sorted({e["type"] for e in calibration["cameras"]})
-        raise ValueError(f"{path}: no cameras of type {kind!r} (types in file: {kinds})")
+        kinds = sorted({str(e.get("type")) for e in entries})
+        raise ValueError(f"no cameras of type {kind!r} (types in file: {kinds})")
     return cameras
+
+
+def calibration_image_wh(value) -> tuple[int, int]:
+    """(width, height) of an `image_wh` of the dataset layout: [width, height], integers in [1, MAX_IMAGE_PX].
+
+    Raises:
+        ValueError: naming the key and what is valid.
+    """
+    if not (isinstance(value, list) and len(value) == 2 and all(
+            isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_CALIBRATION_IMAGE_PX for v in value)):
+        raise ValueError(f"key 'image_wh' = {value!r} must be [width, height], integers in "
+                         f"[1, {MAX_CALIBRATION_IMAGE_PX}]")
+    return value[0], value[1]
+
+
+_MAX_ABS_CM = 1e9  # the largest number a dataset layout camera pose may hold, centimetres (10,000 km)
+
+
+def _dataset_entries(calibration) -> dict:
+    """The `cameras` object (camera name -> {K, Tw, dist_coeffs}) of a dataset layout calibration.json."""
+    if not isinstance(calibration, dict):
+        raise ValueError(f"the file must be an object, got {type(calibration).__name__}")
+    entries = calibration.get("cameras")
+    if not isinstance(entries, dict):
+        raise ValueError(f"key 'cameras' (camera name -> {{K, Tw}}) must be an object, got {type(entries).__name__}")
+    return entries
+
+
+def dataset_cameras(calibration, width_px: int, height_px: int, *, use_distortion: bool = True,
+                    origin_m=(0.0, 0.0, 0.0)) -> list[Camera]:
+    """The cameras of a calibration.json of the dataset layout of Chen et al. (Campus, Shelf, the Store
+    datasets), sorted by name: per camera `K` normalised by the image size (row 0 divided by the width, row 1
+    by the height), `Tw` the 4x4 camera-to-world pose in centimetres, and `dist_coeffs` (k1 k2 p1 p2 [k3]).
+    Its world has z up, as ours.
+
+    Args:
+        calibration: the file's parsed JSON.
+        width_px, height_px: the image size K was normalised by.
+        use_distortion: keep the listed `dist_coeffs` (else none).
+        origin_m: where the calibration's world origin lies in our world frame, metres.
+
+    Raises:
+        ValueError: the document is not of this shape; the message names the camera and the key.
+    """
+    entries = _dataset_entries(calibration)
+    origin = np.asarray(origin_m, dtype=np.float64)
+    cameras = []
+    for name in sorted(entries):
+        entry = entries[name]
+        if not isinstance(entry, dict):
+            raise ValueError(f"camera {name!r} must be an object, got {type(entry).__name__}")
+        try:
+            K = np.asarray(entry["K"], dtype=np.float64)
+            Tw = np.asarray(entry["Tw"], dtype=np.float64)
+            dist = np.asarray(entry.get("dist_coeffs", []), dtype=np.float64) if use_distortion else np.zeros(5)
+        except KeyError as exc:
+            raise ValueError(f"camera {name!r}: key {exc} missing or not numeric") from None
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"camera {name!r}: K, Tw and dist_coeffs must be arrays of numbers ({exc})") from None
+        if K.shape != (3, 3) or Tw.shape != (4, 4):
+            raise ValueError(f"camera {name!r}: K must be 3x3 and Tw 4x4, got {K.shape} and {Tw.shape}")
+        K = K * np.array([[width_px], [height_px], [1.0]])
+        if not (np.isfinite(K).all() and np.isfinite(Tw).all() and np.abs(Tw).max() <= _MAX_ABS_CM):
+            raise ValueError(f"camera {name!r}: K and Tw must hold numbers (no null), Tw's within {_MAX_ABS_CM:g} cm")
+        # Tw's rotation is orthonormal only to the precision the file was written with.
+        R = _orthonormalise(Tw[:3, :3].T)
+        center_m = Tw[:3, 3] * _CM + origin
+        try:
+            cameras.append(Camera(name=str(name), K=K, dist=dist, R_cam_from_world=R, t_cam_from_world=-R @ center_m,
+                                  width_px=width_px, height_px=height_px))
+        except ValueError as exc:
+            raise ValueError(f"camera {name!r}: {exc}") from None
+    return cameras
+
+
+def load_dataset_calibration(path, *, origin_m=(0.0, 0.0, 0.0)) -> list[Camera]:
+    """The cameras of a dataset layout calibration.json that holds its image size as `image_wh` (as this
+    project's exports write it), with their listed distortion (`dataset_cameras`).
+
+    Raises:
+        OSError: the file cannot be read.
+        ValueError: the file is not JSON or not of this shape; the message names the key.
+    """
+    with open(path, encoding="utf-8") as f:
+        calibration = json.load(f)
+    _dataset_entries(calibration)
+    if "image_wh" not in calibration:
+        raise ValueError("key 'image_wh' missing: K is normalised by the image size, so the file must give it "
+                         "as \"image_wh\": [width, height] (the published files keep it in detection.json)")
+    width, height = calibration_image_wh(calibration["image_wh"])
+    return dataset_cameras(calibration, width, height, use_distortion=True, origin_m=origin_m)
 
 
 def _orthonormalise(R: np.ndarray) -> np.ndarray:

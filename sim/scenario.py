@@ -348,7 +348,7 @@ def reference_markdown() -> str:
         "file and the key. Relative paths (`cameras.calibration`) are taken from the scenario file's folder.",
         "",
         "This page is generated from the configuration classes (`crossview scenarios --reference`); a test fails",
-        "when it is stale.",
+        "when it is stale. The notes on the shipped scenarios at its end are written by hand.",
     ]
     for section, cls, array in _sections():
         title = section.rstrip(".")

@@ -41,6 +41,17 @@ def test_run_writes_recording_tracks_and_a_complete_score(short_run):
     assert score["tracker_fps"] > 0
 
 
+def test_the_campus_rig_scenario_runs_end_to_end(tmp_path):
+    """The shipped scenario on Campus's calibrated cameras (standing around the square, outside its kerb):
+    generated, tracked with the campus preset and scored in a 3 s smoke run."""
+    status = main(["--no-progress", "run", "campus", "--duration", "3", "--preset", "campus", "--out", str(tmp_path)])
+    assert status == 0
+    score = json.loads((tmp_path / "campus.score.json").read_text())
+    assert (score["scenario"], score["num_cameras"], score["num_people"], score["duration_s"]) == ("campus", 3, 3, 3)
+    # Three people, each seen by at least two of the three cameras: the tracker must find them.
+    assert score["pcp"] > 0.8 and score["idf1"] > 0.8
+
+
 def test_tracks_are_refused_against_another_recording(short_run, tmp_path, capsys):
     other = tmp_path / "other.mcap"
     scenario = pipeline.load_scenario("store_layout1", duration_s=1.0, seed=4)

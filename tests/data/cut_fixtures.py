@@ -6,7 +6,8 @@ Usage (from the repository root):
 
 DIR is a Campus dataset in the crossview layout (calibration.json, annotation_2d.json, annotation_3d.json and
 the paper authors' result_3d.json); FILE is the Panoptic dome calibration `calibration_160906_band1.json`.
-Sources and licences: tests/data/README.md. The cut is deterministic: the same inputs give the same bytes.
+Sources and licences: tests/data/README.md
+and scenarios/calibrations/README.md. The cut is deterministic: the same inputs give the same bytes.
 """
 
 from __future__ import annotations
@@ -59,6 +60,14 @@ def cut_campus(source: Path, out: Path) -> None:
            for e in near], out / "result_3d.json")
 
 
+def cut_campus_rig(source: Path, out: Path) -> None:
+    """Campus's calibration.json whole, with the image size of its annotation_2d.json as `image_wh` (K is
+    normalised by it, and a scenario's calibration file must say it: `sim.cameras.load_dataset_calibration`)."""
+    calibration = json.loads((source / "calibration.json").read_text())
+    image_wh = json.loads((source / "annotation_2d.json").read_text())["image_wh"]
+    _dump({"image_wh": image_wh, "cameras": calibration["cameras"]}, out)
+
+
 def cut_panoptic(source: Path, out: Path) -> None:
     """The dome's 31 HD cameras, in the calibration file's own format."""
     calibration = json.loads(source.read_text())
@@ -72,6 +81,7 @@ def main() -> None:
     parser.add_argument("--panoptic", type=Path, required=True, help="calibration_160906_band1.json")
     args = parser.parse_args()
     cut_campus(args.campus, HERE / "campus")
+    cut_campus_rig(args.campus, REPO / "scenarios" / "calibrations" / "campus_calibration.json")
     cut_panoptic(args.panoptic, REPO / "scenarios" / "calibrations" / "panoptic_160906_hd.json")
 
 

@@ -6,6 +6,7 @@ import dataclasses
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -15,6 +16,7 @@ from core.errors import ScenarioError
 from core.types import Camera
 from sim import scenario as scenario_mod
 from sim.cameras import (
+    CalibrationFormat,
     CameraPlacement,
     build_rig,
     in_image,
@@ -27,6 +29,9 @@ from tests.reference import cameras as reference
 
 # The Panoptic dome's 31 HD cameras, shipped with the dome scenario (cut by tests/data/cut_fixtures.py).
 PANOPTIC = scenario_mod.SCENARIO_DIR / "calibrations" / "panoptic_160906_hd.json"
+# Campus's calibration.json with its image size, shipped with the campus scenario (cut by the same script).
+CAMPUS_RIG = scenario_mod.SCENARIO_DIR / "calibrations" / "campus_calibration.json"
+CAMPUS = Path(__file__).resolve().parents[1] / "data" / "campus"
 
 
 @pytest.fixture
@@ -254,13 +259,113 @@ def test_bad_calibrations_are_scenario_errors_naming_the_key(rng):
     base = scenario_mod.Scenario(name="dome", store=StoreConfig(width_m=6.0, depth_m=6.0, ceiling_m=3.5))
     config = dataclasses.replace(base.cameras, calibration=str(PANOPTIC), calibration_origin_m=(3.0, 3.0, 0.0))
     assert len(build_rig(dataclasses.replace(base, cameras=config), rng)) == 31
-    # A store too small for the dome, or a missing file, is a scenario error naming the key.
+    # Calibrated cameras may stand around a floor smaller than the dome (a real rig stands where it stands).
     small = dataclasses.replace(base, store=StoreConfig(width_m=4.0, depth_m=4.0, ceiling_m=3.5), cameras=config)
-    with pytest.raises(ScenarioError, match=r"cameras.calibration\[\d+\].*outside the store"):
-        build_rig(small, rng)
+    assert len(build_rig(small, rng)) == 31
+    # An origin that puts the floor out of every view (metres taken for centimetres), cameras under the floor
+    # or a missing file is a scenario error naming the key.
+    far = dataclasses.replace(config, calibration_origin_m=(300.0, 300.0, 0.0))
+    with pytest.raises(ScenarioError, match=r"cameras.calibration\[\d+\]: camera hd_\S+ at .* sees none of the floor"):
+        build_rig(dataclasses.replace(base, cameras=far), rng)
+    sunk = dataclasses.replace(config, calibration_origin_m=(3.0, 3.0, -10.0))
+    with pytest.raises(ScenarioError, match=r"cameras.calibration\[\d+\]: .* must stand above the floor"):
+        build_rig(dataclasses.replace(base, cameras=sunk), rng)
     missing = dataclasses.replace(base, cameras=dataclasses.replace(config, calibration="nowhere.json"))
     with pytest.raises(ScenarioError, match="cameras.calibration.*nowhere.json"):
         build_rig(missing, rng)
+
+
+def test_shipped_campus_scenario_takes_the_dataset_layout_calibration_beside_it(rng):
+    campus = scenario_mod.load("campus")
+    assert campus.cameras.calibration_format is CalibrationFormat.DATASET
+    cams = build_rig(campus, rng)
+    origin = np.array(campus.cameras.calibration_origin_m)
+    raw = json.loads(CAMPUS_RIG.read_text())["cameras"]
+    assert [c.name for c in cams] == ["Camera0", "Camera1", "Camera2"]
+    for cam in cams:
+        # Where the file puts the camera (Tw's translation, cm), moved by the origin; its K at 360 x 288 pixels.
+        Tw = np.array(raw[cam.name]["Tw"])
+        np.testing.assert_allclose(cam.center_world, Tw[:3, 3] / 100 + origin, atol=1e-9)
+        np.testing.assert_allclose(cam.K, np.array(raw[cam.name]["K"]) * [[360], [288], [1]])
+        np.testing.assert_allclose(cam.dist[:4], raw[cam.name]["dist_coeffs"])
+        assert (cam.width_px, cam.height_px) == (360, 288)
+        # Standing around the square, not over it, at the height of a tripod.
+        x, y, z = cam.center_world
+        assert not (0 <= x <= campus.store.width_m and 0 <= y <= campus.store.depth_m) and 1.5 < z < 2.5
+        assert in_image(cam, np.array([campus.store.width_m / 2, campus.store.depth_m / 2, 1.0]))[1]
+
+
+def test_campus_rig_reprojects_the_real_campus_annotations():
+    """The scenario's cameras (without their lens distortion, as the published 2D points are undistorted) put
+    the real 3D truth where the real 2D annotation has it: an independent check of K, Tw and the origin."""
+    campus = scenario_mod.load("campus")
+    cams = {c.name: c for c in build_rig(campus, np.random.default_rng(0))}
+    origin = np.array(campus.cameras.calibration_origin_m)
+    truth = json.loads((CAMPUS / "annotation_3d.json").read_text())
+    frames = json.loads((CAMPUS / "annotation_2d.json").read_text())["frames"]
+    errors = []
+    for frame in frames.values():
+        index = round(frame["timestamp"] * 25)
+        poses_3d = {p["id"]: np.array(p["points_3d"]) / 100 + origin for p in truth[index]["poses"]} \
+            if index < len(truth) else {}
+        cam = dataclasses.replace(cams[frame["camera"]], dist=np.zeros(5))
+        for pose in frame["poses"]:
+            if pose["id"] in poses_3d:
+                px, _ = in_image(cam, poses_3d[pose["id"]])
+                errors.extend(np.linalg.norm(px - np.array(pose["points_2d"]), axis=-1))
+    assert len(errors) > 1000
+    assert np.median(errors) < 1.0  # px (the published files agree to 0.3 px)
+
+
+def _campus_scenario(tmp_path, calibration_text: str | bytes | None, fmt: str = "dataset"):
+    """The shipped campus scenario with its calibration replaced by `calibration_text` in tmp_path (None: no file)."""
+    if calibration_text is not None:
+        data = calibration_text if isinstance(calibration_text, bytes) else calibration_text.encode()
+        (tmp_path / "rig.json").write_bytes(data)
+    text = scenario_mod.resolve_path("campus").read_text()
+    text = text.replace("calibrations/campus_calibration.json", "rig.json")
+    text = text.replace('calibration_format = "dataset"', f'calibration_format = "{fmt}"')
+    (tmp_path / "campus.toml").write_text(text)
+    return scenario_mod.load(tmp_path / "campus.toml")
+
+
+def _campus_rig_with(change) -> str:
+    data = json.loads(CAMPUS_RIG.read_text())
+    change(data)
+    return json.dumps(data)
+
+
+BAD_DATASET_CALIBRATIONS = [
+    ("missing", None, "dataset", r"cameras.calibration: 'rig.json': no such file"),
+    ("not-json", "{", "dataset", r"rig.json' as a dataset calibration: Expecting property name"),
+    ("not-utf8", b'{"cameras": "\xff"}', "dataset", r"rig.json' as a dataset calibration: .*codec can't decode"),
+    ("not-an-object", "[1, 2]", "dataset", r"the file must be an object, got list"),
+    ("cameras-a-list", _campus_rig_with(lambda d: d.update(cameras=list(d["cameras"].values()))), "dataset",
+     r"key 'cameras' \(camera name -> \{K, Tw\}\) must be an object, got list"),
+    ("no-image-size", _campus_rig_with(lambda d: d.pop("image_wh")), "dataset", r"key 'image_wh' missing"),
+    ("bad-image-size", _campus_rig_with(lambda d: d.update(image_wh=[360])), "dataset",
+     r"key 'image_wh' = \[360\] must be \[width, height\]"),
+    ("no-pose", _campus_rig_with(lambda d: d["cameras"]["Camera1"].pop("Tw")), "dataset",
+     r"camera 'Camera1': key 'Tw' missing or not numeric"),
+    ("wrong-shape", _campus_rig_with(lambda d: d["cameras"]["Camera2"].update(K=[[1, 0], [0, 1]])), "dataset",
+     r"camera 'Camera2': K must be 3x3 and Tw 4x4, got \(2, 2\)"),
+    ("null-in-pose", _campus_rig_with(lambda d: d["cameras"]["Camera0"]["Tw"][0].__setitem__(3, None)), "dataset",
+     r"camera 'Camera0': K and Tw must hold numbers"),
+    ("panoptic-file-as-dataset", PANOPTIC.read_text(), "dataset",
+     r"key 'cameras' \(camera name -> \{K, Tw\}\) must be an object, got list"),
+    ("dataset-file-as-panoptic", CAMPUS_RIG.read_text(), "panoptic",
+     r"as a panoptic calibration: key 'cameras' must be an array .* calibration_format = \"dataset\""),
+]
+
+
+@pytest.mark.parametrize(("text", "fmt", "expected"), [c[1:] for c in BAD_DATASET_CALIBRATIONS],
+                         ids=[c[0] for c in BAD_DATASET_CALIBRATIONS])
+def test_bad_dataset_calibrations_are_scenario_errors_naming_file_and_key(tmp_path, rng, text, fmt, expected):
+    scenario = _campus_scenario(tmp_path, text, fmt)
+    with pytest.raises(ScenarioError, match=expected) as caught:
+        build_rig(scenario, rng)
+    message = str(caught.value)
+    assert message.startswith(f"{tmp_path / 'campus.toml'}: cameras.calibration: ") and "\n" not in message
 
 
 def _stacked_rig(rig) -> tuple:
