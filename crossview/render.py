@@ -139,30 +139,40 @@ def outputs_for(tracks, frames: list[CameraFrame]) -> dict[int, TrackerOutput]:
 
 
 class SceneRenderer:
-    """The recording's world, rebuilt and posed at any capture time, rendered through its cameras.
+    """A scenario's world, built again and posed at any true time, rendered through its cameras.
 
     Args:
-        rec: the opened recording.
+        scenario: the `sim.scenario.Scenario` simulated (a recording's: `of_recording`).
+        seed: its seed (the crowd's random stream is `child_rng(seed, "crowd")`, as the simulation's).
+        cameras: the rig.
 
     Call `sim.render.choose_backend` first (before mujoco is imported).
     """
 
-    def __init__(self, rec):
+    def __init__(self, scenario, seed: int, cameras: list[Camera]):
         from sim.render import CameraRenderer
-        from sim.scenario import from_source_text
 
-        self.rec = rec
-        self.scenario = from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
+        self.scenario = scenario
+        self.seed = int(seed)
+        self.cameras = list(cameras)
         self._world = None
         self._world_t = math.inf
         self._build_world()
-        self.renderer = CameraRenderer(self._world.model, rec.cameras)
+        self.renderer = CameraRenderer(self._world.model, self.cameras)
+
+    @classmethod
+    def of_recording(cls, rec) -> SceneRenderer:
+        """The world of an opened recording, from the scenario text and seed it keeps."""
+        from sim.scenario import from_source_text
+
+        scenario = from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
+        return cls(scenario, rec.header.seed, rec.cameras)
 
     def _build_world(self) -> None:
         from sim.rng import child_rng
         from sim.world import World
 
-        self._world = World(self.scenario, child_rng(self.rec.header.seed, "crowd"))
+        self._world = World(self.scenario, child_rng(self.seed, "crowd"))
         self._world_t = 0.0
 
     def world_at(self, t_s: float):
@@ -172,7 +182,7 @@ class SceneRenderer:
 
             self.renderer.close()
             self._build_world()
-            self.renderer = CameraRenderer(self._world.model, self.rec.cameras)
+            self.renderer = CameraRenderer(self._world.model, self.cameras)
         self._world.advance(t_s)
         self._world_t = t_s
         return self._world
@@ -184,6 +194,82 @@ class SceneRenderer:
 
     def close(self) -> None:
         self.renderer.close()
+
+
+JPEG_QUALITY = 85
+"""OpenCV's JPEG quality (0-100; its default is 95) of the pictures `crossview generate --images` stores."""
+# Rates are compared as k · rate / fps against whole numbers: this much below one still counts as one.
+_COUNT_EPS = 1e-9
+
+
+def check_image_rate(images_per_s: float, fps: float, where: str) -> None:
+    """RenderError unless 0 < `images_per_s` <= `fps` (one picture per frame at most)."""
+    if not (math.isfinite(images_per_s) and 0 < images_per_s <= fps):
+        raise RenderError(f"--images {images_per_s:g}: pictures per second per camera must be > 0 and at most the "
+                          f"cameras' frame rate, {fps:g} fps in {where} (one picture per frame at most)")
+
+
+class FrameImages:
+    """JPEG pictures of what the cameras saw for some of a generation's frames (`crossview generate --images`).
+
+    A camera's delivered frames are counted in capture order from k = 0, and frame k gets a picture when
+    floor(k r) > floor((k - 1) r), r = `images_per_s` / `fps`: its first frame, then evenly spread, every
+    frame at r = 1. The picture is `SceneRenderer`'s view (the world `crossview render` builds again, posed at
+    the frame's true capture time, through the camera's lens) without overlays, JPEG-encoded by OpenCV at
+    `JPEG_QUALITY`.
+
+    Args:
+        scenario, seed, cameras: what is simulated (`SceneRenderer`).
+        images_per_s: pictures per second per camera, in (0, fps].
+        fps: the cameras' frame rate.
+
+    Attributes:
+        count: pictures made so far; render_s: seconds spent making them (render, lens remap, JPEG).
+
+    Call `sim.render.choose_backend` first. Use as a context manager or call `close`.
+    """
+
+    def __init__(self, scenario, seed: int, cameras: list[Camera], images_per_s: float, fps: float):
+        self.scene = SceneRenderer(scenario, seed, cameras)
+        self._ratio = float(images_per_s) / float(fps)
+        self._taken = [0] * len(cameras)
+        self.count = 0
+        self.render_s = 0.0
+
+    def _wanted(self, camera: int) -> bool:
+        k = self._taken[camera]
+        self._taken[camera] += 1
+        return k == 0 or math.floor(k * self._ratio + _COUNT_EPS) > math.floor((k - 1) * self._ratio + _COUNT_EPS)
+
+    def pictures(self, cameras: list[int], capture_s: list[float]) -> list[bytes | None]:
+        """The JPEG bytes of each frame that gets a picture, None for the others.
+
+        Args:
+            cameras: the frames' camera indices.
+            capture_s: their true capture times, seconds, ascending across calls (the world moves forward).
+        """
+        out: list[bytes | None] = []
+        for camera, t in zip(cameras, capture_s, strict=True):
+            if not self._wanted(camera):
+                out.append(None)
+                continue
+            start = time.perf_counter()
+            ok, data = cv2.imencode(".jpg", self.scene.view(camera, t), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+            if not ok:
+                raise RuntimeError("OpenCV could not encode a rendered picture as JPEG")
+            out.append(data.tobytes())
+            self.render_s += time.perf_counter() - start
+            self.count += 1
+        return out
+
+    def close(self) -> None:
+        self.scene.close()
+
+    def __enter__(self) -> FrameImages:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def _text(image: np.ndarray, text: str, org: tuple[int, int], scale: float, colour=(255, 255, 255)) -> None:
@@ -292,9 +378,8 @@ class _Timer:
         return RenderTiming(self.renders, self.seconds)
 
 
-def _camera_picture(scene: SceneRenderer, timer: _Timer, index: int, frame: CameraFrame,
+def _camera_picture(rec, scene: SceneRenderer, timer: _Timer, index: int, frame: CameraFrame,
                     output: TrackerOutput | None) -> np.ndarray:
-    rec = scene.rec
     camera = rec.cameras[index]
     image = draw_frame(timer.view(scene, index, frame.truth.capture_s), camera, frame, rec.skeleton, output)
     return _header(image, [_frame_caption(camera, frame, output)])
@@ -304,10 +389,9 @@ def _sheet_columns(count: int) -> int:
     return max(1, math.ceil(math.sqrt(count * 4 / 3)))
 
 
-def _contact_sheet(scene: SceneRenderer, timer: _Timer, frames: dict[int, CameraFrame],
+def _contact_sheet(rec, scene: SceneRenderer, timer: _Timer, frames: dict[int, CameraFrame],
                    outputs: dict[int, TrackerOutput], t_s: float, tile_width_px: int) -> np.ndarray:
     """Every camera's view (its frame nearest `t_s`) in a labelled grid, in rig order."""
-    rec = scene.rec
     order = sorted(frames, key=lambda i: frames[i].truth.capture_s)  # the world only moves forward
     tiles: dict[int, np.ndarray] = {}
     for i in order:
@@ -435,14 +519,14 @@ def _render_picture(request: Request, data: Inputs, indices: list[int]) -> Rende
     if data.tracks is not None:
         found = outputs_for(data.tracks, [f for _, f in listed])
         outputs = {listed[k][0]: o for k, o in found.items()}
-    scene = SceneRenderer(rec)
+    scene = SceneRenderer.of_recording(rec)
     timer = _Timer()
     try:
         if request.contact_sheet:
-            image = _contact_sheet(scene, timer, frames, outputs, request.time_s, request.tile_width_px)
+            image = _contact_sheet(rec, scene, timer, frames, outputs, request.time_s, request.tile_width_px)
         else:
             (index, frame), = listed
-            image = _camera_picture(scene, timer, index, frame, outputs.get(index))
+            image = _camera_picture(rec, scene, timer, index, frame, outputs.get(index))
     finally:
         scene.close()
     write_bytes(encode_picture(image, request.output), request.output)
@@ -463,7 +547,7 @@ def _render_clip(request: Request, data: Inputs, indices: list[int]) -> RenderRe
     if data.tracks is not None and keys:
         found = outputs_for(data.tracks, [frames[k] for k in keys])
         outputs = {keys[n]: o for n, o in found.items()}
-    scene = SceneRenderer(rec)
+    scene = SceneRenderer.of_recording(rec)
     timer = _Timer()
     try:
         with ClipWriter(request.output, request.fps) as clip:
@@ -472,9 +556,9 @@ def _render_clip(request: Request, data: Inputs, indices: list[int]) -> RenderRe
                     at = {i: frames[(i, t)] for i in indices if (i, t) in frames}
                     outs = {i: outputs[(i, t)] for i in at if (i, t) in outputs}
                     if at:
-                        clip.add(_contact_sheet(scene, timer, at, outs, t, request.tile_width_px))
+                        clip.add(_contact_sheet(rec, scene, timer, at, outs, t, request.tile_width_px))
                 elif (indices[0], t) in frames:
-                    clip.add(_camera_picture(scene, timer, indices[0], frames[(indices[0], t)],
+                    clip.add(_camera_picture(rec, scene, timer, indices[0], frames[(indices[0], t)],
                                              outputs.get((indices[0], t))))
             if not clip.count:
                 raise RenderError(f"--from {request.from_s:g} --to {request.to_s:g}: no frame of the camera in that "

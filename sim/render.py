@@ -8,8 +8,9 @@ pixel at the undistorted ray of (u, v) (`cv2.undistortPoints`). Rendered pixels,
 
 MuJoCo chooses its OpenGL backend once, when it is first imported, from the environment variable
 MUJOCO_GL: `choose_backend` must run before anything imports mujoco (`sim.world` does). It takes the
-backend the caller names, else the first of EGL (a GPU) and OSMesa (software, Debian's libosmesa6) with
-which MuJoCo opens an offscreen context here (each probed in a fresh interpreter).
+backend the caller names (or MUJOCO_GL names), checked to open, else the first of EGL (a GPU, or Mesa's
+software EGL) and OSMesa (software, Debian's libosmesa6) with which MuJoCo opens an offscreen context here
+(each probed in a fresh interpreter).
 """
 
 from __future__ import annotations
@@ -51,6 +52,12 @@ class GLBackend(enum.Enum):
     OSMESA = "osmesa"
 
 
+# What to do when a backend the user named does not open.
+_BACKEND_HINTS = {
+    GLBackend.EGL: "run where a GPU driver (or Mesa's libegl-mesa0) gives EGL, or choose OSMesa (--gl osmesa)",
+    GLBackend.OSMESA: "install Debian's libosmesa6 (apt-get install libosmesa6)",
+}
+
 class RenderingUnavailable(CrossviewError):
     """No offscreen OpenGL context can be opened here (or MuJoCo was imported with rendering disabled)."""
 
@@ -68,20 +75,29 @@ def _backend_env(backend: GLBackend) -> dict:
 
 
 @functools.cache
-def probe_backend() -> GLBackend | None:
-    """The first of `GLBackend` with which MuJoCo opens an offscreen context here, each tried in a fresh
-    interpreter (MuJoCo's backend cannot change once it is imported); None when neither works."""
+def backend_problem(backend: GLBackend) -> str | None:
+    """Why MuJoCo cannot open an offscreen context with `backend` here, in one line (tried in a fresh
+    interpreter: MuJoCo's backend cannot change once it is imported); None when it can."""
     probe = "import mujoco; mujoco.GLContext(8, 8).make_current()"
+    try:
+        done = subprocess.run([sys.executable, "-c", probe], env=_backend_env(backend), capture_output=True,
+                              timeout=_PROBE_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return f"opening a context took more than {_PROBE_TIMEOUT_S:g} s"
+    if done.returncode == 0:
+        return None
+    last = done.stderr.decode(errors="replace").strip().splitlines()[-1:]
+    return last[0] if last else f"exit status {done.returncode}"
+
+
+def probe_backend() -> GLBackend | None:
+    """The first of `GLBackend` with which MuJoCo opens an offscreen context here (`backend_problem`); None
+    when neither works."""
     for backend in GLBackend:
-        try:
-            done = subprocess.run([sys.executable, "-c", probe], env=_backend_env(backend), capture_output=True,
-                                  timeout=_PROBE_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            continue
-        if done.returncode == 0:
+        problem = backend_problem(backend)
+        if problem is None:
             return backend
-        log.info("offscreen backend %s unavailable: %s", backend.value,
-                 done.stderr.decode(errors="replace").strip().splitlines()[-1:])
+        log.info("offscreen backend %s unavailable: %s", backend.value, problem)
     return None
 
 
@@ -99,15 +115,22 @@ def choose_backend(requested: str | None = None) -> GLBackend:
     names = ", ".join(b.value for b in GLBackend)
     if importlib.util.find_spec("OpenGL") is None:
         raise RenderingUnavailable("PyOpenGL is not installed (MuJoCo's EGL and OSMesa contexts need it): "
-                                   "pip install 'crossview-testbed[render]'")
+                                   "pip install '.[render]' in a checkout, or pip install 'crossview-testbed[render]'")
+    from_env = None
     if requested is None:
         from_env = os.environ.get("MUJOCO_GL", "").strip().lower()
-        requested = from_env if from_env in {b.value for b in GLBackend} else None
+        from_env = from_env if from_env in {b.value for b in GLBackend} else None
+        requested = from_env
     if requested is not None:
         try:
             backend = GLBackend(requested.strip().lower())
         except ValueError:
             raise RenderingUnavailable(f"--gl {requested}: unknown OpenGL backend (valid: {names})") from None
+        problem = backend_problem(backend)
+        if problem is not None:
+            named = f"MUJOCO_GL={backend.value}" if from_env else f"--gl {backend.value}"
+            raise RenderingUnavailable(f"{named}: MuJoCo cannot open an offscreen {backend.value} context here "
+                                       f"({problem}); {_BACKEND_HINTS[backend]}")
     else:
         backend = probe_backend()
         if backend is None:
