@@ -145,44 +145,45 @@ class SceneRenderer:
         scenario: the `sim.scenario.Scenario` simulated (a recording's: `of_recording`).
         seed: its seed (the crowd's random stream is `child_rng(seed, "crowd")`, as the simulation's).
         cameras: the rig.
+        multisamples: the renders' samples per pixel (`sim.render.CameraRenderer`); None: MuJoCo's 4.
 
     Call `sim.render.choose_backend` first (before mujoco is imported).
     """
 
-    def __init__(self, scenario, seed: int, cameras: list[Camera]):
-        from sim.render import CameraRenderer
-
+    def __init__(self, scenario, seed: int, cameras: list[Camera], *, multisamples: int | None = None):
         self.scenario = scenario
         self.seed = int(seed)
         self.cameras = list(cameras)
+        self.multisamples = multisamples
         self._world = None
         self._world_t = math.inf
+        self.renderer = None
         self._build_world()
-        self.renderer = CameraRenderer(self._world.model, self.cameras)
 
     @classmethod
-    def of_recording(cls, rec) -> SceneRenderer:
+    def of_recording(cls, rec, *, multisamples: int | None = None) -> SceneRenderer:
         """The world of an opened recording, from the scenario text and seed it keeps."""
         from sim.scenario import from_source_text
 
         scenario = from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
-        return cls(scenario, rec.header.seed, rec.cameras)
+        return cls(scenario, rec.header.seed, rec.cameras, multisamples=multisamples)
 
     def _build_world(self) -> None:
+        """A new world at time 0, with a renderer of its model."""
+        from sim.render import CameraRenderer
         from sim.rng import child_rng
         from sim.world import World
 
+        if self.renderer is not None:
+            self.renderer.close()
         self._world = World(self.scenario, child_rng(self.seed, "crowd"))
         self._world_t = 0.0
+        self.renderer = CameraRenderer(self._world.model, self.cameras, multisamples=self.multisamples)
 
     def world_at(self, t_s: float):
         """The world advanced to true time `t_s` (built again when an earlier time is asked for)."""
-        if t_s < self._world_t:  # the world only moves forward: start again, with a renderer of the new model
-            from sim.render import CameraRenderer
-
-            self.renderer.close()
+        if t_s < self._world_t:  # the world only moves forward: start again
             self._build_world()
-            self.renderer = CameraRenderer(self._world.model, self.cameras)
         self._world.advance(t_s)
         self._world_t = t_s
         return self._world
@@ -198,6 +199,9 @@ class SceneRenderer:
 
 JPEG_QUALITY = 85
 """OpenCV's JPEG quality (0-100; its default is 95) of the pictures `crossview generate --images` stores."""
+IMAGE_MULTISAMPLES = 0
+"""Samples per pixel of those pictures' renders: none, for half the time of MuJoCo's 4 in software; the lens
+remap's bilinear reads soften the edges anyway."""
 # Rates are compared as k · rate / fps against whole numbers: this much below one still counts as one.
 _COUNT_EPS = 1e-9
 
@@ -215,8 +219,8 @@ class FrameImages:
     A camera's delivered frames are counted in capture order from k = 0, and frame k gets a picture when
     floor(k r) > floor((k - 1) r), r = `images_per_s` / `fps`: its first frame, then evenly spread, every
     frame at r = 1. The picture is `SceneRenderer`'s view (the world `crossview render` builds again, posed at
-    the frame's true capture time, through the camera's lens) without overlays, JPEG-encoded by OpenCV at
-    `JPEG_QUALITY`.
+    the frame's true capture time, through the camera's lens) without overlays, rendered with
+    `IMAGE_MULTISAMPLES` and JPEG-encoded by OpenCV at `JPEG_QUALITY`.
 
     Args:
         scenario, seed, cameras: what is simulated (`SceneRenderer`).
@@ -230,7 +234,7 @@ class FrameImages:
     """
 
     def __init__(self, scenario, seed: int, cameras: list[Camera], images_per_s: float, fps: float):
-        self.scene = SceneRenderer(scenario, seed, cameras)
+        self.scene = SceneRenderer(scenario, seed, cameras, multisamples=IMAGE_MULTISAMPLES)
         self._ratio = float(images_per_s) / float(fps)
         self._taken = [0] * len(cameras)
         self.count = 0

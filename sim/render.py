@@ -204,6 +204,8 @@ class CameraRenderer:
         model: the `mujoco.MjModel` to render (a `sim.world.World`'s); its offscreen buffer is enlarged to the
             largest pinhole render and its headlight brightened.
         cameras: the rig.
+        multisamples: samples per pixel of the offscreen buffer (the model's `vis.quality.offsamples`, 4 by
+            default: None keeps it); 0 renders about twice as fast in software, with harder edges.
 
     Attributes:
         option: the `mujoco.MjvOption` of every render (which geom and site groups are drawn).
@@ -211,7 +213,7 @@ class CameraRenderer:
     Call `choose_backend` before mujoco is first imported. Use as a context manager or call `close`.
     """
 
-    def __init__(self, model, cameras: list[Camera]):
+    def __init__(self, model, cameras: list[Camera], *, multisamples: int | None = None):
         import mujoco
 
         if getattr(mujoco, "GLContext", None) is None:
@@ -223,6 +225,8 @@ class CameraRenderer:
         self._renderers: dict[tuple[int, int], object] = {}
         self.model.vis.headlight.ambient[:] = _HEADLIGHT_AMBIENT
         self.model.vis.headlight.diffuse[:] = _HEADLIGHT_DIFFUSE
+        if multisamples is not None:  # (read when each renderer's context is made)
+            self.model.vis.quality.offsamples = int(multisamples)
         # What is drawn (MuJoCo's defaults: geom groups 0-2, site groups 0-2; the keypoint sites are group 4).
         self.option = mujoco.MjvOption()
 

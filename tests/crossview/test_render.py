@@ -261,10 +261,10 @@ from sim.render import choose_backend
 choose_backend(sys.argv[3])
 import cv2
 from crossview import recording
-from crossview.render import JPEG_QUALITY, SceneRenderer
+from crossview.render import IMAGE_MULTISAMPLES, JPEG_QUALITY, SceneRenderer
 
 rec = recording.open_recording(sys.argv[1])
-scene = SceneRenderer.of_recording(rec)
+scene = SceneRenderer.of_recording(rec, multisamples=IMAGE_MULTISAMPLES)
 for n, (index, capture_s) in enumerate(json.loads(sys.argv[2])):
     ok, data = cv2.imencode(".jpg", scene.view(index, capture_s), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
     open(f"{sys.argv[4]}/{n}.jpg", "wb").write(data.tobytes())
