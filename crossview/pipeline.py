@@ -109,14 +109,13 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
         worker_process: simulate in a second process pipelined with the writer (`sim.simulate.Simulation`);
             False where the cores are already busy (a sweep's cells run side by side). The bytes are the same.
         images_per_s: store this many rendered JPEG pictures per second per camera, at most the cameras'
-            frame rate (`crossview.render.FrameImages`); None: none. Rendering needs an offscreen OpenGL
+            frame rate (`sim.render.FrameImages`); None: none. Rendering needs an offscreen OpenGL
             backend chosen before MuJoCo is imported in this process (`sim.render.choose_backend`).
         gl: that backend ("egl", "osmesa"); None: MUJOCO_GL when it names one, else probed.
     """
     check_writable(out, inputs=(scenario.source_path or None,))
     if images_per_s is not None:
-        from crossview.render import check_image_rate
-        from sim.render import choose_backend
+        from sim.render import check_image_rate, choose_backend
 
         check_image_rate(images_per_s, scenario.clock.fps, scenario.source_path or scenario.name)
         choose_backend(gl)
@@ -158,7 +157,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
                                                    disable=not progress, leave=False)))
             recording.warm_up(sim.skeleton)
             if images_per_s is not None:  # (made here, after the worker's fork: its OpenGL context stays here)
-                from crossview.render import FrameImages
+                from sim.render import FrameImages
 
                 opened.append(stack.enter_context(FrameImages(scenario, scenario.seed, sim.cameras, images_per_s,
                                                               scenario.clock.fps)))

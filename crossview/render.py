@@ -27,6 +27,7 @@ from core.types import Camera, Skeleton
 from crossview import pipeline
 from crossview.outputs import write_bytes
 from crossview.pictures import FALSE_POSITIVE_BGR, person_bgr
+from sim.render import SceneRenderer
 from sim.types import CameraFrame
 from tracker.types import TrackerOutput
 
@@ -138,142 +139,13 @@ def outputs_for(tracks, frames: list[CameraFrame]) -> dict[int, TrackerOutput]:
     return found
 
 
-class SceneRenderer:
-    """A scenario's world, built again and posed at any true time, rendered through its cameras.
+def scene_of(rec, *, multisamples: int | None = None) -> SceneRenderer:
+    """The world of an opened recording, built again from the scenario text and seed it keeps, ready to render
+    through its cameras (`sim.render.SceneRenderer`)."""
+    from sim.scenario import from_source_text
 
-    Args:
-        scenario: the `sim.scenario.Scenario` simulated (a recording's: `of_recording`).
-        seed: its seed (the crowd's random stream is `child_rng(seed, "crowd")`, as the simulation's).
-        cameras: the rig.
-        multisamples: the renders' samples per pixel (`sim.render.CameraRenderer`); None: MuJoCo's 4.
-
-    Call `sim.render.choose_backend` first (before mujoco is imported).
-    """
-
-    def __init__(self, scenario, seed: int, cameras: list[Camera], *, multisamples: int | None = None):
-        self.scenario = scenario
-        self.seed = int(seed)
-        self.cameras = list(cameras)
-        self.multisamples = multisamples
-        self._world = None
-        self._world_t = math.inf
-        self.renderer = None
-        self._build_world()
-
-    @classmethod
-    def of_recording(cls, rec, *, multisamples: int | None = None) -> SceneRenderer:
-        """The world of an opened recording, from the scenario text and seed it keeps."""
-        from sim.scenario import from_source_text
-
-        scenario = from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
-        return cls(scenario, rec.header.seed, rec.cameras, multisamples=multisamples)
-
-    def _build_world(self) -> None:
-        """A new world at time 0, with a renderer of its model."""
-        from sim.render import CameraRenderer
-        from sim.rng import child_rng
-        from sim.world import World
-
-        if self.renderer is not None:
-            self.renderer.close()
-        self._world = World(self.scenario, child_rng(self.seed, "crowd"))
-        self._world_t = 0.0
-        self.renderer = CameraRenderer(self._world.model, self.cameras, multisamples=self.multisamples)
-
-    def world_at(self, t_s: float):
-        """The world advanced to true time `t_s` (built again when an earlier time is asked for)."""
-        if t_s < self._world_t:  # the world only moves forward: start again
-            self._build_world()
-        self._world.advance(t_s)
-        self._world_t = t_s
-        return self._world
-
-    def view(self, index: int, capture_s: float) -> np.ndarray:
-        """(H, W, 3) uint8 BGR: camera `index`'s view at true time `capture_s`."""
-        world = self.world_at(capture_s)
-        return cv2.cvtColor(self.renderer.render(world.data, index), cv2.COLOR_RGB2BGR)
-
-    def close(self) -> None:
-        self.renderer.close()
-
-
-JPEG_QUALITY = 85
-"""OpenCV's JPEG quality (0-100; its default is 95) of the pictures `crossview generate --images` stores."""
-IMAGE_MULTISAMPLES = 0
-"""Samples per pixel of those pictures' renders: none, for half the time of MuJoCo's 4 in software; the lens
-remap's bilinear reads soften the edges anyway."""
-# Rates are compared as k · rate / fps against whole numbers: this much below one still counts as one.
-_COUNT_EPS = 1e-9
-
-
-def check_image_rate(images_per_s: float, fps: float, where: str) -> None:
-    """RenderError unless 0 < `images_per_s` <= `fps` (one picture per frame at most)."""
-    if not (math.isfinite(images_per_s) and 0 < images_per_s <= fps):
-        raise RenderError(f"--images {images_per_s:g}: pictures per second per camera must be > 0 and at most the "
-                          f"cameras' frame rate, {fps:g} fps in {where} (one picture per frame at most)")
-
-
-class FrameImages:
-    """JPEG pictures of what the cameras saw for some of a generation's frames (`crossview generate --images`).
-
-    A camera's delivered frames are counted in capture order from k = 0, and frame k gets a picture when
-    floor(k r) > floor((k - 1) r), r = `images_per_s` / `fps`: its first frame, then evenly spread, every
-    frame at r = 1. The picture is `SceneRenderer`'s view (the world `crossview render` builds again, posed at
-    the frame's true capture time, through the camera's lens) without overlays, rendered with
-    `IMAGE_MULTISAMPLES` and JPEG-encoded by OpenCV at `JPEG_QUALITY`.
-
-    Args:
-        scenario, seed, cameras: what is simulated (`SceneRenderer`).
-        images_per_s: pictures per second per camera, in (0, fps].
-        fps: the cameras' frame rate.
-
-    Attributes:
-        count: pictures made so far; render_s: seconds spent making them (render, lens remap, JPEG).
-
-    Call `sim.render.choose_backend` first. Use as a context manager or call `close`.
-    """
-
-    def __init__(self, scenario, seed: int, cameras: list[Camera], images_per_s: float, fps: float):
-        self.scene = SceneRenderer(scenario, seed, cameras, multisamples=IMAGE_MULTISAMPLES)
-        self._ratio = float(images_per_s) / float(fps)
-        self._taken = [0] * len(cameras)
-        self.count = 0
-        self.render_s = 0.0
-
-    def _wanted(self, camera: int) -> bool:
-        k = self._taken[camera]
-        self._taken[camera] += 1
-        return k == 0 or math.floor(k * self._ratio + _COUNT_EPS) > math.floor((k - 1) * self._ratio + _COUNT_EPS)
-
-    def pictures(self, cameras: list[int], capture_s: list[float]) -> list[bytes | None]:
-        """The JPEG bytes of each frame that gets a picture, None for the others.
-
-        Args:
-            cameras: the frames' camera indices.
-            capture_s: their true capture times, seconds, ascending across calls (the world moves forward).
-        """
-        out: list[bytes | None] = []
-        for camera, t in zip(cameras, capture_s, strict=True):
-            if not self._wanted(camera):
-                out.append(None)
-                continue
-            start = time.perf_counter()
-            ok, data = cv2.imencode(".jpg", self.scene.view(camera, t), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
-            if not ok:
-                raise RuntimeError("OpenCV could not encode a rendered picture as JPEG")
-            out.append(data.tobytes())
-            self.render_s += time.perf_counter() - start
-            self.count += 1
-        return out
-
-    def close(self) -> None:
-        self.scene.close()
-
-    def __enter__(self) -> FrameImages:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+    scenario = from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
+    return SceneRenderer(scenario, rec.header.seed, rec.cameras, multisamples=multisamples)
 
 
 def _text(image: np.ndarray, text: str, org: tuple[int, int], scale: float, colour=(255, 255, 255)) -> None:
@@ -523,7 +395,7 @@ def _render_picture(request: Request, data: Inputs, indices: list[int]) -> Rende
     if data.tracks is not None:
         found = outputs_for(data.tracks, [f for _, f in listed])
         outputs = {listed[k][0]: o for k, o in found.items()}
-    scene = SceneRenderer.of_recording(rec)
+    scene = scene_of(rec)
     timer = _Timer()
     try:
         if request.contact_sheet:
@@ -551,7 +423,7 @@ def _render_clip(request: Request, data: Inputs, indices: list[int]) -> RenderRe
     if data.tracks is not None and keys:
         found = outputs_for(data.tracks, [frames[k] for k in keys])
         outputs = {keys[n]: o for n, o in found.items()}
-    scene = SceneRenderer.of_recording(rec)
+    scene = scene_of(rec)
     timer = _Timer()
     try:
         with ClipWriter(request.output, request.fps) as clip:

@@ -63,13 +63,13 @@ choose_backend(sys.argv[3])
 import mujoco
 import numpy as np
 from crossview import recording
-from crossview.render import SceneRenderer
+from crossview.render import scene_of
 from sim import humanoid
 
 rec = recording.open_recording(sys.argv[1])
 spec = json.loads(sys.argv[2])
 index = spec["camera"]
-scene = SceneRenderer.of_recording(rec)
+scene = scene_of(rec)
 world = scene.world_at(spec["capture_s"])
 renderer = scene.renderer
 seg = renderer.render(world.data, index, RenderKind.SEGMENTATION)
@@ -261,10 +261,11 @@ from sim.render import choose_backend
 choose_backend(sys.argv[3])
 import cv2
 from crossview import recording
-from crossview.render import IMAGE_MULTISAMPLES, JPEG_QUALITY, SceneRenderer
+from crossview.render import scene_of
+from sim.render import IMAGE_MULTISAMPLES, JPEG_QUALITY
 
 rec = recording.open_recording(sys.argv[1])
-scene = SceneRenderer.of_recording(rec, multisamples=IMAGE_MULTISAMPLES)
+scene = scene_of(rec, multisamples=IMAGE_MULTISAMPLES)
 for n, (index, capture_s) in enumerate(json.loads(sys.argv[2])):
     ok, data = cv2.imencode(".jpg", scene.view(index, capture_s), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
     open(f"{sys.argv[4]}/{n}.jpg", "wb").write(data.tobytes())
