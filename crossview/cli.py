@@ -116,6 +116,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("-o", "--output", type=Path, required=True, help="recording to write (.mcap)")
     scenario_options(p)
+    p.add_argument("--images", type=_positive_float, metavar="RATE", help="store RATE rendered JPEG pictures per "
+                   "second per camera (at most the frame rate; needs the render extra; docs/rendering.md)")
+    p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend for --images (default: "
+                   "$MUJOCO_GL when it names one, else EGL, then OSMesa)")
 
     p = sub.add_parser("track", help="run a tracker over a recording")
     p.add_argument("recording", type=Path)
@@ -346,9 +350,13 @@ def _cmd_generate(args) -> None:
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
-    gen = pipeline.generate(scenario, args.output, progress=not args.no_progress)
+    gen = pipeline.generate(scenario, args.output, progress=not args.no_progress, images_per_s=args.images,
+                            gl=args.gl)
     print(f"{gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
           f"({_speed(gen)})")
+    if gen.images:
+        print(f"{gen.images} pictures rendered in {gen.images_s:.1f} s ({1000 * gen.images_s / gen.images:.0f} ms "
+              "each: render, lens, JPEG)")
 
 
 def _speed(gen) -> str:

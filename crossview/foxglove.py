@@ -241,6 +241,12 @@ def camera_backdrop(camera: Camera, t_ns: int = 0) -> CompressedImage:
     )
 
 
+def camera_image(camera: Camera, t_ns: int, jpeg: bytes) -> CompressedImage:
+    """A rendered picture of what the camera sees (`crossview generate --images`), in its optical frame, stamped
+    `t_ns` like the frame's detections so that an Image panel pairs the two."""
+    return CompressedImage(timestamp=timestamp(t_ns), frame_id=camera_frame_id(camera.name), data=jpeg, format="jpeg")
+
+
 # Repeated Point2/Point3 fields are written straight in protobuf wire format with numpy: building one
 # Python message per point was most of the cost of writing a recording. Each element is the field's tag
 # (wire type 2), the length, then x, y (, z) as fixed64 fields 1, 2 (, 3).

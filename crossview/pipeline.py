@@ -82,6 +82,8 @@ class GenerateResult:
     wall_s: float
     startup_s: float = math.nan
     duration_s: float = math.nan
+    images: int = 0
+    images_s: float = 0.0  # of `wall_s`, making the pictures (`--images`)
 
     @property
     def realtime_factor(self) -> float:
@@ -102,16 +104,25 @@ _SCHEDULE_BYTES_PER_FRAME = 170  # the clock's schedule, as arrays and the lists
 
 
 def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True,
-             worker_process: bool = True) -> GenerateResult:
+             worker_process: bool = True, images_per_s: float | None = None, gl: str | None = None) -> GenerateResult:
     """Simulates `scenario` for its duration and writes the recording to `out` atomically.
 
     Args:
         worker_process: simulate in a second process pipelined with the writer (`sim.simulate.Simulation`);
             False where the cores are already busy (a sweep's cells run side by side). The bytes are the same.
+        images_per_s: store this many rendered JPEG pictures per second per camera, at most the cameras'
+            frame rate (`sim.render.FrameImages`); None: none. Rendering needs an offscreen OpenGL
+            backend chosen before MuJoCo is imported in this process (`sim.render.choose_backend`).
+        gl: that backend ("egl", "osmesa"); None: MUJOCO_GL when it names one, else probed.
     """
+    check_writable(out, inputs=(scenario.source_path or None,))
+    if images_per_s is not None:
+        from sim.render import check_image_rate, choose_backend
+
+        check_image_rate(images_per_s, scenario.clock.fps, scenario.source_path or scenario.name)
+        choose_backend(gl)
     from sim.simulate import Simulation  # MuJoCo is only needed for this stage
 
-    check_writable(out, inputs=(scenario.source_path or None,))
     start = time.perf_counter()
     sim = Simulation(scenario, scenario.seed, worker_process=worker_process)
     scheduled = scenario.duration_s * scenario.clock.fps * len(sim.cameras)
@@ -147,13 +158,23 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             opened.append(stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
                                                    disable=not progress, leave=False)))
             recording.warm_up(sim.skeleton)
+            if images_per_s is not None:  # (made here, after the worker's fork: its OpenGL context stays here)
+                from sim.render import FrameImages
+
+                opened.append(stack.enter_context(FrameImages(scenario, scenario.seed, sim.cameras, images_per_s,
+                                                              scenario.clock.fps)))
 
         def encoded(requests, rows, bounds) -> list:
             """A block's frames encoded straight from the detector's rows, in one compiled call (no
-            CameraFrame objects: the writer takes the encoded frames in their place in the order)."""
+            CameraFrame objects: the writer takes the encoded frames in their place in the order), with the
+            pictures of those that get one (the requests come in capture order)."""
             cameras = [r.camera for r in requests]
             times = [(r.stamp_s, r.capture_s, r.delivery_s) for r in requests]
-            return opened[0].encode_frames(cameras, np.array(times, dtype=np.float64).reshape(-1, 3), bounds, rows)
+            frames = opened[0].encode_frames(cameras, np.array(times, dtype=np.float64).reshape(-1, 3), bounds, rows)
+            if images_per_s is None:
+                return frames
+            pictures = opened[2].pictures(cameras, [r.capture_s for r in requests])
+            return [f if p is None else f._replace(image=p) for f, p in zip(frames, pictures, strict=True)]
 
         batch: list = []  # written many at a time
         started = math.nan
@@ -163,7 +184,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
         for event in events:
             if math.isnan(started):  # the first event: the start-up ends
                 started = time.perf_counter() - start
-                writer, bar = opened
+                writer, bar = opened[:2]
             batch.append(event)
             if not isinstance(event, PoseTruth):
                 frames += 1
@@ -172,7 +193,9 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
                 batch = []
                 bar.update(max(0.0, min(event.t_s, scenario.duration_s) - bar.n))
         opened[0].write_many(batch)  # (`events` calls open_writer before its first event)
-    return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start, started, scenario.duration_s)
+        images = opened[2] if images_per_s is not None else None
+    return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start, started, scenario.duration_s,
+                          images.count if images else 0, images.render_s if images else 0.0)
 
 
 def tracker_config(preset: str, config_path: Path | None = None, overrides: dict | None = None):

@@ -27,6 +27,7 @@ from core.types import Camera, Skeleton
 from crossview import pipeline
 from crossview.outputs import write_bytes
 from crossview.pictures import FALSE_POSITIVE_BGR, person_bgr
+from sim.render import SceneRenderer
 from sim.types import CameraFrame
 from tracker.types import TrackerOutput
 
@@ -138,52 +139,13 @@ def outputs_for(tracks, frames: list[CameraFrame]) -> dict[int, TrackerOutput]:
     return found
 
 
-class SceneRenderer:
-    """The recording's world, rebuilt and posed at any capture time, rendered through its cameras.
+def scene_of(rec, *, multisamples: int | None = None) -> SceneRenderer:
+    """The world of an opened recording, built again from the scenario text and seed it keeps, ready to render
+    through its cameras (`sim.render.SceneRenderer`)."""
+    from sim.scenario import from_source_text
 
-    Args:
-        rec: the opened recording.
-
-    Call `sim.render.choose_backend` first (before mujoco is imported).
-    """
-
-    def __init__(self, rec):
-        from sim.render import CameraRenderer
-        from sim.scenario import from_source_text
-
-        self.rec = rec
-        self.scenario = from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
-        self._world = None
-        self._world_t = math.inf
-        self._build_world()
-        self.renderer = CameraRenderer(self._world.model, rec.cameras)
-
-    def _build_world(self) -> None:
-        from sim.rng import child_rng
-        from sim.world import World
-
-        self._world = World(self.scenario, child_rng(self.rec.header.seed, "crowd"))
-        self._world_t = 0.0
-
-    def world_at(self, t_s: float):
-        """The world advanced to true time `t_s` (built again when an earlier time is asked for)."""
-        if t_s < self._world_t:  # the world only moves forward: start again, with a renderer of the new model
-            from sim.render import CameraRenderer
-
-            self.renderer.close()
-            self._build_world()
-            self.renderer = CameraRenderer(self._world.model, self.rec.cameras)
-        self._world.advance(t_s)
-        self._world_t = t_s
-        return self._world
-
-    def view(self, index: int, capture_s: float) -> np.ndarray:
-        """(H, W, 3) uint8 BGR: camera `index`'s view at true time `capture_s`."""
-        world = self.world_at(capture_s)
-        return cv2.cvtColor(self.renderer.render(world.data, index), cv2.COLOR_RGB2BGR)
-
-    def close(self) -> None:
-        self.renderer.close()
+    scenario = from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
+    return SceneRenderer(scenario, rec.header.seed, rec.cameras, multisamples=multisamples)
 
 
 def _text(image: np.ndarray, text: str, org: tuple[int, int], scale: float, colour=(255, 255, 255)) -> None:
@@ -292,9 +254,8 @@ class _Timer:
         return RenderTiming(self.renders, self.seconds)
 
 
-def _camera_picture(scene: SceneRenderer, timer: _Timer, index: int, frame: CameraFrame,
+def _camera_picture(rec, scene: SceneRenderer, timer: _Timer, index: int, frame: CameraFrame,
                     output: TrackerOutput | None) -> np.ndarray:
-    rec = scene.rec
     camera = rec.cameras[index]
     image = draw_frame(timer.view(scene, index, frame.truth.capture_s), camera, frame, rec.skeleton, output)
     return _header(image, [_frame_caption(camera, frame, output)])
@@ -304,10 +265,9 @@ def _sheet_columns(count: int) -> int:
     return max(1, math.ceil(math.sqrt(count * 4 / 3)))
 
 
-def _contact_sheet(scene: SceneRenderer, timer: _Timer, frames: dict[int, CameraFrame],
+def _contact_sheet(rec, scene: SceneRenderer, timer: _Timer, frames: dict[int, CameraFrame],
                    outputs: dict[int, TrackerOutput], t_s: float, tile_width_px: int) -> np.ndarray:
     """Every camera's view (its frame nearest `t_s`) in a labelled grid, in rig order."""
-    rec = scene.rec
     order = sorted(frames, key=lambda i: frames[i].truth.capture_s)  # the world only moves forward
     tiles: dict[int, np.ndarray] = {}
     for i in order:
@@ -435,14 +395,14 @@ def _render_picture(request: Request, data: Inputs, indices: list[int]) -> Rende
     if data.tracks is not None:
         found = outputs_for(data.tracks, [f for _, f in listed])
         outputs = {listed[k][0]: o for k, o in found.items()}
-    scene = SceneRenderer(rec)
+    scene = scene_of(rec)
     timer = _Timer()
     try:
         if request.contact_sheet:
-            image = _contact_sheet(scene, timer, frames, outputs, request.time_s, request.tile_width_px)
+            image = _contact_sheet(rec, scene, timer, frames, outputs, request.time_s, request.tile_width_px)
         else:
             (index, frame), = listed
-            image = _camera_picture(scene, timer, index, frame, outputs.get(index))
+            image = _camera_picture(rec, scene, timer, index, frame, outputs.get(index))
     finally:
         scene.close()
     write_bytes(encode_picture(image, request.output), request.output)
@@ -463,7 +423,7 @@ def _render_clip(request: Request, data: Inputs, indices: list[int]) -> RenderRe
     if data.tracks is not None and keys:
         found = outputs_for(data.tracks, [frames[k] for k in keys])
         outputs = {keys[n]: o for n, o in found.items()}
-    scene = SceneRenderer(rec)
+    scene = scene_of(rec)
     timer = _Timer()
     try:
         with ClipWriter(request.output, request.fps) as clip:
@@ -472,9 +432,9 @@ def _render_clip(request: Request, data: Inputs, indices: list[int]) -> RenderRe
                     at = {i: frames[(i, t)] for i in indices if (i, t) in frames}
                     outs = {i: outputs[(i, t)] for i in at if (i, t) in outputs}
                     if at:
-                        clip.add(_contact_sheet(scene, timer, at, outs, t, request.tile_width_px))
+                        clip.add(_contact_sheet(rec, scene, timer, at, outs, t, request.tile_width_px))
                 elif (indices[0], t) in frames:
-                    clip.add(_camera_picture(scene, timer, indices[0], frames[(indices[0], t)],
+                    clip.add(_camera_picture(rec, scene, timer, indices[0], frames[(indices[0], t)],
                                              outputs.get((indices[0], t))))
             if not clip.count:
                 raise RenderError(f"--from {request.from_s:g} --to {request.to_s:g}: no frame of the camera in that "

@@ -1,5 +1,8 @@
 """Offscreen MuJoCo pictures of what a camera sees: the store and its people through the camera's own lens.
 
+`SceneRenderer` builds a scenario's world again and renders it at any true time (what `crossview render` draws
+on, and `FrameImages`, the JPEG pictures `crossview generate --images` stores).
+
 MuJoCo renders a pinhole. A camera of the rig has OpenCV's lens model (`sim.cameras.in_image`), so each
 camera is rendered as a wider pinhole (square pixels, centred principal point, large enough to hold every
 pixel of the distorted image) and remapped with OpenCV: pixel (u, v) of the picture takes the render's
@@ -8,8 +11,9 @@ pixel at the undistorted ray of (u, v) (`cv2.undistortPoints`). Rendered pixels,
 
 MuJoCo chooses its OpenGL backend once, when it is first imported, from the environment variable
 MUJOCO_GL: `choose_backend` must run before anything imports mujoco (`sim.world` does). It takes the
-backend the caller names, else the first of EGL (a GPU) and OSMesa (software, Debian's libosmesa6) with
-which MuJoCo opens an offscreen context here (each probed in a fresh interpreter).
+backend the caller names (or MUJOCO_GL names), checked to open, else the first of EGL (a GPU, or Mesa's
+software EGL) and OSMesa (software, Debian's libosmesa6) with which MuJoCo opens an offscreen context here
+(each probed in a fresh interpreter).
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import math
 import os
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 
 import cv2
@@ -51,6 +56,13 @@ class GLBackend(enum.Enum):
     OSMESA = "osmesa"
 
 
+# What to do when a backend the user named does not open.
+_BACKEND_HINTS = {
+    GLBackend.EGL: "run where a GPU driver (or Mesa's libegl-mesa0) gives EGL, or choose OSMesa (--gl osmesa)",
+    GLBackend.OSMESA: "install Debian's libosmesa6 (apt-get install libosmesa6)",
+}
+
+
 class RenderingUnavailable(CrossviewError):
     """No offscreen OpenGL context can be opened here (or MuJoCo was imported with rendering disabled)."""
 
@@ -68,20 +80,29 @@ def _backend_env(backend: GLBackend) -> dict:
 
 
 @functools.cache
-def probe_backend() -> GLBackend | None:
-    """The first of `GLBackend` with which MuJoCo opens an offscreen context here, each tried in a fresh
-    interpreter (MuJoCo's backend cannot change once it is imported); None when neither works."""
+def backend_problem(backend: GLBackend) -> str | None:
+    """Why MuJoCo cannot open an offscreen context with `backend` here, in one line (tried in a fresh
+    interpreter: MuJoCo's backend cannot change once it is imported); None when it can."""
     probe = "import mujoco; mujoco.GLContext(8, 8).make_current()"
+    try:
+        done = subprocess.run([sys.executable, "-c", probe], env=_backend_env(backend), capture_output=True,
+                              timeout=_PROBE_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return f"opening a context took more than {_PROBE_TIMEOUT_S:g} s"
+    if done.returncode == 0:
+        return None
+    last = done.stderr.decode(errors="replace").strip().splitlines()[-1:]
+    return last[0] if last else f"exit status {done.returncode}"
+
+
+def probe_backend() -> GLBackend | None:
+    """The first of `GLBackend` with which MuJoCo opens an offscreen context here (`backend_problem`); None
+    when neither works."""
     for backend in GLBackend:
-        try:
-            done = subprocess.run([sys.executable, "-c", probe], env=_backend_env(backend), capture_output=True,
-                                  timeout=_PROBE_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            continue
-        if done.returncode == 0:
+        problem = backend_problem(backend)
+        if problem is None:
             return backend
-        log.info("offscreen backend %s unavailable: %s", backend.value,
-                 done.stderr.decode(errors="replace").strip().splitlines()[-1:])
+        log.info("offscreen backend %s unavailable: %s", backend.value, problem)
     return None
 
 
@@ -99,15 +120,22 @@ def choose_backend(requested: str | None = None) -> GLBackend:
     names = ", ".join(b.value for b in GLBackend)
     if importlib.util.find_spec("OpenGL") is None:
         raise RenderingUnavailable("PyOpenGL is not installed (MuJoCo's EGL and OSMesa contexts need it): "
-                                   "pip install 'crossview-testbed[render]'")
+                                   "pip install '.[render]' in a checkout, or pip install 'crossview-testbed[render]'")
+    from_env = None
     if requested is None:
         from_env = os.environ.get("MUJOCO_GL", "").strip().lower()
-        requested = from_env if from_env in {b.value for b in GLBackend} else None
+        from_env = from_env if from_env in {b.value for b in GLBackend} else None
+        requested = from_env
     if requested is not None:
         try:
             backend = GLBackend(requested.strip().lower())
         except ValueError:
             raise RenderingUnavailable(f"--gl {requested}: unknown OpenGL backend (valid: {names})") from None
+        problem = backend_problem(backend)
+        if problem is not None:
+            named = f"MUJOCO_GL={backend.value}" if from_env else f"--gl {backend.value}"
+            raise RenderingUnavailable(f"{named}: MuJoCo cannot open an offscreen {backend.value} context here "
+                                       f"({problem}); {_BACKEND_HINTS[backend]}")
     else:
         backend = probe_backend()
         if backend is None:
@@ -181,6 +209,8 @@ class CameraRenderer:
         model: the `mujoco.MjModel` to render (a `sim.world.World`'s); its offscreen buffer is enlarged to the
             largest pinhole render and its headlight brightened.
         cameras: the rig.
+        multisamples: samples per pixel of the offscreen buffer (the model's `vis.quality.offsamples`, 4 by
+            default: None keeps it); 0 renders about twice as fast in software, with harder edges.
 
     Attributes:
         option: the `mujoco.MjvOption` of every render (which geom and site groups are drawn).
@@ -188,7 +218,7 @@ class CameraRenderer:
     Call `choose_backend` before mujoco is first imported. Use as a context manager or call `close`.
     """
 
-    def __init__(self, model, cameras: list[Camera]):
+    def __init__(self, model, cameras: list[Camera], *, multisamples: int | None = None):
         import mujoco
 
         if getattr(mujoco, "GLContext", None) is None:
@@ -200,6 +230,8 @@ class CameraRenderer:
         self._renderers: dict[tuple[int, int], object] = {}
         self.model.vis.headlight.ambient[:] = _HEADLIGHT_AMBIENT
         self.model.vis.headlight.diffuse[:] = _HEADLIGHT_DIFFUSE
+        if multisamples is not None:  # (read when each renderer's context is made)
+            self.model.vis.quality.offsamples = int(multisamples)
         # What is drawn (MuJoCo's defaults: geom groups 0-2, site groups 0-2; the keypoint sites are group 4).
         self.option = mujoco.MjvOption()
 
@@ -272,6 +304,135 @@ class CameraRenderer:
         self._renderers.clear()
 
     def __enter__(self) -> CameraRenderer:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class SceneRenderer:
+    """A scenario's world, built again and posed at any true time, rendered through its cameras.
+
+    Args:
+        scenario: the `sim.scenario.Scenario` simulated (a recording's: `crossview.render.scene_of`).
+        seed: its seed (the crowd's random stream is `child_rng(seed, "crowd")`, as the simulation's).
+        cameras: the rig.
+        multisamples: the renders' samples per pixel (`CameraRenderer`); None: MuJoCo's 4.
+
+    Call `choose_backend` first (before mujoco is imported).
+    """
+
+    def __init__(self, scenario, seed: int, cameras: list[Camera], *, multisamples: int | None = None):
+        self.scenario = scenario
+        self.seed = int(seed)
+        self.cameras = list(cameras)
+        self.multisamples = multisamples
+        self._world = None
+        self._world_t = math.inf
+        self.renderer = None
+        self._build_world()
+
+    def _build_world(self) -> None:
+        """A new world at time 0, with a renderer of its model."""
+        from sim.rng import child_rng
+        from sim.world import World
+
+        if self.renderer is not None:
+            self.renderer.close()
+        self._world = World(self.scenario, child_rng(self.seed, "crowd"))
+        self._world_t = 0.0
+        self.renderer = CameraRenderer(self._world.model, self.cameras, multisamples=self.multisamples)
+
+    def world_at(self, t_s: float):
+        """The world advanced to true time `t_s` (built again when an earlier time is asked for)."""
+        if t_s < self._world_t:  # the world only moves forward: start again
+            self._build_world()
+        self._world.advance(t_s)
+        self._world_t = t_s
+        return self._world
+
+    def view(self, index: int, capture_s: float) -> np.ndarray:
+        """(H, W, 3) uint8 BGR: camera `index`'s view at true time `capture_s`."""
+        world = self.world_at(capture_s)
+        return cv2.cvtColor(self.renderer.render(world.data, index), cv2.COLOR_RGB2BGR)
+
+    def close(self) -> None:
+        self.renderer.close()
+
+
+JPEG_QUALITY = 85
+"""OpenCV's JPEG quality (0-100; its default is 95) of the pictures `crossview generate --images` stores."""
+IMAGE_MULTISAMPLES = 0
+"""Samples per pixel of those pictures' renders: none, for half the time of MuJoCo's 4 in software; the lens
+remap's bilinear reads soften the edges anyway."""
+# Rates are compared as k · rate / fps against whole numbers: this much below one still counts as one.
+_COUNT_EPS = 1e-9
+
+
+def check_image_rate(images_per_s: float, fps: float, where: str) -> None:
+    """CrossviewError unless 0 < `images_per_s` <= `fps` (one picture per frame at most)."""
+    if not (math.isfinite(images_per_s) and 0 < images_per_s <= fps):
+        raise CrossviewError(f"--images {images_per_s:g}: pictures per second per camera must be > 0 and at most "
+                             f"the cameras' frame rate, {fps:g} fps in {where} (one picture per frame at most)")
+
+
+class FrameImages:
+    """JPEG pictures of what the cameras saw for some of a generation's frames (`crossview generate --images`).
+
+    A camera's delivered frames are counted in capture order from k = 0, and frame k gets a picture when
+    floor(k r) > floor((k - 1) r), r = `images_per_s` / `fps`: its first frame, then evenly spread, every
+    frame at r = 1. The picture is `SceneRenderer`'s view (the world `crossview render` builds again, posed at
+    the frame's true capture time, through the camera's lens) without overlays, rendered with
+    `IMAGE_MULTISAMPLES` and JPEG-encoded by OpenCV at `JPEG_QUALITY`.
+
+    Args:
+        scenario, seed, cameras: what is simulated (`SceneRenderer`).
+        images_per_s: pictures per second per camera, in (0, fps].
+        fps: the cameras' frame rate.
+
+    Attributes:
+        count: pictures made so far; render_s: seconds spent making them (render, lens remap, JPEG).
+
+    Call `choose_backend` first. Use as a context manager or call `close`.
+    """
+
+    def __init__(self, scenario, seed: int, cameras: list[Camera], images_per_s: float, fps: float):
+        self.scene = SceneRenderer(scenario, seed, cameras, multisamples=IMAGE_MULTISAMPLES)
+        self._ratio = float(images_per_s) / float(fps)
+        self._taken = [0] * len(cameras)
+        self.count = 0
+        self.render_s = 0.0
+
+    def _wanted(self, camera: int) -> bool:
+        k = self._taken[camera]
+        self._taken[camera] += 1
+        return k == 0 or math.floor(k * self._ratio + _COUNT_EPS) > math.floor((k - 1) * self._ratio + _COUNT_EPS)
+
+    def pictures(self, cameras: list[int], capture_s: list[float]) -> list[bytes | None]:
+        """The JPEG bytes of each frame that gets a picture, None for the others.
+
+        Args:
+            cameras: the frames' camera indices.
+            capture_s: their true capture times, seconds, ascending across calls (the world moves forward).
+        """
+        out: list[bytes | None] = []
+        for camera, t in zip(cameras, capture_s, strict=True):
+            if not self._wanted(camera):
+                out.append(None)
+                continue
+            start = time.perf_counter()
+            ok, data = cv2.imencode(".jpg", self.scene.view(camera, t), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+            if not ok:
+                raise RuntimeError("OpenCV could not encode a rendered picture as JPEG")
+            out.append(data.tobytes())
+            self.render_s += time.perf_counter() - start
+            self.count += 1
+        return out
+
+    def close(self) -> None:
+        self.scene.close()
+
+    def __enter__(self) -> FrameImages:
         return self
 
     def __exit__(self, *exc) -> None:

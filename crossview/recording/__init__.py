@@ -30,7 +30,7 @@ from crossview.recording.messages import (
     pose_truth_bytes,
     warm_up,
 )
-from crossview.recording.reader import Recording, Tracks, open_recording, open_tracks
+from crossview.recording.reader import CameraImage, Recording, Tracks, open_recording, open_tracks
 from crossview.recording.schemas import (
     CHUNK_SIZE,
     FORMAT_VERSION,
@@ -55,7 +55,7 @@ from crossview.recording.writer import RecordingWriter, TracksWriter
 
 __all__ = [
     "CHUNK_SIZE", "FORMAT_VERSION", "TRACKS_FORMAT_VERSION", "TOPIC_HEADER", "TOPIC_OUTPUTS", "TOPIC_STORE",
-    "TOPIC_TRACK_SCENE", "TOPIC_TRUTH",
+    "TOPIC_TRACK_SCENE", "TOPIC_TRUTH", "CameraImage",
     "TOPIC_TRUTH_SCENE", "EncodedFrame", "PoseTruthMsg", "Recording", "RecordingError", "RecordingHeader",
     "RecordingWriter", "Tracks", "TracksHeader", "TracksWriter", "box_from_json", "box_json",
     "camera_frame_bytes", "camera_topic",

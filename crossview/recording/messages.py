@@ -82,6 +82,7 @@ class EncodedFrame(NamedTuple):
     log_time_ns: int  # its delivery time
     frame: bytes  # crossview.CameraFrame
     annotations: bytes  # foxglove.ImageAnnotations stamped log_time_ns
+    image: bytes | None = None  # a rendered JPEG picture of the frame (`crossview generate --images`), or None
 
 
 # Where each field of `DetectionRows` lives in a CameraFrame (its part and attribute), with the dtype and

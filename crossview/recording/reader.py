@@ -9,8 +9,10 @@ import struct
 import zlib
 from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from google.protobuf.message import DecodeError
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
@@ -37,6 +39,7 @@ from crossview.recording.schemas import (
     TracksHeader,
     _box_from_json,
     _camera_from_json,
+    camera_topic,
     software_version,
 )
 from sim.poses import interpolate_poses
@@ -204,6 +207,15 @@ class _Container:
             raise RecordingError(f"{self.path}: corrupt message ({e})") from None
 
 
+class CameraImage(NamedTuple):
+    """A picture of a camera's `image` topic: its camera, log time (ns), format ("png", "jpeg") and bytes."""
+
+    camera: str
+    log_time_ns: int
+    format: str
+    data: bytes
+
+
 class Recording(_Container):
     """A recording opened for reading. `header`, `cameras` and `boxes` are read on open; the events
     stream from disk one chunk at a time every time an iterator is asked for."""
@@ -253,6 +265,20 @@ class Recording(_Container):
     def truth(self) -> Iterator[PoseTruth]:
         """The 100 Hz ground truth in time order."""
         return self._events({"crossview.PoseTruth"})
+
+    def images(self) -> Iterator[CameraImage]:
+        """The pictures of the cameras' `image` topics in file order: each camera's grey backdrop at 0 and, in
+        a recording made with `crossview generate --images`, the rendered JPEG pictures of its frames."""
+        topics = {camera_topic(c.name, "image"): c.name for c in self.cameras}
+        camera_of: dict[int, str] = {}
+        for record in self._stream.records():
+            if isinstance(record, Channel) and record.topic in topics:
+                camera_of[record.id] = topics[record.topic]
+            elif isinstance(record, Message) and record.channel_id in camera_of:
+                image = self._decode(CompressedImage.FromString, record.data)
+                if image is None:
+                    return
+                yield CameraImage(camera_of[record.channel_id], record.log_time, image.format, image.data)
 
 
 class _TruthWindow:

@@ -188,16 +188,17 @@ class RecordingWriter(_WriterContext):
             self._store = out.protobuf_channel(TOPIC_STORE, foxglove.SceneUpdate)
             self._truth = out.protobuf_channel(TOPIC_TRUTH, PoseTruthMsg)
             self._truth_scene = out.protobuf_channel(TOPIC_TRUTH_SCENE, foxglove.SceneUpdate)
-            self._frame_ch, self._annotation_ch = {}, {}
+            self._frame_ch, self._annotation_ch, self._image_ch = {}, {}, {}
             for camera in self.cameras:
                 calibration = out.protobuf_channel(camera_topic(camera.name, "calibration"),
                                                    foxglove.CameraCalibration)
                 self._frame_ch[camera.name] = out.protobuf_channel(camera_topic(camera.name, "frame"), CameraFrameMsg)
                 self._annotation_ch[camera.name] = out.protobuf_channel(
                     camera_topic(camera.name, "detections"), foxglove.ImageAnnotations)
-                backdrop = out.protobuf_channel(camera_topic(camera.name, "image"), foxglove.CompressedImage)
+                image = out.protobuf_channel(camera_topic(camera.name, "image"), foxglove.CompressedImage)
+                self._image_ch[camera.name] = image
                 out.add(calibration, 0, foxglove.camera_calibration(camera, 0).SerializeToString())
-                out.add(backdrop, 0, foxglove.camera_backdrop(camera, 0).SerializeToString())
+                out.add(image, 0, foxglove.camera_backdrop(camera, 0).SerializeToString())
             out.add(self._tf, 0, foxglove.frame_transforms(self.cameras, 0).SerializeToString())
             out.add(self._store, 0, foxglove.store_scene(self.boxes, self.cameras, 0).SerializeToString())
             out.end_chunk()  # the header and the static scene get a chunk of their own
@@ -207,7 +208,8 @@ class RecordingWriter(_WriterContext):
         self._last_ns = 0
         self._next_scene_ns = 0
         self._people: set[int] = set()
-        self._counts = {"truth": 0, "frames": 0}
+        self._counts = {"truth": 0, "frames": 0, "images": 0}
+        self._camera_of = {c.name: c for c in self.cameras}
 
     def _log_time(self, t_ns: int, what: str) -> int:
         if t_ns < self._last_ns:
@@ -236,6 +238,10 @@ class RecordingWriter(_WriterContext):
                 t = self._log_time(event.log_time_ns, f"CameraFrame {event.camera}")
                 messages.append((frame_channel, t, event.frame))
                 messages.append((self._annotation_ch[event.camera], t, event.annotations))
+                if event.image is not None:
+                    picture = foxglove.camera_image(self._camera_of[event.camera], t, event.image)
+                    messages.append((self._image_ch[event.camera], t, picture.SerializeToString()))
+                    self._counts["images"] += 1
                 self._counts["frames"] += 1
             elif isinstance(event, PoseTruth):
                 t = self._log_time(to_ns(event.t_s), "PoseTruth")
@@ -263,6 +269,8 @@ class RecordingWriter(_WriterContext):
             "num_frames": self._counts["frames"],
             "end_s": self._last_ns / 1e9,
         }
+        if self._counts["images"]:  # (only then: a recording without pictures keeps its bytes)
+            summary["num_images"] = self._counts["images"]
         self._out.close({"json": _json(summary).decode()})
 
 

@@ -4,6 +4,7 @@ occluded joints sit behind what the render shows in front of them, and bad input
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -62,13 +63,13 @@ choose_backend(sys.argv[3])
 import mujoco
 import numpy as np
 from crossview import recording
-from crossview.render import SceneRenderer
+from crossview.render import scene_of
 from sim import humanoid
 
 rec = recording.open_recording(sys.argv[1])
 spec = json.loads(sys.argv[2])
 index = spec["camera"]
-scene = SceneRenderer(rec)
+scene = scene_of(rec)
 world = scene.world_at(spec["capture_s"])
 renderer = scene.renderer
 seg = renderer.render(world.data, index, RenderKind.SEGMENTATION)
@@ -246,3 +247,145 @@ def test_render_writes_a_view_a_contact_sheet_a_top_down_map_and_a_clip(made, of
     assert video.get(cv2.CAP_PROP_FRAME_COUNT) == 2 and video.get(cv2.CAP_PROP_FRAME_WIDTH) == 7 * (160 + 2)
     video.release()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["clip.gif", "clip.mp4", "plan.png", "sheet.jpg", "view.png"]
+
+
+# `crossview generate --images`: rendered pictures stored in the recording.
+
+_IMAGES_ARGS = ["store_layout2", "--duration", "1", "--seed", "0", "--cameras", "4"]
+_IMAGES_RATE = 5.0  # of 10 fps: every other frame of each camera
+
+_VIEWS_SCRIPT = """
+import json, sys
+from sim.render import choose_backend
+
+choose_backend(sys.argv[3])
+import cv2
+from crossview import recording
+from crossview.render import scene_of
+from sim.render import IMAGE_MULTISAMPLES, JPEG_QUALITY
+
+rec = recording.open_recording(sys.argv[1])
+scene = scene_of(rec, multisamples=IMAGE_MULTISAMPLES)
+for n, (index, capture_s) in enumerate(json.loads(sys.argv[2])):
+    ok, data = cv2.imencode(".jpg", scene.view(index, capture_s), [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY])
+    open(f"{sys.argv[4]}/{n}.jpg", "wb").write(data.tobytes())
+"""
+
+
+def _generate(argv, backend, env=None):
+    return subprocess.run([sys.executable, "-m", "crossview.cli", "--no-progress", "generate", *map(str, argv)],
+                          env={**render_env(backend), **(env or {})}, capture_output=True, text=True)
+
+
+@pytest.fixture(scope="module")
+def pictured(offscreen_backend, tmp_path_factory):
+    """A short recording made with --images, twice, and the same scenario made without."""
+    folder = tmp_path_factory.mktemp("images")
+    made = []
+    for name in ("a.mcap", "b.mcap"):
+        done = _generate([*_IMAGES_ARGS, "--images", _IMAGES_RATE, "-o", folder / name], offscreen_backend)
+        assert done.returncode == 0, done.stderr
+        made.append(folder / name)
+    assert "pictures rendered in" in done.stdout
+    plain = folder / "plain.mcap"
+    pipeline.generate(pipeline.load_scenario("store_layout2", duration_s=1.0, seed=0, cameras=4), plain,
+                      progress=False)
+    return made[0], made[1], plain
+
+
+def test_generate_images_gives_the_same_bytes_twice(pictured):
+    a, b, _ = pictured
+    assert a.read_bytes() == b.read_bytes()
+
+
+def test_generate_images_adds_pictures_and_changes_nothing_else(pictured):
+    with_images, _, plain = pictured
+    rec, ref = recording.open_recording(with_images), recording.open_recording(plain)
+    # The same truth and frames as without pictures (and without them the bytes are those the other tests pin).
+    for got, want in zip(rec.truth(), ref.truth(), strict=True):
+        np.testing.assert_array_equal(got.poses, want.poses)
+    for got, want in zip(rec.frames(), ref.frames(), strict=True):
+        assert (got.frame.camera, got.frame.stamp_s, got.truth.capture_s) == \
+            (want.frame.camera, want.frame.stamp_s, want.truth.capture_s)
+        np.testing.assert_array_equal(got.frame.keypoints_px, want.frame.keypoints_px)
+    backdrops = list(ref.images())
+    images = list(rec.images())
+    assert [i for i in images if i.format == "png"] == backdrops and len(backdrops) == 4
+    jpegs = [i for i in images if i.format == "jpeg"]
+    assert len(jpegs) == len(images) - 4 > 0
+
+
+def test_each_camera_pictures_every_other_frame_as_crossview_render_sees_it(pictured, offscreen_backend, tmp_path):
+    import cv2
+
+    rec = recording.open_recording(pictured[0])
+    names = [c.name for c in rec.cameras]
+    frames = sorted(rec.frames(), key=lambda f: f.truth.capture_s)
+    # Rate 5 of 10 fps: each camera's frames 0, 2, 4, ... in capture order, at the frame's delivery time.
+    chosen = [f for c in names for f in [g for g in frames if g.frame.camera == c][::2]]
+    jpegs = [i for i in rec.images() if i.format == "jpeg"]
+    assert sorted((i.camera, i.log_time_ns) for i in jpegs) == \
+        sorted((f.frame.camera, recording.to_ns(f.truth.delivery_s)) for f in chosen)
+    by_key = {(i.camera, i.log_time_ns): i.data for i in jpegs}
+    for f in chosen:
+        camera = rec.cameras[names.index(f.frame.camera)]
+        picture = cv2.imdecode(np.frombuffer(by_key[(camera.name, recording.to_ns(f.truth.delivery_s))], np.uint8),
+                               cv2.IMREAD_COLOR)
+        assert picture.shape == (camera.height_px, camera.width_px, 3)
+    # A stored picture is `crossview render`'s view of its frame (the world built again and posed at its capture
+    # time, at random access rather than in order), to the byte.
+    picked = [chosen[0], chosen[-1]]
+    spec = [(names.index(f.frame.camera), f.truth.capture_s) for f in picked]
+    subprocess.run([sys.executable, "-c", _VIEWS_SCRIPT, str(pictured[0]), json.dumps(spec), offscreen_backend,
+                    str(tmp_path)], env=render_env(offscreen_backend), check=True, capture_output=True, text=True)
+    for n, f in enumerate(picked):
+        assert (tmp_path / f"{n}.jpg").read_bytes() == by_key[(f.frame.camera, recording.to_ns(f.truth.delivery_s))]
+
+
+@pytest.mark.parametrize("rate, message", [("11", "--images 11: pictures per second per camera must be > 0 and at "
+                                                   "most the cameras' frame rate, 10 fps in"),
+                                           ("0", "argument --images: 0 must be > 0"),
+                                           ("nan", "argument --images: nan must be > 0"),
+                                           ("fast", "argument --images: 'fast' is not a number")])
+def test_image_rate_that_is_not_positive_or_above_the_frame_rate_is_refused(tmp_path, capsys, rate, message):
+    out = tmp_path / "rec.mcap"
+    err = _run_bad(capsys, ["generate", *_IMAGES_ARGS, "--images", rate, "-o", str(out)])
+    assert message in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_images_without_pyopengl_names_the_extra(tmp_path, capsys, monkeypatch):
+    from sim import render as sim_render
+
+    real = sim_render.importlib.util.find_spec
+    monkeypatch.setattr(sim_render.importlib.util, "find_spec", lambda name: None if name == "OpenGL" else real(name))
+    out = tmp_path / "rec.mcap"
+    err = _run_bad(capsys, ["generate", *_IMAGES_ARGS, "--images", "1", "-o", str(out)])
+    assert "PyOpenGL is not installed" in err and "pip install '.[render]'" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_generate_images_with_an_egl_that_does_not_open(tmp_path):
+    # No EGL vendor library for glvnd's libEGL: EGL cannot open, as on a machine without a GPU or Mesa's EGL.
+    no_egl = {"__EGL_VENDOR_LIBRARY_FILENAMES": str(tmp_path / "none.json")}
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM")} | no_egl
+    probe = ("import json; from sim.render import GLBackend, backend_problem as p; "
+             "print(json.dumps([p(GLBackend.EGL), p(GLBackend.OSMESA)]))")
+    egl_problem, osmesa_problem = json.loads(subprocess.run([sys.executable, "-c", probe], env=env,
+                                                            capture_output=True, text=True, check=True).stdout)
+    if egl_problem is None:
+        pytest.skip("EGL opens here even without a vendor library (not glvnd's libEGL)")
+    out = tmp_path / "rec.mcap"
+    argv = [sys.executable, "-m", "crossview.cli", "--no-progress", "generate", *_IMAGES_ARGS, "--duration", "0.2",
+            "--images", "1", "-o", str(out)]
+    # Asked for by name: one line saying what to do, exit 2, nothing written.
+    done = subprocess.run([*argv, "--gl", "egl"], env=env, capture_output=True, text=True)
+    assert done.returncode == EXIT_BAD_INPUT and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert "--gl egl: MuJoCo cannot open an offscreen egl context here" in done.stderr and "--gl osmesa" in done.stderr
+    assert not out.exists()
+    if osmesa_problem is not None:
+        pytest.skip(f"OSMesa does not open here either ({osmesa_problem}): no fall-back to show")
+    # Chosen automatically (no --gl, no MUJOCO_GL): OSMesa instead.
+    done = subprocess.run(argv, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "4 pictures rendered" in done.stdout

@@ -52,5 +52,6 @@ def test_a_backend_after_mujoco_was_imported_without_it_is_refused(monkeypatch):
 def test_missing_pyopengl_names_the_extra(monkeypatch):
     real = render.importlib.util.find_spec
     monkeypatch.setattr(render.importlib.util, "find_spec", lambda name: None if name == "OpenGL" else real(name))
-    with pytest.raises(RenderingUnavailable, match=r"pip install 'crossview-testbed\[render\]'"):
+    with pytest.raises(RenderingUnavailable, match=r"pip install '\.\[render\]' in a checkout, or pip install "
+                                                    r"'crossview-testbed\[render\]'"):
         choose_backend("osmesa")
