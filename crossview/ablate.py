@@ -381,5 +381,6 @@ def run(out: Path, names: list[str] | None = None, *, quick: bool = False, worke
     ctx.timings["total_wall_s"] = wall_s
     pipeline.write_json({"ablate": wanted, "experiments": results}, out / "results.json")
     pipeline.write_json(ctx.timings, out / "timings.json")
-    report = ablate_report.write_report(out, results, ctx.timings, quick=quick, command=command)
+    report = ablate_report.write_report(out, results, ctx.timings, titles={n: EXPERIMENTS[n].title for n in chosen},
+                                        quick=quick, command=command)
     return AblateSummary(report, chosen, wall_s)

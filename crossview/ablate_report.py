@@ -288,9 +288,14 @@ def _png(figure) -> bytes:
     return buffer.getvalue()
 
 
-def write_report(out: Path, results: dict, timings: dict, *, quick: bool, command: str) -> Path:
-    """Writes `out/report.md` and its plots (`out/plots/`); returns the report's path."""
-    from crossview.ablate import EXPERIMENTS
+def write_report(out: Path, results: dict, timings: dict, *, titles: dict[str, str], quick: bool,
+                 command: str) -> Path:
+    """Writes `out/report.md` and its plots (`out/plots/`); returns the report's path.
+
+    Args:
+        results, timings: what `crossview.ablate.run` measured, by experiment name.
+        titles: each experiment's title, by name.
+    """
     from crossview.recording import software_version
 
     total = timings.get("total_wall_s", math.nan)
@@ -303,9 +308,9 @@ def write_report(out: Path, results: dict, timings: dict, *, quick: bool, comman
                 "frame-rate": frame_rate_verdict, "single-view": single_view_verdict}
     for name, result in results.items():
         outcome, text = speed_verdict(result, timings) if name == "speed" else verdicts[name](result)
-        lines.append(f"- **{EXPERIMENTS[name].title}** — the paper's trend {outcome}: {text}.")
+        lines.append(f"- **{titles[name]}** — the paper's trend {outcome}: {text}.")
     for name, result in results.items():
-        lines += ["", f"## {EXPERIMENTS[name].title}", ""]
+        lines += ["", f"## {titles[name]}", ""]
         if name == "affinity":
             lines += ["Paper (Campus, its Table S1): association accuracy and PCP (%) per weight pair, "
                       "w2D + w3D = 1 (it fixes 0.4 / 0.6).", ""] + _affinity_section(result)
