@@ -853,44 +853,36 @@ def _grid_cells(lo, hi, origin, cell, n):
 
 
 @jit
-def _build_grid(geom_box, x0, y0, z0, cell, nx, ny, starts, tops, entries):
+def _build_grid(geom_box, x0, y0, z0, cell, nx, ny, starts, tops, entries, fill_entries):
     """Bins the geoms by the floor cells their boxes geom_box (G, 6) overlap (geoms wholly below z0 or
     outside the grid left out): cell c holds entries[starts[c]:starts[c + 1]], in geom order, and tops[c]
-    is the highest box top in it (-inf when empty). With entries None, only counts: returns the total."""
+    is the highest box top in it (-inf when empty). Without fill_entries, only counts. Returns the total."""
     ncell = nx * ny
-    for c in range(ncell + 1):
-        starts[c] = 0
-    for c in range(ncell):
-        tops[c] = -np.inf
+    starts[:] = 0
+    tops[:] = -np.inf
     G = geom_box.shape[0]
     x1, y1 = x0 + nx * cell, y0 + ny * cell
-    for g in range(G):
-        if (geom_box[g, 5] < z0 or geom_box[g, 3] < x0 or geom_box[g, 0] > x1 or geom_box[g, 4] < y0
-                or geom_box[g, 1] > y1):
-            continue
-        ia, ib = _grid_cells(geom_box[g, 0], geom_box[g, 3], x0, cell, nx)
-        ja, jb = _grid_cells(geom_box[g, 1], geom_box[g, 4], y0, cell, ny)
-        for j in range(ja, jb + 1):
-            for i in range(ia, ib + 1):
-                starts[j * nx + i + 1] += 1
-                tops[j * nx + i] = max(tops[j * nx + i], geom_box[g, 5])
-    for c in range(ncell):
-        starts[c + 1] += starts[c]
-    total = starts[ncell]
-    if entries is None:
-        return total
     fill = starts[:ncell].copy()
-    for g in range(G):
-        if (geom_box[g, 5] < z0 or geom_box[g, 3] < x0 or geom_box[g, 0] > x1 or geom_box[g, 4] < y0
-                or geom_box[g, 1] > y1):
-            continue
-        ia, ib = _grid_cells(geom_box[g, 0], geom_box[g, 3], x0, cell, nx)
-        ja, jb = _grid_cells(geom_box[g, 1], geom_box[g, 4], y0, cell, ny)
-        for j in range(ja, jb + 1):
-            for i in range(ia, ib + 1):
-                entries[fill[j * nx + i]] = g
-                fill[j * nx + i] += 1
-    return total
+    for stage in range(2 if fill_entries else 1):
+        for g in range(G):
+            if (geom_box[g, 5] < z0 or geom_box[g, 3] < x0 or geom_box[g, 0] > x1 or geom_box[g, 4] < y0
+                    or geom_box[g, 1] > y1):
+                continue
+            ia, ib = _grid_cells(geom_box[g, 0], geom_box[g, 3], x0, cell, nx)
+            ja, jb = _grid_cells(geom_box[g, 1], geom_box[g, 4], y0, cell, ny)
+            for j in range(ja, jb + 1):
+                for c in range(j * nx + ia, j * nx + ib + 1):
+                    if stage == 0:  # count
+                        starts[c + 1] += 1
+                        tops[c] = max(tops[c], geom_box[g, 5])
+                    else:  # fill
+                        entries[fill[c]] = g
+                        fill[c] += 1
+        if stage == 0:
+            for c in range(ncell):
+                starts[c + 1] += starts[c]
+            fill = starts[:ncell].copy()
+    return starts[ncell]
 
 
 @jit
@@ -925,11 +917,14 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     starts = np.empty((T, ncell + 1), dtype=np.int64)
     tops = np.empty((T, ncell))
     offset = np.zeros(T + 1, dtype=np.int64)
+    counting = np.empty(0, dtype=np.int64)
     for s in range(T):
-        offset[s + 1] = offset[s] + _build_grid(bounds[s, :G], x0, y0, z0, cell, nx, ny, starts[s], tops[s], None)
+        offset[s + 1] = offset[s] + _build_grid(bounds[s, :G], x0, y0, z0, cell, nx, ny, starts[s], tops[s], counting,
+                                                  False)
     entries = np.empty(offset[T], dtype=np.int64)
     for s in range(T):
-        _build_grid(bounds[s, :G], x0, y0, z0, cell, nx, ny, starts[s], tops[s], entries[offset[s]:offset[s + 1]])
+        _build_grid(bounds[s, :G], x0, y0, z0, cell, nx, ny, starts[s], tops[s],
+                    entries[offset[s]:offset[s + 1]], True)
     seen = np.full(G, -1, dtype=np.int64)  # the last ray that tested each geom
     ray = 0
     for r in range(points.shape[0]):
