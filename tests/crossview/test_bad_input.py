@@ -41,6 +41,9 @@ SCENARIO_CASES = [
     ("million-cameras", None, ["--cameras", "1000000"], "rows: 1000 must be in [1, 100] cameras"),
     ("huge-seed", None, ["--seed", str(10**30)], f"seed: {10**30} must be in [0, 9223372036854775807]"),
     ("huge-crowd", None, ["--people", "100000000"], "people: 100000000 must be in [0, 500] people"),
+    ("crowd-above-the-floor", None, ["--people", "400"],
+     "crowd.people: 400 people need 400 m² of walkable floor (1.0 m² each) but the store has 12.8 m²; use at "
+     "most 12 people"),
     ("too-many-camera-frames", None, ["--duration", "86400"],
      "schedules 10,368,000 camera frames, more than the 5,000,000 one recording may hold"),
 ]
