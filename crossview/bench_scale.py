@@ -87,6 +87,55 @@ def run_case(case: ScaleCase, duration_s: float, folder: Path, progress: bool) -
     }
 
 
+def _tree_rss_kb(pid: int) -> int:
+    """Resident memory of a process and all its descendants now, kB (Linux /proc; 0 for what has ended)."""
+    total, todo = 0, [pid]
+    while todo:
+        p = todo.pop()
+        try:
+            with open(f"/proc/{p}/status", encoding="ascii") as f:
+                total += next((int(line.split()[1]) for line in f if line.startswith("VmRSS:")), 0)
+            for task in Path(f"/proc/{p}/task").iterdir():
+                todo += [int(c) for c in (task / "children").read_text().split()]
+        except (OSError, ValueError):
+            continue
+    return total
+
+
+_SAMPLE_S = 0.2
+
+
+def bench_generate_command(name: str, duration_s: float, out: Path) -> dict:
+    """`crossview generate NAME` in a new process, as someone runs it: its wall time, CPU time (the command and
+    its simulation worker) and peak resident memory of the two together (sampled every `_SAMPLE_S`)."""
+    import resource
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "generate", name,
+               "--duration", repr(float(duration_s)), "-o", str(out)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    start = time.perf_counter()
+    peak_kb = 0
+    with subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True) as process:
+        try:
+            while process.poll() is None:
+                peak_kb = max(peak_kb, _tree_rss_kb(process.pid))
+                time.sleep(_SAMPLE_S)
+        except BaseException:
+            process.terminate()
+            raise
+        stderr = process.stderr.read()
+    wall = time.perf_counter() - start
+    if process.returncode != 0:
+        raise RuntimeError(f"{' '.join(command[2:])} exited with {process.returncode}: {stderr.strip()[-300:]}")
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"scenario": name, "duration_s": duration_s, "wall_s": wall, "cpu_s": cpu,
+            "realtime_factor": duration_s / wall, "cpu_realtime_factor_2_cores": 2 * duration_s / cpu,
+            "peak_rss_mb": peak_kb / 1024, "bytes_per_simulated_s": out.stat().st_size / duration_s}
+
+
 def column_subsets(cameras, steps=COLUMN_STEPS) -> list[list[str]]:
     """Names of the cameras of the first k grid columns (cameras ordered by x), for each k in `steps`."""
     xs = np.array([c.center_world[0] for c in cameras])
@@ -233,7 +282,17 @@ def markdown_section(payload: dict, plot_name: str | None) -> str:
                   "(1 is linear, the paper's claim)."]
         if plot_name:
             lines += ["", f"![time per round against cameras]({plot_name})"]
+    if payload.get("generation"):
+        lines += ["", "### Generating the hypermarket", "", _generation_line(payload["generation"]) + "."]
     return "\n".join(lines) + "\n"
+
+
+def _generation_line(g: dict) -> str:
+    return (f"`crossview generate {g['scenario']} --duration {g['duration_s']:g}`: {g['wall_s']:.0f} s "
+            f"({g['realtime_factor']:.2f}x real time), {g['cpu_s']:.0f} CPU s in the command and its worker "
+            f"({g['cpu_realtime_factor_2_cores']:.2f}x real time were the two processes on two free, balanced "
+            f"cores), peak resident memory of both {g['peak_rss_mb']:.0f} MB, "
+            f"{g['bytes_per_simulated_s'] / 2**20:.0f} MiB of recording per simulated second")
 
 
 def _cell(value) -> str:
@@ -262,10 +321,13 @@ def main(json_path: Path | None = None, duration_s: float = 10.0, progress: bool
         reuse = next((Path(tmp) / f"{r['scenario']}-{r['num_people']}.mcap" for r in results
                       if r["scenario"] == LINEAR_SCENARIO), None)
         line = linear_in_cameras(duration_s, Path(tmp), progress, reuse) if linear else None
+        generation = bench_generate_command(LINEAR_SCENARIO, duration_s, Path(tmp) / "generated.mcap")
     payload = {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
                "version": recording.software_version(), "machine": platform.platform(),
-               "cpus": os.cpu_count(), "duration_s": duration_s, "cases": results, "linear": line}
+               "cpus": os.cpu_count(), "duration_s": duration_s, "cases": results, "linear": line,
+               "generation": generation}
     print(format_results(results, line))
+    print(_generation_line(generation))
     if json_path:
         pipeline.write_json(payload, json_path)
     if markdown_path:

@@ -53,3 +53,11 @@ def test_one_case_end_to_end_and_the_page_section(tmp_path):
     bench_scale.plot_linear(linear, tmp_path / "plot.png")
     assert (tmp_path / "plot.png").read_bytes().startswith(b"\x89PNG")
     assert "cost per camera frame, dearest / cheapest case: 1.0x" in bench_scale.format_results([row], linear)
+
+
+def test_the_generate_command_is_timed_with_its_worker_and_their_memory(tmp_path):
+    g = bench_scale.bench_generate_command("store_layout1", 1.0, tmp_path / "r.mcap")
+    assert (tmp_path / "r.mcap").stat().st_size == g["bytes_per_simulated_s"]
+    assert g["wall_s"] > 0 and g["cpu_s"] > 0 and g["realtime_factor"] == 1.0 / g["wall_s"]
+    assert g["peak_rss_mb"] > 50  # (Python, numpy, MuJoCo and numba at the least)
+    assert "peak resident memory of both" in bench_scale._generation_line(g)
