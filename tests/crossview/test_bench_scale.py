@@ -34,25 +34,30 @@ def test_the_fitted_exponent_of_a_power_law_is_its_exponent():
 def test_one_case_end_to_end_and_the_page_section(tmp_path):
     row = bench_scale.run_case(bench_scale.ScaleCase("store_layout1"), 3.0, tmp_path, progress=False)
     assert row["num_cameras"] == 12 and row["num_people"] == row["people_asked"] == 4
-    assert row["camera_frames"] > 0 and row["worst_update_ms"] >= row["update_ms_p99"] > 0
+    assert row["camera_frames"] == row["camera_frames_timed"] > 0
+    assert row["worst_update_ms"] >= row["update_ms_p99"] > 0
     assert row["cost_per_camera_frame_ms"] == 1e3 / row["camera_frames_per_s"]
-    assert row["unknown_joints"] == 0 and row["false_positives_per_min"] >= 0
+    assert row["unknown_joints"] == 0 and row["false_positives_per_min"] >= 0 and row["pcp"] > 0.5
+    # Past its budget a case is timed over the start of its stream only, and left unscored.
+    short = bench_scale.run_case(bench_scale.ScaleCase("store_layout1"), 3.0, tmp_path / "b", False, budget_s=0.0)
+    assert short["camera_frames_timed"] == 1 and short["pcp"] is None and short["false_positives_per_min"] is None
     linear = {"scenario": "store_layout1", "duration_s": 3.0, "exponent": 1.1,
               "points": [{"num_cameras": n, "round_ms": n * 0.5, "camera_frames_per_s": 2000.0,
                           "worst_update_ms": 3.0} for n in (3, 6, 12)]}
-    payload = {"date": "2026-01-02 03:04 UTC", "machine": "m", "cpus": 2, "duration_s": 3.0, "cases": [row],
+    payload = {"date": "2026-01-02 03:04 UTC", "machine": "m", "cpus": 2, "duration_s": 3.0, "cases": [row, short],
                "linear": linear}
     section = bench_scale.markdown_section(payload, "benchmarks/linear_in_cameras.png")
     assert section.startswith(bench_scale.SECTION) and "| store_layout1 | 12 | 4 (4) |" in section
+    assert "timed over the first 1 of" in section
     assert "b = 1.10" in section and "![time per round against cameras](benchmarks/linear_in_cameras.png)" in section
-    # Written into the benchmarks page: replacing its own section, keeping the rest; the plain bench keeps it.
+    # Written into the benchmarks page: replacing its own section, keeping the rest.
     page = "# Benchmarks\n\ntable\n"
     once = bench_scale.replace_section(page, section)
     assert once.startswith(page) and once.count(bench_scale.SECTION) == 1
     assert bench_scale.replace_section(once, section) == once
     bench_scale.plot_linear(linear, tmp_path / "plot.png")
     assert (tmp_path / "plot.png").read_bytes().startswith(b"\x89PNG")
-    assert "cost per camera frame, dearest / cheapest case: 1.0x" in bench_scale.format_results([row], linear)
+    assert "fitted exponent of time per round against cameras: 1.10" in bench_scale.format_results([row], linear)
 
 
 def test_the_generate_command_is_timed_with_its_worker_and_their_memory(tmp_path):
