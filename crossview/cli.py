@@ -202,6 +202,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--duration", type=_positive_float, help="simulated seconds per case (default 20; 10 with --scale)")
     p.add_argument("--scale", action="store_true", help="the tracker at crowd scale instead (28/16 to 240/200 "
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
+    p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
+                   "timed per case (the rest of a slower case's stream is left unscored; default 300)")
 
     p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
     p.add_argument("scenario", help="base scenario file or shipped name")
@@ -460,7 +462,7 @@ def _cmd_bench(args) -> None:
         from crossview import bench_scale
 
         bench_scale.main(json_path=args.json, duration_s=args.duration or 10.0, progress=not args.no_progress,
-                         markdown_path=args.markdown)
+                         markdown_path=args.markdown, budget_s=args.budget)
         return
     from crossview import bench
 

@@ -44,7 +44,8 @@ def test_one_case_end_to_end_and_the_page_section(tmp_path):
     linear = {"scenario": "store_layout1", "duration_s": 3.0, "exponent": 1.1,
               "points": [{"num_cameras": n, "round_ms": n * 0.5, "camera_frames_per_s": 2000.0,
                           "worst_update_ms": 3.0} for n in (3, 6, 12)]}
-    payload = {"date": "2026-01-02 03:04 UTC", "machine": "m", "cpus": 2, "duration_s": 3.0, "cases": [row, short],
+    payload = {"date": "2026-01-02 03:04 UTC", "machine": "m", "cpus": 2, "duration_s": 3.0, "budget_s": 9.0,
+               "cases": [row, short],
                "linear": linear}
     section = bench_scale.markdown_section(payload, "benchmarks/linear_in_cameras.png")
     assert section.startswith(bench_scale.SECTION) and "| store_layout1 | 12 | 4 (4) |" in section
