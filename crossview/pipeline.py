@@ -220,13 +220,8 @@ def track(
     preset: str = "store",
     config_path: Path | None = None,
     progress: bool = True,
-    update_s: list | None = None,
 ) -> TrackResult:
-    """Runs a tracker over a recording's frames in delivery order and writes the tracks file.
-
-    Args:
-        update_s: if given, each update's time (seconds, the tracker's alone) is appended to it.
-    """
+    """Runs a tracker over a recording's frames in delivery order and writes the tracks file."""
     from tqdm import tqdm
 
     from core.types import SKELETONS
@@ -257,10 +252,7 @@ def track(
             frame = camera_frame.frame
             start = time.perf_counter()
             targets = resolved.update(tracker, frame, updates)
-            took = time.perf_counter() - start
-            tracker_s += took
-            if update_s is not None:
-                update_s.append(took)
+            tracker_s += time.perf_counter() - start
             writer.write(resolved.output(tracker, targets, frame, updates, skeleton))
             updates += 1
         writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras),
