@@ -235,5 +235,11 @@ def main(json_path: Path | None = None, duration_s: float = 20.0, progress: bool
     if json_path:
         pipeline.write_json(payload, json_path)
     if markdown_path:
-        pipeline.write_text(markdown(payload), markdown_path)
+        from crossview.bench_scale import SECTION
+
+        page = markdown(payload)
+        old = markdown_path.read_text(encoding="utf-8") if markdown_path.exists() else ""
+        if SECTION in old:  # (`crossview bench --scale`'s section is kept)
+            page = page.rstrip("\n") + "\n\n" + old[old.index(SECTION):]
+        pipeline.write_text(page, markdown_path)
     return results

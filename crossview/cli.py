@@ -203,7 +203,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
     p.add_argument("--json", type=Path, help="write the figures here")
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
-    p.add_argument("--duration", type=_positive_float, default=20.0, help="simulated seconds per case")
+    p.add_argument("--duration", type=_positive_float, help="simulated seconds per case (default 20; 10 with --scale)")
+    p.add_argument("--scale", action="store_true", help="the tracker at crowd scale instead (28/16 to 240/200 "
+                   "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
+    p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
+                   "timed per case (the rest of a slower case's stream is left unscored; default 300)")
 
     p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
     p.add_argument("scenario", help="base scenario file or shipped name")
@@ -479,9 +483,15 @@ def _cmd_compare(args) -> None:
 
 
 def _cmd_bench(args) -> None:
+    if args.scale:
+        from crossview import bench_scale
+
+        bench_scale.main(json_path=args.json, duration_s=args.duration or 10.0, progress=not args.no_progress,
+                         markdown_path=args.markdown, budget_s=args.budget)
+        return
     from crossview import bench
 
-    bench.main(json_path=args.json, duration_s=args.duration, progress=not args.no_progress,
+    bench.main(json_path=args.json, duration_s=args.duration or 20.0, progress=not args.no_progress,
                markdown_path=args.markdown)
 
 

@@ -669,19 +669,27 @@ def _parent_bodies(bodies: np.ndarray) -> np.ndarray:
 # by term in the same order, so every hit distance is the one `mujoco.mj_multiRay` returns, and the
 # nearest hit is chosen as MuJoCo chooses it (geoms in model order, a later geom only when strictly
 # nearer). What differs is the culling, which never drops a geom that has a hit nearer than the keypoint
-# (the only hits the flags depend on), so the nearest hit and its ties come out the same: per capture and
-# person, the geoms whose box meets the box around the camera centre and that person's keypoints (whole
-# groups of geoms first: a person's, the store's) are the candidates of the person's rays; per ray, a
-# candidate is skipped when the segment from the camera to the keypoint (to the nearest hit so far) misses
-# its bounding sphere, a box geom also when the box around the segment misses its box. tests/sim checks the
+# (the only hits the flags depend on), so the nearest hit and its ties come out the same. Per instant the
+# geoms are binned by the floor cells (`_GRID_CELL_M`) their boxes overlap, each cell keeping its highest
+# box top; a ray walks the cells its segment crosses from the camera on, skips a cell whose top is below
+# the segment there, and stops at the first cell boundary past its nearest hit (a hit lies in the cell of
+# its point, and its geom's box overlaps that cell). In a cell, a geom is skipped when the segment from the
+# camera to the keypoint (to the nearest hit so far) misses its bounding sphere, a box geom also when the
+# box around the segment misses its box; ties go to the geom first in model order. tests/sim checks the
 # flags and the hits against `mj_multiRay` in the store. This replaced one `mj_multiRay` call per capture,
-# whose per-call set-up (the bounding angles of every geom) cost more than its rays.
+# whose per-call set-up (the bounding angles of every geom) cost more than its rays, and then per-person
+# candidate lists, whose boxes (camera to person) held most of a crowded store.
 
 _MJ_MINVAL = 1e-15  # mjMINVAL: MuJoCo's smallest denominator
 _GEOM_SPHERE, _GEOM_CAPSULE, _GEOM_ELLIPSOID, _GEOM_CYLINDER, _GEOM_BOX = 2, 3, 4, 5, 6  # mjtGeom
 _RAY_GEOM_TYPES = (_GEOM_SPHERE, _GEOM_CAPSULE, _GEOM_ELLIPSOID, _GEOM_CYLINDER, _GEOM_BOX)
 # Slack on the bounding spheres of the culling, far above the rounding of the hit distances.
 _CULL_SLACK_M = 1e-6
+# The floor grid of the ray casting: cell side, most cells along a side, and the slack of its bounds (far
+# above the rounding of the cell walk, far below anything a cell's contents depend on).
+_GRID_CELL_M = 0.5
+_GRID_MAX_CELLS = 256
+_GRID_SLACK_M = 1e-6
 
 
 @jit
@@ -815,6 +823,69 @@ def _scene_bounds(geom_type, groups, geom_xpos, geom_xmat, geom_size, geom_rboun
 
 
 @jit
+def _grid_extent(origins, points, mask):
+    """The floor rectangle (x0, y0, x1, y1) holding every segment from a capture's camera centre to a keypoint
+    it casts (origins (R, 3), points (R, N, 3), mask (R, N)), and the lowest height any of them reaches:
+    geoms outside it cannot meet a ray of the block."""
+    x0 = y0 = z0 = np.inf
+    x1 = y1 = -np.inf
+    for r in range(points.shape[0]):
+        any_cast = False
+        for n in range(points.shape[1]):
+            if mask[r, n]:
+                any_cast = True
+                x0, x1 = min(x0, points[r, n, 0]), max(x1, points[r, n, 0])
+                y0, y1 = min(y0, points[r, n, 1]), max(y1, points[r, n, 1])
+                z0 = min(z0, points[r, n, 2])
+        if any_cast:
+            x0, x1 = min(x0, origins[r, 0]), max(x1, origins[r, 0])
+            y0, y1 = min(y0, origins[r, 1]), max(y1, origins[r, 1])
+            z0 = min(z0, origins[r, 2])
+    return x0 - _GRID_SLACK_M, y0 - _GRID_SLACK_M, x1 + _GRID_SLACK_M, y1 + _GRID_SLACK_M, z0 - _GRID_SLACK_M
+
+
+@jit
+def _grid_cells(lo, hi, origin, cell, n):
+    """First and last cell index (clamped to [0, n)) of the interval [lo, hi] on a grid axis."""
+    a = int(math.floor((lo - origin) / cell))
+    b = int(math.floor((hi - origin) / cell))
+    return max(a, 0), min(b, n - 1)
+
+
+@jit
+def _build_grid(geom_box, x0, y0, z0, cell, nx, ny, starts, tops, entries, fill_entries):
+    """Bins the geoms by the floor cells their boxes geom_box (G, 6) overlap (geoms wholly below z0 or
+    outside the grid left out): cell c holds entries[starts[c]:starts[c + 1]], in geom order, and tops[c]
+    is the highest box top in it (-inf when empty). Without fill_entries, only counts. Returns the total."""
+    ncell = nx * ny
+    starts[:] = 0
+    tops[:] = -np.inf
+    G = geom_box.shape[0]
+    x1, y1 = x0 + nx * cell, y0 + ny * cell
+    fill = starts[:ncell].copy()
+    for stage in range(2 if fill_entries else 1):
+        for g in range(G):
+            if (geom_box[g, 5] < z0 or geom_box[g, 3] < x0 or geom_box[g, 0] > x1 or geom_box[g, 4] < y0
+                    or geom_box[g, 1] > y1):
+                continue
+            ia, ib = _grid_cells(geom_box[g, 0], geom_box[g, 3], x0, cell, nx)
+            ja, jb = _grid_cells(geom_box[g, 1], geom_box[g, 4], y0, cell, ny)
+            for j in range(ja, jb + 1):
+                for c in range(j * nx + ia, j * nx + ib + 1):
+                    if stage == 0:  # count
+                        starts[c + 1] += 1
+                        tops[c] = max(tops[c], geom_box[g, 5])
+                    else:  # fill
+                        entries[fill[c]] = g
+                        fill[c] += 1
+        if stage == 0:
+            for c in range(ncell):
+                starts[c + 1] += starts[c]
+            fill = starts[:ncell].copy()
+    return starts[ncell]
+
+
+@jit
 def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_body, groups, scene_xpos,
                         scene_xmat, scene_size, scene_rbound, scene_person, const_of, scene_of, margin, occluded,
                         self_occluded, geomid, dist, cams, counts, bounds):
@@ -823,7 +894,7 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
     cast, person (R, N // J) person id of each row of J keypoints; kp_bodies (J, 2) body and parent body
     of each keypoint; geom_type, geom_body (G,); groups (K + 1,) starts of contiguous geom groups (a
-    person's geoms, the store's) for the culling; scene_xpos, scene_xmat (T, G, ...) the geoms' positions and
+    person's geoms, the store's); scene_xpos, scene_xmat (T, G, ...) the geoms' positions and
     rotations (rows of 9) at T instants; scene_size, scene_rbound, scene_person (U, G, ...) their sizes,
     bounding radii and owners (U sets; const_of (T,) the set of each instant); scene_of (R,) the instant of
     each capture;
@@ -832,19 +903,36 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
     than the keypoint) and its distance dist (R, N); adds each capture's keypoints cast, occluded and
     self-occluded to its camera's row cams[r] of counts (C, 3). bounds: scratch, (T, G + K, 6) at least.
     """
-    K = groups.shape[0] - 1
     T, G = scene_xpos.shape[0], geom_type.shape[0]
     for s in range(T):
         u = const_of[s]
         _scene_bounds(geom_type, groups, scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u], bounds[s])
-    # One person's candidates: geom ids, and centre minus camera centre, its squared norm, radius plus slack.
-    cand = np.empty(G, dtype=np.int64)
-    cand_sphere = np.empty((G, 5))
+    # One floor grid per instant over the rectangle the block's rays cross.
+    x0, y0, x1, y1, z0 = _grid_extent(origins, points, mask)
+    if not x1 > x0:  # nothing to cast
+        x0, y0, x1, y1 = 0.0, 0.0, 1.0, 1.0
+    cell = max(_GRID_CELL_M, (x1 - x0) / _GRID_MAX_CELLS, (y1 - y0) / _GRID_MAX_CELLS)
+    nx, ny = max(int(math.ceil((x1 - x0) / cell)), 1), max(int(math.ceil((y1 - y0) / cell)), 1)
+    ncell = nx * ny
+    starts = np.empty((T, ncell + 1), dtype=np.int64)
+    tops = np.empty((T, ncell))
+    offset = np.zeros(T + 1, dtype=np.int64)
+    counting = np.empty(0, dtype=np.int64)
+    for s in range(T):
+        offset[s + 1] = offset[s] + _build_grid(bounds[s, :G], x0, y0, z0, cell, nx, ny, starts[s], tops[s], counting,
+                                                  False)
+    entries = np.empty(offset[T], dtype=np.int64)
+    for s in range(T):
+        _build_grid(bounds[s, :G], x0, y0, z0, cell, nx, ny, starts[s], tops[s],
+                    entries[offset[s]:offset[s + 1]], True)
+    seen = np.full(G, -1, dtype=np.int64)  # the last ray that tested each geom
+    ray = 0
     for r in range(points.shape[0]):
         s = scene_of[r]
         u = const_of[s]
         geom_xpos, geom_xmat, geom_size, geom_rbound = scene_xpos[s], scene_xmat[s], scene_size[u], scene_rbound[u]
-        geom_person, geom_box, group_box = scene_person[u], bounds[s, :G], bounds[s, G:]
+        geom_person, geom_box = scene_person[u], bounds[s, :G]
+        cell_start, cell_top, cell_geoms = starts[s], tops[s], entries[offset[s]:offset[s + 1]]
         ox, oy, oz = origins[r, 0], origins[r, 1], origins[r, 2]
         cast_here = occluded_here = self_occluded_here = 0
         for n in range(points.shape[1]):
@@ -852,77 +940,80 @@ def _cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, 
             self_occluded[r, n] = False
             geomid[r, n] = -1
             dist[r, n] = -1.0
-            cast_here += mask[r, n]
-        for q in range(points.shape[1] // J):
-            # The box around the camera centre and the person's keypoints cast holds every ray's segment.
-            c_lo_x = c_hi_x = ox
-            c_lo_y = c_hi_y = oy
-            c_lo_z = c_hi_z = oz
-            cast = False
-            for n in range(q * J, q * J + J):
-                if mask[r, n]:
-                    cast = True
-                    c_lo_x, c_hi_x = min(c_lo_x, points[r, n, 0]), max(c_hi_x, points[r, n, 0])
-                    c_lo_y, c_hi_y = min(c_lo_y, points[r, n, 1]), max(c_hi_y, points[r, n, 1])
-                    c_lo_z, c_hi_z = min(c_lo_z, points[r, n, 2]), max(c_hi_z, points[r, n, 2])
-            if not cast:
+            if not mask[r, n]:
                 continue
-            nc = 0
-            for k in range(K):
-                if (c_hi_x < group_box[k, 0] or c_lo_x > group_box[k, 3] or c_hi_y < group_box[k, 1]
-                        or c_lo_y > group_box[k, 4] or c_hi_z < group_box[k, 2] or c_lo_z > group_box[k, 5]):
-                    continue
-                for g in range(groups[k], groups[k + 1]):
-                    if (c_hi_x < geom_box[g, 0] or c_lo_x > geom_box[g, 3] or c_hi_y < geom_box[g, 1]
-                            or c_lo_y > geom_box[g, 4] or c_hi_z < geom_box[g, 2] or c_lo_z > geom_box[g, 5]):
-                        continue
-                    cand[nc] = g
-                    dx, dy, dz = geom_xpos[g, 0] - ox, geom_xpos[g, 1] - oy, geom_xpos[g, 2] - oz
-                    cand_sphere[nc, 0], cand_sphere[nc, 1], cand_sphere[nc, 2] = dx, dy, dz
-                    cand_sphere[nc, 3] = dx * dx + dy * dy + dz * dz
-                    cand_sphere[nc, 4] = geom_rbound[g] + _CULL_SLACK_M
-                    nc += 1
-            for n in range(q * J, q * J + J):
-                if not mask[r, n]:
-                    continue
-                px, py, pz = points[r, n, 0], points[r, n, 1], points[r, n, 2]
-                vx, vy, vz = px - ox, py - oy, pz - oz
-                length = math.sqrt(vx * vx + vy * vy + vz * vz)
-                ux, uy, uz = vx / length, vy / length, vz / length
-                lo_x, lo_y, lo_z = min(ox, px), min(oy, py), min(oz, pz)
-                hi_x, hi_y, hi_z = max(ox, px), max(oy, py), max(oz, pz)
-                # Only hits nearer than `reach` matter: the keypoint, then the nearest hit so far (a geom later
-                # in model order replaces it only when strictly nearer, as in MuJoCo).
-                best, best_g, reach = -1.0, -1, length
-                for i in range(nc):
-                    g = cand[i]
-                    # (For a geom bounded by its sphere, the box test adds nothing to the sphere test.)
-                    if geom_type[g] == _GEOM_BOX and (
-                            hi_x < geom_box[g, 0] or lo_x > geom_box[g, 3] or hi_y < geom_box[g, 1]
-                            or lo_y > geom_box[g, 4] or hi_z < geom_box[g, 2] or lo_z > geom_box[g, 5]):
-                        continue
-                    along = cand_sphere[i, 0] * ux + cand_sphere[i, 1] * uy + cand_sphere[i, 2] * uz
-                    radius = cand_sphere[i, 4]
-                    if (along + radius < 0 or along - radius > reach
-                            or cand_sphere[i, 3] - along * along > radius * radius):
-                        continue
-                    x = _ray_geom(g, geom_type, geom_xpos, geom_xmat, geom_size, ox, oy, oz, ux, uy, uz)
-                    if x >= 0 and (best < 0 or x < best):
-                        best, best_g = x, g
-                        reach = min(reach, best)
-                if best_g < 0 or not best < length:
-                    continue
-                geomid[r, n] = best_g
-                dist[r, n] = best
-                if geom_person[best_g] != person[r, q]:
-                    occluded[r, n] = True
-                    occluded_here += 1
+            cast_here += 1
+            ray += 1
+            px, py, pz = points[r, n, 0], points[r, n, 1], points[r, n, 2]
+            vx, vy, vz = px - ox, py - oy, pz - oz
+            length = math.sqrt(vx * vx + vy * vy + vz * vz)
+            ux, uy, uz = vx / length, vy / length, vz / length
+            lo_x, lo_y, lo_z = min(ox, px), min(oy, py), min(oz, pz)
+            hi_x, hi_y, hi_z = max(ox, px), max(oy, py), max(oz, pz)
+            # The cells the segment crosses, from the camera on (a 2D grid walk); in each, the distances
+            # t_in..t_out along the ray. Only hits nearer than `reach` matter: the keypoint, then the nearest
+            # hit so far; ties go to the geom first in model order, as in MuJoCo.
+            best, best_g, reach = -1.0, -1, length
+            i, j = _grid_cells(ox, ox, x0, cell, nx)[0], _grid_cells(oy, oy, y0, cell, ny)[0]
+            step_i, step_j = (1 if ux > 0 else -1), (1 if uy > 0 else -1)
+            next_x = x0 + (i + (1 if ux > 0 else 0)) * cell
+            next_y = y0 + (j + (1 if uy > 0 else 0)) * cell
+            t_x = (next_x - ox) / ux if ux != 0 else np.inf
+            t_y = (next_y - oy) / uy if uy != 0 else np.inf
+            dt_x = cell / abs(ux) if ux != 0 else np.inf
+            dt_y = cell / abs(uy) if uy != 0 else np.inf
+            t_in = 0.0
+            while True:
+                t_out = min(t_x, t_y, length)
+                # The segment's lowest point in this cell, against the highest geom top in it.
+                if min(oz + t_in * uz, oz + t_out * uz) <= cell_top[j * nx + i] + _GRID_SLACK_M:
+                    for e in range(cell_start[j * nx + i], cell_start[j * nx + i + 1]):
+                        g = cell_geoms[e]
+                        if seen[g] == ray:
+                            continue
+                        seen[g] = ray
+                        # (For a geom bounded by its sphere, the box test adds nothing to the sphere test.)
+                        if geom_type[g] == _GEOM_BOX and (
+                                hi_x < geom_box[g, 0] or lo_x > geom_box[g, 3] or hi_y < geom_box[g, 1]
+                                or lo_y > geom_box[g, 4] or hi_z < geom_box[g, 2] or lo_z > geom_box[g, 5]):
+                            continue
+                        dx, dy, dz = geom_xpos[g, 0] - ox, geom_xpos[g, 1] - oy, geom_xpos[g, 2] - oz
+                        along = dx * ux + dy * uy + dz * uz
+                        radius = geom_rbound[g] + _CULL_SLACK_M
+                        if (along + radius < 0 or along - radius > reach
+                                or dx * dx + dy * dy + dz * dz - along * along > radius * radius):
+                            continue
+                        x = _ray_geom(g, geom_type, geom_xpos, geom_xmat, geom_size, ox, oy, oz, ux, uy, uz)
+                        if x >= 0 and (best < 0 or x < best or (x == best and g < best_g)):
+                            best, best_g = x, g
+                            reach = min(reach, best)
+                # Every hit in a later cell is at least t_out away.
+                if t_out >= length:
+                    break
+                if best >= 0 and best < t_out - _GRID_SLACK_M:
+                    break
+                if t_x < t_y:
+                    i += step_i
+                    t_in, t_x = t_x, t_x + dt_x
                 else:
-                    body = geom_body[best_g]
-                    j = n - q * J
-                    near = (body == kp_bodies[j, 0] or body == kp_bodies[j, 1]) and length - best <= margin
-                    self_occluded[r, n] = not near
-                    self_occluded_here += not near
+                    j += step_j
+                    t_in, t_y = t_y, t_y + dt_y
+                if i < 0 or i >= nx or j < 0 or j >= ny:
+                    break
+            if best_g < 0 or not best < length:
+                continue
+            geomid[r, n] = best_g
+            dist[r, n] = best
+            q = n // J
+            if geom_person[best_g] != person[r, q]:
+                occluded[r, n] = True
+                occluded_here += 1
+            else:
+                body = geom_body[best_g]
+                k = n - q * J
+                near = (body == kp_bodies[k, 0] or body == kp_bodies[k, 1]) and length - best <= margin
+                self_occluded[r, n] = not near
+                self_occluded_here += not near
         c = cams[r]
         counts[c, 0] += cast_here
         counts[c, 1] += occluded_here

@@ -329,11 +329,16 @@ def _pack_block(block: Block) -> tuple:
     """A block of `_blocks(draws=False)` as a few flat arrays (one pickle of a handful of arrays instead of
     dozens of small ones): the truths' poses concatenated, with their times and people counts; the
     captures' cameras, times, people and visibility (their poses are left out: `_unpack_block` derives
-    them from the truths)."""
+    them from the truths). Of the person-views, only those with a joint in the image travel: the others make
+    no detection and take no draw (`sim.detector._draw_detections`), so the consumer draws the same rows."""
     t, truths, requests, visible, _ = block
     seen = [r.poses.person_ids for r in requests]
-    people = (np.concatenate(seen).astype(np.int64, copy=False) if seen else np.zeros(0, dtype=np.int64),
-              np.array([len(p) for p in seen]))
+    viewed = np.concatenate(seen).astype(np.int64, copy=False) if seen else np.zeros(0, dtype=np.int64)
+    people = (viewed, np.array([len(p) for p in seen], dtype=np.int64))
+    if requests:  # (else `visible` stands for no rows at all)
+        keep = visible[1].any(axis=1)
+        people = (viewed[keep], np.bincount(np.repeat(np.arange(len(seen)), people[1])[keep], minlength=len(seen)))
+        visible = tuple(np.ascontiguousarray(v[keep]) for v in visible)
     times = np.array([p.t_s for p in truths])
     counts = np.array([len(p.person_ids) for p in truths], dtype=np.int64)
     ids = np.concatenate([p.person_ids for p in truths]).astype(np.int64, copy=False)

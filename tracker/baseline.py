@@ -4,7 +4,10 @@ On every frame it re-associates the latest frame of each camera from scratch: ep
 pairs of detections of different cameras (eq. S2), graph partitioning (eq. S3-S5), and a triangulation of every
 cluster of at least two views. Algorithm S1 has no identities; to give its output the tracker's shape, each
 frame's poses are linked to the previous output by the Hungarian algorithm on mean joint distance (a pose
-farther than `_LINK_DISTANCE_M` from all previous ones gets a new id). Every output target is CONFIRMED.
+farther than `_LINK_DISTANCE_M` from all previous ones gets a new id). Every output target is CONFIRMED. As the
+cross-view tracker's, its outputs hold no unknown joint: a joint this frame's cluster did not triangulate keeps
+the identity's last estimate (PREDICTED), and one never triangulated is inferred from the pose's own body
+(`tracker.body.fill_poses`, INFERRED); each target carries the per-joint states.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ from scipy.optimize import linear_sum_assignment
 
 from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
+from tracker.body import fill_poses, joint_states, mean_body
 from tracker.config import TrackerConfig
 from tracker.geometry import fundamental_matrix, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
@@ -54,6 +58,9 @@ class BaselineTracker:
         self._prev_ids = np.zeros(0, dtype=np.int64)
         self._prev_poses = np.zeros((0, J, 3))
         self._prev_s = np.zeros(0)
+        self._prev_seen = np.zeros((0, J))  # (N, J) when each joint of an identity was last triangulated
+        self._mean_body = mean_body(skeleton)
+        self._bones = np.ascontiguousarray(np.asarray(skeleton.bones, dtype=np.int64).reshape(-1, 2))
         self._next_id = 0
         self.last_output = TrackerOutput(0.0, "", [], np.zeros(0, dtype=np.int64))
 
@@ -101,20 +108,28 @@ class BaselineTracker:
             if check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits) is None:
                 poses.append(pose)
                 members.append(ds[ks == c])
-        ids = self._link(poses, t)
+        ids, seen_s = self._link(poses, t)
         for new_id, dets in zip(ids, members):
             assigned[dets] = new_id
-        targets = [Target(int(i), p, t, TargetState.CONFIRMED) for i, p in zip(ids, poses)]
+        out = np.stack(poses) if poses else np.zeros((0, J, 3))
+        codes = joint_states(seen_s, np.isfinite(out[..., 0]), t, self.config.stale_after_s)
+        fill_poses(out, self._mean_body, self._bones)  # (a copy: the identities keep what was triangulated)
+        targets = [Target(int(i), p, t, TargetState.CONFIRMED, code) for i, p, code in zip(ids, out, codes)]
         self.last_output = TrackerOutput(t, frame.camera, targets, assigned)
         return targets
 
-    def _link(self, poses: list[np.ndarray], t: float) -> list[int]:
+    def _link(self, poses: list[np.ndarray], t: float) -> tuple[list[int], np.ndarray]:
         """Identity of each pose: Hungarian match to the recent previous poses on mean joint distance.
 
         Fills, in place, the joints of a linked pose that are NaN with that identity's previous estimate.
+
+        Returns:
+            the ids, and (N, J) when each joint of each pose was last triangulated (-inf: never).
         """
         recent = (t - self._prev_s) <= self.config.lost_after_s
         prev_ids, prev_poses, prev_s = self._prev_ids[recent], self._prev_poses[recent], self._prev_s[recent]
+        prev_seen = self._prev_seen[recent]
+        seen = np.where(np.isfinite(np.stack(poses)[..., 0]), t, -np.inf) if poses else prev_seen[:0]
         ids = [-1] * len(poses)
         if poses and prev_ids.size:
             dist = np.linalg.norm(np.stack(poses)[:, None] - prev_poses[None], axis=-1)  # (N, Tp, J)
@@ -128,6 +143,7 @@ class BaselineTracker:
                     # A joint this frame's clusters did not triangulate keeps its last estimate, as the
                     # cross-view tracker's joints do (a once-known joint never turns NaN).
                     poses[r] = np.where(np.isfinite(poses[r]), poses[r], prev_poses[col])
+                    seen[r] = np.maximum(seen[r], prev_seen[col])
         for i, value in enumerate(ids):
             if value < 0:
                 ids[i] = self._next_id
@@ -136,4 +152,5 @@ class BaselineTracker:
         self._prev_ids = np.concatenate([prev_ids[keep], np.asarray(ids, dtype=np.int64)])
         self._prev_poses = np.concatenate([prev_poses[keep], np.stack(poses) if poses else prev_poses[:0]])
         self._prev_s = np.concatenate([prev_s[keep], np.full(len(poses), t)])
-        return ids
+        self._prev_seen = np.concatenate([prev_seen[keep], seen])
+        return ids, seen

@@ -51,6 +51,9 @@ SCENARIO_CASES = [
     ("calibration-without-image-size",
      f'[cameras]\ncalibration = {json.dumps(str(CAMPUS / "calibration.json"))}\ncalibration_format = "dataset"\n', [],
      "calibration.json' as a dataset calibration: key 'image_wh' missing"),
+    ("crowd-above-the-floor", None, ["--people", "400"],
+     "crowd.people: 400 people need 400 m² of walkable floor (1.0 m² each) but the store has 12.8 m²; use at "
+     "most 12 people"),
     ("too-many-camera-frames", None, ["--duration", "86400"],
      "schedules 10,368,000 camera frames, more than the 5,000,000 one recording may hold"),
 ]

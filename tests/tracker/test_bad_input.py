@@ -4,6 +4,7 @@ import copy
 import functools
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
@@ -136,3 +137,53 @@ def test_a_burst_of_500_detections_in_a_frame():
         frames.append(Frame(cam.name, t + 0.01 * (i + 1), kp, np.full((500, J), 0.9)))
     frames.append(Frame(CAMS[3].name, t + 0.05, rng.uniform(0, 1280, (40, J, 2)), np.full((40, J), 0.9)))
     _check(tracker, frames, complete=True)
+
+
+def _burst_frames(rng, t):
+    """500 person-shaped detections (random bodies projected) in each of three cameras' frames, then a frame of
+    a fourth camera whose every detection is a false positive (random pixels)."""
+    from tests.tracker.synthetic import _REST
+    from tracker.geometry import project_distorted
+
+    bodies = _REST[None] + np.concatenate([rng.uniform([-1, -1], [5.5, 5.0], (500, 2)), np.zeros((500, 1))],
+                                          axis=1)[:, None, :]
+    frames = []
+    for i, cam in enumerate(CAMS[:3]):
+        kp = project_distorted(cam, bodies) + rng.normal(0, 2.0, (500, J, 2))
+        frames.append(Frame(cam.name, t + 0.01 * (i + 1), kp, np.full((500, J), 0.9)))
+    frames.append(Frame(CAMS[3].name, t + 0.05, rng.uniform(0, 1280, (40, J, 2)), np.full((40, J), 0.9)))
+    return frames
+
+
+def test_the_baseline_survives_a_burst_and_a_frame_of_false_positives_without_unknown_joints():
+    tracker = _warm(BaselineTracker, BASELINE_CONFIG)
+    _check(tracker, _burst_frames(np.random.default_rng(9), FRAMES[-1].stamp_s), complete=True)
+    # ... and goes on tracking the real people afterwards.
+    _check(tracker, [Frame(f.camera, f.stamp_s + 1.0, f.keypoints_px, f.scores) for f in FRAMES[-24:]], complete=True)
+    assert tracker.last_output.targets
+
+
+@pytest.mark.parametrize("tracker_type", [Tracker, BaselineTracker])
+def test_a_camera_whose_view_holds_nothing(tracker_type):
+    """A camera that looks at empty floor far from the store (its view overlaps no other camera's): its
+    empty frames and its frames of false positives change nothing, and the other cameras track as before."""
+    from tests.tracker.synthetic import look_at_camera
+
+    void = look_at_camera("void", (60.0, 60.0, 3.0), (60.0, 61.0, 0.0))
+    config = CONFIG if tracker_type is Tracker else BASELINE_CONFIG
+    tracker = tracker_type([*CAMS, void], config)
+    rng = np.random.default_rng(4)
+    frames = []
+    for k, frame in enumerate(FRAMES):
+        frames.append(frame)
+        if k % 12 == 0:  # the void camera at about 10 fps: empty, or false positives only
+            D = int(rng.integers(0, 3))
+            frames.append(Frame("void", frame.stamp_s + 1e-4, rng.uniform(0, 1280, (D, J, 2)), np.full((D, J), 0.9)))
+    _check(tracker, frames, complete=True)
+    reference = tracker_type(CAMS, config)
+    for frame in FRAMES:
+        reference.update(frame)
+    assert len(tracker.last_output.targets) == len(reference.last_output.targets) > 0
+    for a, b in zip(sorted(tracker.last_output.targets, key=lambda t: t.id),
+                    sorted(reference.last_output.targets, key=lambda t: t.id)):
+        np.testing.assert_allclose(a.pose, b.pose, atol=1e-9)

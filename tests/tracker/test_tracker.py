@@ -200,6 +200,24 @@ def _without(frames, joints):
     return out
 
 
+def test_baseline_outputs_no_unknown_joint_and_says_where_each_comes_from(layout1):
+    cams, walkers, frames, _ = layout1
+    hidden = [7, 9]  # the left elbow and wrist: no camera ever sees them
+    outputs = _run(BaselineTracker(cams, CONFIG), _without(frames, hidden)[:150])
+    targets = [t for out in outputs for t in out.targets]
+    assert len(targets) > 100
+    for t in targets:
+        assert np.isfinite(t.pose).all()
+        assert t.joint_state.shape == (17,) and t.joint_state.dtype == np.uint8
+        assert (t.joint_state[hidden] == JointState.INFERRED.value).all()
+    seen = np.array([t.joint_state for t in targets])
+    assert np.mean(seen[:, [0, 5, 6, 11, 12]] == JointState.OBSERVED.value) > 0.9
+    # The inferred arm hangs where a person's arm is: within a forearm's length of the truth.
+    errors = [np.linalg.norm(walkers.poses(out.stamp_s)[:, hidden] - t.pose[hidden], axis=-1).mean(axis=1).min()
+              for out in outputs for t in out.targets]
+    assert np.median(errors) < 0.3
+
+
 def test_joints_never_seen_are_inferred_never_nan(layout1):
     cams, walkers, frames, _ = layout1
     hidden = [7, 9]  # the left elbow and wrist: no camera ever sees them
