@@ -21,16 +21,16 @@ import logging
 import multiprocessing
 import os
 import random
-import re
 import resource
 import socket
 import tempfile
+import threading
 import time
 import tomllib
 from collections.abc import Callable, Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 from core.errors import CrossviewError, ScenarioError
 from crossview import outputs, pipeline
@@ -116,8 +116,8 @@ class Cell:
         scenario_name: the base scenario's name (its file's stem).
         scenario_text: the base scenario file's text (shipped, so that a worker on another machine needs no
             copy of the file).
-        scenario_path: where the file is on the driver; used where it exists with the same text (so that
-            relative paths in it resolve).
+        files: (path as the scenario writes it, text) of each file the scenario refers to by a relative path
+            (its calibration), shipped with it so that the copy a worker loads resolves them.
         overrides: the dotted keys applied to the base scenario (the axis values, the seed, the duration,
             the camera grid's rows and columns).
         version: the package version the cell was planned with (workers must have the same).
@@ -136,7 +136,7 @@ class Cell:
     preset: str
     scenario_name: str
     scenario_text: str
-    scenario_path: str
+    files: tuple
     overrides: dict
     version: str
     error: str | None = None
@@ -145,16 +145,56 @@ class Cell:
     tracker_overrides: dict = field(default_factory=dict)
 
     def load_scenario(self, folder: Path) -> scenario_mod.Scenario:
-        """The cell's resolved scenario, from the driver's file where it is here, else from a copy in `folder`."""
-        path = Path(self.scenario_path)
-        try:
-            same = path.is_file() and path.read_text(encoding="utf-8") == self.scenario_text
-        except (OSError, UnicodeDecodeError):
-            same = False
-        if not same:
-            path = Path(folder) / f"{self.scenario_name}.toml"
-            path.write_text(self.scenario_text, encoding="utf-8")
-        return scenario_mod.load(path, self.overrides)
+        """The cell's resolved scenario, loaded from a copy of its file and the files it refers to in `folder`
+        (the same on the driver and on a worker elsewhere; where it lies changes no byte of the recording)."""
+        return load_copy(Path(folder), self.scenario_name, self.scenario_text, self.files, self.overrides)
+
+
+def load_copy(folder: Path, name: str, text: str, files, overrides: dict) -> scenario_mod.Scenario:
+    """A scenario loaded from a copy of its file's `text` written into `folder` with the `files` it refers to
+    by relative paths ((path, text) pairs), each where that path leads from the copy.
+
+    Raises:
+        ScenarioError: the scenario is invalid with these overrides.
+    """
+    home = copy_home(folder, files)
+    home.mkdir(parents=True, exist_ok=True)
+    for relative, content in files:
+        target = home / relative
+        target.parent.mkdir(parents=True, exist_ok=True)
+        target.write_text(content, encoding="utf-8")
+    source = home / f"{name}.toml"
+    source.write_text(text, encoding="utf-8")
+    return scenario_mod.load(source, overrides)
+
+
+def copy_home(folder: Path, files) -> Path:
+    """Where `load_copy` writes the scenario's copy in `folder`: deep enough that `../x.json` stays inside."""
+    ups = max((PurePosixPath(p).parts.count("..") for p, _ in files), default=0)
+    return Path(folder).joinpath(*["s"] * ups)
+
+
+def referenced_files(scenario: scenario_mod.Scenario) -> tuple[tuple[str, str], ...]:
+    """(path as written, text) of each file `scenario` refers to by a path relative to its own file (its
+    calibration); none where it names an absolute path (a worker needs that file at that path) or the file
+    cannot be read (the cell fails as it runs, naming it)."""
+    calibration = scenario.cameras.calibration
+    if not calibration or Path(calibration).is_absolute() or not scenario.source_path:
+        return ()
+    try:
+        text = (Path(scenario.source_path).parent / calibration).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError):
+        return ()
+    return ((calibration, text),)
+
+
+def portable(message: str, folder) -> str:
+    """`message` with paths under the scenario file's `folder` (the driver's, or a worker's copy) written
+    relative to it (`supermarket.toml: crowd.people: ...`): the same on every machine and from every folder."""
+    prefix = str(folder).rstrip(os.sep) + os.sep
+    message = message.replace(prefix, "")
+    resolved = str(Path(folder).resolve()).rstrip(os.sep) + os.sep
+    return message.replace(resolved, "")
 
 
 # ---------------------------------------------------------------- the command line's values
@@ -295,6 +335,7 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
                 _check_tracker_value(f"--set {axis.key}", axis.key, value, spec.presets)
     path = str(Path(base.source_path).resolve())
     text = Path(path).read_text(encoding="utf-8")  # (the file's, without the overrides' notes)
+    folder = Path(path).parent
     cells = []
     grid = itertools.product(*(a.values for a in spec.axes), spec.seeds, spec.methods, spec.presets)
     for index, combo in enumerate(grid):
@@ -308,22 +349,26 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
             scenario = pipeline.load_scenario(path, seed=seed, duration_s=spec.duration_s, cameras=cameras,
                                               overrides=overrides)
             resolved = _applied_overrides(scenario, overrides, seed, spec.duration_s, cameras)
+            files = referenced_files(scenario)
             identity = resolved_digest(scenario)
         except ScenarioError as e:
-            error = _one_line(e)
+            error = portable(_one_line(e), folder)
             resolved = {**overrides, "seed": seed}
+            files = ()
             identity = _key(base.name, resolved, spec.duration_s, cameras)
+        if files:  # (a calibration's content is part of the cell: the resolved values name only its path)
+            identity = _key(identity, [[p, hashlib.sha256(t.encode()).hexdigest()] for p, t in files])
         if tracker and error is None:
             try:
                 pipeline.tracker_config(preset, None, tracker)
             except CrossviewError as e:
-                error = _one_line(e)
+                error = portable(_one_line(e), folder)
         # (A cell without tracker axes keeps the key it had before they existed: finished cells stay found.)
         identity_parts = (identity, seed, method, preset, version) + ((tracker,) if tracker else ())
         cells.append(Cell(
             index=index, key=_key(*identity_parts), label=_label(values, seed, method, preset),
             values=values, seed=seed, method=method, preset=preset, scenario_name=base.name, scenario_text=text,
-            scenario_path=path, overrides=resolved, version=version, error=error, keep_recording=keep_recordings,
+            files=files, overrides=resolved, version=version, error=error, keep_recording=keep_recordings,
             worker_process=worker_process, tracker_overrides=tracker,
         ))
     return cells
@@ -380,7 +425,7 @@ def run_cell(cell: Cell) -> dict:
     _reset_peak_memory()
     start = time.perf_counter()
     timings: dict = {"host": socket.gethostname()}
-    score, recording = None, None
+    score, recording, home = None, None, None
     try:
         if cell.error is not None:
             raise CrossviewError(cell.error)
@@ -388,6 +433,7 @@ def run_cell(cell: Cell) -> dict:
             raise CrossviewError(f"this worker has crossview-testbed {software_version()}, the sweep {cell.version}; "
                                  "install the same version on every machine")
         with tempfile.TemporaryDirectory(prefix="crossview-cell-") as tmp:
+            home = copy_home(Path(tmp), cell.files)
             scenario = cell.load_scenario(Path(tmp))
             rec, tracks = Path(tmp) / f"{scenario.name}.mcap", Path(tmp) / f"{scenario.name}.tracks.mcap"
             gen = pipeline.generate(scenario, rec, progress=False, worker_process=cell.worker_process)
@@ -403,16 +449,9 @@ def run_cell(cell: Cell) -> dict:
                 recording = rec.read_bytes()
         status = "ok"
     except CrossviewError as e:
-        status = _driver_path(_one_line(e), cell)
+        status = _one_line(e) if home is None else portable(_one_line(e), home)
     timings.update(wall_s=time.perf_counter() - start, peak_memory_mb=_peak_memory_mb())
     return {"key": cell.key, "status": status, "score": score, "timings": timings, "recording": recording}
-
-
-def _driver_path(message: str, cell: Cell) -> str:
-    """`message` naming the scenario file as the driver does, where a worker elsewhere read a copy of it."""
-    copy = re.compile(re.escape(tempfile.gettempdir()) + r"/crossview-cell-[^/]+/" + re.escape(cell.scenario_name)
-                      + r"\.toml")
-    return copy.sub(lambda _: cell.scenario_path, message)
 
 
 def _crashed(cell: Cell, error: BaseException) -> dict:
@@ -448,7 +487,7 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
     queued cells are dropped and the running workers terminated."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(_PRELOAD)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_pool_worker_started)
     finished = False
     try:
         futures = {pool.submit(run_cell, cell): cell for cell in cells}
@@ -469,6 +508,16 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
             for process in multiprocessing.active_children():  # the pool's workers, still running a cell
                 process.terminate()
         pool.shutdown(wait=True)  # (the workers gone, the pool's own thread and queues end and are released)
+
+
+def _pool_worker_started() -> None:
+    """Gives tqdm a thread lock in a pool worker. Its progress bars (disabled in a cell) otherwise share a
+    named semaphore, registered with multiprocessing's resource tracker, that a worker terminated on Ctrl-C or
+    SIGTERM never releases: the tracker then warns of leaked semaphores. A worker runs one cell at a time, in
+    one thread, and shows no bar, so a thread lock is enough."""
+    from tqdm import tqdm
+
+    tqdm.set_lock(threading.RLock())
 
 
 def connect_ray(address: str | None) -> bool:
@@ -586,8 +635,22 @@ def definition(spec: SweepSpec, cells: list[Cell]) -> dict:
     }
 
 
+IDENTITY = ("format", "version", "scenario", "axis_keys", "duration_s", "scenario_resolved_sha256")
+"""What must match between a sweep and the one whose results a folder holds: the base scenario, the axes'
+keys, the duration and the version. The values of the axes, the seeds, methods and presets may differ (a
+smaller or a larger grid of the same sweep): a cell's key says whether it is already there."""
+
+
+def _identity(definition: dict) -> dict:
+    identity = {k: definition.get(k) for k in IDENTITY if k != "axis_keys"}
+    identity["axis_keys"] = [a.get("key") if isinstance(a, dict) else a for a in definition.get("axes") or []]
+    return identity
+
+
 def check_output(out: Path, wanted: dict) -> None:
-    """Refuses, before any cell runs, a folder that holds another sweep's results (creates nothing)."""
+    """Refuses, before any cell runs, a folder that holds another sweep's results (creates nothing). A folder
+    holding the same sweep with other axis values, seeds, methods or presets is accepted: its finished cells
+    that this grid has are reused."""
     out = Path(out)
     found = out / "sweep.json"
     if out.exists() and not out.is_dir():
@@ -595,23 +658,18 @@ def check_output(out: Path, wanted: dict) -> None:
     if found.is_file():
         try:
             held = json.loads(found.read_text(encoding="utf-8"))
-        except (OSError, ValueError, UnicodeDecodeError) as e:
-            raise CrossviewError(f"{found}: unreadable ({e}); choose another --out") from None
-        differing = [k for k in wanted if held.get(k) != wanted[k]]
+            held_identity = _identity(held)
+        except (OSError, ValueError, UnicodeDecodeError, AttributeError) as e:
+            raise CrossviewError(f"{found}: unreadable ({_one_line(e)}); choose another --out") from None
+        identity = _identity(wanted)
+        differing = [k for k in IDENTITY if held_identity[k] != identity[k]]
         if differing:
             name = differing[0]
             raise CrossviewError(
-                f"--out {out}: holds another sweep's results (its {name} {_brief(held.get(name))}, this sweep's "
-                f"{_brief(wanted[name])}); choose another --out or remove that folder")
+                f"--out {out}: holds another sweep's results (its {name} {json.dumps(held_identity[name])}, "
+                f"this sweep's {json.dumps(identity[name])}); choose another --out or remove that folder")
     elif (out / "results.json").exists() or (out / "cells").exists():
         raise CrossviewError(f"--out {out}: holds results without a sweep.json; choose another --out")
-
-
-def _brief(value) -> str:
-    """A sweep.json field in a few words (axes as `key=v1,v2`)."""
-    if isinstance(value, list) and value and isinstance(value[0], dict):
-        return " ".join(f"{a.get('key')}={','.join(map(str, a.get('values', [])))}" for a in value)
-    return json.dumps(value)
 
 
 def _cell_path(out: Path, key: str) -> Path:
@@ -633,7 +691,7 @@ def _finished(out: Path, cell: Cell, keep_recordings: bool) -> dict | None:
         return None
     if keep_recordings and stored["status"] == "ok" and not _recording_path(out, cell.key).is_file():
         return None  # finished before recordings were kept
-    return stored
+    return {**stored, "index": cell.index, "label": cell.label}  # (its place in this grid, which may be another)
 
 
 def _write_bytes(data: bytes, path: Path) -> str:
@@ -770,22 +828,31 @@ def _csv(value) -> str:
 
 
 def write_manifest(out: Path, cells: list[Cell], rows: list[dict]) -> None:
-    """manifest.json: each kept recording with what regenerates it (the base scenario's text and the
-    overrides), its resolved scenario, seed, package version and sha256."""
-    recordings = []
+    """manifest.json: each kept recording with what regenerates it (the base scenario's text, the files it
+    refers to and the overrides), its resolved scenario, seed, package version and sha256. Nothing in it
+    depends on where the scenario or the output folder lie."""
+    recordings, files = [], {}
     for cell, row in zip(cells, rows):
         if row["status"] != "ok" or "recording_sha256" not in row:
             continue
         path = _recording_path(out, cell.key)
         with tempfile.TemporaryDirectory(prefix="crossview-manifest-") as tmp:
-            resolved = scenario_mod.resolved_toml(cell.load_scenario(Path(tmp)))
+            scenario = cell.load_scenario(Path(tmp))
+            # (without its file's place, a relative calibration stays relative: the manifest carries it)
+            resolved = scenario_mod.resolved_toml(dataclasses.replace(scenario, source_path=""))
+        referenced = {}
+        for relative, text in cell.files:
+            digest = hashlib.sha256(text.encode()).hexdigest()
+            files[digest] = text
+            referenced[relative] = digest
         recordings.append({
             "file": str(path.relative_to(out)), "key": cell.key, "label": cell.label,
             "sha256": row["recording_sha256"], "bytes": path.stat().st_size, "seed": cell.seed,
             "version": cell.version, "scenario_name": cell.scenario_name, "scenario_text": cell.scenario_text,
-            "overrides": cell.overrides, "resolved_scenario": resolved,
+            "files": referenced, "overrides": cell.overrides, "resolved_scenario": resolved,
         })
-    pipeline.write_json({"format": SWEEP_FORMAT, "recordings": recordings}, Path(out) / "manifest.json")
+    pipeline.write_json({"format": SWEEP_FORMAT, "recordings": recordings, "files": files},
+                        Path(out) / "manifest.json")
 
 
 @dataclass(frozen=True)
@@ -818,10 +885,16 @@ def verify(folder: Path, *, cells: int | None = None, progress: bool = True) -> 
     try:
         manifest = json.loads(path.read_text(encoding="utf-8"))
         entries = manifest["recordings"]
+        texts = manifest.get("files", {})
+        for entry in entries:
+            entry["file_texts"] = tuple((p, texts[d]) for p, d in entry.get("files", {}).items())
     except FileNotFoundError:
         raise CrossviewError(f"{path}: no manifest; verify needs a sweep run with --keep-recordings") from None
-    except (OSError, ValueError, KeyError, TypeError, UnicodeDecodeError) as e:
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as e:
         raise CrossviewError(f"{path}: not a sweep manifest ({_one_line(e)})") from None
+    for digest, text in texts.items():
+        if hashlib.sha256(text.encode()).hexdigest() != digest:
+            raise CrossviewError(f"{path}: a file it carries does not match its sha256 {digest[:16]}")
     if cells is not None:
         if cells < 1:
             raise CrossviewError(f"--cells: {cells} must be >= 1")
@@ -834,9 +907,8 @@ def verify(folder: Path, *, cells: int | None = None, progress: bool = True) -> 
     results = []
     for entry in tqdm(entries, unit="recording", desc="verify", disable=not progress):
         with tempfile.TemporaryDirectory(prefix="crossview-verify-") as tmp:
-            source = Path(tmp) / f"{entry['scenario_name']}.toml"
-            source.write_text(entry["scenario_text"], encoding="utf-8")
-            scenario = scenario_mod.load(source, entry["overrides"])
+            scenario = load_copy(Path(tmp), entry["scenario_name"], entry["scenario_text"], entry["file_texts"],
+                                 entry["overrides"])
             rec = Path(tmp) / "again.mcap"
             pipeline.generate(scenario, rec, progress=False)
             regenerated = hashlib.sha256(rec.read_bytes()).hexdigest()

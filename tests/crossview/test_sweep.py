@@ -5,13 +5,21 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import shutil
+import signal
+import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pytest
 
+import scenarios
 from crossview import sweep, sweep_report
 from crossview.cli import EXIT_BAD_INPUT, main
+
+SCENARIOS = Path(scenarios.__file__).parent
 
 # The small grid: 2 crowd sizes x 2 camera counts x 2 seeds of store_layout1, 1 simulated second each (CI time).
 GRID = ["store_layout1", "--people", "2,3", "--cameras", "6,12", "--seeds", "0,1", "--duration", "1"]
@@ -101,7 +109,11 @@ def test_a_cell_too_crowded_for_the_floor_fails_alone_and_kept_recordings_verify
                  "--keep-recordings", "--out", str(out)]) == 0
     cells = json.loads((out / "results.json").read_text())["cells"]
     assert cells[0]["status"] == "ok"
-    assert "crowd.people: 200 people need" in cells[1]["status"] and cells[1]["pcp"] is None
+    # The one-line error names the scenario file as the user knows it, not where it lies on this machine.
+    assert cells[1]["status"].startswith("store_layout1.toml: crowd.people: 200 people need")
+    assert cells[1]["pcp"] is None
+    results_text = (out / "results.json").read_text()
+    assert str(SCENARIOS) not in results_text and str(tmp_path) not in results_text
     assert "## Failed cells" in (out / "report.md").read_text()
     # The manifest lists the recording that was made, with its sha256.
     manifest = json.loads((out / "manifest.json").read_text())["recordings"]
@@ -206,3 +218,99 @@ def test_cameras_of_a_calibrated_rig_are_that_many_of_its_cameras():
     six, all_ = sweep.plan(spec)
     assert six.overrides["cameras.calibration_count"] == 6 and all_.overrides["cameras.calibration_count"] == 31
     assert six.error is None and all_.error is None
+def test_failed_cells_name_paths_relative_to_the_scenario_file(tmp_path):
+    # A worker's copy of the scenario and the driver's file are named alike: relative to the scenario's folder.
+    copy = tmp_path / "crossview-cell-x"
+    message = f"{copy}/calibrations/dome.json: cannot be read; {copy}/dome.toml: cameras.calibration"
+    assert sweep.portable(message, copy) == "calibrations/dome.json: cannot be read; dome.toml: cameras.calibration"
+    assert sweep.portable(f"{SCENARIOS}/supermarket.toml: x", SCENARIOS) == "supermarket.toml: x"
+
+
+def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, caplog):
+    out = tmp_path / "subset"
+    shutil.copytree(serial, out)
+    with caplog.at_level("WARNING", logger="crossview.sweep"):
+        assert main(["--no-progress", "sweep", "store_layout1", "--people", "3", "--cameras", "12,6", "--seeds", "1",
+                     "--duration", "1", "--workers", "1", "--out", str(out)]) == 0
+    assert "2 of 2 cells already finished" in caplog.text
+    rows = json.loads((out / "results.json").read_text())["cells"]
+    full = {r["key"]: r for r in json.loads((serial / "results.json").read_text())["cells"]}
+    assert [(r["crowd.people"], r["cameras"], r["seed"]) for r in rows] == [(3, 12, 1), (3, 6, 1)]
+    assert rows == [full[r["key"]] for r in rows]
+    # The folder keeps every finished cell: the full grid again runs nothing and gives the full results.
+    caplog.clear()
+    with caplog.at_level("WARNING", logger="crossview.sweep"):
+        assert _sweep(out, "--workers", "1") == 0
+    assert "8 of 8 cells already finished" in caplog.text
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+@pytest.mark.parametrize(("args", "named"), [
+    (["store_layout2", "--people", "2,3", "--cameras", "6,12"], "its scenario \"store_layout1\""),
+    (["store_layout1", "--people", "2,3", "--set", "clock.fps=10"], "its axis_keys"),
+    (["store_layout1", "--people", "2,3", "--cameras", "6,12", "--duration", "2"], "its duration_s 1.0"),
+])
+def test_a_folder_holding_a_different_sweep_is_refused(serial, tmp_path, capsys, args, named):
+    out = tmp_path / "other"
+    shutil.copytree(serial, out)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    if "--duration" not in args:
+        args = [*args, "--duration", "1"]
+    err = _run_bad(capsys, ["sweep", *args, "--out", str(out)])
+    assert "holds another sweep's results" in err and named in err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_a_kept_sweep_of_a_scenario_with_a_relative_calibration_verifies_from_another_folder(tmp_path, capsys):
+    # panoptic_dome names its calibration relative to its own file: the manifest carries the file itself.
+    out = tmp_path / "dome"
+    assert main(["--no-progress", "sweep", "panoptic_dome", "--people", "1", "--duration", "0.2", "--workers", "1",
+                 "--keep-recordings", "--out", str(out)]) == 0
+    assert json.loads((out / "results.json").read_text())["cells"][0]["status"] == "ok"
+    text = (out / "manifest.json").read_text()
+    assert str(SCENARIOS) not in text and str(tmp_path) not in text
+    manifest = json.loads(text)
+    entry = manifest["recordings"][0]
+    calibration = (SCENARIOS / "calibrations" / "panoptic_160906_hd.json").read_text()
+    digest = hashlib.sha256(calibration.encode()).hexdigest()
+    assert entry["files"] == {"calibrations/panoptic_160906_hd.json": digest}
+    assert manifest["files"][digest] == calibration
+    assert 'calibration = "calibrations/panoptic_160906_hd.json"' in entry["resolved_scenario"]
+    # Moved elsewhere (as on another machine), the folder verifies: the same bytes regenerated.
+    moved = tmp_path / "elsewhere" / "dome"
+    shutil.move(out, moved)
+    capsys.readouterr()
+    assert main(["--no-progress", "verify", str(moved)]) == 0
+    assert "1 of 1 recordings match" in capsys.readouterr().out
+
+
+def _command(out, duration_s: str) -> list[str]:
+    return [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
+            "--seeds", "0,1", "--duration", duration_s, "--workers", "2", "--out", str(out)]
+
+
+@pytest.mark.parametrize("ending", ["SIGTERM to the sweep", "Ctrl-C to its process group"])
+def test_an_interrupted_pool_sweep_keeps_finished_cells_and_leaks_nothing(tmp_path, ending):
+    out = tmp_path / "interrupted"
+    # A new session (so that Ctrl-C can go to the whole group, as a terminal sends it), SIGINT not ignored.
+    process = subprocess.Popen(_command(out, "4"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        while not list((out / "cells").glob("*.json")) and process.poll() is None:
+            time.sleep(0.2)
+        assert process.poll() is None, process.communicate()
+        if ending.startswith("SIGTERM"):
+            process.send_signal(signal.SIGTERM)
+        else:
+            os.killpg(process.pid, signal.SIGINT)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == (143 if ending.startswith("SIGTERM") else 130), err
+    assert "crossview: ended by" in err or "interrupted" in err, err
+    # The resource tracker found nothing left behind (it warns of leaked semaphores otherwise).
+    assert "leaked" not in err and "resource_tracker" not in err and "Traceback" not in err, err
+    assert 1 <= len(list((out / "cells").glob("*.json"))) < 4
+    assert not (out / "results.json").exists()
+    assert not [p for p in out.rglob("*") if p.name.endswith(".tmp") or p.name.startswith(".")]
