@@ -133,8 +133,9 @@ class BaselineTracker:
         ids = [-1] * len(poses)
         if poses and prev_ids.size:
             dist = np.linalg.norm(np.stack(poses)[:, None] - prev_poses[None], axis=-1)  # (N, Tp, J)
-            with np.errstate(invalid="ignore"):
-                mean = np.nanmean(np.where(np.isfinite(dist), dist, np.nan), axis=-1)
+            shared = np.isfinite(dist)  # joints both poses hold; none shared: no link (NaN, not a warning)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mean = np.where(shared, dist, 0.0).sum(axis=-1) / shared.sum(axis=-1)
             cost = np.where(np.isfinite(mean), mean, 1e6)
             rows, cols = linear_sum_assignment(cost)
             for r, col in zip(rows, cols):
