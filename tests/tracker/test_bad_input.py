@@ -123,20 +123,8 @@ def test_wrong_joint_count_is_a_value_error():
 def test_a_burst_of_500_detections_in_a_frame():
     """500 person-shaped detections (random bodies projected) in each of three cameras' frames at once, and a
     frame whose every detection is a false positive: no crash, no NaN, no joint at the origin."""
-    from tests.tracker.synthetic import _REST
-    from tracker.geometry import project_distorted
-
-    rng = np.random.default_rng(9)
     tracker = _warm(Tracker)
-    t = FRAMES[-1].stamp_s
-    bodies = _REST[None] + np.concatenate([rng.uniform([-1, -1], [5.5, 5.0], (500, 2)), np.zeros((500, 1))],
-                                          axis=1)[:, None, :]
-    frames = []
-    for i, cam in enumerate(CAMS[:3]):
-        kp = project_distorted(cam, bodies) + rng.normal(0, 2.0, (500, J, 2))
-        frames.append(Frame(cam.name, t + 0.01 * (i + 1), kp, np.full((500, J), 0.9)))
-    frames.append(Frame(CAMS[3].name, t + 0.05, rng.uniform(0, 1280, (40, J, 2)), np.full((40, J), 0.9)))
-    _check(tracker, frames, complete=True)
+    _check(tracker, _burst_frames(np.random.default_rng(9), FRAMES[-1].stamp_s), complete=True)
 
 
 def _burst_frames(rng, t):
