@@ -208,13 +208,16 @@ def tracker_config(preset: str, config_path: Path | None = None, overrides: dict
     config = TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
     if overrides:
         names = {f.name for f in dataclasses.fields(TrackerConfig)}
-        for key, value in overrides.items():
+        for key in overrides:
             if key not in names:
                 raise ConfigError(f"tracker.{key}: unknown tracker setting; valid: {', '.join(sorted(names))}")
-            try:
-                config = config.replace(**{key: value})
-            except (ValueError, TypeError) as e:
-                raise ConfigError(f"tracker.{key} = {value!r}: {e}") from None
+        # All at once: the rules between fields (view_margin_m >= alpha_3d_m, ...) hold for the result, not
+        # for a half-applied set.
+        try:
+            config = config.replace(**overrides)
+        except (ValueError, TypeError) as e:
+            given = ", ".join(f"tracker.{k} = {v!r}" for k, v in overrides.items())
+            raise ConfigError(f"{given}: {e}") from None
     return config
 
 

@@ -314,3 +314,13 @@ def test_an_interrupted_pool_sweep_keeps_finished_cells_and_leaks_nothing(tmp_pa
     assert 1 <= len(list((out / "cells").glob("*.json"))) < 4
     assert not (out / "results.json").exists()
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp") or p.name.startswith(".")]
+
+
+def test_tracker_settings_of_a_cell_are_checked_together_not_one_by_one():
+    from crossview import pipeline
+
+    # alpha_3d_m 0.6 alone breaks view_margin_m >= alpha_3d_m (0.5); with view_margin_m 0.7 the whole holds.
+    config = pipeline.tracker_config("shelf", None, {"alpha_3d_m": 0.6, "view_margin_m": 0.7})
+    assert (config.alpha_3d_m, config.view_margin_m) == (0.6, 0.7)
+    with pytest.raises(sweep.CrossviewError, match="view_margin_m: 0.5 must be >= alpha_3d_m 0.6"):
+        pipeline.tracker_config("shelf", None, {"alpha_3d_m": 0.6})
