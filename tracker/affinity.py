@@ -229,38 +229,55 @@ def epipolar_affinity_matrix(
 ) -> np.ndarray:
     """Eq. (S2) between every two detections of a pool, -inf within one camera (Algorithm S1).
 
+    Args:
+        points: (n, J, 2) undistorted pixels of the pooled detections (NaN missing).
+        cameras: (n,) camera index of each detection.
+        F, alpha_px, min_common_joints, linked: as in `epipolar_affinity_between`.
+
+    Returns:
+        (n, n) symmetric affinity matrix.
+    """
+    return epipolar_affinity_between(points, cameras, points, cameras, F, alpha_px, min_common_joints, linked)
+
+
+def epipolar_affinity_between(
+    points_a: np.ndarray, cameras_a: np.ndarray, points_b: np.ndarray, cameras_b: np.ndarray, F: np.ndarray,
+    alpha_px: float, min_common_joints: int, linked: np.ndarray | None = None,
+) -> np.ndarray:
+    """Eq. (S2) between every detection of one set and every detection of another, -inf within one camera.
+
     Two cameras whose views share no part of the space people occupy (`linked` False, from
     `visibility.overlapping_views`) cannot see one person: their detections get 0, no edge of the graph
     (an epipolar line of one crosses the other's image anyway, so eq. S2 alone would link them by chance).
 
     Args:
-        points: (n, J, 2) undistorted pixels of the pooled detections (NaN missing).
-        cameras: (n,) camera index of each detection.
+        points_a: (n, J, 2) undistorted pixels (NaN missing); cameras_a: (n,) camera index of each.
+        points_b: (m, J, 2) and cameras_b: (m,) the same for the other set.
         F: (C, C, 3, 3) fundamental matrices, F[a, b] with x_b^T F[a, b] x_a = 0 (any value on the diagonal).
         alpha_px: threshold α, pixels.
         min_common_joints: pairs sharing fewer joints get -inf.
         linked: (C, C) bool, whether two cameras' views overlap; None: all do.
 
     Returns:
-        (n, n) symmetric affinity matrix.
+        (n, m) affinities.
     """
-    n = points.shape[0]
     if linked is None:
         linked = np.ones(F.shape[:2], dtype=bool)
-    A = np.empty((n, n))
-    _epipolar_matrix(np.ascontiguousarray(points, dtype=np.float64), np.asarray(cameras, dtype=np.int64),
+    A = np.empty((points_a.shape[0], points_b.shape[0]))
+    _epipolar_matrix(np.ascontiguousarray(points_a, dtype=np.float64), np.asarray(cameras_a, dtype=np.int64),
+                     np.ascontiguousarray(points_b, dtype=np.float64), np.asarray(cameras_b, dtype=np.int64),
                      np.ascontiguousarray(F, dtype=np.float64), float(alpha_px), int(min_common_joints),
                      np.ascontiguousarray(linked, dtype=np.bool_), A)
     return A
 
 
 @jit
-def _epipolar_matrix(points, cameras, F, alpha_px, min_common_joints, linked, out):
-    """`epipolar_affinity_matrix` into out (n, n) (compiled kernel; `epipolar_affinity` per pair of detections)."""
-    n, J = points.shape[0], points.shape[1]
-    for a in range(n):
-        for b in range(n):
-            ka, kb = cameras[a], cameras[b]
+def _epipolar_matrix(points_a, cameras_a, points_b, cameras_b, F, alpha_px, min_common_joints, linked, out):
+    """`epipolar_affinity_between` into out (n, m) (compiled kernel; `epipolar_affinity` per pair)."""
+    J = points_a.shape[1]
+    for a in range(points_a.shape[0]):
+        for b in range(points_b.shape[0]):
+            ka, kb = cameras_a[a], cameras_b[b]
             out[a, b] = -np.inf
             if ka == kb:
                 continue
@@ -270,7 +287,7 @@ def _epipolar_matrix(points, cameras, F, alpha_px, min_common_joints, linked, ou
             total = 0.0
             common = 0
             for j in range(J):
-                xa, ya, xb, yb = points[a, j, 0], points[a, j, 1], points[b, j, 0], points[b, j, 1]
+                xa, ya, xb, yb = points_a[a, j, 0], points_a[a, j, 1], points_b[b, j, 0], points_b[b, j, 1]
                 # l_b = F x_a and l_a = F^T x_b (eq. S1), and each point's distance to the other's line.
                 lb0 = F[ka, kb, 0, 0] * xa + F[ka, kb, 0, 1] * ya + F[ka, kb, 0, 2]
                 lb1 = F[ka, kb, 1, 0] * xa + F[ka, kb, 1, 1] * ya + F[ka, kb, 1, 2]

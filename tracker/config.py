@@ -99,6 +99,10 @@ class TrackerConfig:
         init_min_bottom_m: lowest allowed joint height, metres (negative: below the floor).
         init_min_separation_m: a new target closer than this (mean joint distance) to an existing one is a
             duplicate and is dropped, metres.
+        init_consensus_m: a new detection's candidate views from other cameras must place it, each triangulated
+            with it alone, within this ground distance of where most of them do (beyond the paper: in a crowd
+            seen by many cameras most epipolar matches are other people on its ray, see tracker.initialization),
+            metres.
     Lifecycle (seconds, see tracker.lifecycle):
         confirm_min_updates: matched detections (including the initial views) before a target is confirmed.
         confirm_min_age_s: least time between a target's birth and its confirmation, s.
@@ -163,6 +167,7 @@ class TrackerConfig:
     init_max_top_m: float = 2.6
     init_min_bottom_m: float = -0.5
     init_min_separation_m: float = 0.3
+    init_consensus_m: float = 0.5
     confirm_min_updates: int = 3
     confirm_min_age_s: float = 0.0
     tentative_timeout_s: float = 0.5
@@ -189,7 +194,7 @@ class TrackerConfig:
         positive = ("ghost_window_s", "implausible_after_s", "alpha_2d_px_per_s", "alpha_3d_m", "view_margin_m",
                     "velocity_window_s", "max_speed_m_per_s",
                     "max_observation_age_s", "alpha_epipolar_px", "reject_floor_px", "max_bone_m", "stale_after_s",
-                    "init_max_reprojection_px", "init_max_bone_m",
+                    "init_max_reprojection_px", "init_max_bone_m", "init_consensus_m",
                     "tentative_timeout_s", "lost_after_s", "remove_after_s")
         for name in nonneg + positive:
             value = getattr(self, name)

@@ -242,27 +242,149 @@ def _partition_milp(a: np.ndarray) -> list[np.ndarray] | None:
 
 
 def _partition_greedy(a: np.ndarray) -> list[np.ndarray]:
-    """Greedy agglomeration: join the pair of clusters with the largest positive total affinity.
+    """Greedy agglomeration: join the pair of clusters with the largest positive total affinity (the first
+    such pair in row-major order on ties), until no pair has a positive one.
 
-    S holds the total affinity between every two clusters; -inf (a shared camera) stays -inf under sums.
+    Non-finite affinities (a shared camera) forbid the pair for good: -inf stays -inf under sums.
     """
     n = a.shape[0]
     S = np.where(np.isfinite(a), a, -np.inf).astype(np.float64)
-    np.fill_diagonal(S, -np.inf)
-    members = [[i] for i in range(n)]
-    alive = np.ones(n, dtype=bool)
+    labels = np.arange(n, dtype=np.int64)
+    _greedy_merge(S, labels)
+    return [np.flatnonzero(labels == c) for c in np.unique(labels)]
+
+
+@jit
+def _greedy_merge(S, labels):
+    """`_partition_greedy` in place: S (n, n) the affinities between the current clusters (-inf: never),
+    labels (n,) each node's cluster, the smallest node index of it when done.
+
+    Each row keeps its largest entry (and the first column holding it), so a merge costs one pass over the
+    rows plus a rescan of the few rows whose largest entry was one of the two merged clusters.
+    """
+    n = S.shape[0]
+    for i in range(n):
+        S[i, i] = -np.inf
+    best = np.empty(n)
+    best_col = np.zeros(n, dtype=np.int64)
+    alive = np.ones(n, dtype=np.bool_)
+    for i in range(n):
+        _row_best(S, i, best, best_col)
     while True:
-        x, y = divmod(int(np.argmax(S)), n)
-        if not S[x, y] > 0:
-            break
-        S[x] = S[x] + S[y]
-        S[:, x] = S[x]
+        x = -1
+        top = 0.0
+        for i in range(n):
+            if alive[i] and best[i] > top:  # strict: the first row holding the largest value
+                top = best[i]
+                x = i
+        if x < 0:
+            return
+        y = best_col[x]  # x < y: S is symmetric and row x precedes row y
+        for k in range(n):
+            S[x, k] = S[x, k] + S[y, k]
+            S[k, x] = S[x, k]
+            S[y, k] = -np.inf
+            S[k, y] = -np.inf
         S[x, x] = -np.inf
-        S[y] = -np.inf
-        S[:, y] = -np.inf
-        members[x] += members[y]
         alive[y] = False
-    return [np.asarray(sorted(members[i])) for i in range(n) if alive[i]]
+        best[y] = -np.inf
+        for k in range(n):
+            if labels[k] == y:
+                labels[k] = x
+        _row_best(S, x, best, best_col)
+        for i in range(n):
+            if not alive[i] or i == x:
+                continue
+            if best_col[i] == x or best_col[i] == y:
+                _row_best(S, i, best, best_col)
+            elif S[i, x] > best[i] or (S[i, x] == best[i] and x < best_col[i]):
+                best[i] = S[i, x]
+                best_col[i] = x
+
+
+@jit
+def _row_best(S, i, best, best_col):
+    """The largest entry of row i of S and the first column holding it."""
+    best[i] = -np.inf
+    best_col[i] = 0
+    for k in range(S.shape[1]):
+        if S[i, k] > best[i]:
+            best[i] = S[i, k]
+            best_col[i] = k
+
+
+def consensus_views(origin: np.ndarray, rays: np.ndarray, origins: np.ndarray, candidate_rays: np.ndarray,
+                    affinity: np.ndarray, min_common_joints: int, radius_m: float) -> np.ndarray:
+    """Which candidate views of a new detection agree on where it is (beyond the paper).
+
+    Each candidate is triangulated with the detection alone: per joint both hold, the midpoint of the two rays'
+    closest points, in front of both cameras; their mean is where the pair places the person. True views of
+    one person place it in one spot; a view of someone else who lies near the detection's epipolar line (in a
+    crowd seen by hundreds of cameras, most of the positive epipolar matches) places it elsewhere along the
+    detection's ray. The spot of most agreement wins (the largest summed epipolar affinity on ties), and the
+    candidates within `radius_m` of it on the ground are kept.
+
+    Args:
+        origin: (3,) the detection's camera centre; rays: (J, 3) its joints' world ray directions, NaN missing.
+        origins: (L, 3) the candidates' camera centres; candidate_rays: (L, J, 3) their joints' rays.
+        affinity: (L,) their epipolar affinities to the detection (eq. S2).
+        min_common_joints: a pair with fewer joints triangulated places nothing.
+        radius_m: ground distance within which two placements agree.
+
+    Returns:
+        (L,) bool, the candidates kept.
+    """
+    spots = np.empty((candidate_rays.shape[0], 3))
+    _pair_spots(np.ascontiguousarray(origin, dtype=np.float64), np.ascontiguousarray(rays, dtype=np.float64),
+                np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(candidate_rays, dtype=np.float64),
+                int(min_common_joints), spots)
+    placed = np.isfinite(spots[:, 0])
+    keep = np.zeros(candidate_rays.shape[0], dtype=bool)
+    if not placed.any():
+        return keep
+    ground = spots[:, :2]
+    with np.errstate(invalid="ignore"):
+        agree = np.linalg.norm(ground[:, None] - ground[None], axis=-1) <= radius_m  # (L, L), False for NaN
+    support = agree.sum(axis=1)
+    weight = np.where(agree, affinity[None, :], 0.0).sum(axis=1)
+    best = np.lexsort((-weight, -support))[0]
+    return agree[best] & placed
+
+
+@jit
+def _pair_spots(origin, rays, origins, candidate_rays, min_common_joints, out):
+    """`consensus_views`' placements: out (L, 3) the mean over joints of the midpoints between the detection's
+    ray and each candidate's, NaN where fewer than `min_common_joints` joints meet in front of both cameras."""
+    L, J = candidate_rays.shape[0], candidate_rays.shape[1]
+    for i in range(L):
+        sx = sy = sz = 0.0
+        count = 0
+        for j in range(J):
+            d1x, d1y, d1z = rays[j, 0], rays[j, 1], rays[j, 2]
+            d2x, d2y, d2z = candidate_rays[i, j, 0], candidate_rays[i, j, 1], candidate_rays[i, j, 2]
+            if not (np.isfinite(d1x) and np.isfinite(d2x)):
+                continue
+            wx, wy, wz = origin[0] - origins[i, 0], origin[1] - origins[i, 1], origin[2] - origins[i, 2]
+            a = d1x * d1x + d1y * d1y + d1z * d1z
+            b = d1x * d2x + d1y * d2y + d1z * d2z
+            c = d2x * d2x + d2y * d2y + d2z * d2z
+            d = d1x * wx + d1y * wy + d1z * wz
+            e = d2x * wx + d2y * wy + d2z * wz
+            den = a * c - b * b
+            if den <= 1e-12 * a * c:  # (near) parallel rays meet nowhere in particular
+                continue
+            s = (b * e - c * d) / den  # closest point of ray 1: origin + s d1; of ray 2: origins[i] + t d2
+            t = (a * e - b * d) / den
+            if s <= 0.0 or t <= 0.0:
+                continue
+            sx += 0.5 * (origin[0] + s * d1x + origins[i, 0] + t * d2x)
+            sy += 0.5 * (origin[1] + s * d1y + origins[i, 1] + t * d2y)
+            sz += 0.5 * (origin[2] + s * d1z + origins[i, 2] + t * d2z)
+            count += 1
+        if count >= min_common_joints:
+            out[i, 0], out[i, 1], out[i, 2] = sx / count, sy / count, sz / count
+        else:
+            out[i, 0] = out[i, 1] = out[i, 2] = np.nan
 
 
 @dataclass(frozen=True)

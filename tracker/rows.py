@@ -4,22 +4,67 @@ from __future__ import annotations
 
 import numpy as np
 
+_MIN_CAPACITY = 16
+
 
 class Rows:
     """Rows of the arrays named in `_FIELDS` (each with the objects on its first axis), which a subclass
-    creates empty in its `__init__`."""
+    creates empty in its `__init__`.
+
+    Each field is a view of the first `len(self)` rows of a larger array, so that appending a row costs the
+    row, not a copy of every row (the capacity doubles when it runs out), and removing rows moves only the
+    rows after the first one removed. Assigning a field writes into its rows; a view taken before an
+    `append` or `keep` may no longer be the field's.
+    """
 
     _FIELDS: tuple[str, ...] = ()
 
+    def __setattr__(self, name: str, value) -> None:
+        if name not in self._FIELDS:
+            object.__setattr__(self, name, value)
+            return
+        store = self.__dict__.setdefault("_store", {})
+        if name in store:
+            store[name][: self._count] = value
+            return
+        value = np.asarray(value)
+        if not store:
+            object.__setattr__(self, "_count", value.shape[0])
+        if value.shape[0] != self._count:
+            raise ValueError(f"{type(self).__name__}.{name}: {value.shape[0]} rows, the others have {self._count}")
+        array = np.empty((max(_MIN_CAPACITY, value.shape[0]),) + value.shape[1:], dtype=value.dtype)
+        array[: value.shape[0]] = value
+        store[name] = array
+
+    def __getattr__(self, name: str):
+        store = self.__dict__.get("_store")
+        if store is not None and name in store:
+            return store[name][: self._count]
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
     def __len__(self) -> int:
-        return getattr(self, self._FIELDS[0]).shape[0]
+        return self._count
 
     def keep(self, mask: np.ndarray) -> None:
-        """Keeps the rows where `mask` (N,) is True, in every array."""
-        for name in self._FIELDS:
-            setattr(self, name, getattr(self, name)[mask])
+        """Keeps the rows where `mask` (N,) is True, in every array, in their order."""
+        mask = np.asarray(mask, dtype=bool)
+        dropped = np.flatnonzero(~mask)
+        if not dropped.size:
+            return
+        first, kept = int(dropped[0]), int(mask.sum())
+        for array in self._store.values():
+            array[first:kept] = array[first: self._count][mask[first:]]
+        self._count = kept
 
     def append(self, **rows) -> None:
         """Appends rows given for every field by name, each array with the new rows on its first axis."""
+        n = self._count
+        m = np.asarray(rows[self._FIELDS[0]]).shape[0]
         for name in self._FIELDS:
-            setattr(self, name, np.concatenate([getattr(self, name), rows[name]]))
+            array = self._store[name]
+            if n + m > array.shape[0]:
+                grown = np.empty((max(2 * array.shape[0], n + m),) + array.shape[1:], dtype=array.dtype)
+                grown[:n] = array[:n]
+                self._store[name] = array = grown
+            array[n: n + m] = rows[name]
+        self._count = n + m

@@ -31,7 +31,7 @@ from tracker.association import associate
 from tracker.body import fill_poses, joint_states, mean_body
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
-from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
+from tracker.initialization import PlausibilityLimits, check_plausible, consensus_views, partition_graph, reconstruct
 from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
 from tracker.rows import Rows
 from tracker.types import Target, TrackerOutput
@@ -319,27 +319,56 @@ class Tracker:
         self._pool_s[c] = t
 
     def _initialize(self, c: int, t: float) -> list[tuple[int, np.ndarray]]:
-        """Supplement: epipolar affinity (S2) among the pooled detections, partitioning (S3-S5), new targets.
+        """Supplement: epipolar affinity (S2), partitioning (S3-S5) and new targets, around each of this frame's
+        unmatched detections.
+
+        The graph is the one of Algorithm S1 restricted to where this frame adds to it: for each unmatched
+        detection x of camera c, x and, from each other camera, the pooled detection with the largest positive
+        affinity to x (eq. S2). A cluster holds one detection per camera, and only a detection with a positive
+        affinity to x adds to (S3) by joining x's; of a camera's several such, the others are mostly people
+        who happen to lie along x's epipolar line (in a crowd seen by hundreds of cameras, most of them). The
+        clusters without any of c's detections were the graph's when their own latest camera's frame came,
+        and their detections are still pooled only because they were not a plausible new person then. So a
+        frame costs its unmatched detections times the pool, and a partition of at most one node per camera
+        for each, however many people the store holds. The cluster holding x becomes a target when it is
+        plausible; its detections leave the pool.
 
         Returns:
             (new target id, indices of the current frame's detections in its cluster) per new target.
         """
         cfg = self.config
         cams = [k for k in range(len(self.cameras))
-                if self._pool_px[k].shape[0] and abs(t - self._pool_s[k]) <= cfg.init_window_s]
-        if len(cams) < 2 or c not in cams:
+                if k != c and self._pool_px[k].shape[0] and abs(t - self._pool_s[k]) <= cfg.init_window_s]
+        new_px = self._pool_px[c]
+        if not cams or not new_px.shape[0]:
             return []
         node_cam = np.concatenate([np.full(self._pool_px[k].shape[0], k) for k in cams])
         node_pos = np.concatenate([np.arange(self._pool_px[k].shape[0]) for k in cams])
-        A = aff.epipolar_affinity_matrix(np.concatenate([self._pool_px[k] for k in cams]), node_cam, self._F,
-                                         cfg.alpha_epipolar_px, cfg.init_min_common_joints, self._linked)  # eq. (S2)
+        node_px = np.concatenate([self._pool_px[k] for k in cams])
+        epipolar = (self._F, cfg.alpha_epipolar_px, cfg.init_min_common_joints, self._linked)
+        to_pool = aff.epipolar_affinity_between(new_px, np.full(new_px.shape[0], c), node_px, node_cam,
+                                                *epipolar)  # eq. (S2), (D_c, n)
+        taken = np.zeros(node_cam.size, dtype=bool)
         created: list[tuple[int, np.ndarray]] = []
-        used: dict[int, list[int]] = {}
-        for cluster in partition_graph(A, cfg.milp_max_nodes):
+        used: dict[int, list[int]] = {c: []}
+        for x in range(new_px.shape[0]):
+            near = np.flatnonzero((to_pool[x] > 0) & ~taken)
+            # x's cluster holds one detection per camera at most: each camera's best match to x
+            near = near[np.lexsort((-to_pool[x, near], node_cam[near]))]
+            near = np.sort(near[np.unique(node_cam[near], return_index=True)[1]])
+            if near.size:
+                near = near[consensus_views(self._centers[c], self._rays(c, new_px[x]), self._centers[node_cam[near]],
+                                            self._rays(node_cam[near], node_px[near]), to_pool[x, near],
+                                            cfg.init_min_common_joints, cfg.init_consensus_m)]
+            if near.size + 1 < cfg.min_views:
+                continue
+            ks = np.concatenate([[c], node_cam[near]])
+            pts = np.concatenate([new_px[x:x + 1], node_px[near]])  # (V, J, 2)
+            A = aff.epipolar_affinity_matrix(pts, ks, *epipolar)
+            cluster = next(p for p in partition_graph(A, cfg.milp_max_nodes) if p[0] == 0)  # the one holding x
             if cluster.size < cfg.min_views:
                 continue
-            ks, ds = node_cam[cluster], node_pos[cluster]
-            pts = np.stack([self._pool_px[k][d] for k, d in zip(ks, ds)])  # (V, J, 2)
+            ks, pts = ks[cluster], pts[cluster]
             stamps = self._pool_s[ks]
             pose = reconstruct(self._P[ks], pts, stamps, t, cfg.lambda_t_per_s, cfg.min_views)
             why = check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits)
@@ -349,14 +378,25 @@ class Tracker:
                 logger.debug("initialisation: cluster of %d views rejected: %s", cluster.size, why)
                 continue
             new_id = self._create_target(ks, pts, stamps, pose, t)
-            for k, d in zip(ks, ds):
+            members = near[cluster[1:] - 1]
+            taken[members] = True
+            used[c].append(x)
+            for k, d in zip(node_cam[members], node_pos[members]):
                 used.setdefault(int(k), []).append(int(d))
-            created.append((new_id, self._pool_frame_index[c][ds[ks == c]]))
+            created.append((new_id, self._pool_frame_index[c][x:x + 1]))
         for k, gone in used.items():
             keep = np.setdiff1d(np.arange(self._pool_px[k].shape[0]), gone)
             self._pool_px[k] = self._pool_px[k][keep]
             self._pool_frame_index[k] = self._pool_frame_index[k][keep]
         return created
+
+    def _rays(self, cameras, px: np.ndarray) -> np.ndarray:
+        """(..., J, 3) world directions of the rays through undistorted joints px (..., J, 2) of `cameras`
+        (an index, or one per leading row), NaN where the joint is."""
+        M = self._world_from_pixel[cameras]
+        if M.ndim == 3:
+            M = M[:, None]
+        return np.einsum("...ab,...b->...a", M, np.concatenate([px, np.ones(px.shape[:-1] + (1,))], axis=-1))
 
     def _duplicates_existing(self, pose: np.ndarray, t: float) -> bool:
         tg, cfg = self._targets, self.config

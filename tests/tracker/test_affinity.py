@@ -11,6 +11,7 @@ from tracker.affinity import (
     affinity_matrix,
     combine,
     epipolar_affinity,
+    epipolar_affinity_between,
     epipolar_affinity_matrix,
     predict_positions,
 )
@@ -151,3 +152,10 @@ def test_pool_affinity_matrix_equals_the_pairwise_epipolar_affinity():
                 pair = epipolar_affinity(points[a:a + 1], points[b:b + 1], F[cameras[a], cameras[b]], 30.0, 2)[0, 0]
                 assert A[a, b] == pytest.approx(pair, rel=1e-12, abs=1e-12)
     assert np.isfinite(A).sum() >= 8
+    # one set against another: the rows and columns of the pool's matrix, unlinked cameras at 0
+    B = epipolar_affinity_between(points[:2], cameras[:2], points[1:], cameras[1:], F, 30.0, 2)
+    np.testing.assert_array_equal(B, A[:2, 1:])
+    linked = np.ones((3, 3), dtype=bool)
+    linked[0, 2] = linked[2, 0] = False
+    B = epipolar_affinity_between(points[:2], cameras[:2], points[1:], cameras[1:], F, 30.0, 2, linked)
+    np.testing.assert_array_equal(B, np.where(cameras[1:][None, :] == 2, 0.0, A[:2, 1:]))

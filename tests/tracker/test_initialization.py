@@ -7,6 +7,8 @@ import pytest
 from scipy.sparse.csgraph import connected_components
 
 from core.types import COCO17
+from tests.reference.partition import greedy_partition
+from tests.tracker.synthetic import look_at_camera
 from tracker.initialization import (
     PlausibilityLimits,
     _branch_and_bound,
@@ -15,6 +17,7 @@ from tracker.initialization import (
     _partition_greedy,
     _partition_milp,
     check_plausible,
+    consensus_views,
     partition_graph,
 )
 
@@ -178,3 +181,40 @@ def test_reprojection_error_is_checked():
     pose = _standing()
     P, x = _views(pose)
     assert "reprojection" in check_plausible(pose + np.array([0.3, 0.0, 0.0]), P, x, COCO17, LIMITS)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_the_compiled_greedy_merge_equals_the_plain_one(seed):
+    """The same clusters as numpy's argmax loop, ties and forbidden pairs included, at sizes up to a crowd's."""
+    rng = np.random.default_rng(seed)
+    n = [5, 17, 40, 120, 250, 400][seed]
+    A = np.round(rng.normal(0.0, 1.0, (n, n)), 1)  # rounded: many equal totals, so ties are exercised
+    A = (A + A.T) / 2
+    cams = rng.integers(0, max(2, n // 3), n)
+    A[cams[:, None] == cams[None, :]] = -np.inf
+    got = _partition_greedy(A)
+    want = greedy_partition(A)
+    assert [c.tolist() for c in got] == [c.tolist() for c in want]
+
+
+def test_consensus_keeps_the_views_that_agree_on_where_the_person_is():
+    """A detection's true views from four cameras place it in one spot; views of two other people who lie on
+    its ray (in front of and behind it) place it elsewhere along the ray: only the true ones are kept."""
+    person = np.array([1.0, 0.5, 1.0])
+    cams = [look_at_camera(f"c{k}", [5.0 * np.cos(k), 5.0 * np.sin(k), 3.0], [0.0, 0.0, 1.0]) for k in range(7)]
+    J = 6
+    offsets = np.linspace(-0.4, 0.4, J)[:, None] * np.array([0.0, 0.0, 1.0])
+    origin = cams[0].center_world
+    rays = person + offsets - origin
+    # others on the detection's rays, 1.5 m nearer and 2 m farther along them
+    others = [origin + 0.55 * (person - origin) + offsets, origin + 1.6 * (person - origin) + offsets]
+    bodies = [person + offsets] * 4 + others
+    origins = np.stack([cams[k].center_world for k in range(1, 7)])
+    candidate_rays = np.stack([body - o for body, o in zip(bodies, origins)])
+    candidate_rays[1, :2] = np.nan  # a view missing two joints still places the person
+    affinity = np.array([0.6, 0.5, 0.7, 0.4, 0.95, 0.9])  # the other people match the epipolar lines best
+    keep = consensus_views(origin, rays, origins, candidate_rays, affinity, 3, 0.5)
+    assert keep.tolist() == [True, True, True, True, False, False]
+    candidate_rays[1, 3:] = np.nan  # now it shares only three joints... then two: it places nothing
+    keep = consensus_views(origin, rays, origins, candidate_rays, affinity, 3, 0.5)
+    assert keep.tolist() == [True, False, True, True, False, False]
