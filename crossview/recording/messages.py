@@ -317,11 +317,13 @@ def _tracker_output_from_msg(msg) -> TrackerOutput:
         raise ValueError(f"a target pose of {msg.camera}@{msg.stamp_s} does not hold {J} joints x 3")
     poses = np.fromiter(itertools.chain.from_iterable(t.pose_m for t in msg.targets), np.float64,
                         count=len(msg.targets) * J * 3).reshape(len(msg.targets), J, 3)
+    known = [len(t.joint_state) == J and J > 0 for t in msg.targets]
+    states = iter(np.fromiter(itertools.chain.from_iterable(t.joint_state for t, k in zip(msg.targets, known) if k),
+                              np.uint8, count=sum(known) * J).reshape(sum(known), J))
     targets = [
-        Target(id=t.id, pose=pose, stamp_s=t.stamp_s,
-               state=_TARGET_STATES.get(t.state) or TargetState(t.state),
-               joint_state=np.fromiter(t.joint_state, np.uint8, count=J) if len(t.joint_state) == J and J else None)
-        for t, pose in zip(msg.targets, poses, strict=True)
+        Target(id=t.id, pose=pose, stamp_s=t.stamp_s, state=_TARGET_STATES.get(t.state) or TargetState(t.state),
+               joint_state=next(states) if k else None)
+        for t, pose, k in zip(msg.targets, poses, known, strict=True)
     ]
     return TrackerOutput(
         stamp_s=msg.stamp_s, camera=msg.camera, targets=targets,
