@@ -378,19 +378,20 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
     truth = list(rec.truth())
     summary: dict = {}
     if is_result_file(tracks_path):
-        outputs = read_results(tracks_path, rec.skeleton, TruthTimeline(truth).span)
+        outputs = counted = read_results(tracks_path, rec.skeleton, TruthTimeline(truth).span)
         frames, cameras = None, None
     else:
         tracks = recording.open_tracks(tracks_path)
         check_tracks_match(rec, tracks)
-        outputs = list(tqdm(tracks.outputs(), unit="output", desc="score", disable=not progress, leave=False))
+        counted = _Counted(tracks.outputs())  # streamed: scoring holds one output per grid tick, not all
+        outputs = tqdm(counted, unit="output", desc="score", disable=not progress, leave=False)
         summary = tracks.summary or {}
         frames = rec.frames() if summary.get(ASSIGNMENTS_KEY, True) else None
         cameras = rec.cameras
     report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
                            skeleton=rec.skeleton)
     tracker_s = summary.get("tracker_s") or 0.0
-    updates = summary.get("updates") or len(outputs)
+    updates = summary.get("updates") or len(counted)
     cams = len(rec.cameras)
     frames_per_s = updates / tracker_s if tracker_s > 0 else None
     people = {int(i) for p in truth for i in p.person_ids}
@@ -404,6 +405,21 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
         camera_frames_per_s=frames_per_s,
     )
     return report, result
+
+
+class _Counted:
+    """An iterable that counts the items it has yielded (`len`)."""
+
+    def __init__(self, items):
+        self._items, self._n = items, 0
+
+    def __iter__(self):
+        for item in self._items:
+            self._n += 1
+            yield item
+
+    def __len__(self) -> int:
+        return self._n
 
 
 def check_tracks_match(rec, tracks) -> None:

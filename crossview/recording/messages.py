@@ -4,6 +4,7 @@ time or many frames in one compiled call (`crossview.wire`), and decoded back.""
 from __future__ import annotations
 
 import functools
+import itertools
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -306,13 +307,23 @@ def _tracker_output_to_msg(output: TrackerOutput, num_joints: int):
     return msg
 
 
+_TARGET_STATES = {s.value: s for s in TargetState}
+
+
 def _tracker_output_from_msg(msg) -> TrackerOutput:
     J = msg.num_joints
+    # All targets' joints in one array (each target's pose is a row of it): one conversion per message.
+    if any(len(t.pose_m) != J * 3 for t in msg.targets):
+        raise ValueError(f"a target pose of {msg.camera}@{msg.stamp_s} does not hold {J} joints x 3")
+    poses = np.fromiter(itertools.chain.from_iterable(t.pose_m for t in msg.targets), np.float64,
+                        count=len(msg.targets) * J * 3).reshape(len(msg.targets), J, 3)
+    known = [len(t.joint_state) == J and J > 0 for t in msg.targets]
+    states = iter(np.fromiter(itertools.chain.from_iterable(t.joint_state for t, k in zip(msg.targets, known) if k),
+                              np.uint8, count=sum(known) * J).reshape(sum(known), J))
     targets = [
-        Target(id=t.id, pose=np.array(t.pose_m, dtype=np.float64).reshape(J, 3), stamp_s=t.stamp_s,
-               state=TargetState(t.state),
-               joint_state=np.array(t.joint_state, dtype=np.uint8) if len(t.joint_state) == J and J else None)
-        for t in msg.targets
+        Target(id=t.id, pose=pose, stamp_s=t.stamp_s, state=_TARGET_STATES.get(t.state) or TargetState(t.state),
+               joint_state=next(states) if k else None)
+        for t, pose, k in zip(msg.targets, poses, known, strict=True)
     ]
     return TrackerOutput(
         stamp_s=msg.stamp_s, camera=msg.camera, targets=targets,

@@ -28,10 +28,10 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import COCO17, Camera, Skeleton
-from crossview.scoring.association import SCORED_STATES, association_accuracy
+from crossview.scoring.association import SCORED_STATES, AssociationAccumulator
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
 from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
-from crossview.scoring.per_camera import projected_2d_scores
+from crossview.scoring.per_camera import Projected2DAccumulator
 from crossview.scoring.pose import PoseAccumulator
 from crossview.scoring.report import JSON_KEYS, ScoreReport
 from sim.types import CameraFrame, PoseTruth
@@ -139,25 +139,9 @@ def _in_area(g_ids, g_poses, t_ids, t_poses, area, reach_m, skeleton: Skeleton):
     return g_ids[g_in], g_poses[g_in], t_ids[t_keep], t_poses[t_keep]
 
 
-def _check_same_recording(timeline: TruthTimeline, outputs: Sequence[TrackerOutput], cameras) -> None:
-    if cameras is not None:
-        names = {c.name for c in cameras}
-        foreign = sorted({o.camera for o in outputs} - names)
-        if foreign:
-            raise ScoringError(f"tracks come from cameras {foreign} not in this recording ({sorted(names)})")
-    if outputs and len(timeline.times):
-        t0, t1 = timeline.span
-        inside = sum(t0 - OUTPUT_MAX_AGE_S <= o.stamp_s <= t1 + OUTPUT_MAX_AGE_S for o in outputs)
-        if inside == 0:
-            raise ScoringError(
-                f"no tracker output stamp falls in the recording's span {t0:.2f}..{t1:.2f} s; "
-                "the tracks belong to another recording"
-            )
-
-
 def score(
     truth: Sequence[PoseTruth],
-    outputs: Sequence[TrackerOutput],
+    outputs: Iterable[TrackerOutput],
     camera_frames: Iterable[CameraFrame] | None = None,
     cameras: Sequence[Camera] | None = None,
     *,
@@ -171,8 +155,9 @@ def score(
 
     Args:
         truth: true poses (metres, in `skeleton`'s layout), e.g. 100 Hz.
-        outputs: tracker outputs in delivery order.
-        camera_frames: delivered frames with per-detection truth; enables association accuracy.
+        outputs: tracker outputs in delivery order, read once (a stream: only one per grid tick is kept).
+        camera_frames: delivered frames with per-detection truth, in delivery order, read once alongside the
+            outputs; enables association accuracy.
         cameras: calibrated cameras; enables the per-camera 2D scores.
         eval_rate_hz: rate of the evaluation grid.
         root_threshold_m: ground-plane gate of MOTA/IDF1, metres.
@@ -195,29 +180,60 @@ def score(
         raise ScoringError(f"truth poses have {timeline.num_joints} joints, expected {skeleton.num_joints} "
                            f"({skeleton.name})")
     timeline.num_joints = skeleton.num_joints
-    outputs = list(outputs)
-    _check_same_recording(timeline, outputs, cameras)
-    ordered = sorted(outputs, key=lambda o: o.stamp_s)  # stable: equal stamps keep delivery order
-    stamps = np.array([o.stamp_s for o in ordered], dtype=np.float64)
+    t_start, t_end = timeline.span
+    num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
+    ticks = t_start + np.arange(num_ticks) / eval_rate_hz  # the same floats as t_start + k / eval_rate_hz
+
+    # One pass over the outputs. The grid needs, per tick, only the latest output stamped at or before it:
+    # `latest[k]` keeps the latest output stamped in (tick k-1, tick k] (on equal stamps the later one
+    # delivered), so at most one output per tick is held.
+    latest: dict[int, TrackerOutput] = {}
+    names = None if cameras is None else {c.name for c in cameras}
+    foreign: set[str] = set()
+    num_outputs = inside = 0
+    projected = Projected2DAccumulator(cameras, timeline.at) if cameras is not None else None
+    association = AssociationAccumulator() if camera_frames is not None else None
+    frames = iter(camera_frames) if camera_frames is not None else iter(())
+    for out in outputs:
+        num_outputs += 1
+        if names is not None and out.camera not in names:
+            foreign.add(out.camera)
+            continue
+        inside += t_start - OUTPUT_MAX_AGE_S <= out.stamp_s <= t_end + OUTPUT_MAX_AGE_S
+        k = int(np.searchsorted(ticks, out.stamp_s, side="left"))
+        if k < num_ticks and (k not in latest or out.stamp_s >= latest[k].stamp_s):
+            latest[k] = out
+        if projected is not None:
+            projected.add(out)
+        if association is not None:
+            association.add_output(out)
+            while association.waiting_outputs and (cf := next(frames, None)) is not None:
+                association.add_frame(cf)
+    if foreign:
+        raise ScoringError(f"tracks come from cameras {sorted(foreign)} not in this recording ({sorted(names)})")
+    if num_outputs and len(timeline.times) and inside == 0:
+        raise ScoringError(
+            f"no tracker output stamp falls in the recording's span {t_start:.2f}..{t_end:.2f} s; "
+            "the tracks belong to another recording"
+        )
 
     pose_acc = PoseAccumulator(skeleton=skeleton)
     id_acc = IdentityAccumulator(root_threshold_m, skeleton)
     hota_truth, hota_targets, hota_sims = [], [], []
     report = ScoreReport(eval_rate_hz=eval_rate_hz, root_threshold_m=root_threshold_m,
                          hota_zero_distance_m=hota_zero_distance_m)
-    t_start, t_end = timeline.span
-    num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
     scored_ticks = 0
+    chosen: TrackerOutput | None = None
     compared: list[tuple[float, np.ndarray, np.ndarray]] = []  # per identity update: time, person ids, roots
     for k in range(num_ticks):
         tick = t_start + k / eval_rate_hz
-        j = int(np.searchsorted(stamps, tick, side="right")) - 1
-        if j < 0 and stamps.size:
+        chosen = latest.pop(k, chosen)  # the latest output stamped at or before the tick
+        if chosen is None and num_outputs:
             continue  # nothing delivered yet: no tracker could know anything
         scored_ticks += 1
-        if j >= 0 and tick - stamps[j] <= OUTPUT_MAX_AGE_S:
-            t_ids, t_poses = _targets(ordered[j], skeleton)
-            at = stamps[j]
+        if chosen is not None and tick - chosen.stamp_s <= OUTPUT_MAX_AGE_S:
+            t_ids, t_poses = _targets(chosen, skeleton)
+            at = chosen.stamp_s
         else:
             t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, skeleton.num_joints, 3))
             at = tick
@@ -257,11 +273,13 @@ def score(
     if report.truth_person_instants or ident.num_predictions:
         report.hota, report.deta, report.assa, report.loca = h.hota, h.deta, h.assa, h.loca
 
-    if camera_frames is not None:
-        a = association_accuracy(camera_frames, outputs)
-        if outputs and a.frames_scored == 0 and a.frames_without_output > 0:
+    if association is not None:
+        for cf in frames:
+            association.add_frame(cf)
+        a = association.result()
+        if num_outputs and a.frames_scored == 0 and a.frames_without_output > 0:
             raise ScoringError(
-                f"none of the {len(outputs)} tracker outputs has the camera and stamp of one of the recording's "
+                f"none of the {num_outputs} tracker outputs has the camera and stamp of one of the recording's "
                 f"{a.frames_without_output} frames; the tracks belong to another recording"
             )
         report.association_accuracy = a.overall
@@ -269,6 +287,6 @@ def score(
         report.false_positive_detections_assigned = a.false_positive_assigned
         if a.frames_without_output:
             logger.warning("association accuracy: %d camera frames had no tracker output", a.frames_without_output)
-    if cameras is not None:
-        report.camera_2d = projected_2d_scores(outputs, cameras, timeline.at)
+    if projected is not None:
+        report.camera_2d = projected.result()
     return report

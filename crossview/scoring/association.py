@@ -16,7 +16,7 @@ tracking scores that use it (the paper's Table 5) are in `crossview.scoring.per_
 from __future__ import annotations
 
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import cv2
@@ -61,56 +61,100 @@ class AssociationScores:
     frames_scored: int = 0
 
 
-def association_accuracy(camera_frames: Iterable[CameraFrame], outputs: Sequence[TrackerOutput]) -> AssociationScores:
+class AssociationAccumulator:
+    """Association accuracy fed one camera frame and one tracker output at a time, in any interleaving.
+
+    A frame and the output made from it (same `stamp_key`) are paired as soon as both have been added;
+    only the unpaired ones wait, so memory is bounded by how far the two streams drift apart, and the
+    counts are kept per (camera, person, target): bounded by cameras x people x targets, not by frames.
+    """
+
+    def __init__(self):
+        self._outputs: dict[tuple[str, int], np.ndarray] = {}  # unpaired outputs' detection target ids
+        self._frames: dict[tuple[str, int], tuple[int, float, np.ndarray]] = {}  # unpaired frames: index, stamp, ids
+        self._num_frames = 0
+        self._first: dict[str, int] = {}  # camera -> index of its first paired frame (the result's order)
+        self._counts: Counter = Counter()  # (camera, person, target) -> detections
+        self._paired = 0
+
+    def add_output(self, output: TrackerOutput) -> None:
+        """Adds a tracker output; `detection_target_ids` rows match its frame's detections."""
+        key = stamp_key(output.camera, output.stamp_s)
+        targets = np.asarray(output.detection_target_ids, dtype=np.int64)
+        frame = self._frames.pop(key, None)
+        if frame is None:
+            self._outputs[key] = targets
+        else:
+            self._pair(key, *frame, targets)
+
+    def add_frame(self, camera_frame: CameraFrame) -> None:
+        """Adds a delivered frame with its per-detection truth."""
+        key = stamp_key(camera_frame.frame.camera, camera_frame.frame.stamp_s)
+        persons = np.asarray(camera_frame.truth.person_ids, dtype=np.int64)
+        index, self._num_frames = self._num_frames, self._num_frames + 1
+        targets = self._outputs.pop(key, None)
+        if targets is None:
+            self._frames[key] = (index, camera_frame.frame.stamp_s, persons)
+        else:
+            self._pair(key, index, camera_frame.frame.stamp_s, persons, targets)
+
+    @property
+    def waiting_outputs(self) -> int:
+        """Outputs added whose frame has not been added yet."""
+        return len(self._outputs)
+
+    def _pair(self, key, index: int, stamp_s: float, persons: np.ndarray, targets: np.ndarray) -> None:
+        if targets.shape != persons.shape:
+            raise ValueError(
+                f"association: camera {key[0]} at {stamp_s} s has {len(persons)} detections but the tracker "
+                f"output assigns {len(targets)}; the tracks do not belong to this recording"
+            )
+        camera = key[0]
+        self._first[camera] = min(self._first.get(camera, index), index)
+        self._counts.update(zip([camera] * len(persons), persons.tolist(), targets.tolist(), strict=True))
+        self._paired += 1
+
+    def result(self) -> AssociationScores:
+        """Scores over the frames and outputs added so far (unpaired frames count as without output)."""
+        # Each person's carrier: the target most of its detections went to (ties: the smaller id).
+        votes: dict[int, Counter] = defaultdict(Counter)
+        for (_, p, t), n in self._counts.items():
+            if p >= 0 and t >= 0:
+                votes[p][t] += n
+        carrier = {p: min(c.items(), key=lambda kv: (-kv[1], kv[0]))[0] for p, c in votes.items()}
+        correct: Counter = Counter()
+        total: Counter = Counter({camera: 0 for camera in sorted(self._first, key=self._first.get)})
+        fp_total = fp_assigned = 0
+        for (camera, p, t), n in self._counts.items():
+            if p < 0:
+                fp_total += n
+                fp_assigned += n if t >= 0 else 0
+                continue
+            total[camera] += n
+            correct[camera] += n if t >= 0 and carrier.get(p) == t else 0
+        scores = AssociationScores(frames_without_output=len(self._frames), frames_scored=self._paired)
+        for camera in total:  # order of the first paired frame of each camera
+            scores.true_detections[camera] = total[camera]
+            scores.per_camera[camera] = correct[camera] / total[camera] if total[camera] else None
+        n = sum(total.values())
+        scores.overall = sum(correct.values()) / n if n else None
+        scores.false_positive_assigned = fp_assigned / fp_total if fp_total else None
+        return scores
+
+
+def association_accuracy(camera_frames: Iterable[CameraFrame], outputs: Iterable[TrackerOutput]) -> AssociationScores:
     """The paper's association accuracy per camera (Figure 4), see the module docstring.
 
     Args:
         camera_frames: delivered frames with per-detection truth.
         outputs: tracker outputs; `detection_target_ids` rows match the frame's detections.
     """
-    assigned = {stamp_key(o.camera, o.stamp_s): np.asarray(o.detection_target_ids, dtype=np.int64) for o in outputs}
-    pairs: list[tuple[str, np.ndarray, np.ndarray]] = []
-    missing = 0
+    acc = AssociationAccumulator()
+    for o in outputs:
+        acc.add_output(o)
     for cf in camera_frames:
-        key = stamp_key(cf.frame.camera, cf.frame.stamp_s)
-        persons = np.asarray(cf.truth.person_ids, dtype=np.int64)
-        if key not in assigned:
-            missing += 1
-            continue
-        targets = assigned[key]
-        if targets.shape != persons.shape:
-            raise ValueError(
-                f"association: camera {key[0]} at {cf.frame.stamp_s} s has {len(persons)} detections but the tracker "
-                f"output assigns {len(targets)}; the tracks do not belong to this recording"
-            )
-        pairs.append((key[0], persons, targets))
-    # Each person's carrier: the target most of its detections went to (ties: the smaller id).
-    votes: dict[int, Counter] = defaultdict(Counter)
-    for _, persons, targets in pairs:
-        for p, t in zip(persons.tolist(), targets.tolist(), strict=True):
-            if p >= 0 and t >= 0:
-                votes[p][t] += 1
-    carrier = {p: min(c.items(), key=lambda kv: (-kv[1], kv[0]))[0] for p, c in votes.items()}
-    correct: Counter = Counter()
-    total: Counter = Counter()
-    fp_total = fp_assigned = 0
-    for camera, persons, targets in pairs:
-        total[camera] += 0
-        for p, t in zip(persons.tolist(), targets.tolist(), strict=True):
-            if p < 0:
-                fp_total += 1
-                fp_assigned += t >= 0
-                continue
-            total[camera] += 1
-            correct[camera] += t >= 0 and carrier.get(p) == t
-    scores = AssociationScores(frames_without_output=missing, frames_scored=len(pairs))
-    for camera in total:  # order of first appearance
-        scores.true_detections[camera] = total[camera]
-        scores.per_camera[camera] = correct[camera] / total[camera] if total[camera] else None
-    n = sum(total.values())
-    scores.overall = sum(correct.values()) / n if n else None
-    scores.false_positive_assigned = fp_assigned / fp_total if fp_total else None
-    return scores
+        acc.add_frame(cf)
+    return acc.result()
 
 
 def project_points(camera: Camera, points: np.ndarray) -> np.ndarray:
@@ -157,7 +201,20 @@ def pose_boxes(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarra
     """
     poses = np.asarray(poses, dtype=np.float64)
     n, j = poses.shape[:2]
-    boxes = keypoint_boxes(project_points(camera, poses.reshape(-1, 3)).reshape(n, j, 2))
+    return projected_boxes(camera, project_points(camera, poses.reshape(-1, 3)).reshape(n, j, 2))
+
+
+def projected_boxes(camera: Camera, poses_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`pose_boxes` of poses already projected by `project_points`.
+
+    Args:
+        camera: the camera they were projected into.
+        poses_px: (N, J, 2) projected joints, pixels (NaN: not projected).
+
+    Returns:
+        boxes (N, 4) and (N,) bool visible, as `pose_boxes`.
+    """
+    boxes = keypoint_boxes(poses_px)
     lo, hi = boxes[:, :2], boxes[:, 2:]
     size = np.prod(hi - lo, axis=1)
     inside = np.prod(np.clip(np.minimum(hi, (camera.width_px, camera.height_px)) - np.maximum(lo, 0), 0, None), axis=1)

@@ -33,7 +33,7 @@ import numpy as np
 from core.boxes import box_iou, keypoint_boxes
 from core.errors import CrossviewError
 from core.types import Camera, Frame
-from crossview.scoring.association import SCORED_STATES, pose_boxes, stamp_key
+from crossview.scoring.association import SCORED_STATES, project_points, projected_boxes, stamp_key
 from crossview.scoring.identity import identity_scores
 from sim.types import CameraFrame
 from tracker.types import TrackerOutput
@@ -137,8 +137,75 @@ def joint_distances(truth_px: np.ndarray, truth_valid: np.ndarray, track_px: np.
     return d
 
 
+class Projected2DAccumulator:
+    """The *projected* protocol fed one tracker output at a time (see the module docstring).
+
+    Each camera's outputs wait in a block of at most `BLOCK_POINTS` joints and are projected together in
+    one `project_points` call (the same per-point arithmetic as one call per pose); the block then goes
+    into the camera's py-motmetrics accumulator in the order the outputs came. Memory: one block per camera.
+
+    Args:
+        cameras: the calibrated cameras.
+        truth_at: t -> (ids (P,), poses (P, J, 3)) true poses at time t.
+    """
+
+    BLOCK_POINTS = 16384
+    """Joints (truth and targets) of one camera's outputs projected in one call."""
+
+    def __init__(self, cameras: Sequence[Camera], truth_at: Callable[[float], tuple[np.ndarray, np.ndarray]]):
+        self._cameras = {c.name: c for c in cameras}
+        self._truth_at = truth_at
+        self._acc = Camera2DAccumulator(list(self._cameras))
+        self._blocks: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {
+            name: [] for name in self._cameras}
+        self._points: Counter = Counter()
+
+    def add(self, output: TrackerOutput) -> None:
+        """Adds a tracker output, scored in the camera that produced it."""
+        if output.camera not in self._cameras:
+            raise ValueError(f"2D scores: tracker output from camera {output.camera!r}, not among "
+                             f"{sorted(self._cameras)}")
+        ids, poses = self._truth_at(output.stamp_s)
+        targets = [t for t in output.targets if t.state in SCORED_STATES]
+        h_ids = np.array([t.id for t in targets], dtype=np.int64)
+        h_poses = np.array([t.pose for t in targets], dtype=np.float64) if targets else np.zeros((0, 1, 3))
+        poses = np.asarray(poses, dtype=np.float64)
+        self._blocks[output.camera].append((np.asarray(ids), poses, h_ids, h_poses))
+        self._points[output.camera] += poses[..., 0].size + h_poses[..., 0].size
+        if self._points[output.camera] >= self.BLOCK_POINTS:
+            self._flush(output.camera)
+
+    def _flush(self, name: str) -> None:
+        camera, block = self._cameras[name], self._blocks[name]
+        self._blocks[name], self._points[name] = [], 0
+        if not block:
+            return
+        sides = [poses for item in block for poses in (item[1], item[3])]  # truth, targets, truth, ...
+        counts = [len(p) for p in sides]
+        px = project_points(camera, np.concatenate([p.reshape(-1, 3) for p in sides]))
+        shapes = {p.shape[1:] for p in sides if len(p)}
+        if len(shapes) <= 1:  # one joint layout: box every pose of the block at once (row by row the same)
+            j = shapes.pop()[0] if shapes else 1
+            all_boxes, all_vis = projected_boxes(camera, px.reshape(-1, j, 2))
+            ends = np.cumsum(counts)[:-1]
+            boxes = list(zip(np.split(all_boxes, ends), np.split(all_vis, ends), strict=True))
+        else:
+            ends = np.cumsum([p[..., 0].size for p in sides])[:-1]
+            boxes = [projected_boxes(camera, chunk.reshape(*p.shape[:2], 2))
+                     for p, chunk in zip(sides, np.split(px, ends), strict=True)]
+        for (ids, _, h_ids, _), (t_boxes, t_vis), (h_boxes, h_vis) in zip(block, boxes[::2], boxes[1::2],
+                                                                          strict=True):
+            self._acc.update(name, ids[t_vis], h_ids[h_vis], iou_distances(t_boxes[t_vis], h_boxes[h_vis]))
+
+    def result(self) -> dict[str, Camera2DScores]:
+        """Camera name -> scores, for every camera given."""
+        for name in self._cameras:
+            self._flush(name)
+        return self._acc.result()
+
+
 def projected_2d_scores(
-    outputs: Sequence[TrackerOutput],
+    outputs: Iterable[TrackerOutput],
     cameras: Sequence[Camera],
     truth_at: Callable[[float], tuple[np.ndarray, np.ndarray]],
 ) -> dict[str, Camera2DScores]:
@@ -152,19 +219,9 @@ def projected_2d_scores(
     Returns:
         camera name -> scores, for every camera given.
     """
-    by_name = {c.name: c for c in cameras}
-    acc = Camera2DAccumulator(list(by_name))
+    acc = Projected2DAccumulator(cameras, truth_at)
     for out in outputs:
-        camera = by_name.get(out.camera)
-        if camera is None:
-            raise ValueError(f"2D scores: tracker output from camera {out.camera!r}, not among {sorted(by_name)}")
-        ids, poses = truth_at(out.stamp_s)
-        t_boxes, t_vis = pose_boxes(camera, poses) if len(ids) else (np.zeros((0, 4)), np.zeros(0, bool))
-        targets = [t for t in out.targets if t.state in SCORED_STATES]
-        h_ids = np.array([t.id for t in targets], dtype=np.int64)
-        h_poses = np.array([t.pose for t in targets], dtype=np.float64) if targets else np.zeros((0, 1, 3))
-        h_boxes, h_vis = pose_boxes(camera, h_poses) if len(h_ids) else (np.zeros((0, 4)), np.zeros(0, bool))
-        acc.update(camera.name, np.asarray(ids)[t_vis], h_ids[h_vis], iou_distances(t_boxes[t_vis], h_boxes[h_vis]))
+        acc.add(out)
     return acc.result()
 
 

@@ -6,7 +6,7 @@ import pytest
 
 from core.types import Camera, Frame
 from crossview.scoring import score
-from crossview.scoring.association import association_accuracy, pose_boxes, project_points
+from crossview.scoring.association import AssociationAccumulator, association_accuracy, pose_boxes, project_points
 from crossview.scoring.identity import body_roots
 from sim.types import CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import Target, TrackerOutput
@@ -123,3 +123,34 @@ def test_outputs_that_match_no_frame_of_the_recording_are_refused():
     outputs = [_output("top", 0.1 * k + 0.013, [10]) for k in range(5)]
     with pytest.raises(ValueError, match="another recording"):
         score(truth, outputs, frames)
+
+
+def test_accumulator_pairs_frames_and_outputs_in_any_order_as_the_whole_lists_do():
+    rng = np.random.default_rng(11)
+    frames, outputs = [], []
+    for k in range(40):
+        camera = ("A", "B", "C")[k % 3]
+        persons = rng.choice([-1, 1, 2, 3], size=rng.integers(0, 5))
+        frames.append(_camera_frame(camera, 0.05 * k, persons))
+        outputs.append(_output(camera, 0.05 * k, rng.choice([-1, 10, 20, 30], size=len(persons))))
+    whole = association_accuracy(frames, outputs[:-3])  # the last three frames were never processed
+    for order in ("outputs first", "frames first", "interleaved late"):
+        acc = AssociationAccumulator()
+        if order == "outputs first":
+            for o in outputs[:-3]:
+                acc.add_output(o)
+            for f in frames:
+                acc.add_frame(f)
+        elif order == "frames first":
+            for f in frames:
+                acc.add_frame(f)
+            for o in outputs[:-3]:
+                acc.add_output(o)
+        else:  # each output two frames behind its frame
+            for k, f in enumerate(frames):
+                acc.add_frame(f)
+                if 2 <= k < len(frames) - 1:
+                    acc.add_output(outputs[k - 2])
+        s = acc.result()
+        assert s == whole, order
+        assert list(s.per_camera) == ["A", "B", "C"] and s.frames_without_output == 3

@@ -7,17 +7,21 @@ import numpy as np
 import pytest
 
 from core.errors import CrossviewError
-from core.types import Frame
-from crossview.scoring.association import stamp_key
+from core.types import Camera, Frame
+from crossview.scoring.association import pose_boxes, stamp_key
 from crossview.scoring.per_camera import (
     JOINT_MATCH_FRACTION,
     Camera2DAccumulator,
+    Projected2DAccumulator,
     detection_2d_scores,
     detection_tracks,
     detection_truth,
+    iou_distances,
     joint_distances,
+    projected_2d_scores,
 )
 from sim.types import CameraFrame, DetectionTruth
+from tracker.types import Target, TrackerOutput
 
 J = 17
 
@@ -126,3 +130,45 @@ def test_ids_of_another_recording_are_refused():
         detection_2d_scores(frames, {stamp_key("A", 0.0): np.array([1, 2])}, ["A"])
     with pytest.raises(CrossviewError, match="none of the recording's 1 camera frames"):
         detection_2d_scores(frames, {stamp_key("A", 0.5): np.array([1])}, ["A"])
+
+
+def _walk_outputs(camera, rng):
+    """Tracker outputs of one camera: two noisy, partly swapped tracks of the truth, a ghost and a target
+    behind the camera, with the true poses (t -> ids, poses) they are scored against."""
+    template = np.column_stack([rng.uniform(-0.25, 0.25, J), rng.uniform(-0.1, 0.1, J), np.linspace(0.1, 1.7, J)])
+
+    def truth_at(t):
+        return np.array([1, 2]), np.stack([template + [0.3 * t - 1.5, 0, 0], template + [1.2 - 0.4 * t, 0.5, 0]])
+
+    outputs = []
+    for k in range(60):
+        t = 0.05 * k
+        _, poses = truth_at(t)
+        noisy = poses + rng.normal(0, 0.03, poses.shape)
+        ids = (10, 20) if k < 30 else (20, 10)
+        targets = [Target(ids[0], noisy[0], t), Target(ids[1], noisy[1], t),
+                   Target(30, template + [rng.uniform(-3, 3), 0, 0], t), Target(40, template + [0, 0, 9.0], t)]
+        outputs.append(TrackerOutput(t, camera.name, targets[: k % 5], np.zeros(0, dtype=np.int64)))
+    return outputs, truth_at
+
+
+def test_projected_scores_in_blocks_equal_one_projection_per_pose(monkeypatch):
+    rng = np.random.default_rng(4)
+    R = np.diag([1.0, -1.0, -1.0])
+    camera = Camera("top", np.array([[400.0, 0, 320], [0, 400.0, 240], [0, 0, 1]]),
+                    np.array([-0.2, 0.05, 0.001, -0.001, 0.0]), R, -R @ np.array([0.0, 0.0, 4.0]), 640, 480)
+    outputs, truth_at = _walk_outputs(camera, rng)
+    # Reference: each output's true and tracked poses projected on their own (`pose_boxes`).
+    reference = Camera2DAccumulator(["top"])
+    for out in outputs:
+        ids, poses = truth_at(out.stamp_s)
+        t_boxes, t_vis = pose_boxes(camera, poses)
+        h_ids = np.array([t.id for t in out.targets], dtype=np.int64)
+        h_poses = np.array([t.pose for t in out.targets]) if out.targets else np.zeros((0, J, 3))
+        h_boxes, h_vis = pose_boxes(camera, h_poses)
+        reference.update("top", ids[t_vis], h_ids[h_vis], iou_distances(t_boxes[t_vis], h_boxes[h_vis]))
+    expected = reference.result()
+    assert 0 < expected["top"].id_switches and expected["top"].false_positives > 0  # a story worth comparing
+    for block_points in (1, 100, Projected2DAccumulator.BLOCK_POINTS):
+        monkeypatch.setattr(Projected2DAccumulator, "BLOCK_POINTS", block_points)
+        assert projected_2d_scores(iter(outputs), [camera], truth_at) == expected, block_points

@@ -200,3 +200,19 @@ def test_ghosts_off_the_floor_are_ignored_and_on_the_floor_are_false_positives()
                           o.detection_target_ids) for o in _outputs()]
     r = score(_truth(), outs, scored_area=area)
     assert r.false_positives == 101 and r.false_negatives == 0
+
+
+def test_outputs_are_read_once_as_a_stream_and_equal_stamps_take_the_later_delivered():
+    outs = _outputs(ids=lambda t: (10, 20) if t < 5.0 else (20, 10))
+    # Delivery order is not stamp order: every pair of neighbours swapped.
+    shuffled = [o for pair in zip(outs[1::2], outs[0::2], strict=False) for o in pair] + outs[len(outs) // 2 * 2:]
+    once = score(_truth(), iter(shuffled))
+    assert once.to_json(scenario="s", seed=0, num_cameras=1, num_people=2, duration_s=DURATION_S, tracker_fps=None,
+                        camera_frames_per_s=None) == score(_truth(), outs).to_json(
+        scenario="s", seed=0, num_cameras=1, num_people=2, duration_s=DURATION_S, tracker_fps=None,
+        camera_frames_per_s=None)
+    # A second output with the stamp of one already delivered replaces it: its targets are the ones scored.
+    late_ghosts = [TrackerOutput(o.stamp_s, "cam0", [Target(99, _pose(1, o.stamp_s) + [0.0, 5.0, 0.0], o.stamp_s)],
+                                 np.zeros(0, dtype=np.int64)) for o in outs]
+    r = score(_truth(), iter([o for pair in zip(outs, late_ghosts, strict=True) for o in pair]))
+    assert r.false_negatives == r.truth_person_instants and r.false_positives == r.eval_instants
