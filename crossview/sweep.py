@@ -35,7 +35,6 @@ from pathlib import Path, PurePosixPath
 from core.errors import CrossviewError, ScenarioError
 from crossview import outputs, pipeline
 from sim import scenario as scenario_mod
-from tracker.config import PRESETS
 
 log = logging.getLogger(__name__)
 
@@ -245,28 +244,38 @@ def parse_axis(key: str, text: str) -> Axis:
         if key == CAMERAS_AXIS:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise CrossviewError(f"--cameras: {value!r} is not a camera count (an integer >= 1)")
-        elif key.startswith(TRACKER_PREFIX):
-            _check_tracker_value(option, key, value, PRESETS)
-        else:
+        elif not key.startswith(TRACKER_PREFIX):  # (tracker values are checked together, by `plan`)
             scenario_mod.check_override(key, value, option)
     return Axis(key, values)
 
 
-def _check_tracker_value(option: str, key: str, value, presets) -> None:
-    """Refuses a `tracker.*` axis value that no preset of `presets` takes (one some take fails only the
-    cells of the others, when planned).
+def _check_tracker_axes(axes, presets) -> None:
+    """Refuses a `tracker.*` axis value that no cell of the grid can take: with none of the presets and none
+    of the other tracker axes' values is the configuration valid (a value valid only with some of them fails
+    only the other cells, when planned; `alpha_3d_m` 0.6 is valid with `view_margin_m` 0.7, not alone).
 
     Raises:
-        CrossviewError: an unknown field, or a value no preset takes, named with its option.
+        CrossviewError: an unknown field, or a value no cell takes, named with its option.
     """
-    errors = []
-    for preset in presets:
-        try:
-            pipeline.tracker_config(preset, None, {key[len(TRACKER_PREFIX):]: value})
-            return
-        except CrossviewError as e:
-            errors.append(e)
-    raise CrossviewError(f"{option}: {errors[0]}")
+    axes = [a for a in axes if a.key.startswith(TRACKER_PREFIX)]
+    fine = [[False] * len(a.values) for a in axes]
+    first_error: dict[tuple[int, int], CrossviewError] = {}
+    for picks in itertools.product(*(range(len(a.values)) for a in axes)):
+        fields = {a.key[len(TRACKER_PREFIX):]: a.values[i] for a, i in zip(axes, picks)}
+        for preset in presets:
+            try:
+                pipeline.tracker_config(preset, None, fields)
+            except CrossviewError as e:
+                for n, i in enumerate(picks):
+                    first_error.setdefault((n, i), e)
+                continue
+            for n, i in enumerate(picks):
+                fine[n][i] = True
+            break
+    for n, axis in enumerate(axes):
+        for i, ok in enumerate(fine[n]):
+            if not ok:
+                raise CrossviewError(f"--set {axis.key}: {first_error[(n, i)]}")
 
 
 def parse_seeds(text: str) -> tuple[int, ...]:
@@ -329,10 +338,7 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
 
     version = software_version()
     base = pipeline.load_scenario(spec.scenario, duration_s=spec.duration_s)
-    for axis in spec.axes:
-        if axis.key.startswith(TRACKER_PREFIX):
-            for value in axis.values:
-                _check_tracker_value(f"--set {axis.key}", axis.key, value, spec.presets)
+    _check_tracker_axes(spec.axes, spec.presets)
     path = str(Path(base.source_path).resolve())
     text = Path(path).read_text(encoding="utf-8")  # (the file's, without the overrides' notes)
     folder = Path(path).parent

@@ -324,3 +324,18 @@ def test_tracker_settings_of_a_cell_are_checked_together_not_one_by_one():
     assert (config.alpha_3d_m, config.view_margin_m) == (0.6, 0.7)
     with pytest.raises(sweep.CrossviewError, match="view_margin_m: 0.5 must be >= alpha_3d_m 0.6"):
         pipeline.tracker_config("shelf", None, {"alpha_3d_m": 0.6})
+
+
+def test_tracker_axes_valid_only_together_are_planned_not_refused():
+    """alpha_3d_m 0.6 is valid with view_margin_m 0.7, not with 0.5: the grid is planned and only that cell fails,
+    with its reason; a value that no cell can take (alpha_3d_m 0.9 with either margin) is refused up front."""
+    axes = (sweep.parse_axis("tracker.alpha_3d_m", "0.3,0.6"), sweep.parse_axis("tracker.view_margin_m", "0.5,0.7"))
+    cells = sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, seeds=(0,), methods=("crossview",),
+                                       presets=("shelf",), duration_s=1.0))
+    assert [c.error is None for c in cells] == [True, True, False, True]
+    assert "view_margin_m: 0.5 must be >= alpha_3d_m 0.6" in cells[2].error
+    axes = (sweep.parse_axis("tracker.alpha_3d_m", "0.6,0.9"), sweep.parse_axis("tracker.view_margin_m", "0.5,0.7"))
+    with pytest.raises(sweep.CrossviewError, match=r"--set tracker.alpha_3d_m: .*view_margin_m: 0.5 must be >= "
+                                                   r"alpha_3d_m 0.9"):
+        sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, seeds=(0,), methods=("crossview",),
+                                   presets=("shelf",), duration_s=1.0))
