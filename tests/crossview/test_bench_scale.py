@@ -1,6 +1,7 @@
 """The scale benchmark's parts: the cases it runs, the camera subsets, the fit and the page it writes."""
 
 import numpy as np
+import pytest
 
 from crossview import bench_scale
 
@@ -37,6 +38,9 @@ def test_one_case_end_to_end_and_the_page_section(tmp_path):
     assert row["camera_frames"] == row["camera_frames_timed"] > 0
     assert row["worst_update_ms"] >= row["update_ms_p99"] > 0
     assert row["cost_per_camera_frame_ms"] == 1e3 / row["camera_frames_per_s"]
+    # the cost per detection: the same tracking time over the detections of the timed frames
+    assert row["us_per_detection"] * row["detections_per_camera_frame"] == pytest.approx(
+        1e3 * row["cost_per_camera_frame_ms"])
     assert row["unknown_joints"] == 0 and row["false_positives_per_min"] >= 0 and row["pcp"] > 0.5
     # Past its budget a case is timed over the start of its stream only, and left unscored.
     short = bench_scale.run_case(bench_scale.ScaleCase("store_layout1"), 3.0, tmp_path / "b", False, budget_s=0.0)
