@@ -167,7 +167,7 @@ class TrackerConfig:
     init_max_top_m: float = 2.6
     init_min_bottom_m: float = -0.5
     init_min_separation_m: float = 0.3
-    init_consensus_m: float = 0.5
+    init_consensus_m: float = 0.3
     confirm_min_updates: int = 3
     confirm_min_age_s: float = 0.0
     tentative_timeout_s: float = 0.5
