@@ -34,8 +34,10 @@ def _temporaries(folder: Path, part: str = "") -> list[Path]:
 def _signal_while_writing(argv, watched: Path, signum: int, env=None, part: str = "") -> tuple[str, int]:
     """Runs `crossview ARGV`, signals it while a temporary output (with `part` in its name) exists under
     `watched`; returns its stderr and process id (which is its group's)."""
+    # (SIGINT at its default, as in a terminal: a shell starts background jobs, and so a suite run in the
+    # background, with SIGINT ignored, which Python and its children keep)
     process = subprocess.Popen([*CROSSVIEW, *argv], stderr=subprocess.PIPE, text=True, start_new_session=True,
-                               env=env)
+                               env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 300
         while not _temporaries(watched, part) and process.poll() is None and time.monotonic() < deadline:
