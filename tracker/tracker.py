@@ -326,8 +326,9 @@ class Tracker:
         detection x of camera c, x and, from each other camera, the pooled detection with the largest positive
         affinity to x (eq. S2). A cluster holds one detection per camera, and only a detection with a positive
         affinity to x adds to (S3) by joining x's; of a camera's several such, the others are mostly people
-        who happen to lie along x's epipolar line (in a crowd seen by hundreds of cameras, most of them). The
-        clusters without any of c's detections were the graph's when their own latest camera's frame came,
+        who happen to lie along x's epipolar line (in a crowd seen by hundreds of cameras, most of them), and
+        of the cameras' best matches only those that agree on where x is stay (`consensus_views`, beyond the
+        paper). The clusters without any of c's detections were the graph's when their own latest camera's frame came,
         and their detections are still pooled only because they were not a plausible new person then. So a
         frame costs its unmatched detections times the pool, and a partition of at most one node per camera
         for each, however many people the store holds. The cluster holding x becomes a target when it is
