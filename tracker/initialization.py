@@ -359,12 +359,12 @@ def _pair_spots(origin, rays, origins, candidate_rays, min_common_joints, out):
     for i in range(L):
         sx = sy = sz = 0.0
         count = 0
+        wx, wy, wz = origin[0] - origins[i, 0], origin[1] - origins[i, 1], origin[2] - origins[i, 2]
         for j in range(J):
             d1x, d1y, d1z = rays[j, 0], rays[j, 1], rays[j, 2]
             d2x, d2y, d2z = candidate_rays[i, j, 0], candidate_rays[i, j, 1], candidate_rays[i, j, 2]
             if not (np.isfinite(d1x) and np.isfinite(d2x)):
                 continue
-            wx, wy, wz = origin[0] - origins[i, 0], origin[1] - origins[i, 1], origin[2] - origins[i, 2]
             a = d1x * d1x + d1y * d1y + d1z * d1z
             b = d1x * d2x + d1y * d2y + d1z * d2z
             c = d2x * d2x + d2y * d2y + d2z * d2z
