@@ -143,22 +143,27 @@ def project_distorted(camera: Camera, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def ray_directions(camera: Camera, points_px: np.ndarray, world_from_pixel: np.ndarray | None = None) -> np.ndarray:
+def ray_directions(camera: Camera | None, points_px: np.ndarray, world_from_pixel: np.ndarray | None = None
+                   ) -> np.ndarray:
     """Eq. (3): unit world directions of the rays from the camera centre through undistorted pixels.
 
     The ray P⁺x̃ + μX̃_c of eq. (3) is the line through the centre X_c with direction R^T K^-1 x̃.
 
     Args:
-        camera: the camera.
+        camera: the camera (None when `world_from_pixel` is given).
         points_px: (..., 2) undistorted pixels.
-        world_from_pixel: (3, 3) R^T K^-1 of the camera if already computed (`world_from_pixel(camera)`).
+        world_from_pixel: R^T K^-1 of the camera if already computed (`world_from_pixel_matrix(camera)`), (3, 3);
+            or one per leading index of points_px, (..., 3, 3), for pixels of several cameras.
 
     Returns:
         (..., 3) unit directions in the world frame (NaN where the pixel is NaN).
     """
     points = np.asarray(points_px, dtype=np.float64)
-    M = world_from_pixel_matrix(camera) if world_from_pixel is None else world_from_pixel
-    d = points @ M[:, :2].T + M[:, 2]
+    M = world_from_pixel_matrix(camera) if world_from_pixel is None else np.asarray(world_from_pixel)
+    if M.ndim == 2:
+        d = points @ M[:, :2].T + M[:, 2]
+    else:
+        d = np.einsum("...ab,...b->...a", M[..., :, :2], points) + M[..., :, 2]
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
 
 

@@ -30,7 +30,7 @@ from tracker import lifecycle
 from tracker.association import associate
 from tracker.body import fill_poses, joint_states, mean_body
 from tracker.config import TrackerConfig, Triangulation
-from tracker.geometry import fundamental_matrix, undistort_detections, world_from_pixel_matrix
+from tracker.geometry import fundamental_matrix, ray_directions, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, consensus_views, partition_graph, reconstruct
 from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
 from tracker.rows import Rows
@@ -358,9 +358,10 @@ class Tracker:
             near = near[np.lexsort((-to_pool[x, near], node_cam[near]))]
             near = np.sort(near[np.unique(node_cam[near], return_index=True)[1]])
             if near.size:
-                near = near[consensus_views(self._centers[c], self._rays(c, new_px[x]), self._centers[node_cam[near]],
-                                            self._rays(node_cam[near], node_px[near]), to_pool[x, near],
-                                            cfg.init_min_common_joints, cfg.init_consensus_m)]
+                rays = ray_directions(None, new_px[x], self._world_from_pixel[c])
+                candidate_rays = ray_directions(None, node_px[near], self._world_from_pixel[node_cam[near]][:, None])
+                near = near[consensus_views(self._centers[c], rays, self._centers[node_cam[near]], candidate_rays,
+                                            to_pool[x, near], cfg.init_min_common_joints, cfg.init_consensus_m)]
             if near.size + 1 < cfg.min_views:
                 continue
             ks = np.concatenate([[c], node_cam[near]])
@@ -390,14 +391,6 @@ class Tracker:
             self._pool_px[k] = self._pool_px[k][keep]
             self._pool_frame_index[k] = self._pool_frame_index[k][keep]
         return created
-
-    def _rays(self, cameras, px: np.ndarray) -> np.ndarray:
-        """(..., J, 3) world directions of the rays through undistorted joints px (..., J, 2) of `cameras`
-        (an index, or one per leading row), NaN where the joint is."""
-        M = self._world_from_pixel[cameras]
-        if M.ndim == 3:
-            M = M[:, None]
-        return np.einsum("...ab,...b->...a", M, np.concatenate([px, np.ones(px.shape[:-1] + (1,))], axis=-1))
 
     def _duplicates_existing(self, pose: np.ndarray, t: float) -> bool:
         tg, cfg = self._targets, self.config

@@ -16,6 +16,7 @@ from tracker.geometry import (
     ray_directions,
     undistort_detections,
     undistort_points,
+    world_from_pixel_matrix,
 )
 
 DIST = np.array([-0.2, 0.05, 0.001, -0.001, 0.0])
@@ -58,6 +59,16 @@ def test_ray_through_a_projection_passes_through_the_point(camera, points):
     rays = ray_directions(camera, project(camera.P, points))
     np.testing.assert_allclose(point_to_ray_distance(points, camera.center_world, rays), 0.0, atol=1e-9)  # m
     np.testing.assert_allclose(np.linalg.norm(rays, axis=-1), 1.0)
+
+
+def test_rays_of_several_cameras_at_once_equal_each_cameras(camera, points):
+    # One (3, 3) matrix per leading row: the same directions as one call per camera.
+    other = look_at_camera("other", [3.0, -2.0, 3.0], [0.0, 0.0, 1.0])
+    cams = [camera, other, camera]
+    px = np.stack([project(c.P, points) for c in cams])  # (3, N, 2)
+    M = np.stack([world_from_pixel_matrix(c) for c in cams])[:, None]  # (3, 1, 3, 3)
+    np.testing.assert_allclose(ray_directions(None, px, M),
+                               np.stack([ray_directions(c, p) for c, p in zip(cams, px)]), rtol=0, atol=1e-15)
 
 
 def test_point_to_ray_distance_by_hand():
