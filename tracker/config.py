@@ -120,8 +120,14 @@ class TrackerConfig:
         ghost_inside_m: a camera is expected to see a target when the target's predicted hip centre lies at
             least this far inside the camera's view volume, metres.
         ghost_min_expected: the decayed count of expected sightings before the next rule may act.
-        ghost_min_seen_ratio: a target matched in fewer than this share of the frames expected to see it is
+        ghost_min_seen_ratio: a target matched in fewer than this share of the sightings expected of it is
             removed (a ghost: cameras that should see a person there see nobody), in [0, 1]; 0 disables.
+        ghost_cell_m: side of the floor cells of each camera's sight map: how often the camera matched the
+            confirmed targets whose hips stood in each cell while inside its view volume (shelves and crowds
+            hide people from some cameras in some places); a frame adds that rate, not 1, to a target's
+            expected sightings. 0 disables the map (every frame of a camera whose view holds it counts 1), m.
+        ghost_map_prior_count: weight, in sightings, of what a cell's rate assumes before it has its own: the
+            camera's rate over all cells (whose own prior is 1 with this weight).
         implausible_after_s: a target whose observed body stays implausible this long (the init_* limits of
             height above the floor, bone length and median reprojection error, checked at every match) is
             removed, s.
@@ -178,7 +184,9 @@ class TrackerConfig:
     ghost_window_s: float = 1.0
     ghost_inside_m: float = 0.3
     ghost_min_expected: float = 10.0
-    ghost_min_seen_ratio: float = 0.2
+    ghost_min_seen_ratio: float = 0.35
+    ghost_cell_m: float = 1.0
+    ghost_map_prior_count: float = 10.0
     implausible_after_s: float = 0.5
     max_lateness_s: float = 0.5
 
@@ -190,7 +198,7 @@ class TrackerConfig:
                              f"{[m.value for m in Triangulation]}")
         nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "alpha_2d_floor_px", "lambda_t_per_s", "max_predict_s",
                   "init_window_s", "confirm_min_age_s", "max_lateness_s", "reid_max_m", "reid_speed_m_per_s",
-                  "reject_factor", "ghost_inside_m", "ghost_min_expected")
+                  "reject_factor", "ghost_inside_m", "ghost_min_expected", "ghost_cell_m", "ghost_map_prior_count")
         positive = ("ghost_window_s", "implausible_after_s", "alpha_2d_px_per_s", "alpha_3d_m", "view_margin_m",
                     "velocity_window_s", "max_speed_m_per_s",
                     "max_observation_age_s", "alpha_epipolar_px", "reject_floor_px", "max_bone_m", "stale_after_s",
@@ -208,6 +216,9 @@ class TrackerConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
                 raise ValueError(f"TrackerConfig.{name}: {value!r} is not a number")
+        if 0.0 < self.ghost_cell_m < 0.5:
+            raise ValueError(f"TrackerConfig.ghost_cell_m: {self.ghost_cell_m} must be 0 (no sight map) or at "
+                             "least 0.5 m")
         if not 0.0 <= self.ghost_min_seen_ratio <= 1.0:
             raise ValueError(f"TrackerConfig.ghost_min_seen_ratio: {self.ghost_min_seen_ratio} must be in [0, 1]")
         if not 0.0 <= self.score_threshold <= 1.0:

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from core.errors import ConfigError
 from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
 from tracker import lifecycle
@@ -35,7 +36,7 @@ from tracker.initialization import PlausibilityLimits, check_plausible, consensu
 from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
 from tracker.rows import Rows
 from tracker.types import Target, TrackerOutput
-from tracker.visibility import all_view_planes, count_sightings, overlapping_views, targets_in_view
+from tracker.visibility import all_view_planes, count_sightings, overlapping_views, sight_map_grid, targets_in_view
 
 logger = logging.getLogger(__name__)
 
@@ -43,6 +44,9 @@ _DEFAULT_CONFIG = TrackerConfig()
 
 IMPLAUSIBLE_SHARE = 0.25
 """Share of a target's observed joints (or bones) out of the birth limits that makes its body implausible."""
+
+MAX_SIGHT_MAP_CELLS = 20_000_000
+"""Most cells of all cameras' sight maps together (two float64 counts each: 320 MB)."""
 
 
 class _Targets(Rows):
@@ -123,6 +127,14 @@ class Tracker:
         self._planes = all_view_planes(self.cameras)
         self._linked = overlapping_views(self.cameras, config.init_min_bottom_m, config.init_max_top_m,
                                          config.view_margin_m)
+        # Each camera's sight map (docs/tracker.md, "No ghosts"): how often it matched confirmed targets per cell.
+        self._sight_grid, nx, ny = sight_map_grid(self.cameras, config.ghost_cell_m)
+        if C * nx * ny > MAX_SIGHT_MAP_CELLS:
+            raise ConfigError(f"TrackerConfig.ghost_cell_m: {config.ghost_cell_m} m makes {C} sight maps of {nx * ny} "
+                              f"cells (more than {MAX_SIGHT_MAP_CELLS:,} in all); raise it, or 0 for no map")
+        self._sight_shape = (nx, ny)
+        self._sight_expected = np.zeros((C, nx * ny + 1))  # cells, then the camera's total
+        self._sight_matched = np.zeros((C, nx * ny + 1))
         self._targets = _Targets(C, J, config.velocity_history)
         self._next_id = 0
         self._camera_last_s = np.full(C, -np.inf)
@@ -270,8 +282,9 @@ class Tracker:
         """What camera c's frame says about each target (docs/tracker.md, "No ghosts").
 
         1. Sightings: every target whose predicted hip centre lies `ghost_inside_m` inside the camera's view
-           volume should have been seen; its decayed counts of expected and matched frames (time constant
-           `ghost_window_s`) are updated.
+           volume should have been seen, as often as the camera's sight map says it sees confirmed targets
+           there; its decayed counts of expected and matched sightings (time constant `ghost_window_s`) are
+           updated, and the confirmed targets teach the map.
         2. Plausibility: each matched target's observed body (joints triangulated within `stale_after_s`) is
            implausible when more than `IMPLAUSIBLE_SHARE` of its observed joints lie outside the heights
            [init_min_bottom_m, init_max_top_m] or of its observed bones are longer than init_max_bone_m, or its
@@ -288,8 +301,9 @@ class Tracker:
         matched = np.zeros(len(tg), dtype=np.bool_)
         matched[rows] = True
         count_sightings(self._planes[c], self._hips, tg.pos, tg.vel, tg.joint_s, t, float(cfg.max_predict_s),
-                        float(cfg.ghost_inside_m), float(cfg.ghost_window_s), matched, tg.expected, tg.sighted,
-                        tg.evidence_s)
+                        float(cfg.ghost_inside_m), float(cfg.ghost_window_s), matched, tg.state == lifecycle.CONFIRMED,
+                        self._sight_grid, *self._sight_shape, self._sight_expected[c], self._sight_matched[c],
+                        float(cfg.ghost_map_prior_count), tg.expected, tg.sighted, tg.evidence_s)
         if rows.size:
             bad = np.empty(rows.size, dtype=np.bool_)
             implausible_bodies(rows, cols, det_px, self._P[c], tg.pos, tg.seen_s, t, float(cfg.stale_after_s),

@@ -171,14 +171,39 @@ def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, stamp_s, max_predi
     return n
 
 
+def sight_map_grid(cameras: Sequence[Camera], cell_m: float, pad_m: float = 10.0) -> tuple[np.ndarray, int, int]:
+    """The floor grid of the cameras' sight maps: (x0, y0, cell_m) and its cell counts (nx, ny).
+
+    It covers the cameras' centres on the floor widened by `pad_m`; a point beyond it falls in the nearest
+    edge cell. cell_m <= 0: a single cell (the map is off).
+    """
+    if cell_m <= 0 or not cameras:
+        return np.array([0.0, 0.0, 0.0]), 1, 1
+    xy = np.stack([c.center_world[:2] for c in cameras])
+    lo, hi = xy.min(axis=0) - pad_m, xy.max(axis=0) + pad_m
+    n = np.maximum(np.ceil((hi - lo) / cell_m).astype(np.int64), 1)
+    return np.array([lo[0], lo[1], cell_m]), int(n[0]), int(n[1])
+
+
 @jit
-def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, inside_m, window_s, matched, expected,
-                    sighted, evidence_s):
-    """Counts what one camera frame says about each target (in place): a target whose predicted hip centre
-    (eq. 5, both hips known) lies at least `inside_m` inside the camera's view volume (planes (5, 4)) was
-    expected to be seen; expected (T,) and sighted (T,) are counts decayed with time constant `window_s` since
-    evidence_s (T,), the latter counting the frames that matched it (matched (T,) bool)."""
+def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, inside_m, window_s, matched, confirmed,
+                    grid, nx, ny, map_expected, map_matched, prior_count, expected, sighted, evidence_s):
+    """Counts what one camera frame says about each target (in place).
+
+    A target whose predicted hip centre (eq. 5, both hips known) lies at least `inside_m` inside the camera's
+    view volume (planes (5, 4)) was expected to be seen, as often as this camera matches the confirmed targets
+    standing in the same floor cell (its sight map: shelves and crowds hide people from some cameras in some
+    places). That rate is the cell's share of matched sightings with `prior_count` pseudo-sightings at the
+    camera's share over all cells, itself with `prior_count` at 1: a new map trusts the camera everywhere,
+    a cell learns from the camera as a whole until it has its own sightings.
+    expected (T,) and sighted (T,) are counts decayed with time constant `window_s` since evidence_s (T,):
+    the first adds that rate (1 for a matched target outside the volume), the second 1 for each frame that
+    matched the target (matched (T,) bool). The confirmed targets (confirmed (T,) bool) inside the volume
+    teach the camera's map: map_expected and map_matched (nx * ny + 1,), its cells (x0, y0, cell side) = grid
+    then the camera's totals; cell side 0: no map, every rate is 1.
+    """
     T = pos.shape[0]
+    total = nx * ny
     for r in range(T):
         c = np.zeros(3)
         for h in range(hips.size):
@@ -190,8 +215,22 @@ def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, ins
         for p in range(planes.shape[0]):
             depth = min(depth, planes[p, 0] * c[0] + planes[p, 1] * c[1] + planes[p, 2] * c[2] + planes[p, 3])
         seen = depth >= inside_m  # False for NaN (a hip unknown)
-        if seen or matched[r]:
-            decay = np.exp(-max(stamp_s - evidence_s[r], 0.0) / window_s)
-            expected[r] = expected[r] * decay + 1.0
-            sighted[r] = sighted[r] * decay + (1.0 if matched[r] else 0.0)
-            evidence_s[r] = stamp_s
+        if not (seen or matched[r]):
+            continue
+        rate = 1.0
+        if seen and grid[2] > 0:
+            ix = min(max(int(np.floor((c[0] - grid[0]) / grid[2])), 0), nx - 1)
+            iy = min(max(int(np.floor((c[1] - grid[1]) / grid[2])), 0), ny - 1)
+            cell = iy * nx + ix
+            camera_rate = (map_matched[total] + prior_count) / (map_expected[total] + prior_count)
+            rate = (map_matched[cell] + prior_count * camera_rate) / (map_expected[cell] + prior_count)
+            if confirmed[r]:
+                hit = 1.0 if matched[r] else 0.0
+                map_expected[cell] += 1.0
+                map_matched[cell] += hit
+                map_expected[total] += 1.0
+                map_matched[total] += hit
+        decay = np.exp(-max(stamp_s - evidence_s[r], 0.0) / window_s)
+        expected[r] = expected[r] * decay + rate
+        sighted[r] = sighted[r] * decay + (1.0 if matched[r] else 0.0)
+        evidence_s[r] = stamp_s

@@ -301,6 +301,34 @@ def test_a_target_seen_by_too_few_of_the_cameras_that_should_see_it_is_removed(l
     assert id_of_person_0(kept) in {t.id for t in kept[-1].targets}
 
 
+def test_the_sight_map_keeps_people_whom_some_cameras_never_see_there(layout1):
+    # Eight of the twelve cameras never see anyone on the left half of the floor (as if a shelf stood between
+    # them and it), so there a person is matched by at most four of the twelve cameras whose views hold them.
+    cams, walkers, frames, _ = layout1
+    index = {c.name: c for c in cams}
+    blind = {f"cam{i:02d}" for i in range(4, 12)}
+    hidden = []
+    for f in frames:
+        if f.camera in blind and f.keypoints_px.shape[0]:
+            poses = walkers.poses(f.stamp_s)
+            proj = project_distorted(index[f.camera], poses)  # (P, J, 2)
+            err = np.nanmean(np.linalg.norm(f.keypoints_px[:, None] - proj[None], axis=-1), axis=2)  # (D, P)
+            left = poses[np.argmin(err, axis=1), 11:13, 0].mean(axis=1) < 2.25
+            f = Frame(f.camera, f.stamp_s, f.keypoints_px[~left], f.scores[~left])
+        hidden.append(f)
+
+    def identities(config):
+        rows = _errors(_run(Tracker(cams, config), hidden), walkers, after_s=0.5)
+        return {(target_id, person) for target_id, person, err in rows if err < 0.3}
+
+    # Half of the expected sightings asked: the map learns where those cameras see nobody and keeps one
+    # identity per person; counting every camera whose view holds the person, the ones on the left are
+    # removed as ghosts and come back under new identities.
+    strict = CONFIG.replace(ghost_min_seen_ratio=0.5, ghost_map_prior_count=3.0)
+    assert sorted(person for _, person in identities(strict)) == [0, 1, 2, 3]
+    assert len(identities(strict.replace(ghost_cell_m=0.0))) > 4
+
+
 def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
     from tracker.kernels import implausible_bodies
     from tracker.tracker import IMPLAUSIBLE_SHARE
@@ -322,8 +350,10 @@ def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
         for sightings, bodies in ((count_sightings, implausible_bodies),
                                   (count_sightings.py_func, implausible_bodies.py_func)):
             arrays = [tg.expected.copy(), tg.sighted.copy(), tg.evidence_s.copy()]
+            maps = [tracker._sight_expected[c].copy(), tracker._sight_matched[c].copy()]
             sightings(tracker._planes[c], tracker._hips, pos, tg.vel, tg.joint_s, frame.stamp_s, 0.5, 0.3, 1.0,
-                      matched, *arrays)
+                      matched, tg.state == 1, tracker._sight_grid, *tracker._sight_shape, *maps, 20.0, *arrays)
+            arrays += maps
             bad = np.empty(rows.size, dtype=bool)
             bodies(rows, cols, det_px, tracker._P[c], pos, tg.seen_s, frame.stamp_s, 0.3, tracker._bones,
                    lim.min_bottom_m, lim.max_top_m, lim.max_bone_m, lim.max_reprojection_px, IMPLAUSIBLE_SHARE, bad)

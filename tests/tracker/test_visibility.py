@@ -8,7 +8,7 @@ from tests.tracker.synthetic import Walkers, look_at_camera, make_frames
 from tracker.config import TrackerConfig
 from tracker.geometry import project
 from tracker.tracker import Tracker
-from tracker.visibility import overlapping_views, targets_in_view, view_planes
+from tracker.visibility import count_sightings, overlapping_views, sight_map_grid, targets_in_view, view_planes
 
 
 def _corridor(num_cameras=8, spacing_m=2.0):
@@ -62,6 +62,47 @@ def test_targets_in_view_keeps_the_near_and_the_recent(compiled):
     assert out[:n].tolist() == [0, 1, 2]
     n = kernel(planes, 0, pos, vel, joint_s, obs_s, 3.0, 0.5, 0.5, 1.0, out)  # the match is now too old
     assert out[:n].tolist() == [0, 2]
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_sight_map_expects_as_often_as_the_camera_sees_people_there(compiled):
+    kernel = count_sightings if compiled else count_sightings.py_func
+    cam = _corridor()[0]  # sees x in about [-1.5, 3.5] at the floor
+    grid, nx, ny = sight_map_grid([cam], 1.0)
+    assert grid.tolist() == [-9.0, -8.0, 1.0] and (nx, ny) == (20, 20)  # the camera's centre widened by 10 m
+    J = 17
+    pos = np.zeros((3, J, 3))
+    pos[:, :, 2] = 1.0
+    pos[0, :, :2] = [0.5, 2.2]  # in the cell (9, 10): the camera matched 1 in 4 confirmed targets there
+    pos[1, :, :2] = [2.5, 2.2]  # in (11, 10): no sightings there yet
+    pos[2, :, :2] = [30.0, 2.2]  # outside the view
+    cell_a, cell_b, total = 10 * nx + 9, 10 * nx + 11, nx * ny
+    map_expected, map_matched = np.zeros(nx * ny + 1), np.zeros(nx * ny + 1)
+    map_expected[cell_a], map_matched[cell_a] = 40.0, 10.0
+    map_expected[total], map_matched[total] = 40.0, 10.0
+
+    def step(matched, confirmed, prior):
+        counts = [np.zeros(3), np.zeros(3), np.zeros(3)]
+        kernel(view_planes(cam), np.array([11, 12]), pos, np.zeros_like(pos), np.zeros((3, J)), 0.0, 0.5, 0.3, 1.0,
+               np.array(matched), np.array(confirmed), grid, nx, ny, map_expected, map_matched, prior, *counts)
+        return counts
+
+    expected, sighted, _ = step([True, False, False], [False, False, False], 10.0)
+    camera_rate = (10 + 10) / (40 + 10)  # the camera over all cells, with 10 pseudo-sightings at 1
+    np.testing.assert_allclose(expected, [(10 + 10 * camera_rate) / (40 + 10), camera_rate, 0.0])
+    np.testing.assert_allclose(sighted, [1.0, 0.0, 0.0])
+    assert map_expected[total] == 40.0  # only confirmed targets teach the map
+    step([True, False, False], [True, True, True], 10.0)
+    assert (map_expected[cell_a], map_matched[cell_a], map_expected[cell_b], map_matched[cell_b]) == (41, 11, 1, 0)
+    assert (map_expected[total], map_matched[total]) == (42, 11)
+    expected, _, _ = step([False, False, False], [False, False, False], 0.0)  # no prior: the cells' own shares
+    np.testing.assert_allclose(expected[:2], [11 / 41, 0.0])
+    counts = [np.zeros(3), np.zeros(3), np.zeros(3)]
+    grid_off, nx_off, ny_off = sight_map_grid([cam], 0.0)  # no map: every frame whose view holds it counts 1
+    kernel(view_planes(cam), np.array([11, 12]), pos, np.zeros_like(pos), np.zeros((3, J)), 0.0, 0.5, 0.3, 1.0,
+        np.zeros(3, dtype=bool), np.ones(3, dtype=bool), grid_off, nx_off, ny_off, np.zeros(2), np.zeros(2), 10.0,
+        *counts)
+    np.testing.assert_allclose(counts[0], [1.0, 1.0, 0.0])
 
 
 def test_gating_changes_no_output():
