@@ -130,8 +130,8 @@ class Tracker:
         # Each camera's sight map (docs/tracker.md, "No ghosts"): how often it matched confirmed targets per cell.
         self._sight_grid, nx, ny = sight_map_grid(self.cameras, config.ghost_cell_m)
         if C * nx * ny > MAX_SIGHT_MAP_CELLS:
-            raise ConfigError(f"TrackerConfig.ghost_cell_m: {config.ghost_cell_m} m makes {C} sight maps of {nx * ny} "
-                              f"cells (more than {MAX_SIGHT_MAP_CELLS:,} in all); raise it, or 0 for no map")
+            raise ConfigError(f"TrackerConfig.ghost_cell_m: {config.ghost_cell_m} m makes {C} sight maps of "
+                              f"{nx * ny:,} cells (over {MAX_SIGHT_MAP_CELLS:,} in all); raise it, or 0 for no map")
         self._sight_shape = (nx, ny)
         self._sight_expected = np.zeros((C, nx * ny + 1))  # cells, then the camera's total
         self._sight_matched = np.zeros((C, nx * ny + 1))

@@ -28,7 +28,7 @@ def test_unknown_preset_lists_the_valid_ones():
 @pytest.mark.parametrize("field, value", [
     ("alpha_3d_m", 0.0), ("score_threshold", 1.5), ("min_views", 1), ("velocity_history", 1.5),
     ("lambda_t_per_s", -1.0), ("triangulation", "sideways"), ("w_2d", float("nan")), ("reject_factor", -1.0),
-    ("reject_floor_px", 0.0),
+    ("reject_floor_px", 0.0), ("ghost_cell_m", 0.1), ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0),
 ])
 def test_out_of_range_values_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):

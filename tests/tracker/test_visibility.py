@@ -105,6 +105,17 @@ def test_sight_map_expects_as_often_as_the_camera_sees_people_there(compiled):
     np.testing.assert_allclose(counts[0], [1.0, 1.0, 0.0])
 
 
+def test_sight_maps_too_large_for_memory_are_refused():
+    from core.errors import ConfigError
+
+    far = [look_at_camera("a", [0.0, 0.0, 3.0], [0.0, 1.0, 0.0]),
+           look_at_camera("b", [3e3, 3e3, 3.0], [3e3, 3e3 + 1, 0.0])]
+    with pytest.raises(ConfigError, match=r"ghost_cell_m: 0.5 m makes 2 sight maps of 36,481,600 cells"):
+        Tracker(far, TrackerConfig(ghost_cell_m=0.5))
+    Tracker(far, TrackerConfig(ghost_cell_m=0.0))  # no map
+    Tracker(far, TrackerConfig(ghost_cell_m=5.0))
+
+
 def test_gating_changes_no_output():
     """Within the cameras' views nothing changes: the same run with a margin that lets every target and camera
     pair in (association without gating) gives the same targets and poses at every frame. Both trackers link
