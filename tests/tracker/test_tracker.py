@@ -6,6 +6,7 @@ import pytest
 from core.types import Frame
 from tests.reference.plain import plain_python, reaches_compiled_code
 from tests.tracker.synthetic import Walkers, make_frames, store_like
+from tracker import lifecycle
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import project_distorted
@@ -352,7 +353,8 @@ def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
             arrays = [tg.expected.copy(), tg.sighted.copy(), tg.evidence_s.copy()]
             maps = [tracker._sight_expected[c].copy(), tracker._sight_matched[c].copy()]
             sightings(tracker._planes[c], tracker._hips, pos, tg.vel, tg.joint_s, frame.stamp_s, 0.5, 0.3, 1.0,
-                      matched, tg.state == 1, tracker._sight_grid, *tracker._sight_shape, *maps, 20.0, *arrays)
+                      matched, tg.state == lifecycle.CONFIRMED, tracker._sight_grid, *tracker._sight_shape, *maps,
+                      20.0, *arrays)
             arrays += maps
             bad = np.empty(rows.size, dtype=bool)
             bodies(rows, cols, det_px, tracker._P[c], pos, tg.seen_s, frame.stamp_s, 0.3, tracker._bones,

@@ -81,10 +81,10 @@ def test_sight_map_expects_as_often_as_the_camera_sees_people_there(compiled):
     map_expected[cell_a], map_matched[cell_a] = 40.0, 10.0
     map_expected[total], map_matched[total] = 40.0, 10.0
 
-    def step(matched, confirmed, prior):
+    def step(matched, confirmed, prior, sight=(grid, nx, ny, map_expected, map_matched)):
         counts = [np.zeros(3), np.zeros(3), np.zeros(3)]
         kernel(view_planes(cam), np.array([11, 12]), pos, np.zeros_like(pos), np.zeros((3, J)), 0.0, 0.5, 0.3, 1.0,
-               np.array(matched), np.array(confirmed), grid, nx, ny, map_expected, map_matched, prior, *counts)
+               np.array(matched), np.array(confirmed), *sight, prior, *counts)
         return counts
 
     expected, sighted, _ = step([True, False, False], [False, False, False], 10.0)
@@ -97,12 +97,10 @@ def test_sight_map_expects_as_often_as_the_camera_sees_people_there(compiled):
     assert (map_expected[total], map_matched[total]) == (42, 11)
     expected, _, _ = step([False, False, False], [False, False, False], 0.0)  # no prior: the cells' own shares
     np.testing.assert_allclose(expected[:2], [11 / 41, 0.0])
-    counts = [np.zeros(3), np.zeros(3), np.zeros(3)]
-    grid_off, nx_off, ny_off = sight_map_grid([cam], 0.0)  # no map: every frame whose view holds it counts 1
-    kernel(view_planes(cam), np.array([11, 12]), pos, np.zeros_like(pos), np.zeros((3, J)), 0.0, 0.5, 0.3, 1.0,
-        np.zeros(3, dtype=bool), np.ones(3, dtype=bool), grid_off, nx_off, ny_off, np.zeros(2), np.zeros(2), 10.0,
-        *counts)
-    np.testing.assert_allclose(counts[0], [1.0, 1.0, 0.0])
+    # No map: every frame whose view holds the target counts 1.
+    expected, _, _ = step([False, False, False], [True, True, True], 10.0,
+                          (*sight_map_grid([cam], 0.0), np.zeros(2), np.zeros(2)))
+    np.testing.assert_allclose(expected, [1.0, 1.0, 0.0])
 
 
 def test_sight_maps_too_large_for_memory_are_refused():
