@@ -204,8 +204,9 @@ def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, ins
     """
     T = pos.shape[0]
     total = nx * ny
+    c = np.empty(3)  # the predicted hip centre, one buffer for every target
     for r in range(T):
-        c = np.zeros(3)
+        c[:] = 0.0
         for h in range(hips.size):
             j = hips[h]
             horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
