@@ -24,6 +24,7 @@ from tracker.body import fill_poses, joint_states, mean_body
 from tracker.config import TrackerConfig
 from tracker.geometry import fundamental_matrix, undistort_points
 from tracker.initialization import PlausibilityLimits, check_plausible, partition_graph, reconstruct
+from tracker.triangulation import row_norm_code
 from tracker.types import Target, TargetState, TrackerOutput
 
 logger = logging.getLogger(__name__)
@@ -104,7 +105,7 @@ class BaselineTracker:
             ks, ds = node_cam[cluster], node_pos[cluster]
             pts = np.stack([self._latest_px[k][d] for k, d in zip(ks, ds)])
             pose = reconstruct(self._P[ks], pts, self._latest_s[ks], t, self.config.lambda_t_per_s,
-                               self.config.min_views)
+                               self.config.min_views, row_norm_code(self.config, reconstruction=True))
             if check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits) is None:
                 poses.append(pose)
                 members.append(ds[ks == c])

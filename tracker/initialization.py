@@ -31,7 +31,7 @@ from scipy.sparse import coo_matrix
 
 from core.jit import jit
 from core.types import Skeleton
-from tracker.triangulation import reprojection_error_px, triangulate_incremental
+from tracker.triangulation import WHOLE_ROW, reprojection_error_px, triangulate_incremental
 
 logger = logging.getLogger(__name__)
 
@@ -401,7 +401,7 @@ class PlausibilityLimits:
 
 def reconstruct(
     P: np.ndarray, points_px: np.ndarray, stamps_s: np.ndarray, stamp_s: float, lambda_t_per_s: float,
-    min_views: int = 2,
+    min_views: int = 2, row_norm: int = WHOLE_ROW,
 ) -> np.ndarray:
     """3D reconstruction of a new target from a cluster (Algorithm 1): the eq. (10)-(11) DLT per joint.
 
@@ -416,7 +416,7 @@ def reconstruct(
     """
     pts = np.swapaxes(points_px, 0, 1)  # (J, C, 2)
     stamps = np.broadcast_to(stamps_s, pts.shape[:2])
-    return triangulate_incremental(P, pts, stamps, stamp_s, lambda_t_per_s, None, min_views)
+    return triangulate_incremental(P, pts, stamps, stamp_s, lambda_t_per_s, None, min_views, row_norm)
 
 
 def check_plausible(

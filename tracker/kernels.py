@@ -21,7 +21,7 @@ def update_matched(
     rows, cols, det_px, camera, stamp_s,
     pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
     P, bones,
-    max_observation_age_s, lambda_t_per_s, use_velocity, normalize_rows, min_views, reject_factor, reject_floor_px,
+    max_observation_age_s, lambda_t_per_s, use_velocity, row_norm, min_views, reject_factor, reject_floor_px,
     max_bone_m, velocity_window_s, max_speed_m_per_s, stale_after_s, max_predict_s,
 ):
     """Updates the matched targets in place: eq. (6)-(11) per joint, bone gate, eq. (5) velocity, stale joints.
@@ -46,7 +46,8 @@ def update_matched(
             frame of each camera matched to the target (NaN none), >= every obs_s of that camera, so that only
             the cameras with a fresh point are visited per joint.
         P: (C, 3, 4) projection matrices; bones: (B, 2) joint pairs.
-        The rest: `TrackerConfig` fields (normalize_rows and a λt of 0 from its `triangulation`).
+        The rest: `TrackerConfig` fields (row_norm: `triangulation.row_norm_code`; a λt of 0 from its
+            `triangulation`).
     """
     C, J = obs_s.shape[1], obs_s.shape[2]
     H = hist_s.shape[1]
@@ -102,7 +103,7 @@ def update_matched(
                     num += 1
             V[0], V[1], V[2] = vel[r, j, 0], vel[r, j, 1], vel[r, j, 2]
             triangulate_point(P, cams, points, dts, decays, num, V, use_velocity, min_views, reject_factor,
-                              reject_floor_px, normalize_rows, plain, compensated, work, scratch)
+                              reject_floor_px, row_norm, plain, compensated, work, scratch)
             update[j] = np.isfinite(plain[0])
             use_compensated = use_velocity and np.isfinite(compensated[0])
             for k in range(3):

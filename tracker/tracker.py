@@ -35,6 +35,7 @@ from tracker.geometry import fundamental_matrix, ray_directions, undistort_detec
 from tracker.initialization import PlausibilityLimits, check_plausible, consensus_views, partition_graph, reconstruct
 from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
 from tracker.rows import Rows
+from tracker.triangulation import row_norm_code
 from tracker.types import Target, TrackerOutput
 from tracker.visibility import all_view_planes, count_sightings, overlapping_views, sight_map_grid, targets_in_view
 
@@ -113,7 +114,7 @@ class Tracker:
         mode = cfg.triangulation
         self._update_params = (float(cfg.max_observation_age_s),
                                float(cfg.lambda_t_per_s) if mode.weighs_time else 0.0,
-                               mode is Triangulation.VELOCITY, mode.normalizes_rows, int(cfg.min_views),
+                               mode is Triangulation.VELOCITY, row_norm_code(cfg), int(cfg.min_views),
                                float(cfg.reject_factor), float(cfg.reject_floor_px), float(cfg.max_bone_m),
                                float(cfg.velocity_window_s), float(cfg.max_speed_m_per_s), float(cfg.stale_after_s),
                                float(cfg.max_predict_s))
@@ -386,7 +387,8 @@ class Tracker:
                 continue
             ks, pts = ks[cluster], pts[cluster]
             stamps = self._pool_s[ks]
-            pose = reconstruct(self._P[ks], pts, stamps, t, cfg.lambda_t_per_s, cfg.min_views)
+            pose = reconstruct(self._P[ks], pts, stamps, t, cfg.lambda_t_per_s, cfg.min_views,
+                               row_norm_code(cfg, reconstruction=True))
             why = check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits)
             if why is None and self._duplicates_existing(pose, t):
                 why = "duplicate of an existing target"

@@ -7,6 +7,29 @@ import numpy as np
 
 from core.jit import jit, sort_prefix
 
+# How eq. (11) divides a row c of C (eq. 9), the `row_norm` code of the functions below.
+UNIT_ROWS = 0
+"""No division: Table 4's "w/o norm" and the conventional DLT (ablations)."""
+WHOLE_ROW = 1
+"""||c|| over its four entries: eq. (11) as printed. The fourth entry, x t3 - (K t)1 for P = K [R | t], grows
+with the camera's distance from the world origin, so views of the same point weigh very differently by
+where the origin happens to be: in the hypermarket (origin at a corner) up to 1,800 times."""
+PLANE_ROW = 2
+"""||c[:3]||, beyond the paper: c·X̃ / ||c[:3]|| is then the distance in metres from X to the plane through the
+camera centre and the image line x = x_i (or y = y_i), whatever the world origin. With detector noise in
+pixels proportional to the person's size in the image (the simulated detector's, docs/sensor-model.md), that
+distance has about the same spread in every view, so equal weights are what least squares wants."""
+
+
+def row_norm_code(config, reconstruction: bool = False) -> int:
+    """The `row_norm` code of a `tracker.config.TrackerConfig`: its triangulation mode and row norm.
+
+    reconstruction: the code for a new target's reconstruction, whose rows are divided in every mode (the
+    ablations of Table 4 leave the norm out of the update of eq. 6-11 only)."""
+    if not (reconstruction or config.triangulation.normalizes_rows):
+        return UNIT_ROWS
+    return PLANE_ROW if config.row_norm.value == "plane" else WHOLE_ROW
+
 
 def dlt_rows(P: np.ndarray, points_px: np.ndarray) -> np.ndarray:
     """Eq. (9): the two rows x p3ᵀ - p1ᵀ and y p3ᵀ - p2ᵀ of each view.
@@ -88,22 +111,22 @@ def _smallest_eigenvector(M: np.ndarray) -> np.ndarray:
     return sol
 
 
-def triangulate(P: np.ndarray, points_px: np.ndarray, min_views: int = 2, normalize_rows: bool = True) -> np.ndarray:
+def triangulate(P: np.ndarray, points_px: np.ndarray, min_views: int = 2, row_norm: int = WHOLE_ROW) -> np.ndarray:
     """Standard DLT (eq. 8-9), all points taken at one instant.
 
     Args:
         P: (C, 3, 4) projection matrices.
         points_px: (..., C, 2) undistorted pixels of the same point(s) in each camera, NaN missing.
         min_views: least number of views.
-        normalize_rows: divide each row by its norm (eq. 11 without the time term); False: unit weights.
+        row_norm: UNIT_ROWS, WHOLE_ROW or PLANE_ROW: how each row is divided (eq. 11 without the time term).
 
     Returns:
         (..., 3) world points, metres (NaN with fewer than `min_views` views).
     """
     rows = dlt_rows(P, points_px)
-    if normalize_rows:
+    if row_norm != UNIT_ROWS:
         with np.errstate(invalid="ignore", divide="ignore"):
-            rows = rows / np.linalg.norm(rows, axis=-1, keepdims=True)
+            rows = rows / np.linalg.norm(rows if row_norm == WHOLE_ROW else rows[..., :3], axis=-1, keepdims=True)
     return solve_weighted(rows, np.ones(rows.shape[:-2]), min_views)
 
 
@@ -134,6 +157,7 @@ def triangulate_incremental(
     lambda_t_per_s: float,
     velocities: np.ndarray | None = None,
     min_views: int = 2,
+    row_norm: int = WHOLE_ROW,
 ) -> np.ndarray:
     """Eq. (6)-(11): the time-weighted DLT over the latest point of each camera.
 
@@ -148,12 +172,13 @@ def triangulate_incremental(
         lambda_t_per_s: λt, 1/s.
         velocities: None, or (..., 3) joint velocities, m/s.
         min_views: least number of views.
+        row_norm: eq. (11)'s division of the rows (UNIT_ROWS, WHOLE_ROW or PLANE_ROW).
 
     Returns:
         (..., 3) world points at time t, metres (NaN with fewer than `min_views` views).
     """
     plain, compensated = triangulate_incremental_both(P, points_px, stamps_s, stamp_s, lambda_t_per_s,
-                                                      velocities, min_views)
+                                                      velocities, min_views, row_norm)
     return plain if velocities is None else compensated
 
 
@@ -165,6 +190,7 @@ def triangulate_incremental_both(
     lambda_t_per_s: float,
     velocities: np.ndarray | None,
     min_views: int = 2,
+    row_norm: int = WHOLE_ROW,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """`triangulate_incremental` without and with velocity compensation, sharing one batched solve.
 
@@ -179,7 +205,7 @@ def triangulate_incremental_both(
     stamps = np.broadcast_to(stamps_s, batch + (C,)).reshape(-1, C)[group, cam]
     vel = None if velocities is None else np.broadcast_to(velocities, batch + (3,)).reshape(-1, 3)
     plain, compensated = triangulate_observations(P, group, cam, px, stamps, valid.shape[0], stamp_s,
-                                                  lambda_t_per_s, vel, min_views)
+                                                  lambda_t_per_s, vel, min_views, row_norm)
     return plain.reshape(batch + (3,)), None if compensated is None else compensated.reshape(batch + (3,))
 
 
@@ -194,6 +220,7 @@ def triangulate_observations(
     lambda_t_per_s: float,
     velocities: np.ndarray | None,
     min_views: int = 2,
+    row_norm: int = WHOLE_ROW,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Eq. (6)-(11) for many points at once, from a flat list of their observations (no missing entries).
 
@@ -211,13 +238,14 @@ def triangulate_observations(
         lambda_t_per_s: λt, 1/s.
         velocities: None, or (N, 3) joint velocities, m/s (see `triangulate_incremental`).
         min_views: least number of views.
+        row_norm: eq. (11)'s division of the rows (UNIT_ROWS, WHOLE_ROW or PLANE_ROW).
 
     Returns:
         (paper estimate (N, 3), velocity-compensated estimate (N, 3) or None without velocities); NaN for a
         point with fewer than `min_views` observations.
     """
     return triangulate_observations_robust(P, group, cam, points_px, stamps_s, num_groups, stamp_s, lambda_t_per_s,
-                                           velocities, min_views, 0.0, 1.0)
+                                           velocities, min_views, 0.0, 1.0, row_norm)
 
 
 def triangulate_observations_robust(
@@ -233,7 +261,7 @@ def triangulate_observations_robust(
     min_views: int,
     reject_factor: float,
     reject_floor_px: float,
-    normalize_rows: bool = True,
+    row_norm: int = WHOLE_ROW,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """`triangulate_observations`, then once more without the views whose reprojection error exceeds both
     `reject_floor_px` and `reject_factor` times the median error of the point's views (beyond the paper).
@@ -241,7 +269,7 @@ def triangulate_observations_robust(
     The error of an observation taken at t_i is measured against the estimate moved back to t_i with the
     velocity when velocities are given. A point keeps its first estimate if fewer than `min_views` views
     would remain. Arguments as `triangulate_observations`; reject_factor 0 disables the second pass;
-    normalize_rows False leaves out eq. (11)'s division by the row norm (an ablation, Table 4), and λt = 0
+    row_norm UNIT_ROWS leaves out eq. (11)'s division by the row norm (an ablation, Table 4), and λt = 0
     gives every point unit time weight (with it, the conventional DLT over the points).
     """
     P = np.ascontiguousarray(P, dtype=np.float64)
@@ -257,13 +285,13 @@ def triangulate_observations_robust(
     compensated = np.empty((num_groups, 3))
     _triangulate_groups(P, starts, np.asarray(cam, dtype=np.int64)[order], points, dts, V, use_velocity,
                         int(min_views), float(lambda_t_per_s), float(reject_factor), float(reject_floor_px),
-                        bool(normalize_rows), plain, compensated)
+                        int(row_norm), plain, compensated)
     return plain, compensated if use_velocity else None
 
 
 @jit
 def _triangulate_groups(P, starts, cam, points_px, dts, V, use_velocity, min_views, lambda_t_per_s, reject_factor,
-                        reject_floor_px, normalize_rows, plain, compensated):
+                        reject_floor_px, row_norm, plain, compensated):
     """`triangulate_point` for each group of observations cam/points_px/dts[starts[n]:starts[n + 1]]."""
     work = np.empty((3, 4, 4))
     size = 4
@@ -281,14 +309,14 @@ def _triangulate_groups(P, starts, cam, points_px, dts, V, use_velocity, min_vie
             decays_n[i] = np.exp(-2.0 * lambda_t_per_s * dts[a + i])
         V_n[0], V_n[1], V_n[2] = V[n, 0], V[n, 1], V[n, 2]
         triangulate_point(P, cam_n, points_n, dts_n, decays_n, num, V_n, use_velocity, min_views, reject_factor,
-                          reject_floor_px, normalize_rows, plain_n, compensated_n, work, scratch)
+                          reject_floor_px, row_norm, plain_n, compensated_n, work, scratch)
         for k in range(3):
             plain[n, k], compensated[n, k] = plain_n[k], compensated_n[k]
 
 
 @jit
 def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, reject_factor, reject_floor_px,
-                      normalize_rows, plain, compensated, work, scratch):
+                      row_norm, plain, compensated, work, scratch):
     """Eq. (6)-(11) for one point from its `num` observations, with the robust second pass (compiled kernel).
 
     Args:
@@ -297,11 +325,11 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
         decays: (≥num,) e^(-2 λt (t - t_i)), the squared time factors of the eq. (11) weights.
         V: (3,) the point's velocity, m/s (read only when use_velocity).
         use_velocity: also compute the velocity-compensated estimate.
-        min_views, reject_factor, reject_floor_px, normalize_rows: as `triangulate_observations_robust`.
+        min_views, reject_factor, reject_floor_px, row_norm: as `triangulate_observations_robust`.
         plain, compensated: (3,) outputs, NaN when not determined (compensated untouched without velocity).
         work: (3, 4, 4) and scratch: (4, 8) work space.
     """
-    _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, normalize_rows, plain,
+    _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, row_norm, plain,
                         compensated, work, scratch)
     if reject_factor <= 0.0 or num == 0:
         return
@@ -338,7 +366,7 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
         decays2[i] = decays[keep[i]]
     plain2 = np.empty(3)
     compensated2 = np.empty(3)
-    _solve_observations(P, cam2, points2, dts2, decays2, kept, V, use_velocity, min_views, normalize_rows, plain2,
+    _solve_observations(P, cam2, points2, dts2, decays2, kept, V, use_velocity, min_views, row_norm, plain2,
                         compensated2, work, scratch)
     if np.isfinite(plain2[0]):
         plain[:] = plain2
@@ -347,10 +375,10 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
 
 
 @jit
-def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, normalize_rows, plain,
+def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, row_norm, plain,
                         compensated, work, scratch):
     """The normal matrices of eq. (8), (10) with the weights of eq. (11) (without its row norms unless
-    `normalize_rows`), and their smallest eigenvectors."""
+    `row_norm`), and their smallest eigenvectors."""
     plain[0] = plain[1] = plain[2] = np.nan
     if use_velocity:
         compensated[0] = compensated[1] = compensated[2] = np.nan
@@ -366,12 +394,15 @@ def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, mi
                           x0 * P[k, 2, 3] - P[k, 0, 3])
         b0, b1, b2, b3 = (x1 * P[k, 2, 0] - P[k, 1, 0], x1 * P[k, 2, 1] - P[k, 1, 1], x1 * P[k, 2, 2] - P[k, 1, 2],
                           x1 * P[k, 2, 3] - P[k, 1, 3])
-        # Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||² (the ablations: without the norm).
+        # Eq. (11): squared row weight e^(-2 λt (t - t_i)) / ||r||² (the ablations: without the norm; PLANE_ROW:
+        # the norm of the row's first three entries).
         decay = decays[i]
         w0, w1 = decay, decay
-        if normalize_rows:
-            w0 = decay / (a0 * a0 + a1 * a1 + a2 * a2 + a3 * a3)
-            w1 = decay / (b0 * b0 + b1 * b1 + b2 * b2 + b3 * b3)
+        if row_norm != UNIT_ROWS:
+            norm_a, norm_b = a0 * a0 + a1 * a1 + a2 * a2, b0 * b0 + b1 * b1 + b2 * b2
+            if row_norm == WHOLE_ROW:
+                norm_a, norm_b = norm_a + a3 * a3, norm_b + b3 * b3
+            w0, w1 = decay / norm_a, decay / norm_b
         # Eq. (8), (10): Σ w² r rᵀ, and with velocities its moments Σ dt_i (.) and Σ dt_i² (.).
         e = (w0 * a0 * a0 + w1 * b0 * b0, w0 * a0 * a1 + w1 * b0 * b1, w0 * a0 * a2 + w1 * b0 * b2,
              w0 * a0 * a3 + w1 * b0 * b3, w0 * a1 * a1 + w1 * b1 * b1, w0 * a1 * a2 + w1 * b1 * b2,

@@ -4,7 +4,8 @@ import dataclasses
 
 import pytest
 
-from tracker.config import PRESETS, TABLE_S2, TrackerConfig, Triangulation
+from tracker.config import PRESETS, TABLE_S2, RowNorm, TrackerConfig, Triangulation
+from tracker.triangulation import PLANE_ROW, UNIT_ROWS, WHOLE_ROW
 
 
 def test_presets_keep_table_s2_and_the_paper_variants_are_verbatim():
@@ -13,6 +14,7 @@ def test_presets_keep_table_s2_and_the_paper_variants_are_verbatim():
         for key, value in row.items():
             assert getattr(paper, key) == value
         assert paper.triangulation is Triangulation.PAPER and paper.alpha_2d_floor_px == 0.0
+        assert paper.row_norm is RowNorm.ROW and TrackerConfig.preset(name).row_norm is RowNorm.PLANE
         assert paper.reid_max_m == 0.0
         tuned = TrackerConfig.preset(name)
         assert (tuned.alpha_3d_m, tuned.lambda_a_per_s, tuned.lambda_t_per_s) == (
@@ -27,8 +29,9 @@ def test_unknown_preset_lists_the_valid_ones():
 
 @pytest.mark.parametrize("field, value", [
     ("alpha_3d_m", 0.0), ("score_threshold", 1.5), ("min_views", 1), ("velocity_history", 1.5),
-    ("lambda_t_per_s", -1.0), ("triangulation", "sideways"), ("w_2d", float("nan")), ("reject_factor", -1.0),
-    ("reject_floor_px", 0.0), ("ghost_cell_m", 0.1), ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0),
+    ("lambda_t_per_s", -1.0), ("triangulation", "sideways"), ("row_norm", "diagonal"), ("row_norm", 1),
+    ("w_2d", float("nan")), ("reject_factor", -1.0), ("reject_floor_px", 0.0), ("ghost_cell_m", 0.1),
+    ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0),
 ])
 def test_out_of_range_values_name_the_field(field, value):
     with pytest.raises(ValueError, match=field):
@@ -37,9 +40,10 @@ def test_out_of_range_values_name_the_field(field, value):
 
 def test_toml_overrides_a_preset(tmp_path):
     path = tmp_path / "t.toml"
-    path.write_text('alpha_3d_m = 0.3\ntriangulation = "paper"\n')
+    path.write_text('alpha_3d_m = 0.3\ntriangulation = "paper"\nrow_norm = "row"\n')
     config = TrackerConfig.from_toml(path, base="store")
     assert config.alpha_3d_m == 0.3 and config.triangulation is Triangulation.PAPER
+    assert config.row_norm is RowNorm.ROW
     assert config.lambda_t_per_s == PRESETS["store"]["lambda_t_per_s"]
 
 
@@ -70,13 +74,14 @@ def test_every_field_is_documented():
     assert not missing
 
 
-@pytest.mark.parametrize("mode, lambda_t, velocity, normalize", [
-    ("paper", 5.0, False, True), ("velocity", 5.0, True, True), ("unnormalized", 5.0, False, False),
-    ("conventional", 0.0, False, False)])
-def test_each_triangulation_reaches_the_update_kernel_as_its_weights(mode, lambda_t, velocity, normalize):
+@pytest.mark.parametrize("preset, mode, lambda_t, velocity, row_norm", [
+    ("store", "paper", 5.0, False, PLANE_ROW), ("store", "velocity", 5.0, True, PLANE_ROW),
+    ("store", "unnormalized", 5.0, False, UNIT_ROWS), ("store", "conventional", 0.0, False, UNIT_ROWS),
+    ("store-paper", "paper", 5.0, False, WHOLE_ROW), ("store-paper", "velocity", 5.0, True, WHOLE_ROW)])
+def test_each_triangulation_reaches_the_update_kernel_as_its_weights(preset, mode, lambda_t, velocity, row_norm):
     from tests.tracker.synthetic import ceiling_rig
     from tracker.tracker import Tracker
 
-    config = TrackerConfig.preset("store").replace(triangulation=mode)
+    config = TrackerConfig.preset(preset).replace(triangulation=mode)
     params = Tracker(ceiling_rig(4, 5.0, 4.0), config)._update_params
-    assert params[1:4] == (lambda_t, velocity, normalize)
+    assert params[1:4] == (lambda_t, velocity, row_norm)

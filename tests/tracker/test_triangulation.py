@@ -8,6 +8,9 @@ from tests.reference.plain import plain_python
 from tests.tracker.synthetic import ceiling_rig
 from tracker.geometry import project
 from tracker.triangulation import (
+    PLANE_ROW,
+    UNIT_ROWS,
+    WHOLE_ROW,
     _inverse_iteration_gauss_jordan,
     _triangulate_groups,
     dlt_rows,
@@ -28,7 +31,7 @@ def rig():
 
 def _reference_dlt(P, x, weights=None, normalize=True):
     """Independent per-point DLT: stack the two rows of eq. (9) per view (each divided by its norm unless
-    `normalize` is False), SVD, dehomogenise."""
+    `normalize` is False; by the norm of its first three entries when it is "plane"), SVD, dehomogenise."""
     rows = []
     for c in range(len(P)):
         if np.isnan(x[c]).any():
@@ -37,6 +40,8 @@ def _reference_dlt(P, x, weights=None, normalize=True):
         r2 = x[c, 1] * P[c, 2] - P[c, 1]
         w = 1.0 if weights is None else weights[c]
         n1, n2 = (np.linalg.norm(r1), np.linalg.norm(r2)) if normalize else (1.0, 1.0)
+        if normalize == "plane":
+            n1, n2 = np.linalg.norm(r1[:3]), np.linalg.norm(r2[:3])
         rows += [w * r1 / n1, w * r2 / n2]
     _, _, vt = np.linalg.svd(np.array(rows))
     return vt[-1, :3] / vt[-1, 3]
@@ -46,7 +51,8 @@ def test_triangulate_inverts_projection(rig):
     X = np.random.default_rng(1).uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (20, 3))
     x = np.moveaxis(project(rig, X), 0, 1)  # (N, C, 2)
     np.testing.assert_allclose(triangulate(rig, x), X, atol=1e-7)  # m
-    np.testing.assert_allclose(triangulate(rig, x, normalize_rows=False), X, atol=1e-7)  # m
+    np.testing.assert_allclose(triangulate(rig, x, row_norm=UNIT_ROWS), X, atol=1e-7)  # m
+    np.testing.assert_allclose(triangulate(rig, x, row_norm=PLANE_ROW), X, atol=1e-7)  # m
 
 
 def test_triangulate_matches_an_independent_svd_with_noise_and_missing_views(rig):
@@ -89,20 +95,43 @@ def test_incremental_weights_match_an_independent_weighted_svd(rig):
     np.testing.assert_allclose(got, _reference_dlt(rig, x, np.exp(-10.0 * (1.0 - stamps))), atol=1e-8)
 
 
-@pytest.mark.parametrize("lambda_t, normalize", [(10.0, False), (0.0, False), (0.0, True)])
+_CODE = {False: UNIT_ROWS, True: WHOLE_ROW, "plane": PLANE_ROW}
+
+
+@pytest.mark.parametrize("lambda_t, normalize", [(10.0, False), (0.0, False), (0.0, True), (10.0, "plane"),
+                                                 (0.0, "plane")])
 def test_the_ablations_weights_match_an_independent_svd(rig, lambda_t, normalize):
-    # Table 4's "w/o norm" (λt, no row norms) and the conventional DLT (unit weights, λt = 0), point by point.
+    # Table 4's "w/o norm" (λt, no row norms), the conventional DLT (unit weights, λt = 0) and the plane norm,
+    # point by point.
     rng = np.random.default_rng(9)
     X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (5, 3))
     x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0.0, 2.0, (5, len(rig), 2))
     stamps = 1.0 - rng.uniform(0.0, 0.3, (5, len(rig)))
     got, _ = triangulate_observations_robust(rig, *_flat(x, stamps), 5, 1.0, lambda_t, None, 2, 0.0, 10.0,
-                                             normalize_rows=normalize)
+                                             row_norm=_CODE[normalize])
     for n in range(5):
         expected = _reference_dlt(rig, x[n], np.exp(-lambda_t * (1.0 - stamps[n])), normalize=normalize)
         np.testing.assert_allclose(got[n], expected, atol=1e-7)  # m
-    if not normalize and lambda_t == 0.0:
-        np.testing.assert_allclose(got, triangulate(rig, x, normalize_rows=False), atol=1e-7)  # m
+    if lambda_t == 0.0:
+        np.testing.assert_allclose(got, triangulate(rig, x, row_norm=_CODE[normalize]), atol=1e-7)  # m
+
+
+def test_the_plane_norm_does_not_depend_on_where_the_world_origin_is(rig):
+    # The same rig and noisy points with the world origin moved 40 m away (a corner of a large store): with
+    # the plane norm the estimates move with the origin (within a millimetre: the solve's unit-norm constraint
+    # on X̃ is not quite free of the origin); with eq. (11)'s whole-row norm they move 5 cm more, because the
+    # rows' constant terms, and so their weights, change with the cameras' distance from the origin.
+    rng = np.random.default_rng(11)
+    X = rng.uniform([0.5, 0.5, 0.1], [4.5, 3.5, 1.9], (20, 3))
+    x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0.0, 3.0, (20, len(rig), 2))
+    shift = np.array([-40.0, 25.0, 0.0])  # world' = world + shift
+    moved = rig.copy()
+    moved[:, :, 3] -= rig[:, :, :3] @ shift  # P' [X + shift; 1] = P [X; 1]
+    moved_by = {}
+    for code in (PLANE_ROW, WHOLE_ROW):
+        here, there = triangulate(rig, x, row_norm=code), triangulate(moved, x, row_norm=code)
+        moved_by[code] = np.abs(there - shift - here).max()
+    assert moved_by[PLANE_ROW] < 0.001 and moved_by[WHOLE_ROW] > 0.02, moved_by  # m
 
 
 def test_stale_views_pull_the_paper_estimate_back_and_velocity_compensation_removes_it(rig):
@@ -197,7 +226,7 @@ def test_compiled_triangulation_runs_the_same_as_plain_python(rig, velocity):
     for kernel in (_triangulate_groups, plain_python(_triangulate_groups)):
         plain, compensated = np.empty((6, 3)), np.empty((6, 3))
         kernel(rig, starts, cam[order], px[order], np.maximum(1.0 - stamps[order], 0.0), V, velocity, 2, 5.0, 3.0,
-               10.0, True, plain, compensated)
+               10.0, PLANE_ROW if velocity else WHOLE_ROW, plain, compensated)
         outputs.append(plain if not velocity else compensated)
     np.testing.assert_allclose(outputs[0], outputs[1], atol=1e-12)  # m
     assert np.isfinite(outputs[0]).all()
