@@ -40,6 +40,7 @@ def main(argv: list[str] | None = None) -> None:
         for t in targets:
             joints = [None if np.isnan(joint).any() else joint.tolist() for joint in t.pose]
             lines.append({"stamp_s": frame.stamp_s, "id": t.id, "joints": joints})
+    args.output.parent.mkdir(parents=True, exist_ok=True)
     args.output.write_text("".join(json.dumps(line) + "\n" for line in lines))
     print(f"{args.output}: {len(lines)} lines")
 
