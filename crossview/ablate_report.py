@@ -164,7 +164,9 @@ def _affinity_section(result: dict) -> list[str]:
 
 def _reconstruction_section(result: dict) -> list[str]:
     lines = [f"Ours: seeds {', '.join(map(str, result['seeds']))}, {result['duration_s']:g} s each, the `store` "
-             "preset with `tracker.triangulation` set; means over seeds. The paper keeps its association fixed "
+             "preset with `tracker.triangulation` set (its eq. (11) divides a row by the norm of its first three "
+             "entries, `row_norm = \"plane\"`, where the paper divides by the whole row's: docs/tracker.md); means "
+             "over seeds. The paper keeps its association fixed "
              "and swaps only the reconstruction; here the reconstruction also feeds the next frames' 3D "
              "affinity, so a worse one can also cost association. 3DPS is not implemented.", "",
              "| data | method | torso | upper arms | lower arms | whole | MPJPE (mm) |",
