@@ -38,8 +38,9 @@ def test_every_experiment_writes_its_numbers_verdict_and_plots(tiny):
     assert set(results) == set(ablate.EXPERIMENTS)
     assert [r["w_2d"] for r in results["affinity"]["rows"]] == [1.0, 0.4]
     assert all(0.0 <= r["association_accuracy"] <= 1.0 for r in results["affinity"]["rows"])
-    methods = [r["triangulation"] for r in results["reconstruction"]["stores"][0]["rows"]]
-    assert methods == list(ablate.RECONSTRUCTION_METHODS)
+    methods = [(r["triangulation"], r["row_norm"]) for r in results["reconstruction"]["stores"][0]["rows"]]
+    assert methods == [("conventional", "plane"), ("unnormalized", "plane"), ("paper", "row"), ("paper", "plane"),
+                       ("velocity", "plane")]
     spreads = [r["spread_s"] for r in results["frame-rate"]["rows"]]
     assert spreads[1] > spreads[0] > 0.0  # fewer frames a second: older points in the sets
     assert results["speed"]["camera_counts"] == [4, 8]
@@ -106,6 +107,14 @@ def test_verdicts_follow_the_numbers():
     assert ablate_report.frame_rate_verdict(rate)[0] == holds
     rate["rows"][1]["pcp"]["paper"] = 0.93
     assert ablate_report.frame_rate_verdict(rate)[0] == partly
+    # Table 4: eq. (11) as printed (the whole row's norm) against the conventional DLT decides, not the plane norm.
+    store = {"scenario": "s", "rows": [
+        {"triangulation": "conventional", "row_norm": "plane", "lower_arms": 0.80, "pcp": 0.90},
+        {"triangulation": "paper", "row_norm": "row", "lower_arms": 0.79, "pcp": 0.91},
+        {"triangulation": "paper", "row_norm": "plane", "lower_arms": 0.95, "pcp": 0.97}]}
+    assert ablate_report.reconstruction_verdict({"stores": [store]})[0] == fails
+    store["rows"][1]["lower_arms"] = 0.85
+    assert ablate_report.reconstruction_verdict({"stores": [store]})[0] == holds
     timings = {"speed": {"exponent": {"crossview": 1.05, "baseline": 2.1}}}
     assert ablate_report.speed_verdict({}, timings)[0] == holds
     timings["speed"]["exponent"]["crossview"] = 1.8
