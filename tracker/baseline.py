@@ -49,6 +49,7 @@ class BaselineTracker:
         self.skeleton = skeleton
         C, J = len(cameras), skeleton.num_joints
         self._P = np.stack([c.P for c in cameras]) if C else np.zeros((0, 3, 4))
+        self._reconstruction_row_norm = row_norm_code(config, reconstruction=True)
         self._F = {(a, b): fundamental_matrix(cameras[a], cameras[b]) for a in range(C) for b in range(C) if a != b}
         self._latest_px: list[np.ndarray] = [np.zeros((0, J, 2)) for _ in range(C)]
         self._latest_s = np.full(C, -np.inf)
@@ -105,7 +106,7 @@ class BaselineTracker:
             ks, ds = node_cam[cluster], node_pos[cluster]
             pts = np.stack([self._latest_px[k][d] for k, d in zip(ks, ds)])
             pose = reconstruct(self._P[ks], pts, self._latest_s[ks], t, self.config.lambda_t_per_s,
-                               self.config.min_views, row_norm_code(self.config, reconstruction=True))
+                               self.config.min_views, self._reconstruction_row_norm)
             if check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits) is None:
                 poses.append(pose)
                 members.append(ds[ks == c])

@@ -112,6 +112,7 @@ class Tracker:
                                  float(cfg.w_3d), float(cfg.alpha_3d_m), float(cfg.lambda_a_per_s),
                                  float(cfg.max_predict_s), bool(cfg.normalize_affinity))
         mode = cfg.triangulation
+        self._reconstruction_row_norm = row_norm_code(cfg, reconstruction=True)
         self._update_params = (float(cfg.max_observation_age_s),
                                float(cfg.lambda_t_per_s) if mode.weighs_time else 0.0,
                                mode is Triangulation.VELOCITY, row_norm_code(cfg), int(cfg.min_views),
@@ -388,7 +389,7 @@ class Tracker:
             ks, pts = ks[cluster], pts[cluster]
             stamps = self._pool_s[ks]
             pose = reconstruct(self._P[ks], pts, stamps, t, cfg.lambda_t_per_s, cfg.min_views,
-                               row_norm_code(cfg, reconstruction=True))
+                               self._reconstruction_row_norm)
             why = check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits)
             if why is None and self._duplicates_existing(pose, t):
                 why = "duplicate of an existing target"

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from core.jit import jit, sort_prefix
+from tracker.config import RowNorm, TrackerConfig
 
 # How eq. (11) divides a row c of C (eq. 9), the `row_norm` code of the functions below.
 UNIT_ROWS = 0
@@ -21,14 +22,14 @@ pixels proportional to the person's size in the image (the simulated detector's,
 distance has about the same spread in every view, so equal weights are what least squares wants."""
 
 
-def row_norm_code(config, reconstruction: bool = False) -> int:
-    """The `row_norm` code of a `tracker.config.TrackerConfig`: its triangulation mode and row norm.
+def row_norm_code(config: TrackerConfig, reconstruction: bool = False) -> int:
+    """The `row_norm` code of a configuration: its triangulation mode and row norm.
 
     reconstruction: the code for a new target's reconstruction, whose rows are divided in every mode (the
     ablations of Table 4 leave the norm out of the update of eq. 6-11 only)."""
     if not (reconstruction or config.triangulation.normalizes_rows):
         return UNIT_ROWS
-    return PLANE_ROW if config.row_norm.value == "plane" else WHOLE_ROW
+    return PLANE_ROW if config.row_norm is RowNorm.PLANE else WHOLE_ROW
 
 
 def dlt_rows(P: np.ndarray, points_px: np.ndarray) -> np.ndarray:
