@@ -54,6 +54,8 @@ class DetectorParams(NamedTuple):
         miss_prob: probability of missing a fully visible person.
         miss_occlusion_gain: extra miss probability per unit occluded share of the person's joints.
         min_visible_joints: people with fewer visible (unoccluded, in-image) joints are never detected.
+        min_person_frac: people smaller in the image than this fraction of its height (the larger side of
+            their joints' box) are never detected.
         occluded_drop_prob: probability that an occluded joint is not reported.
         self_occluded_drop_prob: probability that a self-occluded joint is not reported.
         joint_drop_prob: probability that a visible joint is not reported.
@@ -74,6 +76,7 @@ class DetectorParams(NamedTuple):
     miss_prob: float
     miss_occlusion_gain: float
     min_visible_joints: int
+    min_person_frac: float
     occluded_drop_prob: float
     self_occluded_drop_prob: float
     joint_drop_prob: float
@@ -89,21 +92,23 @@ class DetectorParams(NamedTuple):
 PROFILES: dict[DetectorProfile, DetectorParams] = {
     DetectorProfile.IDEAL: DetectorParams(
         noise_frac=0.0, noise_tail_dof=math.inf, occluded_noise_scale=1.0, self_occluded_noise_scale=1.0,
-        gross_error_prob=0.0, miss_prob=0.0, miss_occlusion_gain=0.0, min_visible_joints=1,
+        gross_error_prob=0.0, miss_prob=0.0, miss_occlusion_gain=0.0, min_visible_joints=1, min_person_frac=0.0,
         occluded_drop_prob=0.0, self_occluded_drop_prob=0.0, joint_drop_prob=0.0, fragment_prob=0.0,
         swap_prob=0.0, duplicate_prob=0.0, phantom_rate=0.0, score_visible=1.0, score_occluded=1.0, score_std=0.0,
     ),
-    # Calibrated against OpenPose (BODY25) detections on the Shelf dataset; see docs/sensor-model.md.
+    # Calibrated against OpenPose (BODY25) detections on the Shelf dataset; see docs/sensor-model.md. Shelf's
+    # people are all large: min_person_frac follows COCO instead (docs/sensor-model.md, "People too small to
+    # detect").
     DetectorProfile.TYPICAL: DetectorParams(
         noise_frac=0.013, noise_tail_dof=5.0, occluded_noise_scale=1.6, self_occluded_noise_scale=1.3,
-        gross_error_prob=0.001, miss_prob=0.03, miss_occlusion_gain=0.15, min_visible_joints=2,
+        gross_error_prob=0.001, miss_prob=0.03, miss_occlusion_gain=0.15, min_visible_joints=2, min_person_frac=0.1,
         occluded_drop_prob=0.4, self_occluded_drop_prob=0.1, joint_drop_prob=0.02, fragment_prob=0.07,
         swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.02, score_visible=0.8, score_occluded=0.45,
         score_std=0.12,
     ),
     DetectorProfile.HARSH: DetectorParams(
         noise_frac=0.022, noise_tail_dof=3.0, occluded_noise_scale=2.5, self_occluded_noise_scale=1.5,
-        gross_error_prob=0.01, miss_prob=0.10, miss_occlusion_gain=0.4, min_visible_joints=4,
+        gross_error_prob=0.01, miss_prob=0.10, miss_occlusion_gain=0.4, min_visible_joints=4, min_person_frac=0.13,
         occluded_drop_prob=0.6, self_occluded_drop_prob=0.2, joint_drop_prob=0.05, fragment_prob=0.15,
         swap_prob=0.02, duplicate_prob=0.05, phantom_rate=0.2, score_visible=0.7, score_occluded=0.35,
         score_std=0.15,
@@ -136,6 +141,7 @@ class DetectorConfig:
     miss_prob: float | None = bounded(None, 0.0, 1.0)
     miss_occlusion_gain: float | None = bounded(None, 0.0, 10.0, unit="probability per occluded share")
     min_visible_joints: int | None = bounded(None, 1, 1000, unit="joints")
+    min_person_frac: float | None = bounded(None, 0.0, 1.0, unit="fraction of the image height")
     occluded_drop_prob: float | None = bounded(None, 0.0, 1.0)
     self_occluded_drop_prob: float | None = bounded(None, 0.0, 1.0)
     joint_drop_prob: float | None = bounded(None, 0.0, 1.0)
@@ -312,7 +318,10 @@ class Detector:
         # only when some camera of it has them).
         self._tangential = [bool(np.any(d[2:4])) for d in self._dist]
         self._skew = [bool(k[0, 1]) for k in self._K]
-        # Per camera: joints in the image, occluded, self-occluded (all person views, detected or not).
+        # Per camera: the size in pixels below which nobody is detected (min_person_frac of the image height).
+        self.min_size_px = self.params.min_person_frac * self._size[:, 1]
+        # Per camera: joints in the image, occluded, self-occluded (all person views no smaller than
+        # min_size_px, detected or not).
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
 
     def visibility(self, camera_index: int, world, poses: PoseTruth):
@@ -441,7 +450,9 @@ class Detector:
                 (the tangential and skew terms of the lens are added for a batch when a camera of it has them).
 
         Returns:
-            Every request's people in turn: px (sum P, J, 2), in_img, occluded, self_occluded (sum P, J).
+            Every request's people in turn: px (sum P, J, 2), in_img, occluded, self_occluded (sum P, J); the
+            occlusion flags of people smaller than the camera's `min_size_px` are False (no rays: they make no
+            detection).
         """
         J = self.skeleton.num_joints
         n_req = len(requests)
@@ -476,16 +487,22 @@ class Detector:
                              np.array([batch_skew[k] for k in scene_of]), px, in_img)
         occluded = np.zeros((n_req, N), dtype=bool)
         self_occluded = np.zeros((n_req, N), dtype=bool)
-        if scenes is not None and in_img.any():
+        cast = in_img
+        if self.params.min_person_frac > 0:
+            # No rays for the people too small to detect (`_draw_detections` drops them): far across a large
+            # store they are most of the views.
+            large = large_enough(px.reshape(n_req * most, J, 2), np.repeat(self.min_size_px[cams], most))
+            cast = in_img & np.repeat(large.reshape(n_req, most), J, axis=1)
+        if scenes is not None and cast.any():
             kp_bodies, geom_body, geom_type, groups = self._scene_cache
             xpos, xmat, size, rbound, owner, const_of = self._scene_arrays(scenes)
             geomid, dist, bounds = self._ray_scratch(n_req, N, len(scenes), len(groups) - 1)
-            _cast_keypoint_rays(self._centre_array[cams], points, in_img, ids, J, kp_bodies, geom_type, geom_body,
+            _cast_keypoint_rays(self._centre_array[cams], points, cast, ids, J, kp_bodies, geom_type, geom_body,
                                 groups, xpos, xmat, size, rbound, owner, const_of,
                                 np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
                                 self_occluded, geomid, dist, cams, self.visibility_counts, bounds)
         else:
-            _count_views(cams, in_img, occluded, self_occluded, self.visibility_counts)
+            _count_views(cams, cast, occluded, self_occluded, self.visibility_counts)
         px = px.reshape(n_req, most, J, 2)
         in_img, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_img, occluded, self_occluded))
         if min(counts) == most:
@@ -563,7 +580,8 @@ class Detector:
             person_ids = [r.poses.person_ids for r in requests]
         ids = np.concatenate(person_ids).astype(np.int64, copy=False)
         group = np.repeat(np.arange(len(requests)), [len(p) for p in person_ids])
-        rows = self._detections(ids, px, in_img, occluded, self_occluded, group)
+        cams = np.array([r.camera for r in requests], dtype=np.int64)
+        rows = self._detections(ids, px, in_img, occluded, self_occluded, group, self.min_size_px[cams][group])
         # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
         n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
         phantoms = [(i, ph) for i in np.repeat(np.arange(len(requests)), n_phantoms)
@@ -589,13 +607,13 @@ class Detector:
                                                 rows, bounds[i], bounds[i + 1], r.poses))
         return frames
 
-    def _detections(self, person_ids, px, in_img, occluded, self_occluded, group):
+    def _detections(self, person_ids, px, in_img, occluded, self_occluded, group, min_px):
         """The detections of real people, drawn by one compiled loop (`_draw_detections`; rows: people
         detected, then duplicates).
 
         Args:
             person_ids: (P,) ids; px (P, J, 2); in_img, occluded, self_occluded (P, J); group (P,) the
-                request each row belongs to.
+                request each row belongs to; min_px (P,) the size below which it is not detected.
 
         Returns:
             ids (D,), keypoints (D, J, 2), scores (D, J), true px (D, J, 2), in_image, occluded,
@@ -606,7 +624,8 @@ class Detector:
                          np.empty((2 * P, J, 2)), *(np.empty((2 * P, J), dtype=bool) for _ in range(3)),
                          np.empty(2 * P, dtype=np.int64), np.empty(2 * P, dtype=np.int64))
         n = _draw_detections(self._rng, np.ascontiguousarray(person_ids, dtype=np.int64), px, in_img, occluded,
-                             self_occluded, np.ascontiguousarray(group, dtype=np.int64), self._fragment_masks,
+                             self_occluded, np.ascontiguousarray(group, dtype=np.int64),
+                             np.ascontiguousarray(min_px, dtype=np.float64), self._fragment_masks,
                              self._joint_noise, self._swap, self.params, out)
         return [r[:n] for r in out]
 
@@ -1060,14 +1079,39 @@ _FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP, _DUPLICATE = (int(e) for e in (
 
 
 @jit
-def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group, fragment_masks, joint_noise,
-                     swap_order, model, out):
+def _person_size(px, p):
+    """`person_size_px` of px[p] (J, 2), compiled."""
+    high0 = high1 = -np.inf
+    low0 = low1 = np.inf
+    for j in range(px.shape[1]):
+        x, y = px[p, j, 0], px[p, j, 1]
+        if not np.isnan(x):
+            high0, low0 = max(high0, x), min(low0, x)
+        if not np.isnan(y):
+            high1, low1 = max(high1, y), min(low1, y)
+    extent = max(-np.inf, high0 - low0, high1 - low1)
+    return extent if np.isfinite(extent) else np.nan
+
+
+@jit
+def large_enough(px, min_px):
+    """(P,) whether each person-view of px (P, J, 2) is at least min_px[p] in the image (`person_size_px`)."""
+    out = np.empty(px.shape[0], dtype=np.bool_)
+    for p in range(px.shape[0]):
+        out[p] = _person_size(px, p) >= min_px[p]
+    return out
+
+
+@jit
+def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group, min_px, fragment_masks,
+                     joint_noise, swap_order, model, out):
     """The detections of real people (`Detector._detections`): every draw from `rng` (a numpy Generator,
     whose stream numba reads and advances as numpy would) and what it does, person-view by person-view,
     each value drawn only where it is used.
 
     Per person-view (rows of px (P, J, 2), in_img, occluded, self_occluded (P, J), person_ids and group
-    (P,)): never detected with fewer than `min_visible` visible joints in the image, else missed with
+    (P,)): never detected with fewer than `min_visible` visible joints in the image or smaller than
+    min_px (P,) in it (`person_size_px`), else missed with
     probability miss + gain x its occluded share; a detection reports each joint in the image unless
     dropped (by the joint's occlusion), may keep only one body part (fragment), has Student-t noise
     scaled by the person's size in the image (`person_size_px`), the joint's noise factor and its
@@ -1099,18 +1143,11 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
             n_occluded += occluded[p, j]
         if n_in == 0 or n_visible < model.min_visible_joints:
             continue
+        size = _person_size(px, p)
+        if not size >= min_px[p]:  # too small to detect (NaN: no joint known)
+            continue
         if rng.random() < model.miss_prob + model.miss_occlusion_gain * n_occluded / n_in:
             continue
-        high0 = high1 = -np.inf
-        low0 = low1 = np.inf
-        for j in range(J):
-            x, y = px[p, j, 0], px[p, j, 1]
-            if not np.isnan(x):
-                high0, low0 = max(high0, x), min(low0, x)
-            if not np.isnan(y):
-                high1, low1 = max(high1, y), min(low1, y)
-        extent = max(-np.inf, high0 - low0, high1 - low1)
-        size = extent if np.isfinite(extent) else np.nan
         effect = 0
         for j in range(J):
             drop = model.occluded_drop_prob if occluded[p, j] else (

@@ -20,7 +20,7 @@ from core import jit
 from core.types import COCO17
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
-from sim.detector import Detector
+from sim.detector import Detector, large_enough
 from sim.poses import interpolate_ticks
 from sim.rng import child_rng
 from sim.types import CameraFrame, Capture, DetectionRows, PoseTruth
@@ -255,7 +255,7 @@ class Simulation:
             signal.signal(ending, signal.SIG_DFL)
         try:
             for block in self._blocks(duration, draws=False):
-                sender.send(("block", _pack_block(block)))
+                sender.send(("block", _pack_block(block, self.detector.min_size_px)))
             sender.send(("end", self.detector.visibility_counts))
         except BrokenPipeError:  # the consumer is gone
             pass
@@ -325,18 +325,22 @@ def _usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _pack_block(block: Block) -> tuple:
+def _pack_block(block: Block, min_size_px: np.ndarray | None = None) -> tuple:
     """A block of `_blocks(draws=False)` as a few flat arrays (one pickle of a handful of arrays instead of
     dozens of small ones): the truths' poses concatenated, with their times and people counts; the
     captures' cameras, times, people and visibility (their poses are left out: `_unpack_block` derives
-    them from the truths). Of the person-views, only those with a joint in the image travel: the others make
-    no detection and take no draw (`sim.detector._draw_detections`), so the consumer draws the same rows."""
+    them from the truths). Of the person-views, only those with a joint in the image and no smaller than
+    the camera's `min_size_px` (`Detector.min_size_px`) travel: the others make no detection and take no draw
+    (`sim.detector._draw_detections`), so the consumer draws the same rows."""
     t, truths, requests, visible, _ = block
     seen = [r.poses.person_ids for r in requests]
     viewed = np.concatenate(seen).astype(np.int64, copy=False) if seen else np.zeros(0, dtype=np.int64)
     people = (viewed, np.array([len(p) for p in seen], dtype=np.int64))
     if requests:  # (else `visible` stands for no rows at all)
         keep = visible[1].any(axis=1)
+        if min_size_px is not None and min_size_px.any():
+            cams = np.array([r.camera for r in requests], dtype=np.int64)
+            keep &= large_enough(visible[0], np.repeat(min_size_px[cams], people[1]))
         people = (viewed[keep], np.bincount(np.repeat(np.arange(len(seen)), people[1])[keep], minlength=len(seen)))
         visible = tuple(np.ascontiguousarray(v[keep]) for v in visible)
     times = np.array([p.t_s for p in truths])

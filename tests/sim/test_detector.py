@@ -253,6 +253,38 @@ def test_in_image_joints_of_far_away_people_are_not_reported():
     assert not inside.any() and detect(detector, 0, None, far, 0, 0, 0).truth.person_ids.size == 0
 
 
+def test_people_smaller_than_min_person_frac_of_the_image_are_never_detected_and_cast_no_rays():
+    # One person 6 m from the camera, one 30 m away along the same line of sight (a hypermarket's far aisle),
+    # and a shelf in front of the far one's legs.
+    world = BoxWorld([(6.0, 0.0), (30.0, 0.0)], shelf=((28.0, 0.0, 0.4), (0.2, 1.0, 0.4)))
+    cams = _cameras(CameraPlacement((0.0, 0.0, 2.9), (30.0, 0.0, 0.5)))
+    truth = world.truth()
+    sizes = person_size_px(Detector(DetectorConfig(), cams, np.random.default_rng(0)).visibility(
+        0, world, truth)[0])
+    assert sizes[0] > 100 and 20 < sizes[1] < 48  # px, in 720 px high images
+
+    def seen(**knobs):
+        detector = Detector(_only(**knobs), cams, np.random.default_rng(0))
+        px, in_img, occluded, _ = detector.visibility(0, world, truth)
+        frame = detect(detector, 0, world, truth, 0.0, 0.0, 0.0)
+        return sorted(frame.truth.person_ids.tolist()), in_img, occluded, detector.visibility_counts[0]
+
+    ids, in_img, occluded, counts = seen()
+    assert ids == [0, 1] and in_img[1].all() and occluded[1].any()  # the ideal detector reports both
+    assert counts[0] == 2 * in_img.sum()  # (both calls cast every joint in the image)
+    for knobs in ({"min_person_frac": 0.1}, {"min_person_frac": (sizes[1] + 1e-6) / 720}):
+        ids, small_in_img, small_occluded, counts = seen(**knobs)
+        assert ids == [0]
+        # The far person is still in the image, but no ray is cast for it: no occlusion flag, not counted.
+        assert (small_in_img == in_img).all() and not small_occluded[1].any()
+        assert (small_occluded[0] == occluded[0]).all() and counts[0] == 2 * in_img[0].sum()
+    assert seen(min_person_frac=(sizes[1] - 1e-6) / 720)[0] == [0, 1]
+    typical = Detector(DetectorConfig(), cams, np.random.default_rng(0))
+    assert typical.min_size_px.tolist() == [72.0]  # a tenth of the image height
+    with pytest.raises(ValueError, match="min_person_frac"):
+        DetectorConfig(min_person_frac=-0.1)
+
+
 def test_profiles_order_from_ideal_to_harsh():
     def figures(profile):
         frames = _frames(DetectorConfig(profile=profile), n=150, seed=4)
