@@ -36,7 +36,7 @@ from tracker.initialization import PlausibilityLimits, check_plausible, consensu
 from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
 from tracker.rows import Rows
 from tracker.triangulation import row_norm_code
-from tracker.types import Target, TrackerOutput
+from tracker.types import TargetArrays, TrackerOutput
 from tracker.visibility import all_view_planes, count_sightings, overlapping_views, sight_map_grid, targets_in_view
 
 logger = logging.getLogger(__name__)
@@ -156,15 +156,15 @@ class Tracker:
 
     # ------------------------------------------------------------------ public API
 
-    def update(self, frame: Frame) -> list[Target]:
+    def update(self, frame: Frame) -> TargetArrays:
         """Processes one camera frame (Algorithm 1) and returns the confirmed targets at `frame.stamp_s`.
 
         Args:
             frame: detections of one camera, distorted pixels (D, J, 2), scores (D, J).
 
         Returns:
-            Confirmed targets with poses (J, 3) predicted to the frame's stamp; a joint is NaN only if it
-            was never triangulated.
+            Confirmed targets (a sequence of `Target`) with poses (J, 3) predicted to the frame's stamp;
+            joints never triangulated are inferred from the target's body (`joint_state`).
         """
         D = frame.keypoints_px.shape[0]
         J = self.skeleton.num_joints
@@ -479,7 +479,7 @@ class Tracker:
         best = int(np.argmin(dist))
         return int(lost[best]) if np.isfinite(dist[best]) else None
 
-    def _emit(self, t: float, camera: str, assigned: np.ndarray) -> list[Target]:
+    def _emit(self, t: float, camera: str, assigned: np.ndarray) -> TargetArrays:
         tg = self._targets
         ids, poses = poses_in_state(tg.state, lifecycle.CONFIRMED, tg.ids, tg.pos, tg.vel, tg.joint_s, t,
                                     self._update_params[-1])  # eq. (5)
@@ -487,8 +487,6 @@ class Tracker:
         known = np.isfinite(poses[..., 0])
         codes = joint_states(tg.seen_s[rows], known, t, self.config.stale_after_s)
         fill_poses(poses, self._mean_body, self._bones)  # joints never triangulated: from the target's own body
-        state = lifecycle.to_state(lifecycle.CONFIRMED)
-        targets = [Target(target_id, pose, t, state, code)
-                   for target_id, pose, code in zip(ids.tolist(), poses, codes)]
+        targets = TargetArrays(ids, poses, codes, t, lifecycle.to_state(lifecycle.CONFIRMED))
         self.last_output = TrackerOutput(stamp_s=t, camera=camera, targets=targets, detection_target_ids=assigned)
         return targets

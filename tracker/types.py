@@ -7,6 +7,8 @@ float64, NaN for a missing joint. World frame: z up, metres.
 from __future__ import annotations
 
 import enum
+import operator
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -49,6 +51,47 @@ class Target:
     joint_state: np.ndarray | None = None
 
 
+class TargetArrays(Sequence):
+    """Targets of one output held as arrays, all with one stamp and state: a sequence of `Target`, each made
+    only when it is read. The built-in tracker emits these every frame; the tracks file's encoder takes the
+    arrays as they are, so no per-target object is made on that path (in the hypermarket, making 200 per
+    camera frame took longer than tracking).
+
+    Attributes:
+        ids: (T,) int64 identities.
+        poses: (T, J, 3) joint positions, metres.
+        joint_states: (T, J) uint8 `JointState` codes.
+        stamp_s: the stamp of every target.
+        state: the lifecycle state of every target.
+    """
+
+    __slots__ = ("ids", "poses", "joint_states", "stamp_s", "state")
+
+    def __init__(self, ids: np.ndarray, poses: np.ndarray, joint_states: np.ndarray, stamp_s: float,
+                 state: TargetState = TargetState.CONFIRMED):
+        self.ids, self.poses, self.joint_states = ids, poses, joint_states
+        self.stamp_s, self.state = stamp_s, state
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        i = operator.index(index)
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"target index {i} out of range for {len(self)} targets")
+        i %= len(self)
+        return Target(int(self.ids[i]), self.poses[i], self.stamp_s, self.state, self.joint_states[i])
+
+    def __iter__(self) -> Iterator[Target]:
+        for i, target_id in enumerate(self.ids.tolist()):
+            yield Target(target_id, self.poses[i], self.stamp_s, self.state, self.joint_states[i])
+
+    def __repr__(self) -> str:
+        return f"TargetArrays({len(self)} targets at {self.stamp_s} s)"
+
+
 @dataclass(frozen=True, eq=False)
 class TrackerOutput:
     """What the tracker reported after one frame: the targets and where each detection went.
@@ -56,12 +99,12 @@ class TrackerOutput:
     Attributes:
         stamp_s: stamp of the frame that was processed.
         camera: name of that frame's camera.
-        targets: confirmed targets after the update, poses at `stamp_s`.
+        targets: confirmed targets after the update, poses at `stamp_s` (a list, or `TargetArrays`).
         detection_target_ids: (D,) int64 id of the target each detection of the frame was assigned
             to (including a target it helped start), -1 for a detection left unassigned.
     """
 
     stamp_s: float
     camera: str
-    targets: list[Target]
+    targets: Sequence[Target]
     detection_target_ids: np.ndarray

@@ -14,7 +14,7 @@ from core.types import Frame, Skeleton
 from crossview import foxglove
 from crossview.recording.schemas import TrackerOutputMsg, to_ns
 from sim.types import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
-from tracker.types import JointState, Target, TargetState, TrackerOutput
+from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
 
 
 def pose_truth_bytes(truth: PoseTruth) -> bytes:
@@ -244,6 +244,42 @@ def tracker_output_bytes(output: TrackerOutput, num_joints: int) -> bytes:
     from crossview import wire  # (numba: loaded for writing only)
 
     T, J = len(output.targets), num_joints
+    arrays = _target_arrays(output.targets, J)
+    if arrays is not None:  # the built-in tracker's: no per-target object
+        ids, stamps, states, poses, codes, has_states = arrays
+    else:
+        ids, stamps, states, poses, codes, has_states = _stacked_targets(output, J)
+        if (ids < 0).any():
+            return _tracker_output_to_msg(output, num_joints).SerializeToString()
+    camera = _utf8(output.camera)
+    det_ids = np.ascontiguousarray(output.detection_target_ids, dtype=np.int64).ravel()
+    out = _scratch(wire.tracker_output_capacity(T, J, det_ids.size, camera.size, _STATE_BYTES.size))
+    size = wire.tracker_output(out, float(output.stamp_s), camera, ids, stamps, _STATE_BYTES, _STATE_ENDS, states,
+                               poses, codes, has_states, det_ids)
+    return out[:size].tobytes()
+
+
+def _target_arrays(targets, num_joints: int) -> tuple | None:
+    """The encoder's arrays straight from a `TargetArrays` whose arrays are well formed (else None: the
+    generic path checks and names what is wrong)."""
+    if not isinstance(targets, TargetArrays):
+        return None
+    T = len(targets)
+    ids = np.ascontiguousarray(targets.ids, dtype=np.int64)
+    poses = np.ascontiguousarray(targets.poses, dtype=np.float64)
+    codes = np.asarray(targets.joint_states)
+    if ids.shape != (T,) or poses.shape != (T, num_joints, 3) or codes.shape != (T, num_joints) or (
+            T and (ids.min() < 0 or codes.min() < 0 or codes.max() >= len(JointState))):
+        return None
+    codes = np.ascontiguousarray(codes, dtype=np.uint8)
+    stamps = np.full(T, float(targets.stamp_s))
+    states = np.full(T, _STATE_NAMES.index(TargetState(targets.state).value), dtype=np.int64)
+    return ids, stamps, states, poses, codes, np.ones(T, dtype=np.bool_)
+
+
+def _stacked_targets(output: TrackerOutput, num_joints: int) -> tuple:
+    """The encoder's arrays from any sequence of `Target`, each checked (a ValueError names the first bad one)."""
+    T, J = len(output.targets), num_joints
     try:  # the targets' arrays stacked at once; a wrong shape is found and named below
         poses = np.ascontiguousarray(np.stack([t.pose for t in output.targets]) if T else np.zeros((0, J, 3)),
                                      dtype=np.float64)
@@ -266,16 +302,9 @@ def tracker_output_bytes(output: TrackerOutput, num_joints: int) -> bytes:
                     _checked_joint_state(output, target, J)
         codes[has_states] = given
     ids = np.array([int(t.id) for t in output.targets], dtype=np.int64)
-    if (ids < 0).any():
-        return _tracker_output_to_msg(output, num_joints).SerializeToString()
     stamps = np.array([float(t.stamp_s) for t in output.targets], dtype=np.float64)
     states = np.array([_STATE_NAMES.index(TargetState(t.state).value) for t in output.targets], dtype=np.int64)
-    camera = _utf8(output.camera)
-    det_ids = np.ascontiguousarray(output.detection_target_ids, dtype=np.int64).ravel()
-    out = _scratch(wire.tracker_output_capacity(T, J, det_ids.size, camera.size, _STATE_BYTES.size))
-    size = wire.tracker_output(out, float(output.stamp_s), camera, ids, stamps, _STATE_BYTES, _STATE_ENDS, states,
-                               poses, codes, has_states, det_ids)
-    return out[:size].tobytes()
+    return ids, stamps, states, poses, codes, has_states
 
 
 def _checked_pose(output: TrackerOutput, target: Target, num_joints: int) -> np.ndarray:

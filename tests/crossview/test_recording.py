@@ -29,7 +29,7 @@ from crossview.recording import (
 )
 from sim.types import Box, BoxKind, CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tests.reference import recording as reference
-from tracker.types import Target, TargetState, TrackerOutput
+from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
 
 SCENARIO_TEXT = 'description = "synthetic"\n[crowd]\npeople = 3\n'
 
@@ -791,6 +791,32 @@ def test_tracker_output_bytes_are_protobufs_own():
         detection_target_ids=np.zeros(0, dtype=np.int64))
     with pytest.raises(ValueError, match="joint_state"):
         tracker_output_bytes(bad, 17)
+
+
+def test_target_arrays_encode_as_their_targets_and_read_as_a_sequence():
+    """The built-in tracker's `TargetArrays` take the encoder's array path: the same bytes as the list of the
+    same targets, which protobuf checks; malformed arrays fall back to the checked path, which names them."""
+    from crossview.recording.messages import _tracker_output_to_msg, tracker_output_bytes
+
+    rng = np.random.default_rng(5)
+    for T in (0, 1, 7):
+        arrays = TargetArrays(np.arange(T, dtype=np.int64) * 3 + 1, rng.normal(size=(T, 17, 3)),
+                              rng.integers(0, len(JointState), (T, 17)).astype(np.uint8), 2.5)
+        listed = list(arrays)
+        assert len(listed) == T and [t.id for t in listed] == arrays.ids.tolist()
+        if T:
+            assert arrays[-1].id == listed[-1].id and [t.id for t in arrays[1:3]] == [4, 7][:T - 1]
+            np.testing.assert_array_equal(arrays[0].pose, arrays.poses[0])
+            assert arrays[0].state == TargetState.CONFIRMED and arrays[0].stamp_s == 2.5
+        with pytest.raises(IndexError):
+            arrays[T]
+        as_arrays = TrackerOutput(2.5, "cam03", arrays, np.arange(T, dtype=np.int64))
+        as_list = TrackerOutput(2.5, "cam03", listed, np.arange(T, dtype=np.int64))
+        assert tracker_output_bytes(as_arrays, 17) == tracker_output_bytes(as_list, 17) == \
+            _tracker_output_to_msg(as_list, 17).SerializeToString()
+    bad = TargetArrays(np.array([1]), np.zeros((1, 17, 3)), np.full((1, 17), 7), 0.0)
+    with pytest.raises(ValueError, match="joint_state"):
+        tracker_output_bytes(TrackerOutput(0.0, "c", bad, np.zeros(0, dtype=np.int64)), 17)
 
 
 def test_tracks_of_format_2_are_read_without_joint_states(tmp_path):
