@@ -119,16 +119,16 @@ class Tracker:
                                float(cfg.reject_factor), float(cfg.reject_floor_px), float(cfg.max_bone_m),
                                float(cfg.velocity_window_s), float(cfg.max_speed_m_per_s), float(cfg.stale_after_s),
                                float(cfg.max_predict_s))
-        self._F = np.zeros((C, C, 3, 3))  # F[a, b]: x_b^T F x_a = 0 (eq. S1)
-        for a in range(C):
-            for b in range(C):
-                if a != b:
-                    self._F[a, b] = fundamental_matrix(self.cameras[a], self.cameras[b])
         # View volumes (which targets a frame is scored against) and the camera pairs whose views share part
-        # of the band of heights where joints can be (the only pairs initialisation links).
+        # of the band of heights where joints can be (the only pairs initialisation links, so the only ones
+        # whose fundamental matrix is needed).
         self._planes = all_view_planes(self.cameras)
         self._linked = overlapping_views(self.cameras, config.init_min_bottom_m, config.init_max_top_m,
                                          config.view_margin_m)
+        self._F = np.zeros((C, C, 3, 3))  # F[a, b]: x_b^T F x_a = 0 (eq. S1)
+        for a, b in zip(*np.nonzero(self._linked)):
+            if a != b:
+                self._F[a, b] = fundamental_matrix(self.cameras[a], self.cameras[b])
         # Each camera's sight map (docs/tracker.md, "No ghosts"): how often it matched confirmed targets per cell.
         self._sight_grid, nx, ny = sight_map_grid(self.cameras, config.ghost_cell_m)
         if C * nx * ny > MAX_SIGHT_MAP_CELLS:

@@ -85,17 +85,32 @@ def overlapping_views(cameras: Sequence[Camera], min_z_m: float, max_z_m: float,
     """
     C = len(cameras)
     planes = all_view_planes(cameras)
-    samples = [_band_samples(cam, min_z_m, max_z_m, grid, max_depth_m) for cam in cameras]
     overlap = np.eye(C, dtype=bool)
     for a in range(C):
-        pts = samples[a]
-        if not pts.shape[0]:
-            continue
-        # (C, 5, N) signed distances of a's samples to every camera's planes
-        dist = np.einsum("cpk,nk->cpn", planes[:, :, :3], pts) + planes[:, :, 3:4]
-        inside = np.all(dist >= -margin_m, axis=1).any(axis=1)
-        overlap[a] |= inside
+        pts = _band_samples(cameras[a], min_z_m, max_z_m, grid, max_depth_m)
+        if pts.shape[0]:
+            _samples_inside(planes, np.ascontiguousarray(pts), float(margin_m), overlap[a])
     return overlap | overlap.T
+
+
+@jit
+def _samples_inside(planes, pts, margin_m, out):
+    """out[c] |= some point of pts (N, 3) lies inside camera c's view volume (planes (C, 5, 4)) widened by
+    margin_m; each camera's search stops at its first such point (in the hypermarket most pairs share none,
+    and a point fails on its first plane or two)."""
+    for c in range(planes.shape[0]):
+        if out[c]:
+            continue
+        for n in range(pts.shape[0]):
+            inside = True
+            for p in range(planes.shape[1]):
+                if planes[c, p, 0] * pts[n, 0] + planes[c, p, 1] * pts[n, 1] + planes[c, p, 2] * pts[n, 2] + \
+                        planes[c, p, 3] < -margin_m:
+                    inside = False
+                    break
+            if inside:
+                out[c] = True
+                break
 
 
 def _band_samples(camera: Camera, min_z_m: float, max_z_m: float, grid: int, max_depth_m: float) -> np.ndarray:

@@ -48,7 +48,7 @@ from crossview.recording.schemas import (
     to_ns,
 )
 from sim.types import Box, CameraFrame, DetectionRows, PoseTruth
-from tracker.types import TrackerOutput
+from tracker.types import TargetArrays, TrackerOutput
 
 
 class _AtomicMcapWriter:
@@ -326,7 +326,9 @@ class TracksWriter(_WriterContext):
             scene = foxglove.tracker_skeletons(output, self.skeleton, t_ns)
             self._out.add(self._scene, t_ns, scene.SerializeToString())
             self._next_scene_ns = t_ns + to_ns(TRACK_SCENE_PERIOD_S)
-        self._targets.update(int(t.id) for t in output.targets)
+        targets = output.targets
+        self._targets.update(targets.ids.tolist() if isinstance(targets, TargetArrays) else
+                             (int(t.id) for t in targets))
         self._count += 1
 
     def finish(self, summary: dict) -> None:
