@@ -1111,8 +1111,8 @@ def _draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group
 
     Per person-view (rows of px (P, J, 2), in_img, occluded, self_occluded (P, J), person_ids and group
     (P,)): never detected with fewer than `min_visible` visible joints in the image or smaller than
-    min_px (P,) in it (`person_size_px`), else missed with
-    probability miss + gain x its occluded share; a detection reports each joint in the image unless
+    min_px (P,) in it (`person_size_px`), else missed with probability miss + gain x its occluded share;
+    a detection reports each joint in the image unless
     dropped (by the joint's occlusion), may keep only one body part (fragment), has Student-t noise
     scaled by the person's size in the image (`person_size_px`), the joint's noise factor and its
     occlusion, gross jumps of a uniform fraction of that size in a uniform direction, clipped normal

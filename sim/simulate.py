@@ -325,7 +325,7 @@ def _usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _pack_block(block: Block, min_size_px: np.ndarray | None = None) -> tuple:
+def _pack_block(block: Block, min_size_px: np.ndarray) -> tuple:
     """A block of `_blocks(draws=False)` as a few flat arrays (one pickle of a handful of arrays instead of
     dozens of small ones): the truths' poses concatenated, with their times and people counts; the
     captures' cameras, times, people and visibility (their poses are left out: `_unpack_block` derives
@@ -338,7 +338,7 @@ def _pack_block(block: Block, min_size_px: np.ndarray | None = None) -> tuple:
     people = (viewed, np.array([len(p) for p in seen], dtype=np.int64))
     if requests:  # (else `visible` stands for no rows at all)
         keep = visible[1].any(axis=1)
-        if min_size_px is not None and min_size_px.any():
+        if min_size_px.any():
             cams = np.array([r.camera for r in requests], dtype=np.int64)
             keep &= large_enough(visible[0], np.repeat(min_size_px[cams], people[1]))
         people = (viewed[keep], np.bincount(np.repeat(np.arange(len(seen)), people[1])[keep], minlength=len(seen)))
