@@ -47,17 +47,20 @@ def undistorted_bounds_px(camera: Camera, samples: int = 33) -> tuple[float, flo
     return float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1])
 
 
-def view_planes(camera: Camera, margin_px: float = 0.0) -> np.ndarray:
+def view_planes(camera: Camera, margin_px: float = 0.0, bounds_px: tuple[float, float, float, float] | None = None,
+                near_m: float = NEAR_M) -> np.ndarray:
     """(5, 4) planes (n_x, n_y, n_z, d) bounding the camera's view volume: n·X + d >= 0 inside, |n| = 1.
 
-    Rows: near plane, left, right, top, bottom edge of the undistorted image widened by `margin_px`.
+    Rows: the near plane `near_m` in front of the centre, then the left, right, top and bottom edge of
+    `bounds_px` (u_min, v_min, u_max, v_max) in undistorted pixels, by default the undistorted image
+    (`undistorted_bounds_px`), widened by `margin_px`.
     """
     K, R, t = camera.K, camera.R_cam_from_world, camera.t_cam_from_world
-    u0, v0, u1, v1 = undistorted_bounds_px(camera)
+    u0, v0, u1, v1 = undistorted_bounds_px(camera) if bounds_px is None else bounds_px
     u0, v0, u1, v1 = u0 - margin_px, v0 - margin_px, u1 + margin_px, v1 + margin_px
     # In camera coordinates a point is right of the column u when (K X)_0 - u (K X)_2 >= 0 (z > 0), etc.
     rows_cam = [np.array([0.0, 0.0, 1.0]), K[0] - u0 * K[2], u1 * K[2] - K[0], K[1] - v0 * K[2], v1 * K[2] - K[1]]
-    offsets = [-NEAR_M, 0.0, 0.0, 0.0, 0.0]
+    offsets = [-near_m, 0.0, 0.0, 0.0, 0.0]
     planes = np.empty((5, 4))
     for i, (n_cam, off) in enumerate(zip(rows_cam, offsets)):
         norm = np.linalg.norm(n_cam)

@@ -28,7 +28,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import COCO17, Camera, Skeleton
-from crossview.scoring.association import SCORED_STATES, AssociationAccumulator
+from crossview.scoring.association import SCORED_STATES, AssociationAccumulator, scored_targets
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
 from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
 from crossview.scoring.per_camera import Projected2DAccumulator
@@ -99,17 +99,15 @@ class TruthTimeline:
 
 
 def _targets(out: TrackerOutput, skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
-    targets = [t for t in out.targets if t.state in SCORED_STATES]
-    ids = np.array([t.id for t in targets], dtype=np.int64)
     J = skeleton.num_joints
-    poses = np.zeros((0, J, 3))
-    if targets:
-        poses = np.array([np.asarray(t.pose, dtype=np.float64) for t in targets])
-        if poses.ndim != 3 or poses.shape[1:] != (J, 3):
-            raise ScoringError(
-                f"tracker output {out.camera}@{out.stamp_s}: target poses have shape {poses.shape[1:]}, expected "
-                f"({J}, 3) {skeleton.name}"
-            )
+    try:
+        ids, poses = scored_targets(out.targets, J)
+    except ValueError:
+        poses = None
+    if poses is None or poses.ndim != 3 or poses.shape[1:] != (J, 3):
+        shapes = sorted({np.shape(t.pose) for t in out.targets if t.state in SCORED_STATES})
+        raise ScoringError(f"tracker output {out.camera}@{out.stamp_s}: target poses have shape "
+                           f"{', '.join(map(str, shapes))}, expected ({J}, 3) {skeleton.name}")
     return ids, poses
 
 

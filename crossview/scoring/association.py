@@ -16,7 +16,7 @@ tracking scores that use it (the paper's Table 5) are in `crossview.scoring.per_
 from __future__ import annotations
 
 from collections import Counter, defaultdict
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import cv2
@@ -25,7 +25,8 @@ import numpy as np
 from core.boxes import keypoint_boxes
 from core.types import Camera
 from sim.types import CameraFrame
-from tracker.types import TargetState, TrackerOutput
+from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
+from tracker.visibility import view_planes
 
 MIN_VISIBLE_FRACTION = 0.5
 """Fraction of a projected box that must lie inside the image for the box to count."""
@@ -33,6 +34,25 @@ SCORED_STATES = (TargetState.CONFIRMED, TargetState.LOST)
 """Target states that are scored (a tracker reports confirmed targets; tentative and removed ones never count)."""
 _MIN_DEPTH_M = 0.1
 _PROJECTION_MARGIN = 0.5  # fraction of the image size outside which undistorted points are not distorted
+_VOLUME_SLACK_M = 1e-6  # how much wider `projection_volume` is than what `project_points` projects
+
+
+def scored_targets(targets: Sequence[Target], num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """ids (T,) int64 and poses (T, J, 3) float64 of the targets in `SCORED_STATES`, in their order; a
+    `TargetArrays` gives its own arrays without making a `Target` each. With none, poses is (0, num_joints, 3).
+
+    Raises:
+        ValueError: poses of different shapes.
+    """
+    if isinstance(targets, TargetArrays):
+        if targets.state in SCORED_STATES:
+            return np.asarray(targets.ids, dtype=np.int64), np.asarray(targets.poses, dtype=np.float64)
+        return np.zeros(0, dtype=np.int64), np.zeros((0, num_joints, 3))
+    kept = [t for t in targets if t.state in SCORED_STATES]
+    if not kept:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, num_joints, 3))
+    return (np.array([t.id for t in kept], dtype=np.int64),
+            np.array([np.asarray(t.pose, dtype=np.float64) for t in kept]))
 
 
 def stamp_key(camera: str, stamp_s: float) -> tuple[str, int]:
@@ -186,6 +206,27 @@ def project_points(camera: Camera, points: np.ndarray) -> np.ndarray:
     idx = np.flatnonzero(front)[near]
     out[idx] = px.reshape(-1, 2)
     return out
+
+
+def projection_volume(camera: Camera) -> np.ndarray:
+    """(5, 4) planes (`tracker.visibility.view_planes`) around the points that `project_points` projects: in
+    front of the camera and inside the undistorted image widened by its margin, both by a micrometre more so
+    that rounding can only keep a point that the projection leaves out, never the other way round."""
+    w, h, m = float(camera.width_px), float(camera.height_px), _PROJECTION_MARGIN
+    return view_planes(camera, margin_px=0.0, bounds_px=(-m * w, -m * h, (1 + m) * w, (1 + m) * h),
+                       near_m=_MIN_DEPTH_M) + np.array([0.0, 0.0, 0.0, _VOLUME_SLACK_M])
+
+
+def may_project(volume: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(N,) bool: whether a pose of poses (N, J, 3) has a joint inside `volume` (`projection_volume`).
+
+    A pose without one has no joint that `project_points` projects, so no box and no part in the camera's
+    2D scores: leaving it out changes nothing, and in a large store it is nearly everybody.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        inside = (poses @ volume[:, :3].T + volume[:, 3] >= 0).all(axis=-1)  # (N, J), False for NaN
+    return inside.any(axis=-1)
 
 
 def pose_boxes(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

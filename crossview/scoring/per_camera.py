@@ -33,7 +33,14 @@ import numpy as np
 from core.boxes import box_iou, keypoint_boxes
 from core.errors import CrossviewError
 from core.types import Camera, Frame
-from crossview.scoring.association import SCORED_STATES, project_points, projected_boxes, stamp_key
+from crossview.scoring.association import (
+    may_project,
+    project_points,
+    projected_boxes,
+    projection_volume,
+    scored_targets,
+    stamp_key,
+)
 from crossview.scoring.identity import identity_scores
 from sim.types import CameraFrame
 from tracker.types import TrackerOutput
@@ -154,6 +161,7 @@ class Projected2DAccumulator:
 
     def __init__(self, cameras: Sequence[Camera], truth_at: Callable[[float], tuple[np.ndarray, np.ndarray]]):
         self._cameras = {c.name: c for c in cameras}
+        self._volumes = {c.name: projection_volume(c) for c in cameras}
         self._truth_at = truth_at
         self._acc = Camera2DAccumulator(list(self._cameras))
         self._blocks: dict[str, list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]] = {
@@ -166,11 +174,13 @@ class Projected2DAccumulator:
             raise ValueError(f"2D scores: tracker output from camera {output.camera!r}, not among "
                              f"{sorted(self._cameras)}")
         ids, poses = self._truth_at(output.stamp_s)
-        targets = [t for t in output.targets if t.state in SCORED_STATES]
-        h_ids = np.array([t.id for t in targets], dtype=np.int64)
-        h_poses = np.array([t.pose for t in targets], dtype=np.float64) if targets else np.zeros((0, 1, 3))
-        poses = np.asarray(poses, dtype=np.float64)
-        self._blocks[output.camera].append((np.asarray(ids), poses, h_ids, h_poses))
+        ids, poses = np.asarray(ids), np.asarray(poses, dtype=np.float64)
+        h_ids, h_poses = scored_targets(output.targets, poses.shape[1])
+        # Only the poses with a joint the camera could project can have a box in it (`may_project`).
+        volume = self._volumes[output.camera]
+        near, h_near = may_project(volume, poses), may_project(volume, h_poses)
+        ids, poses, h_ids, h_poses = ids[near], poses[near], h_ids[h_near], h_poses[h_near]
+        self._blocks[output.camera].append((ids, poses, h_ids, h_poses))
         self._points[output.camera] += poses[..., 0].size + h_poses[..., 0].size
         if self._points[output.camera] >= self.BLOCK_POINTS:
             self._flush(output.camera)

@@ -6,7 +6,14 @@ import pytest
 
 from core.types import Camera, Frame
 from crossview.scoring import score
-from crossview.scoring.association import AssociationAccumulator, association_accuracy, pose_boxes, project_points
+from crossview.scoring.association import (
+    AssociationAccumulator,
+    association_accuracy,
+    may_project,
+    pose_boxes,
+    project_points,
+    projection_volume,
+)
 from crossview.scoring.identity import body_roots
 from sim.types import CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import Target, TrackerOutput
@@ -65,6 +72,28 @@ def test_projection_agrees_with_opencv_from_world_coordinates():
     np.testing.assert_allclose(project_points(cam, pts), ref.reshape(-1, 2), atol=1e-9)  # px
     # Behind the camera: NaN.
     assert np.isnan(project_points(cam, np.array([[0.0, 0.0, 5.0]]))).all()
+
+
+def test_poses_left_out_of_a_camera_project_to_nothing_there():
+    """`may_project` leaves out only poses of which `project_points` projects no joint (no box, so no part in
+    the camera's 2D scores), and keeps every pose with a joint projected, also a joint just past the edge."""
+    rng = np.random.default_rng(8)
+    for cam in (_camera(), _camera(dist=(-0.2, 0.05, 0.001, -0.001, 0.0)),
+                _camera(center=(1.0, -2.0, 3.0), dist=(0.1, -0.02, 0.0, 0.0, 0.01))):
+        volume = projection_volume(cam)
+        poses = rng.uniform([-12.0, -12.0, -1.0], [12.0, 12.0, 6.0], (3000, 1, 3)) + rng.normal(0, 0.3, (3000, 17, 3))
+        poses[::7, ::3] = np.nan
+        projected = np.isfinite(project_points(cam, poses.reshape(-1, 3))).all(axis=1).reshape(3000, 17).any(axis=1)
+        kept = may_project(volume, poses)
+        assert not (projected & ~kept).any()  # nothing projected is left out
+        assert (~kept).sum() > 1000 and projected.sum() > 100
+        # The volume is what project_points projects, within its micrometre: keeping is rare without projecting.
+        assert (kept & ~projected).sum() <= 0.01 * kept.sum()
+    # A joint on the volume's edge (a quarter pixel further out is beyond it) is kept.
+    cam = _camera()
+    edge = (-0.5 * 640 + 1e-9 - 320) / 400 * 4.0  # x of the column u = -0.5 W, 4 m below the camera at z = 0
+    assert may_project(projection_volume(cam), np.array([[[edge, 0.0, 0.0]]])).tolist() == [True]
+    assert may_project(projection_volume(cam), np.array([[[edge - 0.25 / 400 * 4, 0.0, 0.0]]])).tolist() == [False]
 
 
 def test_box_mostly_outside_the_image_does_not_count():
