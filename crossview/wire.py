@@ -3,7 +3,8 @@
 `crossview.recording.camera_frame_bytes` and `crossview.foxglove.image_annotations_bytes` say what the
 bytes are (and the tests check those against protobuf's own serialisation); the kernels here write the
 same bytes field by field into one buffer, which is most of what writing a recording costs per frame.
-Only the recording writer imports this module, so reading a recording never loads numba.
+Only the recording writer and the tracks reader (`tracker_output_arrays`, which reads a tracker output's
+targets straight into arrays) import this module, so reading a recording never loads numba.
 
 proto3 rules kept here as there: a scalar whose value is its default (a double with all bits zero, an
 integer 0, an empty string) is left out; a packed repeated field is one length-delimited run and is left
@@ -496,3 +497,176 @@ def frames_and_annotations(out, ends, status, names, name_ends, times, t_ns, det
             pos += size
         ends[2 * i + 1] = pos
     return pos
+
+
+# --------------------------------------------------------------------------------------------------
+# Reading: the one message read in bulk (a tracks file holds every target at every camera frame).
+
+BAD_BYTES = 1
+"""`tracker_output_arrays`'s status for bytes it does not read."""
+TARGET_ID, TARGET_STATE, TARGET_STATE_END, TARGET_CODES, TARGET_CODES_END = range(5)
+"""Columns of `tracker_output_arrays`'s target rows: the id, then byte offsets into the message (-1: absent)."""
+
+
+@intrinsic
+def _double(typingctx, bits):
+    """The float64 whose 64 bits are the int64 `bits` (`_bits` the other way)."""
+    if not isinstance(bits, types.Integer):
+        return None
+
+    def codegen(context, builder, sig, args):
+        return builder.bitcast(context.cast(builder, args[0], sig.args[0], types.int64), llvm_ir.DoubleType())
+
+    return types.float64(bits), codegen
+
+
+@_jit
+def _get_f8(buf, pos):
+    """The little-endian float64 at pos."""
+    bits = np.int64(0)
+    for i in range(8):
+        bits |= np.int64(buf[pos + i]) << (8 * i)
+    return _double(bits)
+
+
+@_jit
+def _get_varint(buf, pos, end):
+    """(value as int64, next position) of the varint at pos; next position -1 when it runs past end or is
+    longer than 10 bytes."""
+    value = np.int64(0)
+    for shift in range(0, 70, 7):
+        if pos >= end:
+            return value, -1
+        byte = np.int64(buf[pos])
+        pos += 1
+        value |= (byte & 0x7F) << shift
+        if byte < 128:
+            return value, pos
+    return value, -1
+
+
+@_jit
+def _run(buf, pos, end):
+    """(start, end) of the length-delimited run whose length varint is at pos; (-1, -1) past end."""
+    size, pos = _get_varint(buf, pos, end)
+    if pos < 0 or size < 0 or pos + size > end:
+        return -1, -1
+    return pos, pos + size
+
+
+@_jit
+def tracker_output_arrays(buf):
+    """`crossview.TrackerOutput` wire bytes (uint8) read into arrays, as `tracker_output` writes them.
+
+    Returns (status, head, stamps, poses, rows, detection_target_ids):
+    - status: 0, or `BAD_BYTES` for anything this scan does not read (a field it does not know, a repeated
+      field not packed or in two runs, a joint state code over one byte, a pose not of num_joints x 3
+      doubles, bytes that end early): the caller reads the message with protobuf instead, which also
+      names what is wrong.
+    - head (4,) int64: the output's stamp bits (int64 of the float64), the camera name's start and end
+      byte, num_joints J;
+    - stamps (T,) and poses (T, J, 3) of the targets;
+    - rows (T, 5) int64 (`TARGET_*` columns): the id, the byte offsets of the state name's start and end
+      and of the joint states' run (-1 where absent);
+    - detection_target_ids (D,) int64 (zigzag decoded).
+    A field left out has proto3's default (0, 0.0, an empty string or run).
+    """
+    n = buf.size
+    head = np.zeros(4, dtype=np.int64)
+    # Pass 1: the top-level fields, counting the targets and the detection ids.
+    num_targets, num_ids, status = 0, 0, 0
+    pos = 0
+    while pos < n and status == 0:
+        key, pos = _get_varint(buf, pos, n)
+        field, wire_type = key >> 3, key & 7
+        if pos < 0:
+            status = BAD_BYTES
+        elif field == 1 and wire_type == _FIXED64 and pos + 8 <= n:
+            head[0] = _bits(_get_f8(buf, pos))
+            pos += 8
+        elif field == 3 and wire_type == _VARINT:
+            head[3], pos = _get_varint(buf, pos, n)
+            status = BAD_BYTES if pos < 0 or head[3] < 0 else 0
+        elif (field == 2 or field == 4 or field == 5) and wire_type == _LEN:
+            start, stop = _run(buf, pos, n)
+            if start < 0:
+                status = BAD_BYTES
+            elif field == 2:
+                head[1], head[2] = start, stop
+            elif field == 4:
+                num_targets += 1
+            else:
+                for i in range(start, stop):
+                    if buf[i] < 128:
+                        num_ids += 1
+            pos = stop
+        else:
+            status = BAD_BYTES
+    J = head[3] if status == 0 else 0
+    T = num_targets if status == 0 else 0
+    stamps = np.zeros(T)
+    poses = np.zeros((T, J, 3))
+    rows = np.full((T, 5), -1, dtype=np.int64)
+    ids = np.empty(num_ids if status == 0 else 0, dtype=np.int64)
+    # Pass 2: each target's fields, and the detection ids.
+    t, k, pos = 0, 0, 0
+    while pos < n and status == 0:
+        key, pos = _get_varint(buf, pos, n)
+        field = key >> 3
+        if field == 1:
+            pos += 8
+        elif field == 3:
+            _, pos = _get_varint(buf, pos, n)
+        else:
+            start, stop = _run(buf, pos, n)
+            pos = stop
+            if field == 5:
+                q = start
+                while q < stop:
+                    value, q = _get_varint(buf, q, stop)
+                    if q < 0:
+                        return BAD_BYTES, head, stamps, poses, rows, ids
+                    ids[k] = ((value >> 1) & 0x7FFFFFFFFFFFFFFF) ^ -(value & 1)  # zigzag
+                    k += 1
+            elif field == 4:
+                rows[t, TARGET_ID] = 0
+                pose_doubles = 0
+                q = start
+                while q < stop:
+                    key, q = _get_varint(buf, q, stop)
+                    sub, sub_type = key >> 3, key & 7
+                    if q < 0:
+                        return BAD_BYTES, head, stamps, poses, rows, ids
+                    elif sub == 1 and sub_type == _VARINT:
+                        rows[t, TARGET_ID], q = _get_varint(buf, q, stop)
+                    elif sub == 2 and sub_type == _FIXED64 and q + 8 <= stop:
+                        stamps[t] = _get_f8(buf, q)
+                        q += 8
+                    elif 3 <= sub <= 5 and sub_type == _LEN:
+                        a, b = _run(buf, q, stop)
+                        if a < 0:
+                            return BAD_BYTES, head, stamps, poses, rows, ids
+                        if sub == 3:
+                            rows[t, TARGET_STATE], rows[t, TARGET_STATE_END] = a, b
+                        elif sub == 5:
+                            if rows[t, TARGET_CODES] >= 0:  # a second run: protobuf joins them
+                                return BAD_BYTES, head, stamps, poses, rows, ids
+                            for i in range(a, b):
+                                if buf[i] >= 128:
+                                    return BAD_BYTES, head, stamps, poses, rows, ids
+                            rows[t, TARGET_CODES], rows[t, TARGET_CODES_END] = a, b
+                        elif pose_doubles:  # a second run of the same pose: protobuf joins them
+                            return BAD_BYTES, head, stamps, poses, rows, ids
+                        else:
+                            pose_doubles = (b - a) // 8
+                            if b - a != 24 * J:
+                                return BAD_BYTES, head, stamps, poses, rows, ids
+                            for i in range(pose_doubles):
+                                poses[t, i // 3, i % 3] = _get_f8(buf, a + 8 * i)
+                        q = b
+                    else:
+                        return BAD_BYTES, head, stamps, poses, rows, ids
+                if pose_doubles != 3 * J:
+                    return BAD_BYTES, head, stamps, poses, rows, ids
+                t += 1
+    return status, head, stamps, poses, rows, ids

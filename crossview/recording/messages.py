@@ -339,6 +339,42 @@ def _tracker_output_to_msg(output: TrackerOutput, num_joints: int):
 _TARGET_STATES = {s.value: s for s in TargetState}
 
 
+def tracker_output_from_bytes(data: bytes) -> TrackerOutput:
+    """The `TrackerOutput` of `crossview.TrackerOutput` wire bytes, read into arrays by a compiled scan
+    (`wire.tracker_output_arrays`): the targets are a `TargetArrays` when they share one stamp and state and
+    all carry joint states (every output of the built-in tracker), else a list of `Target`. Bytes the scan
+    does not read go through protobuf (`_tracker_output_from_msg`), which reads the same output from the
+    same bytes and names what is wrong in a corrupt message (DecodeError or ValueError)."""
+    from crossview import wire
+
+    buf = np.frombuffer(data, dtype=np.uint8)
+    status, head, stamps, poses, rows, detection_ids = wire.tracker_output_arrays(buf)
+    try:
+        camera = data[head[1]:head[2]].decode()
+    except UnicodeDecodeError:
+        status = wire.BAD_BYTES
+    if status:
+        return _tracker_output_from_msg(TrackerOutputMsg.FromString(data))
+    stamp_s, J, T = float(head[:1].view(np.float64)[0]), int(head[3]), len(rows)
+    if not T:
+        return TrackerOutput(stamp_s=stamp_s, camera=camera, targets=[], detection_target_ids=detection_ids)
+    names = [data[a:b] for a, b in rows[:, wire.TARGET_STATE:wire.TARGET_STATE_END + 1].tolist()]  # b"": absent
+    states = {name: _TARGET_STATES.get(name.decode()) or TargetState(name.decode()) for name in set(names)}
+    known = (rows[:, wire.TARGET_CODES_END] - rows[:, wire.TARGET_CODES] == J) & (J > 0)
+    if len(states) == 1 and known.all() and (stamps == stamps[0]).all():
+        codes = buf[rows[:, wire.TARGET_CODES, None] + np.arange(J)]
+        return TrackerOutput(stamp_s=stamp_s, camera=camera, detection_target_ids=detection_ids,
+                             targets=TargetArrays(rows[:, wire.TARGET_ID].copy(), poses, codes, float(stamps[0]),
+                                                  states.popitem()[1]))
+    targets = [
+        Target(id=target_id, pose=poses[i], stamp_s=float(stamps[i]), state=states[name],
+               joint_state=buf[c:c + J].copy() if known[i] else None)
+        for i, (target_id, name, c) in enumerate(zip(rows[:, wire.TARGET_ID].tolist(), names,
+                                                     rows[:, wire.TARGET_CODES].tolist(), strict=True))
+    ]
+    return TrackerOutput(stamp_s=stamp_s, camera=camera, targets=targets, detection_target_ids=detection_ids)
+
+
 def _tracker_output_from_msg(msg) -> TrackerOutput:
     J = msg.num_joints
     # All targets' joints in one array (each target's pose is a row of it): one conversion per message.

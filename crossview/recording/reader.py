@@ -20,7 +20,7 @@ from mcap.records import Channel, DataEnd, Message, Metadata, Schema
 from mcap.stream_reader import CRCValidationError, StreamReader
 
 from core.types import SKELETONS
-from crossview.recording.messages import _camera_frame_from_msg, _pose_truth_from_msg, _tracker_output_from_msg
+from crossview.recording.messages import _camera_frame_from_msg, _pose_truth_from_msg, tracker_output_from_bytes
 from crossview.recording.schemas import (
     FORMAT_VERSION,
     KIND_RECORDING,
@@ -35,7 +35,6 @@ from crossview.recording.schemas import (
     PoseTruthMsg,
     RecordingError,
     RecordingHeader,
-    TrackerOutputMsg,
     TracksHeader,
     _box_from_json,
     _camera_from_json,
@@ -348,7 +347,7 @@ class Tracks(_Container):
 
     def outputs(self) -> Iterator[TrackerOutput]:
         for _, record in self._messages({"crossview.TrackerOutput"}):
-            output = self._decode(lambda b: _tracker_output_from_msg(TrackerOutputMsg.FromString(b)), record.data)
+            output = self._decode(tracker_output_from_bytes, record.data)
             if output is None:
                 return
             yield output

@@ -819,6 +819,83 @@ def test_target_arrays_encode_as_their_targets_and_read_as_a_sequence():
         tracker_output_bytes(TrackerOutput(0.0, "c", bad, np.zeros(0, dtype=np.int64)), 17)
 
 
+def _same_output(a: TrackerOutput, b: TrackerOutput) -> bool:
+    return (a.stamp_s == b.stamp_s and a.camera == b.camera and len(a.targets) == len(b.targets)
+            and np.array_equal(a.detection_target_ids, b.detection_target_ids)
+            and all(x.id == y.id and x.stamp_s == y.stamp_s and x.state == y.state
+                    and np.array_equal(x.pose, y.pose, equal_nan=True)
+                    and (x.joint_state is None) == (y.joint_state is None)
+                    and (x.joint_state is None or np.array_equal(x.joint_state, y.joint_state))
+                    for x, y in zip(a.targets, b.targets, strict=True)))
+
+
+def test_tracker_outputs_read_by_the_compiled_scan_equal_protobufs_reading():
+    """`tracker_output_from_bytes` reads what protobuf reads from the same bytes: arrays for the built-in
+    tracker's outputs, a list where the targets differ in stamp or state or lack joint states, protobuf
+    itself for bytes the scan does not read, and a ValueError or DecodeError for a corrupt message."""
+    from google.protobuf.message import DecodeError
+
+    from crossview.recording.messages import (
+        _tracker_output_from_msg,
+        _tracker_output_to_msg,
+        tracker_output_bytes,
+        tracker_output_from_bytes,
+    )
+    from crossview.recording.schemas import TrackerOutputMsg
+
+    def protobufs(data):
+        return _tracker_output_from_msg(TrackerOutputMsg.FromString(data))
+
+    rng = np.random.default_rng(12)
+    outputs = make_outputs(rng, 20)
+    outputs += [
+        TrackerOutput(3.0, "cam03", TargetArrays(np.array([4, 0, 2**40]), rng.normal(size=(3, 17, 3)),
+                                                 rng.integers(0, 3, (3, 17)).astype(np.uint8), 3.0),
+                      np.array([-1, 4, 2**40, -2**40])),
+        TrackerOutput(0.0, "", [
+            Target(id=0, pose=np.zeros((17, 3)), stamp_s=0.0, state=TargetState.LOST,
+                   joint_state=np.zeros(17, dtype=np.uint8)),
+            Target(id=7, pose=np.full((17, 3), np.nan), stamp_s=-1.5, state=TargetState.TENTATIVE)],
+            np.zeros(0, dtype=np.int64)),
+        TrackerOutput(1.0, "c", [Target(id=-3, pose=np.ones((17, 3)), stamp_s=1.0)], np.zeros(0, dtype=np.int64)),
+        TrackerOutput(1.0, "kamera-ü", [], np.array([-1, -1])),
+    ]
+    kinds = set()
+    for output in outputs:
+        data = tracker_output_bytes(output, 17)
+        read = tracker_output_from_bytes(data)
+        kinds.add(type(read.targets).__name__)
+        assert _same_output(read, protobufs(data)) and _same_output(read, output)
+    assert kinds == {"TargetArrays", "list"}
+    msg = _tracker_output_to_msg(outputs[0], 17)
+    # An unknown field and a pose split in two runs (both valid protobuf) go through protobuf: the same output.
+    extra = msg.SerializeToString() + bytes([0x30, 0x05])  # field 6, varint 5
+    assert _same_output(tracker_output_from_bytes(extra), protobufs(extra))
+    f8 = np.float64(1.0).tobytes
+    target = (b"\x08\x01" + b"\x11" + f8() + b"\x1a\x09confirmed" + b"\x22\x08" + f8()
+              + b"\x22\x10" + np.array([2.0, 3.0]).tobytes() + b"\x2a\x01\x00")
+    halves = b"\x09" + f8() + b"\x12\x01c" + b"\x18\x01" + b"\x22" + bytes([len(target)]) + target
+    assert _same_output(tracker_output_from_bytes(halves), protobufs(halves))
+    np.testing.assert_array_equal(tracker_output_from_bytes(halves).targets[0].pose, [[1.0, 2.0, 3.0]])
+    # A pose of the wrong size is named; every prefix of a message reads as protobuf reads it, or is refused.
+    short = TrackerOutputMsg(stamp_s=1.0, camera="c", num_joints=17)
+    short.targets.add(id=1, pose_m=[0.0] * 50)
+    with pytest.raises(ValueError, match="does not hold 17 joints x 3"):
+        tracker_output_from_bytes(short.SerializeToString())
+    whole = tracker_output_bytes(outputs[-4], 17)
+    refused = 0
+    for cut in range(len(whole)):
+        try:
+            expected = protobufs(whole[:cut])
+        except (DecodeError, ValueError):
+            refused += 1
+            with pytest.raises((DecodeError, ValueError)):
+                tracker_output_from_bytes(whole[:cut])
+        else:
+            assert _same_output(tracker_output_from_bytes(whole[:cut]), expected)
+    assert 0 < refused < len(whole)
+
+
 def test_tracks_of_format_2_are_read_without_joint_states(tmp_path):
     rng = np.random.default_rng(4)
     outputs = [TrackerOutput(o.stamp_s, o.camera, [dataclasses.replace(t, joint_state=None) for t in o.targets],
