@@ -13,8 +13,9 @@ class Rows:
 
     Each field is a view of the first `len(self)` rows of a larger array, so that appending a row costs the
     row, not a copy of every row (the capacity doubles when it runs out), and removing rows moves only the
-    rows after the first one removed. Assigning a field writes into its rows; a view taken before an
-    `append` or `keep` may no longer be the field's.
+    rows after the first one removed. The views are plain instance attributes, made again when the rows
+    change, so that reading a field (dozens of times per tracker frame) is an attribute lookup. Assigning a
+    field writes into its rows; a view taken before an `append` or `keep` may no longer be the field's.
     """
 
     _FIELDS: tuple[str, ...] = ()
@@ -35,15 +36,14 @@ class Rows:
         array = np.empty((max(_MIN_CAPACITY, value.shape[0]),) + value.shape[1:], dtype=value.dtype)
         array[: value.shape[0]] = value
         store[name] = array
-
-    def __getattr__(self, name: str):
-        store = self.__dict__.get("_store")
-        if store is not None and name in store:
-            return store[name][: self._count]
-        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+        self.__dict__[name] = array[: self._count]
 
     def __len__(self) -> int:
         return self._count
+
+    def _views(self) -> None:
+        for name, array in self._store.items():
+            self.__dict__[name] = array[: self._count]
 
     def keep(self, mask: np.ndarray) -> None:
         """Keeps the rows where `mask` (N,) is True, in every array, in their order."""
@@ -55,6 +55,7 @@ class Rows:
         for array in self._store.values():
             array[first:kept] = array[first: self._count][mask[first:]]
         self._count = kept
+        self._views()
 
     def append(self, **rows) -> None:
         """Appends rows given for every field by name, each array with the new rows on its first axis."""
@@ -68,3 +69,4 @@ class Rows:
                 self._store[name] = array = grown
             array[n: n + m] = rows[name]
         self._count = n + m
+        self._views()
