@@ -10,6 +10,7 @@ from core.jit import jit, sort_prefix
 from core.types import Skeleton
 from tracker.types import JointState
 
+_OBSERVED, _PREDICTED, _INFERRED = JointState.OBSERVED.value, JointState.PREDICTED.value, JointState.INFERRED.value
 # A standing adult in the body frame (x forward, y left, z up), metres, by joint name: the mean body the
 # unseen joints are taken from (COCO-17 names, and the Campus/Shelf head joints).
 MEAN_BODY_M = {
@@ -110,15 +111,23 @@ def fill_poses(poses, model, bones):
                 poses[t, j, 2] = z + dm2
 
 
-def joint_states(seen_s: np.ndarray, known: np.ndarray, stamp_s: float, stale_after_s: float) -> np.ndarray:
+@jit
+def joint_states(seen_s, known, stamp_s, stale_after_s):
     """(T, J) `JointState` codes: OBSERVED when triangulated within `stale_after_s` of `stamp_s`, PREDICTED when
     triangulated earlier (carried with the body since), INFERRED when never triangulated (`fill_unknown`).
+    Compiled: the tracker calls it every frame.
 
     Args:
         seen_s: (T, J) last time each joint was triangulated from observations (-inf never); known: (T, J) whether
             the tracker holds an estimate of the joint.
     """
-    codes = np.full(seen_s.shape, JointState.PREDICTED.value, dtype=np.uint8)
-    codes[stamp_s - seen_s <= stale_after_s] = JointState.OBSERVED.value
-    codes[~known] = JointState.INFERRED.value
+    codes = np.empty(seen_s.shape, dtype=np.uint8)
+    for t in range(seen_s.shape[0]):
+        for j in range(seen_s.shape[1]):
+            if not known[t, j]:
+                codes[t, j] = _INFERRED
+            elif stamp_s - seen_s[t, j] <= stale_after_s:
+                codes[t, j] = _OBSERVED
+            else:
+                codes[t, j] = _PREDICTED
     return codes

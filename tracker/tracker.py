@@ -144,6 +144,7 @@ class Tracker:
         # Unmatched detections of the latest frame of each camera (Algorithm 1's D_u).
         self._pool_px: list[np.ndarray] = [np.zeros((0, J, 2)) for _ in range(C)]
         self._pool_s = np.full(C, -np.inf)
+        self._pool_size = np.zeros(C, dtype=np.int64)
         self._pool_frame_index: list[np.ndarray] = [np.zeros(0, dtype=np.int64) for _ in range(C)]
         self._limits = PlausibilityLimits(
             max_reprojection_px=config.init_max_reprojection_px, min_joints_3d=config.init_min_joints_3d,
@@ -248,7 +249,7 @@ class Tracker:
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
         # Only the targets this camera can see (tracker.visibility): the others have no positive affinity.
         rows = np.empty(len(tg), dtype=np.int64)
-        rows = rows[:targets_in_view(self._planes[c], c, tg.pos, tg.vel, tg.joint_s, tg.obs_s, t,
+        rows = rows[:targets_in_view(self._planes[c], c, tg.pos, tg.vel, tg.joint_s, tg.obs_s, tg.cam_s, t,
                                      float(cfg.max_predict_s), float(cfg.view_margin_m),
                                      float(cfg.max_observation_age_s), rows)]
         if not rows.size:
@@ -333,6 +334,7 @@ class Tracker:
         self._pool_px[c] = px
         self._pool_frame_index[c] = frame_index
         self._pool_s[c] = t
+        self._pool_size[c] = px.shape[0]
 
     def _initialize(self, c: int, t: float) -> list[tuple[int, np.ndarray]]:
         """Supplement: epipolar affinity (S2), partitioning (S3-S5) and new targets, around each of this frame's
@@ -354,8 +356,10 @@ class Tracker:
             (new target id, indices of the current frame's detections in its cluster) per new target.
         """
         cfg = self.config
-        cams = [k for k in range(len(self.cameras))
-                if k != c and self._pool_px[k].shape[0] and abs(t - self._pool_s[k]) <= cfg.init_window_s]
+        # Only cameras whose views overlap c's: the others' detections have no positive affinity to c's (eq. S2).
+        pooled = self._linked[c] & (self._pool_size > 0) & (np.abs(t - self._pool_s) <= cfg.init_window_s)
+        pooled[c] = False
+        cams = np.flatnonzero(pooled).tolist()
         new_px = self._pool_px[c]
         if not cams or not new_px.shape[0]:
             return []
@@ -407,6 +411,7 @@ class Tracker:
             keep = np.setdiff1d(np.arange(self._pool_px[k].shape[0]), gone)
             self._pool_px[k] = self._pool_px[k][keep]
             self._pool_frame_index[k] = self._pool_frame_index[k][keep]
+            self._pool_size[k] = keep.size
         return created
 
     def _duplicates_existing(self, pose: np.ndarray, t: float) -> bool:

@@ -130,7 +130,7 @@ def _band_samples(camera: Camera, min_z_m: float, max_z_m: float, grid: int, max
 
 
 @jit
-def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, stamp_s, max_predict_s, margin_m, recent_s, out):
+def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, cam_s, stamp_s, max_predict_s, margin_m, recent_s, out):
     """The rows of the targets a camera's frame is scored against; returns how many were written to `out`.
 
     A target is in when its predicted body (eq. 5), the sphere around the mean of its known joints through
@@ -141,7 +141,8 @@ def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, stamp_s, max_predi
     Args:
         planes: (5, 4) `view_planes` of the camera; camera: its index in obs_s.
         pos, vel: (T, J, 3) X_t' and V_t'; joint_s: (T, J) t', s; obs_s: (T, C, J) stamps of the last matched
-            point per camera (NaN none).
+            point per camera (NaN none); cam_s: (T, C) the stamp of the camera's last frame matched to the
+            target, >= its every obs_s (NaN none): only a target with a recent one has its points looked at.
         stamp_s: t, s; max_predict_s: the horizon of eq. (5), s.
         out: (T,) int64, the rows written first.
     """
@@ -150,10 +151,11 @@ def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, stamp_s, max_predi
     n = 0
     for t in range(T):
         recent = False
-        for j in range(J):
-            if stamp_s - obs_s[t, camera, j] <= recent_s:  # False for NaN
-                recent = True
-                break
+        if stamp_s - cam_s[t, camera] <= recent_s:  # False for NaN
+            for j in range(J):
+                if stamp_s - obs_s[t, camera, j] <= recent_s:  # False for NaN
+                    recent = True
+                    break
         if recent:
             out[n] = t
             n += 1

@@ -1,6 +1,7 @@
 """Inferred joints: the mean body fitted to a target's known joints, and the per-joint state codes."""
 
 import numpy as np
+import pytest
 
 from core.types import CAMPUS14, COCO17
 from tracker.body import fill_poses, fill_unknown, joint_states, mean_body
@@ -45,10 +46,12 @@ def test_the_model_covers_both_skeletons():
         assert 1.5 < body[:, 2].max() < 1.9
 
 
-def test_joint_states():
+@pytest.mark.parametrize("compiled", [True, False])
+def test_joint_states(compiled):
     seen = np.array([[9.9, 9.0, -np.inf, 9.75]])
     known = np.array([[True, True, False, True]])
-    codes = joint_states(seen, known, 10.0, 0.3)
+    codes = (joint_states if compiled else joint_states.py_func)(seen, known, 10.0, 0.3)
+    assert codes.dtype == np.uint8
     assert codes.tolist() == [[JointState.OBSERVED.value, JointState.PREDICTED.value, JointState.INFERRED.value,
                                JointState.OBSERVED.value]]
 

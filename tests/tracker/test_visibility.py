@@ -57,11 +57,15 @@ def test_targets_in_view_keeps_the_near_and_the_recent(compiled):
     joint_s = np.zeros((4, J))
     obs_s = np.full((4, 2, J), np.nan)
     obs_s[1, 0, 3] = 0.9  # target 1 (far) was matched by this camera 0.1 s ago
+    cam_s = np.nanmax(obs_s, axis=2, initial=-np.inf)
     out = np.empty(4, dtype=np.int64)
-    n = kernel(planes, 0, pos, vel, joint_s, obs_s, 1.0, 0.5, 0.5, 1.0, out)
+    n = kernel(planes, 0, pos, vel, joint_s, obs_s, cam_s, 1.0, 0.5, 0.5, 1.0, out)
     assert out[:n].tolist() == [0, 1, 2]
-    n = kernel(planes, 0, pos, vel, joint_s, obs_s, 3.0, 0.5, 0.5, 1.0, out)  # the match is now too old
+    n = kernel(planes, 0, pos, vel, joint_s, obs_s, cam_s, 3.0, 0.5, 0.5, 1.0, out)  # the match is now too old
     assert out[:n].tolist() == [0, 2]
+    cam_s[1, 0] = 1.0  # a later frame of the camera matched the target with none of these joints: still recent
+    n = kernel(planes, 0, pos, vel, joint_s, obs_s, cam_s, 1.0, 0.5, 0.5, 1.0, out)
+    assert out[:n].tolist() == [0, 1, 2]
 
 
 @pytest.mark.parametrize("compiled", [True, False])
