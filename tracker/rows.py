@@ -61,12 +61,17 @@ class Rows:
         """Appends rows given for every field by name, each array with the new rows on its first axis."""
         n = self._count
         m = np.asarray(rows[self._FIELDS[0]]).shape[0]
-        for name in self._FIELDS:
-            array = self._store[name]
-            if n + m > array.shape[0]:
-                grown = np.empty((max(2 * array.shape[0], n + m),) + array.shape[1:], dtype=array.dtype)
-                grown[:n] = array[:n]
-                self._store[name] = array = grown
-            array[n: n + m] = rows[name]
-        self._count = n + m
-        self._views()
+        try:
+            for name in self._FIELDS:
+                array = self._store[name]
+                if n + m > array.shape[0]:
+                    # The field's view goes first, so that the old array is freed as soon as it is copied (a
+                    # 240-camera rig's point arrays are megabytes, and the allocator reuses what is freed).
+                    del self.__dict__[name]
+                    grown = np.empty((max(2 * array.shape[0], n + m),) + array.shape[1:], dtype=array.dtype)
+                    grown[:n] = array[:n]
+                    self._store[name] = array = grown
+                array[n: n + m] = rows[name]
+            self._count = n + m
+        finally:
+            self._views()
