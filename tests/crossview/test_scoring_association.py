@@ -16,7 +16,7 @@ from crossview.scoring.association import (
 )
 from crossview.scoring.identity import body_roots
 from sim.types import CameraFrame, DetectionTruth, PoseTruth
-from tracker.types import Target, TrackerOutput
+from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
 
 
 def _camera(name="top", center=(0.0, 0.0, 4.0), dist=(0.0, 0.0, 0.0, 0.0, 0.0)):
@@ -38,7 +38,8 @@ def _camera_frame(camera, stamp, person_ids):
 
 
 def _output(camera, stamp, assigned, targets=()):
-    return TrackerOutput(stamp, camera, list(targets), np.asarray(assigned, dtype=np.int64))
+    targets = targets if isinstance(targets, TargetArrays) else list(targets)
+    return TrackerOutput(stamp, camera, targets, np.asarray(assigned, dtype=np.int64))
 
 
 def test_association_accuracy_by_hand():
@@ -137,6 +138,28 @@ def test_projected_truth_tracks_score_perfectly_in_2d_and_a_swap_is_one_switch_e
     assert [e[:3] for e in swap.id_switch_events] == [(1.0, 1, 20), (1.0, 2, 10)]
     for (_, pid, _, x, y) in swap.id_switch_events:
         np.testing.assert_allclose([x, y], body_roots(_walker(pid, 1.0)[None])[0], atol=1e-12)  # m
+
+
+def test_targets_given_as_arrays_score_as_the_same_targets_listed():
+    """The scorer reads a `TargetArrays` (the built-in tracker's, and the tracks reader's) through its arrays:
+    the same report, 3D and per camera, as the same targets in a list; targets in a state that is not scored
+    count in neither."""
+    cams = [_camera(), _camera("side", center=(3.0, 0.0, 4.0), dist=(-0.1, 0.01, 0.0, 0.0, 0.0))]
+    times = np.arange(0, 2.001, 0.01)
+    truth = [PoseTruth(t, np.array([1, 2]), np.stack([_walker(1, t), _walker(2, t)])) for t in times]
+    listed, arrays = [], []
+    for k, t in enumerate(np.arange(0, 2.001, 0.05)):
+        ids = (10, 20) if t < 1 else (20, 10)
+        state = TargetState.TENTATIVE if k % 7 == 3 else TargetState.LOST if k % 5 == 1 else TargetState.CONFIRMED
+        poses = np.stack([_walker(1, t), _walker(2, t)]) + 0.02 * np.sin(k)
+        codes = np.zeros((2, 17), dtype=np.uint8)
+        camera = cams[k % 2].name
+        listed.append(_output(camera, t, [], [Target(i, p, t, state, c) for i, p, c in zip(ids, poses, codes)]))
+        arrays.append(_output(camera, t, [], TargetArrays(np.array(ids), poses, codes, t, state)))
+    a, b = score(truth, listed, cameras=cams), score(truth, arrays, cameras=cams)
+    run = dict(scenario="two walkers", seed=0, num_cameras=2, num_people=2, duration_s=2.0)
+    assert a.to_json(**run) == b.to_json(**run) and a.camera_2d == b.camera_2d
+    assert a.camera_2d["side"].num_truth > 0 and a.id_switches == 2
 
 
 def test_output_without_targets_counts_visible_people_as_misses_in_2d():
