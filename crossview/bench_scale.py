@@ -283,8 +283,8 @@ def markdown_section(payload: dict, plot_name: str | None) -> str:
     lines = [SECTION, "",
              f"Written by `crossview bench --scale --duration {payload['duration_s']:g} "
              f"--budget {payload['budget_s']:g} --markdown docs/benchmarks.md` "
-             f"({payload['date']}, {payload['machine']}, {payload['cpus']} CPUs; the machine was shared with other "
-             "jobs: compare figures within this section only). Each case is generated, tracked by the crossview "
+             f"({payload['date']}, {payload['machine']}, {payload['cpus']} CPUs; a machine's speed can move from day "
+             "to day: compare figures within this section only). Each case is generated, tracked by the crossview "
              "tracker (preset `store`) and scored; the worst update is the slowest single camera frame. The "
              "bad input of issue 17 (a burst of 500 detections, a frame of false positives only, a camera that sees "
              "nothing) is in tests/tracker/test_bad_input.py; a real frame's worst is this column.", "",
