@@ -3,7 +3,7 @@
 `Tracker` (tracker/tracker.py) holds the arrays and calls these once per frame; each does in one pass what
 would otherwise be a few hundred small numpy calls: `update_matched` (eq. 6-11 through
 `triangulation.triangulate_point`, the bone gate, the velocity fit of eq. 5, the stale joints),
-`split_detections` and `poses_in_state` (the frame's output).
+`split_detections` and `output_poses` (the frame's output).
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from core.jit import jit, sort_prefix
+from tracker.body import fill_poses, joint_states
 from tracker.triangulation import triangulate_point
 
 MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
@@ -248,19 +249,45 @@ def split_detections(usable, min_joints, rows, cols, ids):
 
 
 @jit
-def poses_in_state(state, code, ids, pos, vel, joint_s, stamp_s, max_predict_s):
-    """The ids (K,) of the targets in lifecycle state `code` and their poses (K, J, 3) predicted to stamp_s by
-    eq. (5): X_t' + V_t' (t - t'), the horizon clipped to [0, max_predict_s]."""
+def output_poses(state, code, ids, pos, vel, joint_s, seen_s, stamp_s, max_predict_s, stale_after_s, model, bones):
+    """The frame's output: the ids (K,) of the targets in lifecycle state `code`, their poses (K, J, 3) predicted
+    to stamp_s by eq. (5), X_t' + V_t' (t - t'), the horizon clipped to [0, max_predict_s], with the joints never
+    triangulated filled from the target's own body (`body.fill_poses`, model and bones), and their (K, J)
+    `JointState` codes (`body.joint_states`, stale after `stale_after_s`)."""
     rows = np.flatnonzero(state == code)
     J = pos.shape[1]
     out = np.empty((rows.size, J, 3))
+    known = np.empty((rows.size, J), dtype=np.bool_)
+    seen = np.empty((rows.size, J))
     for i in range(rows.size):
         r = rows[i]
         for j in range(J):
             horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
             for k in range(3):
                 out[i, j, k] = pos[r, j, k] + vel[r, j, k] * horizon
-    return ids[rows], out
+            known[i, j] = np.isfinite(out[i, j, 0])
+            seen[i, j] = seen_s[r, j]
+    codes = joint_states(seen, known, stamp_s, stale_after_s)
+    fill_poses(out, model, bones)
+    return ids[rows], out, codes
+
+
+@jit
+def has_body(pos, rows, hips, min_joints):
+    """(M,) whether each target of rows has both hips and at least `min_joints` joints triangulated (pos NaN
+    where not): the body a confirmation needs (`Tracker._has_body`)."""
+    out = np.empty(rows.size, dtype=np.bool_)
+    for m in range(rows.size):
+        r = rows[m]
+        count = 0
+        for j in range(pos.shape[1]):
+            if np.isfinite(pos[r, j, 0]):
+                count += 1
+        ok = count >= min_joints
+        for h in range(hips.size):
+            ok = ok and np.isfinite(pos[r, hips[h], 0])
+        out[m] = ok
+    return out
 
 
 @jit

@@ -29,11 +29,11 @@ from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
 from tracker import lifecycle
 from tracker.association import associate
-from tracker.body import fill_poses, joint_states, mean_body
+from tracker.body import mean_body
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, ray_directions, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, consensus_views, partition_graph, reconstruct
-from tracker.kernels import implausible_bodies, poses_in_state, split_detections, update_matched
+from tracker.kernels import has_body, implausible_bodies, output_poses, split_detections, update_matched
 from tracker.rows import Rows
 from tracker.triangulation import row_norm_code
 from tracker.types import TargetArrays, TrackerOutput
@@ -327,8 +327,7 @@ class Tracker:
     def _has_body(self, rows: np.ndarray) -> np.ndarray:
         """(M,) whether each target has its root (both hips) and `init_min_joints_3d` joints triangulated: the
         body a confirmation needs (its other joints can then be inferred from it, tracker.body)."""
-        known = np.isfinite(self._targets.pos[rows, :, 0])
-        return known[:, self._hips].all(axis=1) & (known.sum(axis=1) >= self.config.init_min_joints_3d)
+        return has_body(self._targets.pos, rows, self._hips, int(self.config.init_min_joints_3d))
 
     def _set_pool(self, c: int, px: np.ndarray, frame_index: np.ndarray, t: float) -> None:
         self._pool_px[c] = px
@@ -486,12 +485,10 @@ class Tracker:
 
     def _emit(self, t: float, camera: str, assigned: np.ndarray) -> TargetArrays:
         tg = self._targets
-        ids, poses = poses_in_state(tg.state, lifecycle.CONFIRMED, tg.ids, tg.pos, tg.vel, tg.joint_s, t,
-                                    self._update_params[-1])  # eq. (5)
-        rows = np.flatnonzero(tg.state == lifecycle.CONFIRMED)
-        known = np.isfinite(poses[..., 0])
-        codes = joint_states(tg.seen_s[rows], known, t, self.config.stale_after_s)
-        fill_poses(poses, self._mean_body, self._bones)  # joints never triangulated: from the target's own body
+        # Eq. (5) to the stamp; joints never triangulated from the target's own body (tracker.body).
+        ids, poses, codes = output_poses(tg.state, lifecycle.CONFIRMED, tg.ids, tg.pos, tg.vel, tg.joint_s, tg.seen_s,
+                                         t, self._update_params[-1], float(self.config.stale_after_s),
+                                         self._mean_body, self._bones)
         targets = TargetArrays(ids, poses, codes, t, lifecycle.to_state(lifecycle.CONFIRMED))
         self.last_output = TrackerOutput(stamp_s=t, camera=camera, targets=targets, detection_target_ids=assigned)
         return targets
