@@ -9,15 +9,18 @@ States are held as small integer codes in the tracker's arrays; `to_state` maps 
 - CONFIRMED -> LOST when not updated for `lost_after_s` (lost targets are still matched, not output);
 - LOST -> CONFIRMED when matched again;
 - LOST -> REMOVED when not updated for `remove_after_s`. Removed targets are deleted; ids are never reused;
-- any state -> REMOVED when the cameras' evidence says it is a ghost (`ghost`, from the tracker: matched in
-  fewer than `ghost_min_seen_ratio` of the frames of cameras that should see it, or an observed body that
-  stayed implausible for `implausible_after_s`).
+- any state -> REMOVED when the cameras' evidence says it is a ghost (`ghosts`, from the tracker's counts:
+  matched in fewer than `ghost_min_seen_ratio` of the frames of cameras that should see it, or an observed
+  body that stayed implausible for `implausible_after_s`).
+
+The rules run per target in compiled loops (the tracker applies them at every camera frame).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from core.jit import jit
 from tracker.config import TrackerConfig
 from tracker.types import TargetState
 
@@ -35,22 +38,59 @@ def to_state(code: int) -> TargetState:
     return _STATES[int(code)]
 
 
+def ghosts(expected: np.ndarray, sighted: np.ndarray, state: np.ndarray, implausible_s: np.ndarray, now_s: float,
+           config: TrackerConfig) -> np.ndarray:
+    """(T,) whether the cameras' evidence marks each target a ghost: at least `ghost_min_expected` sightings
+    expected and fewer than `ghost_min_seen_ratio` of them matched (not for a LOST target: it is out of the
+    output and goes by the time rule, it may be a person hidden), or an observed body implausible since
+    `implausible_after_s` or longer.
+
+    Args:
+        expected, sighted: (T,) decayed counts of the frames that should have seen each target and of those that
+            matched it; state: (T,) codes; implausible_s: (T,) since when the body is implausible (NaN: it is not).
+    """
+    out = np.empty(state.shape[0], dtype=np.bool_)
+    _ghosts(expected, sighted, state, implausible_s, float(now_s), float(config.ghost_min_expected),
+            float(config.ghost_min_seen_ratio), float(config.implausible_after_s), out)
+    return out
+
+
+@jit
+def _ghosts(expected, sighted, state, implausible_s, now_s, min_expected, min_seen_ratio, implausible_after_s, out):
+    for i in range(state.shape[0]):
+        unseen = expected[i] >= min_expected and sighted[i] < min_seen_ratio * expected[i] and state[i] != LOST
+        out[i] = unseen or now_s - implausible_s[i] >= implausible_after_s  # False for NaN
+
+
 def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: TrackerConfig,
             ghost: np.ndarray | None = None) -> np.ndarray:
     """Transitions caused by time passing (no match): returns the new (T,) state codes.
 
     Args:
         state: (T,) codes; last_update_s: (T,) time of each target's last matched detection, s; now_s: s.
-        ghost: (T,) whether the cameras' evidence marks the target a ghost; None: none is.
+        ghost: (T,) whether the cameras' evidence marks the target a ghost (`ghosts`); None: none is.
     """
-    idle = now_s - last_update_s
-    new = state.copy()
-    if ghost is not None:
-        new[ghost] = REMOVED
-    new[(state == TENTATIVE) & (idle > config.tentative_timeout_s)] = REMOVED
-    new[(state == CONFIRMED) & (idle > config.lost_after_s)] = LOST
-    new[(new == LOST) & (idle > config.remove_after_s)] = REMOVED
+    new = np.empty_like(state)
+    _on_time(state, last_update_s, float(now_s), float(config.tentative_timeout_s), float(config.lost_after_s),
+             float(config.remove_after_s), np.zeros(0, dtype=np.bool_) if ghost is None else ghost, new)
     return new
+
+
+@jit
+def _on_time(state, last_update_s, now_s, tentative_timeout_s, lost_after_s, remove_after_s, ghost, new):
+    """`on_time` per target (a ghost is removed, unless the lost rule applies to it first)."""
+    for i in range(state.shape[0]):
+        idle = now_s - last_update_s[i]
+        code = state[i]
+        if ghost.size and ghost[i]:
+            code = REMOVED
+        if state[i] == TENTATIVE and idle > tentative_timeout_s:
+            code = REMOVED
+        if state[i] == CONFIRMED and idle > lost_after_s:
+            code = LOST
+        if code == LOST and idle > remove_after_s:
+            code = REMOVED
+        new[i] = code
 
 
 def on_match(
@@ -63,10 +103,20 @@ def on_match(
         state, born_s, num_updates: (M,) codes, birth times (s) and matched-detection counts (after this match).
         has_body: (M,) whether each has its hips and enough joints triangulated; None: all have.
     """
-    new = state.copy()
-    ready = (num_updates >= config.confirm_min_updates) & (now_s - born_s >= config.confirm_min_age_s)
-    if has_body is not None:
-        ready &= has_body
-    new[(state == TENTATIVE) & ready] = CONFIRMED
-    new[state == LOST] = CONFIRMED
+    new = np.empty_like(state)
+    _on_match(state, born_s, num_updates, float(now_s), int(config.confirm_min_updates),
+              float(config.confirm_min_age_s), np.zeros(0, dtype=np.bool_) if has_body is None else has_body, new)
     return new
+
+
+@jit
+def _on_match(state, born_s, num_updates, now_s, min_updates, min_age_s, has_body, new):
+    """`on_match` per target."""
+    for i in range(state.shape[0]):
+        ready = num_updates[i] >= min_updates and now_s - born_s[i] >= min_age_s and (has_body.size == 0 or has_body[i])
+        code = state[i]
+        if state[i] == TENTATIVE and ready:
+            code = CONFIRMED
+        if state[i] == LOST:
+            code = CONFIRMED
+        new[i] = code

@@ -230,14 +230,10 @@ class Tracker:
         if not len(tg):
             return
         cfg = self.config
-        with np.errstate(invalid="ignore", divide="ignore"):
-            # A LOST target is already out of the output and goes by the time rule (it may be a person hidden).
-            unseen = (tg.expected >= cfg.ghost_min_expected) & (tg.sighted < cfg.ghost_min_seen_ratio * tg.expected)
-            unseen &= tg.state != lifecycle.LOST
-        ghost = unseen | (t - tg.implausible_s >= cfg.implausible_after_s)  # False for NaN
+        ghost = lifecycle.ghosts(tg.expected, tg.sighted, tg.state, tg.implausible_s, t, cfg)
         if ghost.any():
             logger.debug("removing ghost targets %s", tg.ids[ghost].tolist())
-        tg.state = lifecycle.on_time(tg.state, tg.last_update_s, t, cfg, ghost).astype(np.int8)
+        tg.state = lifecycle.on_time(tg.state, tg.last_update_s, t, cfg, ghost)
         removed = tg.state == lifecycle.REMOVED
         if removed.any():
             tg.keep(~removed)
