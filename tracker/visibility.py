@@ -97,6 +97,28 @@ def overlapping_views(cameras: Sequence[Camera], min_z_m: float, max_z_m: float,
 
 
 @jit
+def inside_volume(planes, x, y, z, margin_m):
+    """Whether the point (x, y, z) lies inside the volume of planes (P, 4) widened by margin_m (False for a
+    NaN coordinate); the test stops at the first plane the point lies outside."""
+    for p in range(planes.shape[0]):
+        if not planes[p, 0] * x + planes[p, 1] * y + planes[p, 2] * z + planes[p, 3] >= -margin_m:
+            return False
+    return True
+
+
+@jit
+def poses_in_volume(planes, poses, margin_m, out):
+    """out[n] = whether some joint of poses[n] (N, J, 3) lies inside the volume of planes (P, 4) widened by
+    margin_m (`inside_volume`); a pose's search stops at its first such joint."""
+    for n in range(poses.shape[0]):
+        out[n] = False
+        for j in range(poses.shape[1]):
+            if inside_volume(planes, poses[n, j, 0], poses[n, j, 1], poses[n, j, 2], margin_m):
+                out[n] = True
+                break
+
+
+@jit
 def _samples_inside(planes, pts, margin_m, out):
     """out[c] |= some point of pts (N, 3) lies inside camera c's view volume (planes (C, 5, 4)) widened by
     margin_m; each camera's search stops at its first such point (in the hypermarket most pairs share none,
@@ -105,13 +127,7 @@ def _samples_inside(planes, pts, margin_m, out):
         if out[c]:
             continue
         for n in range(pts.shape[0]):
-            inside = True
-            for p in range(planes.shape[1]):
-                if planes[c, p, 0] * pts[n, 0] + planes[c, p, 1] * pts[n, 1] + planes[c, p, 2] * pts[n, 2] + \
-                        planes[c, p, 3] < -margin_m:
-                    inside = False
-                    break
-            if inside:
+            if inside_volume(planes[c], pts[n, 0], pts[n, 1], pts[n, 2], margin_m):
                 out[c] = True
                 break
 
@@ -179,13 +195,7 @@ def targets_in_view(planes, camera, pos, vel, joint_s, obs_s, cam_s, stamp_s, ma
             if np.isfinite(pred[j, 0] + pred[j, 1] + pred[j, 2]):
                 dx, dy, dz = pred[j, 0] - c0, pred[j, 1] - c1, pred[j, 2] - c2
                 radius_sq = max(radius_sq, dx * dx + dy * dy + dz * dz)
-        reach = np.sqrt(radius_sq) + margin_m
-        inside = True
-        for p in range(planes.shape[0]):
-            if planes[p, 0] * c0 + planes[p, 1] * c1 + planes[p, 2] * c2 + planes[p, 3] < -reach:
-                inside = False
-                break
-        if inside:
+        if inside_volume(planes, c0, c1, c2, np.sqrt(radius_sq) + margin_m):
             out[n] = t
             n += 1
     return n

@@ -23,11 +23,10 @@ import cv2
 import numpy as np
 
 from core.boxes import keypoint_boxes
-from core.jit import jit
 from core.types import Camera
 from sim.types import CameraFrame
 from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
-from tracker.visibility import view_planes
+from tracker.visibility import poses_in_volume, view_planes
 
 MIN_VISIBLE_FRACTION = 0.5
 """Fraction of a projected box that must lie inside the image for the box to count."""
@@ -226,26 +225,8 @@ def may_project(volume: np.ndarray, poses: np.ndarray) -> np.ndarray:
     """
     poses = np.ascontiguousarray(poses, dtype=np.float64)
     out = np.empty(poses.shape[0], dtype=np.bool_)
-    _any_joint_inside(np.ascontiguousarray(volume, dtype=np.float64), poses, out)
+    poses_in_volume(np.ascontiguousarray(volume, dtype=np.float64), poses, 0.0, out)
     return out
-
-
-@jit
-def _any_joint_inside(volume, poses, out):
-    """`may_project`'s loop: out[n] = some joint of poses[n] (finite) lies inside every plane of volume; a
-    pose's search stops at its first such joint, a joint's at the first plane it lies outside."""
-    for n in range(poses.shape[0]):
-        out[n] = False
-        for j in range(poses.shape[1]):
-            inside = True
-            for p in range(volume.shape[0]):
-                d = volume[p, 0] * poses[n, j, 0] + volume[p, 1] * poses[n, j, 1] + volume[p, 2] * poses[n, j, 2]
-                if not d + volume[p, 3] >= 0.0:  # also for NaN
-                    inside = False
-                    break
-            if inside:
-                out[n] = True
-                break
 
 
 def pose_boxes(camera: Camera, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
