@@ -199,12 +199,9 @@ def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
     Returns:
         (...,) size in pixels (NaN when no joint is known).
     """
-    known = ~np.isnan(keypoints_px)
-    high = np.where(known, keypoints_px, -np.inf).max(axis=-2, initial=-np.inf)
-    low = np.where(known, keypoints_px, np.inf).min(axis=-2, initial=np.inf)
-    extent = high - low
-    size = np.max(extent, axis=-1, initial=-np.inf)
-    return np.where(np.isfinite(size), size, np.nan)
+    kp = np.ascontiguousarray(keypoints_px, dtype=np.float64)
+    sizes = _person_sizes(kp.reshape((int(np.prod(kp.shape[:-2])),) + kp.shape[-2:]))  # `_person_size` each
+    return sizes.reshape(kp.shape[:-2])
 
 
 def left_right_permutation(skeleton: Skeleton) -> np.ndarray:
@@ -1080,7 +1077,8 @@ _FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP, _DUPLICATE = (int(e) for e in (
 
 @jit
 def _person_size(px, p):
-    """`person_size_px` of px[p] (J, 2), compiled."""
+    """The size in the image of person-view px[p] (J, 2): the larger side of the bounding box of its known
+    joints, NaN with none (`person_size_px` of any shape, compiled)."""
     high0 = high1 = -np.inf
     low0 = low1 = np.inf
     for j in range(px.shape[1]):
@@ -1091,6 +1089,15 @@ def _person_size(px, p):
             high1, low1 = max(high1, y), min(low1, y)
     extent = max(-np.inf, high0 - low0, high1 - low1)
     return extent if np.isfinite(extent) else np.nan
+
+
+@jit
+def _person_sizes(px):
+    """(P,) `_person_size` of every person-view of px (P, J, 2)."""
+    out = np.empty(px.shape[0])
+    for p in range(px.shape[0]):
+        out[p] = _person_size(px, p)
+    return out
 
 
 @jit

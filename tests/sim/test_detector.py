@@ -253,6 +253,22 @@ def test_in_image_joints_of_far_away_people_are_not_reported():
     assert not inside.any() and detect(detector, 0, None, far, 0, 0, 0).truth.person_ids.size == 0
 
 
+def test_person_size_is_the_larger_side_of_the_box_of_the_known_joints():
+    """`person_size_px` (the detector's compiled loop) against the box computed with numpy, any leading shape."""
+    rng = np.random.default_rng(6)
+    kp = rng.uniform(0, 1280, (4, 5, 17, 2))
+    kp[rng.random(kp.shape) < 0.3] = np.nan  # single coordinates unknown too
+    kp[0, 0] = np.nan  # nobody known: NaN
+    known = ~np.isnan(kp)
+    extent = (np.where(known, kp, -np.inf).max(axis=-2, initial=-np.inf)
+              - np.where(known, kp, np.inf).min(axis=-2, initial=np.inf))
+    size = np.max(extent, axis=-1, initial=-np.inf)
+    np.testing.assert_array_equal(person_size_px(kp), np.where(np.isfinite(size), size, np.nan))
+    assert np.isnan(person_size_px(kp)[0, 0]) and person_size_px(kp[1, 2]).shape == ()
+    assert person_size_px(np.array([[0.0, 0.0], [3.0, np.nan], [np.nan, 5.0]])) == 5.0
+    assert person_size_px(np.zeros((0, 17, 2))).shape == (0,)
+
+
 def test_people_smaller_than_min_person_frac_of_the_image_are_never_detected_and_cast_no_rays():
     # One person 6 m from the camera, one 30 m away along the same line of sight (a hypermarket's far aisle),
     # and a shelf in front of the far one's legs.
