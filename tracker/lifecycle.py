@@ -1,7 +1,7 @@
 """Target lifecycle: tentative -> confirmed <-> lost -> removed, timed in seconds. Every transition is here.
 
 States are held as small integer codes in the tracker's arrays; `to_state` maps them to `TargetState`.
-- born TENTATIVE (from an initialisation cluster);
+- born TENTATIVE (from an initialisation cluster whose reconstruction has its root, both hips);
 - TENTATIVE -> CONFIRMED once it has `confirm_min_updates` matched detections, `confirm_min_age_s` of age and
   a body: its root (both hips) and `init_min_joints_3d` joints triangulated (so no output is a partial body
   whose missing joints would be guessed from a few);

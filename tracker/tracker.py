@@ -345,7 +345,7 @@ class Tracker:
         and their detections are still pooled only because they were not a plausible new person then. So a
         frame costs its unmatched detections times the pool, and a partition of at most one node per camera
         for each, however many people the store holds. The cluster holding x becomes a target when it is
-        plausible; its detections leave the pool.
+        plausible and has its root (both hips triangulated); its detections leave the pool.
 
         Returns:
             (new target id, indices of the current frame's detections in its cluster) per new target.
@@ -390,6 +390,8 @@ class Tracker:
             pose = reconstruct(self._P[ks], pts, stamps, t, cfg.lambda_t_per_s, cfg.min_views,
                                self._reconstruction_row_norm)
             why = check_plausible(pose, self._P[ks], pts, self.skeleton, self._limits)
+            if why is None and not np.isfinite(pose[self._hips]).all():
+                why = "a hip not triangulated"
             if why is None and self._duplicates_existing(pose, t):
                 why = "duplicate of an existing target"
             if why is not None:

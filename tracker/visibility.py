@@ -245,7 +245,9 @@ def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, ins
         depth = np.inf
         for p in range(planes.shape[0]):
             depth = min(depth, planes[p, 0] * c[0] + planes[p, 1] * c[1] + planes[p, 2] * c[2] + planes[p, 3])
-        seen = depth >= inside_m  # False for NaN (a hip unknown)
+        # False for a hip unknown: min() keeps the running depth when a plane gives NaN (NaN < x is False), so
+        # the NaN hip centre itself is tested
+        seen = depth >= inside_m and np.isfinite(c[0] + c[1] + c[2])
         if not (seen or matched[r]):
             continue
         rate = 1.0

@@ -239,9 +239,15 @@ def test_joints_never_seen_are_inferred_never_nan(layout1):
         assert np.linalg.norm(nearest[hidden] - t.pose[hidden], axis=-1).max() < 0.3
 
 
-def test_a_body_without_hips_is_never_confirmed(layout1):
+def test_a_body_without_hips_is_never_born(layout1):
     cams, _, frames, _ = layout1
-    assert not any(out.targets for out in _run(Tracker(cams, CONFIG), _without(frames, [11, 12])))
+    outputs = _run(Tracker(cams, CONFIG), _without(frames, [11, 12]))
+    assert not any(out.targets for out in outputs)
+    # Not even as a tentative target: no detection ever went to one.
+    assert all((out.detection_target_ids == -1).all() for out in outputs)
+    # One hip is not a root either; with both, the same people are tracked.
+    assert not any(out.targets for out in _run(Tracker(cams, CONFIG), _without(frames, [12])))
+    assert sum(len(out.targets) for out in _run(Tracker(cams, CONFIG), _without(frames, [0])))
 
 
 class _Sinking(Walkers):

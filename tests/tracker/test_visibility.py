@@ -107,6 +107,25 @@ def test_sight_map_expects_as_often_as_the_camera_sees_people_there(compiled):
     np.testing.assert_allclose(expected, [1.0, 1.0, 0.0])
 
 
+@pytest.mark.parametrize("compiled", [True, False])
+def test_a_target_without_hips_is_expected_by_no_camera(compiled):
+    kernel = count_sightings if compiled else count_sightings.py_func
+    cams = _corridor()
+    J = 17
+    pos = np.zeros((2, J, 3))
+    pos[:, :, :2] = [1.0, 2.2]  # both in the first camera's view, with every joint
+    pos[:, :, 2] = 1.0
+    pos[1, 12] = np.nan  # target 1 has no right hip: where it stands is not known
+    for cam in cams:  # the cameras that see the place and those that do not
+        grid, nx, ny = sight_map_grid([cam], 1.0)
+        expected, sighted, evidence_s = np.zeros(2), np.zeros(2), np.zeros(2)
+        kernel(view_planes(cam), np.array([11, 12]), pos, np.zeros_like(pos), np.zeros((2, J)), 0.0, 0.5, 0.3, 1.0,
+               np.zeros(2, dtype=bool), np.zeros(2, dtype=bool), grid, nx, ny, np.zeros(nx * ny + 1),
+               np.zeros(nx * ny + 1), 10.0, expected, sighted, evidence_s)
+        assert expected[1] == 0.0 and sighted[1] == 0.0
+        assert expected[0] == (1.0 if cam is cams[0] else 0.0)
+
+
 def test_sight_maps_too_large_for_memory_are_refused():
     from core.errors import ConfigError
 
