@@ -19,11 +19,11 @@ from collections import Counter, defaultdict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
-import cv2
 import numpy as np
 
 from core.boxes import keypoint_boxes
 from core.types import Camera
+from sim.cameras import in_image
 from sim.types import CameraFrame
 from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
 from tracker.visibility import poses_in_volume, view_planes
@@ -202,9 +202,8 @@ def project_points(camera: Camera, points: np.ndarray) -> np.ndarray:
             & (pin[:, 1] > -_PROJECTION_MARGIN * h) & (pin[:, 1] < (1 + _PROJECTION_MARGIN) * h))
     if not near.any():
         return out
-    px, _ = cv2.projectPoints(cam[front][near].reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
     idx = np.flatnonzero(front)[near]
-    out[idx] = px.reshape(-1, 2)
+    out[idx] = in_image(camera, points[idx])[0]  # the simulator's projection, which drew the detections
     return out
 
 
