@@ -32,6 +32,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
+from core import processes
 from core.errors import CrossviewError, ScenarioError
 from crossview import outputs, pipeline
 from sim import scenario as scenario_mod
@@ -738,9 +739,9 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
 
     start = time.perf_counter()
     out = Path(out)
-    workers = workers or _usable_cores()
+    workers = workers or processes.usable_cores()
     in_process = executor is Executor.SERIAL
-    cells = plan(spec, keep_recordings=keep_recordings, worker_process=in_process and _usable_cores() > 1)
+    cells = plan(spec, keep_recordings=keep_recordings, worker_process=in_process and processes.usable_cores() > 1)
     wanted = definition(spec, cells)
     check_output(out, wanted)
     disconnect = connect_ray(ray_address) if executor is Executor.RAY else False
@@ -781,13 +782,6 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
     failed = sum(r["status"] != "ok" for r in rows)
     return SweepSummary(len(cells), len(cells) - len(pending), len(pending), failed, time.perf_counter() - start, out,
                         rows)
-
-
-def _usable_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        return os.cpu_count() or 1
 
 
 # ---------------------------------------------------------------- the result files

@@ -5,18 +5,13 @@ from __future__ import annotations
 import contextlib
 import heapq
 import itertools
-import logging
-import multiprocessing
-import os
-import signal
-import traceback
 from collections.abc import Iterator
 from typing import NamedTuple
 
 import cv2
 import numpy as np
 
-from core import jit
+from core import jit, processes
 from core.types import COCO17
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
@@ -24,8 +19,6 @@ from sim.detector import Detector, large_enough
 from sim.poses import interpolate_ticks
 from sim.rng import child_rng
 from sim.types import CameraFrame, Capture, DetectionRows, PoseTruth
-
-log = logging.getLogger(__name__)
 
 TRUTH_RATE_HZ = 100.0
 # Order of events that share a log time: the truth first, then frames by camera index.
@@ -128,7 +121,7 @@ class Simulation:
         self.detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"),
                                  self.skeleton)
         frames_of = frames_of or self.detector.frames_from_rows
-        if self.worker_process and _usable_cores() > 1 and "fork" in multiprocessing.get_all_start_methods():
+        if self.worker_process and processes.can_fork_worker():
             blocks = self._blocks_from_worker(duration, with_poses, while_starting)
         else:
             if while_starting is not None:
@@ -213,23 +206,14 @@ class Simulation:
         # would hang the worker's first parallel OpenCV call (the store's distance transform) on that lock:
         # OpenCV runs on the calling thread alone from here on (its calls in this project are small).
         cv2.setNumThreads(0)
-        context = multiprocessing.get_context("fork")
-        receiver, sender = context.Pipe(duplex=False)
-        _widen_pipe(sender)
-        worker = context.Process(target=self._work, args=(duration, sender), name="crossview-simulation", daemon=True)
-        worker.start()
-        sender.close()
+        worker, receiver = processes.start_worker(self._work, (duration,), "crossview-simulation", _PIPE_BYTES)
         previous = None  # the last truth tick of the previous block
         try:
             _load_draw_kernels(self.detector)
             if while_starting is not None:
                 while_starting()
             while True:
-                try:
-                    kind, payload = receiver.recv()
-                except EOFError:
-                    raise RuntimeError(f"the simulation worker process stopped unexpectedly (exit code "
-                                       f"{worker.exitcode})") from None
+                kind, payload = processes.receive(receiver, worker, _WORKER)  # (its error is raised here)
                 if kind == "block":
                     t, truths, requests, visible, people = _unpack_block(payload, previous, with_poses)
                     previous = truths[-1] if truths else previous
@@ -239,20 +223,16 @@ class Simulation:
                     if requests:
                         rows, bounds = self.detector.detection_rows_of(requests, *visible, person_ids=people)
                     yield Block(t, truths, requests, rows, bounds)
-                elif kind == "error":
-                    raise payload
                 else:  # "end": the counts of the detector that ran there
                     self.detector.visibility_counts[:] = payload
                     return
         finally:
             receiver.close()
-            _stop(worker)
+            processes.stop_worker(worker, _WORKER)
 
     def _work(self, duration: float, sender) -> None:
         """The worker process: simulates and sends every block, then the detector's counts (or its error)."""
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        for ending in (signal.SIGTERM, signal.SIGHUP):  # the consumer's handlers are not the worker's
-            signal.signal(ending, signal.SIG_DFL)
+        processes.worker_signals()
         try:
             for block in self._blocks(duration, draws=False):
                 sender.send(("block", _pack_block(block, self.detector.min_size_px)))
@@ -260,11 +240,7 @@ class Simulation:
         except BrokenPipeError:  # the consumer is gone
             pass
         except BaseException as e:  # handed over to be raised in the consumer, with where it happened
-            e.add_note("raised in the simulation worker process:\n" + traceback.format_exc().rstrip())
-            try:
-                sender.send(("error", e))
-            except (BrokenPipeError, TypeError, ValueError, AttributeError):  # gone, or an unpicklable error
-                sender.send(("error", RuntimeError(f"simulation worker: {type(e).__name__}: {e}")))
+            processes.send_error(sender, e, _WORKER)
         finally:
             sender.close()
 
@@ -274,18 +250,7 @@ class Simulation:
 # side stalls both. A pipe of the system's usual limit, 1 MiB, holds a block and a half: the worker can
 # finish the next block while the consumer is still reading one.
 _PIPE_BYTES = 1 << 20
-
-
-def _widen_pipe(connection) -> None:
-    """Asks for a pipe of `_PIPE_BYTES` behind `connection` (Linux; elsewhere, or when refused, as is)."""
-    try:
-        import fcntl
-
-        with open("/proc/sys/fs/pipe-max-size") as f:
-            limit = int(f.read())
-        fcntl.fcntl(connection.fileno(), fcntl.F_SETPIPE_SZ, min(_PIPE_BYTES, limit))
-    except (ImportError, AttributeError, OSError, ValueError):
-        pass
+_WORKER = "simulation worker"  # (how errors and warnings name the worker process)
 
 
 def _load_draw_kernels(detector: Detector) -> None:
@@ -296,33 +261,6 @@ def _load_draw_kernels(detector: Detector) -> None:
     seen = np.ones((1, J), dtype=bool)
     spare.detection_rows_of([Capture(0, None, 0.0, 0.0, 0.0)], np.ones((1, J, 2)), seen, ~seen, ~seen,
                             person_ids=[np.zeros(1, np.int64)])
-
-
-_STOP_WAIT_S = 5.0
-"""How long a stopping worker is given to end after SIGTERM, then after SIGKILL, seconds."""
-
-
-def _stop(worker) -> None:
-    """Ends the worker process and reaps it: SIGTERM, then SIGKILL if it has not ended in `_STOP_WAIT_S`
-    (it may be stuck, e.g. on a lock a fork copied held), so that stopping never hangs."""
-    if worker.is_alive():
-        worker.terminate()
-        worker.join(_STOP_WAIT_S)
-    if worker.is_alive():
-        log.warning("the simulation worker process did not end on SIGTERM; killing it")
-        worker.kill()
-        worker.join(_STOP_WAIT_S)
-    if worker.exitcode is None:
-        log.warning("the simulation worker process %d could not be reaped", worker.pid)
-    else:
-        worker.join()
-
-
-def _usable_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # pragma: no cover - not Linux
-        return os.cpu_count() or 1
 
 
 def _pack_block(block: Block, min_size_px: np.ndarray) -> tuple:

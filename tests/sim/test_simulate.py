@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import signal
 
 import numpy as np
 import pytest
@@ -163,29 +162,3 @@ def test_a_consumer_failure_mid_stream_stops_the_worker_at_once(small):
         kept.append(failure)
         calls.clear()
         assert multiprocessing.active_children() == []
-
-
-def test_stopping_a_worker_that_ignores_sigterm_kills_it(monkeypatch):
-    """A worker stuck where SIGTERM cannot end it is killed after the wait, and reaped: stopping never hangs."""
-    import multiprocessing
-
-    from sim import simulate
-
-    monkeypatch.setattr(simulate, "_STOP_WAIT_S", 0.5)
-    context = multiprocessing.get_context("fork")
-    ready = context.Event()
-    worker = context.Process(target=_ignore_sigterm_forever, args=(ready,), daemon=True)
-    worker.start()
-    assert ready.wait(60)  # (it has set SIGTERM aside)
-    simulate._stop(worker)
-    assert worker.exitcode == -signal.SIGKILL
-    assert multiprocessing.active_children() == []
-
-
-def _ignore_sigterm_forever(ready):
-    import time
-
-    signal.signal(signal.SIGTERM, signal.SIG_IGN)
-    ready.set()
-    while True:
-        time.sleep(1)

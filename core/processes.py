@@ -1,0 +1,106 @@
+"""The plumbing of the forked worker processes that work beside a command (the simulation's, the 2D scorer's):
+how many cores there are, how a worker starts, how its failure reaches the command, how it is stopped.
+
+A worker ignores Ctrl-C (the whole process group gets it; the command decides), hands its error over to be
+raised in the command, and is stopped and reaped whenever the command stops using it.
+"""
+
+from __future__ import annotations
+
+import logging
+import multiprocessing
+import os
+import signal
+import traceback
+
+log = logging.getLogger(__name__)
+
+STOP_WAIT_S = 5.0
+"""How long a stopping worker is given to end after SIGTERM, then after SIGKILL, seconds."""
+
+
+def usable_cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def can_fork_worker() -> bool:
+    """Whether a worker process would run beside this one: more than one core, and fork to start it."""
+    return usable_cores() > 1 and "fork" in multiprocessing.get_all_start_methods()
+
+
+def start_worker(target, args: tuple, name: str, pipe_bytes: int | None = None):
+    """Forks a daemon process running target(*args, sender) and returns (process, receiver): what target
+    sends on `sender` arrives on `receiver`, through a pipe of `pipe_bytes` when given (Linux; elsewhere,
+    or when refused, the system's default). target should call `worker_signals` first and hand any failure
+    over with `send_error`."""
+    context = multiprocessing.get_context("fork")
+    receiver, sender = context.Pipe(duplex=False)
+    if pipe_bytes:
+        _widen_pipe(sender, pipe_bytes)
+    worker = context.Process(target=target, args=(*args, sender), name=name, daemon=True)
+    worker.start()
+    sender.close()
+    return worker, receiver
+
+
+def worker_signals() -> None:
+    """In a worker: Ctrl-C is the command's to handle; SIGTERM and SIGHUP end the worker (the command's
+    handlers, inherited through the fork, are not the worker's)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for ending in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(ending, signal.SIG_DFL)
+
+
+def send_error(sender, error: BaseException, what: str) -> None:
+    """In a worker: hands `error` over to be raised in the command, with where it happened (a note with the
+    worker's traceback); an error that cannot be pickled goes as a RuntimeError naming it."""
+    error.add_note(f"raised in the {what} process:\n" + traceback.format_exc().rstrip())
+    try:
+        sender.send(("error", error))
+    except BrokenPipeError:  # the command is gone
+        pass
+    except (TypeError, ValueError, AttributeError):  # an unpicklable error
+        sender.send(("error", RuntimeError(f"{what}: {type(error).__name__}: {error}")))
+
+
+def receive(receiver, worker, what: str):
+    """The next (kind, payload) a worker sent; its error, when it sent one, is raised here."""
+    try:
+        kind, payload = receiver.recv()
+    except EOFError:
+        raise RuntimeError(f"the {what} process stopped unexpectedly (exit code {worker.exitcode})") from None
+    if kind == "error":
+        raise payload
+    return kind, payload
+
+
+def stop_worker(worker, what: str) -> None:
+    """Ends the worker process and reaps it: SIGTERM, then SIGKILL if it has not ended in `STOP_WAIT_S` (it
+    may be stuck, e.g. on a lock a fork copied held), so that stopping never hangs."""
+    if worker.is_alive():
+        worker.terminate()
+        worker.join(STOP_WAIT_S)
+    if worker.is_alive():
+        log.warning("the %s process did not end on SIGTERM; killing it", what)
+        worker.kill()
+        worker.join(STOP_WAIT_S)
+    if worker.exitcode is None:
+        log.warning("the %s process %d could not be reaped", what, worker.pid)
+    else:
+        worker.join()
+
+
+def _widen_pipe(connection, pipe_bytes: int) -> None:
+    """Asks for a pipe of `pipe_bytes` (at most the system's limit) behind `connection`."""
+    try:
+        import fcntl
+
+        with open("/proc/sys/fs/pipe-max-size") as f:
+            limit = int(f.read())
+        fcntl.fcntl(connection.fileno(), fcntl.F_SETPIPE_SZ, min(pipe_bytes, limit))
+    except (ImportError, AttributeError, OSError, ValueError):
+        pass

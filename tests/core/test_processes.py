@@ -1,0 +1,67 @@
+"""The worker-process plumbing: failures reach the command as what they were, stopping never hangs."""
+
+import multiprocessing
+import signal
+
+import pytest
+
+from core import processes
+
+
+def _fails(sender):
+    processes.worker_signals()
+    try:
+        raise ArithmeticError("worker broke")
+    except BaseException as e:
+        processes.send_error(sender, e, "test worker")
+    finally:
+        sender.close()
+
+
+def _answers(value, sender):
+    processes.worker_signals()
+    sender.send(("result", value))
+    sender.close()
+
+
+def _exits(sender):
+    raise SystemExit(3)
+
+
+def test_a_worker_hands_over_its_result_or_its_error_and_is_reaped():
+    worker, receiver = processes.start_worker(_answers, ({"a": 1},), "test-worker", pipe_bytes=1 << 20)
+    assert processes.receive(receiver, worker, "test worker") == ("result", {"a": 1})
+    processes.stop_worker(worker, "test worker")
+    worker, receiver = processes.start_worker(_fails, (), "test-worker")
+    with pytest.raises(ArithmeticError, match="worker broke") as failure:
+        processes.receive(receiver, worker, "test worker")
+    assert any("raised in the test worker process" in note for note in failure.value.__notes__)
+    processes.stop_worker(worker, "test worker")
+    worker, receiver = processes.start_worker(_exits, (), "test-worker")
+    with pytest.raises(RuntimeError, match="the test worker process stopped unexpectedly"):
+        processes.receive(receiver, worker, "test worker")
+    processes.stop_worker(worker, "test worker")
+    assert worker.exitcode == 3
+    assert multiprocessing.active_children() == []
+
+
+def test_stopping_a_worker_that_ignores_sigterm_kills_it(monkeypatch):
+    """A worker stuck where SIGTERM cannot end it is killed after the wait, and reaped: stopping never hangs."""
+    monkeypatch.setattr(processes, "STOP_WAIT_S", 0.5)
+    context = multiprocessing.get_context("fork")
+    ready = context.Event()
+    worker = context.Process(target=_ignore_sigterm_forever, args=(ready,), daemon=True)
+    worker.start()
+    assert ready.wait(60)  # (it has set SIGTERM aside)
+    processes.stop_worker(worker, "test worker")
+    assert worker.exitcode == -signal.SIGKILL
+    assert multiprocessing.active_children() == []
+
+
+def _ignore_sigterm_forever(ready):
+    import time
+
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    ready.set()
+    while True:
+        time.sleep(1)
