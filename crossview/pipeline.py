@@ -11,6 +11,7 @@ import dataclasses
 import json
 import logging
 import math
+import multiprocessing
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -361,14 +362,20 @@ def open_run(rec_path: Path, tracks_path: Path):
     return rec, tracks
 
 
-def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
+def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_process: bool | None = None):
     """Scores a tracks file, or a result file (result_3d.json or JSON lines, `crossview.results`), against
     the recording it was made from; returns (report, json dict).
 
     A result file holds no detection assignments, cameras or timings: association accuracy, the per-camera
-    table and the FPS figures are then left out (null)."""
+    table and the FPS figures are then left out (null).
+
+    worker_process: compute the per-camera 2D scores of a tracks file in a second process (forked), which
+    reads the tracks file on its own while this one computes the rest: the same figures, in about half
+    the time at 240 cameras. None: where the machine has more than one core; True: wherever fork exists.
+    """
     from tqdm import tqdm
 
+    from core import processes
     from crossview import recording
     from crossview.results import is_result_file, read_results
     from crossview.scoring import TruthTimeline
@@ -388,8 +395,22 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
         summary = tracks.summary or {}
         frames = rec.frames() if summary.get(ASSIGNMENTS_KEY, True) else None
         cameras = rec.cameras
-    report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
-                           skeleton=rec.skeleton)
+    if worker_process is None:
+        worker_process = processes.can_fork_worker()
+    beside = None
+    if cameras is not None and worker_process and "fork" in multiprocessing.get_all_start_methods():
+        # (forked after the truth is read: the worker shares its pages instead of reading it again)
+        beside = processes.start_worker(_camera_2d_worker, (truth, rec.skeleton.num_joints, rec.cameras,
+                                                            Path(tracks_path)), "crossview-score-2d")
+    try:
+        report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
+                               skeleton=rec.skeleton, projected=beside is None)
+        if beside is not None:
+            report.camera_2d = processes.receive(beside[1], beside[0], _SCORE_WORKER)[1]
+    finally:
+        if beside is not None:
+            beside[1].close()
+            processes.stop_worker(beside[0], _SCORE_WORKER)
     tracker_s = summary.get("tracker_s") or 0.0
     updates = summary.get("updates") or len(counted)
     cams = len(rec.cameras)
@@ -405,6 +426,28 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True):
         camera_frames_per_s=frames_per_s,
     )
     return report, result
+
+
+_SCORE_WORKER = "2D scoring worker"  # (how errors and warnings name the process)
+
+
+def _camera_2d_worker(truth, num_joints: int, cameras, tracks_path: Path, sender) -> None:
+    """The second process of `score`: the per-camera 2D scores of the tracks file, sent back (or its error)."""
+    from core import processes
+    from crossview import recording
+    from crossview.scoring import TruthTimeline
+    from crossview.scoring.per_camera import projected_2d_scores
+
+    processes.worker_signals()
+    try:
+        timeline = TruthTimeline(truth)
+        timeline.num_joints = num_joints
+        sender.send(("result", projected_2d_scores(recording.open_tracks(tracks_path).outputs(), cameras,
+                                                   timeline.at)))
+    except BaseException as e:
+        processes.send_error(sender, e, _SCORE_WORKER)
+    finally:
+        sender.close()
 
 
 class _Counted:

@@ -148,6 +148,7 @@ def score(
     hota_zero_distance_m: float = HOTA_ZERO_DISTANCE_M,
     scored_area: tuple[float, float, float, float] | None = None,
     skeleton: Skeleton = COCO17,
+    projected: bool = True,
 ) -> ScoreReport:
     """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
 
@@ -156,12 +157,15 @@ def score(
         outputs: tracker outputs in delivery order, read once (a stream: only one per grid tick is kept).
         camera_frames: delivered frames with per-detection truth, in delivery order, read once alongside the
             outputs; enables association accuracy.
-        cameras: calibrated cameras; enables the per-camera 2D scores.
+        cameras: calibrated cameras; enables the per-camera 2D scores (and the check that the outputs come
+            from them).
         eval_rate_hz: rate of the evaluation grid.
         root_threshold_m: ground-plane gate of MOTA/IDF1, metres.
         hota_zero_distance_m: distance at which the HOTA similarity reaches 0, metres.
         scored_area: (x_min, y_min, x_max, y_max) of the floor the cameras watch, metres; None: everywhere.
         skeleton: the joint layout of the truth and the targets (the recording's).
+        projected: with cameras, also the per-camera 2D scores (`camera_2d`); False leaves them to the caller
+            (`crossview.pipeline.score` computes them in a second process: `projected_2d_scores`).
 
     Returns:
         the report; metrics that cannot be measured are None.
@@ -189,7 +193,7 @@ def score(
     names = None if cameras is None else {c.name for c in cameras}
     foreign: set[str] = set()
     num_outputs = inside = 0
-    projected = Projected2DAccumulator(cameras, timeline.at) if cameras is not None else None
+    projected = Projected2DAccumulator(cameras, timeline.at) if cameras is not None and projected else None
     association = AssociationAccumulator() if camera_frames is not None else None
     frames = iter(camera_frames) if camera_frames is not None else iter(())
     for out in outputs:

@@ -1,6 +1,7 @@
 """The main job end to end on a short run: generate, track, score, through the command line."""
 
 import json
+import multiprocessing
 import os
 import signal
 import subprocess
@@ -50,6 +51,27 @@ def test_the_campus_rig_scenario_runs_end_to_end(tmp_path):
     assert (score["scenario"], score["num_cameras"], score["num_people"], score["duration_s"]) == ("campus", 3, 3, 3)
     # Three people, each seen by at least two of the three cameras: the tracker must find them.
     assert score["pcp"] > 0.8 and score["idf1"] > 0.8
+
+
+def test_the_2d_scores_of_a_second_process_are_those_of_one(short_run, monkeypatch):
+    """`score` leaves the per-camera 2D scores to a forked process: the same JSON as in one process; a failure
+    there is raised here, as what it was, and no process is left behind."""
+    from crossview.scoring import per_camera
+
+    rec, tracks = short_run / "store_layout1.mcap", short_run / "store_layout1.tracks.mcap"
+    _, alone = pipeline.score(rec, tracks, progress=False, worker_process=False)
+    _, beside = pipeline.score(rec, tracks, progress=False, worker_process=True)
+    assert beside == alone and len(alone["camera_2d"]) == 12
+    assert multiprocessing.active_children() == []
+
+    def broken(*args):
+        raise ArithmeticError("2D scoring broke")
+
+    monkeypatch.setattr(per_camera, "projected_2d_scores", broken)
+    with pytest.raises(ArithmeticError, match="2D scoring broke") as failure:
+        pipeline.score(rec, tracks, progress=False, worker_process=True)
+    assert any("raised in the 2D scoring worker process" in note for note in failure.value.__notes__)
+    assert multiprocessing.active_children() == []
 
 
 def test_tracks_are_refused_against_another_recording(short_run, tmp_path, capsys):
