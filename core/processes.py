@@ -15,6 +15,8 @@ import traceback
 
 log = logging.getLogger(__name__)
 
+_ENDING = {signal.SIGINT, signal.SIGTERM, signal.SIGHUP}
+
 STOP_WAIT_S = 5.0
 """How long a stopping worker is given to end after SIGTERM, then after SIGKILL, seconds."""
 
@@ -42,7 +44,14 @@ def start_worker(target, args: tuple, name: str, pipe_bytes: int | None = None):
     if pipe_bytes:
         _widen_pipe(sender, pipe_bytes)
     worker = context.Process(target=target, args=(*args, sender), name=name, daemon=True)
-    worker.start()
+    # The worker is born with the ending signals blocked, until `worker_signals` has set its own handling:
+    # a Ctrl-C reaching the whole group a moment after the fork would otherwise raise in the worker's start.
+    # (Here they wait for the fork, then arrive.)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, _ENDING)
+    try:
+        worker.start()
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
     sender.close()
     return worker, receiver
 
@@ -50,9 +59,10 @@ def start_worker(target, args: tuple, name: str, pipe_bytes: int | None = None):
 def worker_signals() -> None:
     """In a worker: Ctrl-C is the command's to handle; SIGTERM and SIGHUP end the worker (the command's
     handlers, inherited through the fork, are not the worker's)."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # (a Ctrl-C that came since the fork is dropped)
     for ending in (signal.SIGTERM, signal.SIGHUP):
         signal.signal(ending, signal.SIG_DFL)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _ENDING)
 
 
 def send_error(sender, error: BaseException, what: str) -> None:

@@ -96,6 +96,37 @@ def test_a_signal_ends_every_command_cleanly(command, signum, tmp_path, recordin
         os.killpg(group, 0)
 
 
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_while_score_has_its_2d_worker_ends_both(signum, tmp_path, recording_5s):
+    tracks = tmp_path / "t.mcap"
+    assert main(["--no-progress", "track", str(recording_5s), "-o", str(tracks)]) == 0
+    argv = ["score", str(recording_5s), str(tracks), "--json", str(tmp_path / "s.json")]
+    process = subprocess.Popen([*CROSSVIEW, *argv], stderr=subprocess.PIPE, text=True, start_new_session=True,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    children = Path(f"/proc/{process.pid}/task/{process.pid}/children")
+    try:
+        deadline = time.monotonic() + 300
+        while process.poll() is None and time.monotonic() < deadline and not children.read_text().split():
+            time.sleep(0.002)
+        process.send_signal(signal.SIGSTOP)
+        assert children.read_text().split(), f"score never started its worker (exit {process.poll()})"
+        if signum == signal.SIGINT:  # Ctrl-C in a terminal reaches the whole group, the worker too
+            os.killpg(process.pid, signum)
+        else:
+            process.send_signal(signum)
+        process.send_signal(signal.SIGCONT)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 128 + signum, err
+    assert err.strip().splitlines()[-1].startswith("crossview: "), err
+    assert not (tmp_path / "s.json").exists()
+    time.sleep(0.2)
+    with pytest.raises(ProcessLookupError):  # the worker is gone too
+        os.killpg(process.pid, 0)
+
+
 def test_an_error_mid_generation_in_process_leaves_no_worker_and_no_file(tmp_path, monkeypatch):
     """An error raised by the consumer in the middle of `generate`, again and again in one long-lived
     process with every traceback kept: each call returns (the worker stopped at once), leaving nothing."""
