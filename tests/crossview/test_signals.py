@@ -31,20 +31,23 @@ def _temporaries(folder: Path, part: str = "") -> list[Path]:
     return [p for p in folder.rglob("*") if p.name.endswith(".tmp") and part in p.name]
 
 
-def _signal_while_writing(argv, watched: Path, signum: int, env=None, part: str = "") -> tuple[str, int]:
-    """Runs `crossview ARGV`, signals it while a temporary output (with `part` in its name) exists under
-    `watched`; returns its stderr and process id (which is its group's)."""
+def _signal_when(argv, ready, what: str, signum: int, env=None, group: bool = False) -> tuple[str, int]:
+    """Runs `crossview ARGV`, signals it (its whole process group with `group`, as Ctrl-C in a terminal does)
+    once ready(process) holds; returns its stderr and process id (which is its group's)."""
     # (SIGINT at its default, as in a terminal: a shell starts background jobs, and so a suite run in the
     # background, with SIGINT ignored, which Python and its children keep)
     process = subprocess.Popen([*CROSSVIEW, *argv], stderr=subprocess.PIPE, text=True, start_new_session=True,
                                env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         deadline = time.monotonic() + 300
-        while not _temporaries(watched, part) and process.poll() is None and time.monotonic() < deadline:
+        while not ready(process) and process.poll() is None and time.monotonic() < deadline:
             time.sleep(0.002)
         process.send_signal(signal.SIGSTOP)
-        assert _temporaries(watched, part), f"{argv}: never wrote (exit {process.poll()})"
-        process.send_signal(signum)
+        assert ready(process), f"{argv}: never {what} (exit {process.poll()})"
+        if group:
+            os.killpg(process.pid, signum)
+        else:
+            process.send_signal(signum)
         process.send_signal(signal.SIGCONT)
         _, err = process.communicate(timeout=120)
     finally:
@@ -52,6 +55,11 @@ def _signal_while_writing(argv, watched: Path, signum: int, env=None, part: str 
             os.killpg(process.pid, signal.SIGKILL)
     assert process.returncode == 128 + signum, err
     return err, process.pid
+
+
+def _signal_while_writing(argv, watched: Path, signum: int, env=None, part: str = "") -> tuple[str, int]:
+    """`_signal_when` a temporary output (with `part` in its name) exists under `watched`."""
+    return _signal_when(argv, lambda _: bool(_temporaries(watched, part)), "wrote", signum, env)
 
 
 # Every command that writes, each under one of the three signals (generate under all three).
@@ -101,30 +109,16 @@ def test_a_signal_while_score_has_its_2d_worker_ends_both(signum, tmp_path, reco
     tracks = tmp_path / "t.mcap"
     assert main(["--no-progress", "track", str(recording_5s), "-o", str(tracks)]) == 0
     argv = ["score", str(recording_5s), str(tracks), "--json", str(tmp_path / "s.json")]
-    process = subprocess.Popen([*CROSSVIEW, *argv], stderr=subprocess.PIPE, text=True, start_new_session=True,
-                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    children = Path(f"/proc/{process.pid}/task/{process.pid}/children")
-    try:
-        deadline = time.monotonic() + 300
-        while process.poll() is None and time.monotonic() < deadline and not children.read_text().split():
-            time.sleep(0.002)
-        process.send_signal(signal.SIGSTOP)
-        assert children.read_text().split(), f"score never started its worker (exit {process.poll()})"
-        if signum == signal.SIGINT:  # Ctrl-C in a terminal reaches the whole group, the worker too
-            os.killpg(process.pid, signum)
-        else:
-            process.send_signal(signum)
-        process.send_signal(signal.SIGCONT)
-        _, err = process.communicate(timeout=120)
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-    assert process.returncode == 128 + signum, err
+
+    def has_worker(process):
+        return bool(Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split())
+
+    err, group = _signal_when(argv, has_worker, "started its worker", signum, group=signum == signal.SIGINT)
     assert err.strip().splitlines()[-1].startswith("crossview: "), err
     assert not (tmp_path / "s.json").exists()
     time.sleep(0.2)
     with pytest.raises(ProcessLookupError):  # the worker is gone too
-        os.killpg(process.pid, 0)
+        os.killpg(group, 0)
 
 
 def test_an_error_mid_generation_in_process_leaves_no_worker_and_no_file(tmp_path, monkeypatch):
