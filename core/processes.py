@@ -29,31 +29,64 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
+def can_fork() -> bool:
+    """Whether this platform starts processes by fork (a `Worker` needs it)."""
+    return "fork" in multiprocessing.get_all_start_methods()
+
+
 def can_fork_worker() -> bool:
     """Whether a worker process would run beside this one: more than one core, and fork to start it."""
-    return usable_cores() > 1 and "fork" in multiprocessing.get_all_start_methods()
+    return usable_cores() > 1 and can_fork()
 
 
-def start_worker(target, args: tuple, name: str, pipe_bytes: int | None = None):
-    """Forks a daemon process running target(*args, sender) and returns (process, receiver): what target
-    sends on `sender` arrives on `receiver`, through a pipe of `pipe_bytes` when given (Linux; elsewhere,
-    or when refused, the system's default). target should call `worker_signals` first and hand any failure
-    over with `send_error`."""
-    context = multiprocessing.get_context("fork")
-    receiver, sender = context.Pipe(duplex=False)
-    if pipe_bytes:
-        _widen_pipe(sender, pipe_bytes)
-    worker = context.Process(target=target, args=(*args, sender), name=name, daemon=True)
-    # The worker is born with the ending signals blocked, until `worker_signals` has set its own handling:
-    # a Ctrl-C reaching the whole group a moment after the fork would otherwise raise in the worker's start.
-    # (Here they wait for the fork, then arrive.)
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, _ENDING)
-    try:
-        worker.start()
-    finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
-    sender.close()
-    return worker, receiver
+class Worker:
+    """A daemon process forked to run target(*args, sender): what target sends on `sender` arrives through
+    `receive`, through a pipe of `pipe_bytes` when given (Linux; elsewhere, or when refused, the system's
+    default). target should call `worker_signals` first and hand any failure over with `send_error`.
+
+    Made first, started then, inside the try whose finally calls `stop`: a signal that arrives right after
+    the fork (it is held back during it) then still finds the worker to stop.
+
+    Args:
+        what: how errors and warnings name it ("simulation worker").
+    """
+
+    def __init__(self, target, args: tuple, name: str, what: str, pipe_bytes: int | None = None):
+        context = multiprocessing.get_context("fork")
+        self.what = what
+        self._receiver, self._sender = context.Pipe(duplex=False)
+        if pipe_bytes:
+            _widen_pipe(self._sender, pipe_bytes)
+        self.process = context.Process(target=target, args=(*args, self._sender), name=name, daemon=True)
+
+    def start(self) -> None:
+        """Forks the worker. It is born with the ending signals blocked, until `worker_signals` has set its
+        own handling: a Ctrl-C reaching the whole group a moment after the fork would otherwise raise in its
+        start-up. (Here they wait for the fork, then arrive.)"""
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, _ENDING)
+        try:
+            self.process.start()
+            self._sender.close()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+
+    def receive(self):
+        """The next (kind, payload) the worker sent; its error, when it sent one, is raised here."""
+        try:
+            kind, payload = self._receiver.recv()
+        except EOFError:
+            raise RuntimeError(f"the {self.what} process stopped unexpectedly (exit code "
+                               f"{self.process.exitcode})") from None
+        if kind == "error":
+            raise payload
+        return kind, payload
+
+    def stop(self) -> None:
+        """Closes the pipe, and ends and reaps the worker if it was started (`stop_worker`)."""
+        self._receiver.close()
+        self._sender.close()
+        if self.process.pid is not None:
+            stop_worker(self.process, self.what)
 
 
 def worker_signals() -> None:
@@ -75,17 +108,6 @@ def send_error(sender, error: BaseException, what: str) -> None:
         pass
     except (TypeError, ValueError, AttributeError):  # an unpicklable error
         sender.send(("error", RuntimeError(f"{what}: {type(error).__name__}: {error}")))
-
-
-def receive(receiver, worker, what: str):
-    """The next (kind, payload) a worker sent; its error, when it sent one, is raised here."""
-    try:
-        kind, payload = receiver.recv()
-    except EOFError:
-        raise RuntimeError(f"the {what} process stopped unexpectedly (exit code {worker.exitcode})") from None
-    if kind == "error":
-        raise payload
-    return kind, payload
 
 
 def stop_worker(worker, what: str) -> None:

@@ -11,7 +11,6 @@ import dataclasses
 import json
 import logging
 import math
-import multiprocessing
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -398,19 +397,20 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
     if worker_process is None:
         worker_process = processes.can_fork_worker()
     beside = None
-    if cameras is not None and worker_process and "fork" in multiprocessing.get_all_start_methods():
+    if cameras is not None and worker_process and processes.can_fork():
         # (forked after the truth is read: the worker shares its pages instead of reading it again)
-        beside = processes.start_worker(_camera_2d_worker, (truth, rec.skeleton.num_joints, rec.cameras,
-                                                            Path(tracks_path)), "crossview-score-2d")
+        beside = processes.Worker(_camera_2d_worker, (truth, rec.skeleton.num_joints, rec.cameras,
+                                                      Path(tracks_path)), "crossview-score-2d", _SCORE_WORKER)
     try:
+        if beside is not None:
+            beside.start()
         report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
                                skeleton=rec.skeleton, projected=beside is None)
         if beside is not None:
-            report.camera_2d = processes.receive(beside[1], beside[0], _SCORE_WORKER)[1]
+            report.camera_2d = beside.receive()[1]
     finally:
         if beside is not None:
-            beside[1].close()
-            processes.stop_worker(beside[0], _SCORE_WORKER)
+            beside.stop()
     tracker_s = summary.get("tracker_s") or 0.0
     updates = summary.get("updates") or len(counted)
     cams = len(rec.cameras)

@@ -206,14 +206,15 @@ class Simulation:
         # would hang the worker's first parallel OpenCV call (the store's distance transform) on that lock:
         # OpenCV runs on the calling thread alone from here on (its calls in this project are small).
         cv2.setNumThreads(0)
-        worker, receiver = processes.start_worker(self._work, (duration,), "crossview-simulation", _PIPE_BYTES)
+        worker = processes.Worker(self._work, (duration,), "crossview-simulation", _WORKER, _PIPE_BYTES)
         previous = None  # the last truth tick of the previous block
         try:
+            worker.start()
             _load_draw_kernels(self.detector)
             if while_starting is not None:
                 while_starting()
             while True:
-                kind, payload = processes.receive(receiver, worker, _WORKER)  # (its error is raised here)
+                kind, payload = worker.receive()  # (its error is raised here)
                 if kind == "block":
                     t, truths, requests, visible, people = _unpack_block(payload, previous, with_poses)
                     previous = truths[-1] if truths else previous
@@ -227,8 +228,7 @@ class Simulation:
                     self.detector.visibility_counts[:] = payload
                     return
         finally:
-            receiver.close()
-            processes.stop_worker(worker, _WORKER)
+            worker.stop()
 
     def _work(self, duration: float, sender) -> None:
         """The worker process: simulates and sends every block, then the detector's counts (or its error)."""

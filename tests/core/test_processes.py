@@ -29,19 +29,24 @@ def _exits(sender):
 
 
 def test_a_worker_hands_over_its_result_or_its_error_and_is_reaped():
-    worker, receiver = processes.start_worker(_answers, ({"a": 1},), "test-worker", pipe_bytes=1 << 20)
-    assert processes.receive(receiver, worker, "test worker") == ("result", {"a": 1})
-    processes.stop_worker(worker, "test worker")
-    worker, receiver = processes.start_worker(_fails, (), "test-worker")
+    worker = processes.Worker(_answers, ({"a": 1},), "test-worker", "test worker", pipe_bytes=1 << 20)
+    worker.stop()  # (never started: nothing to stop)
+    worker = processes.Worker(_answers, ({"a": 1},), "test-worker", "test worker", pipe_bytes=1 << 20)
+    worker.start()
+    assert worker.receive() == ("result", {"a": 1})
+    worker.stop()
+    worker = processes.Worker(_fails, (), "test-worker", "test worker")
+    worker.start()
     with pytest.raises(ArithmeticError, match="worker broke") as failure:
-        processes.receive(receiver, worker, "test worker")
+        worker.receive()
     assert any("raised in the test worker process" in note for note in failure.value.__notes__)
-    processes.stop_worker(worker, "test worker")
-    worker, receiver = processes.start_worker(_exits, (), "test-worker")
+    worker.stop()
+    worker = processes.Worker(_exits, (), "test-worker", "test worker")
+    worker.start()
     with pytest.raises(RuntimeError, match="the test worker process stopped unexpectedly"):
-        processes.receive(receiver, worker, "test worker")
-    processes.stop_worker(worker, "test worker")
-    assert worker.exitcode == 3
+        worker.receive()
+    worker.stop()
+    assert worker.process.exitcode == 3
     assert multiprocessing.active_children() == []
 
 
