@@ -242,12 +242,7 @@ def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, ins
             horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
             for k in range(3):
                 c[k] += (pos[r, j, k] + vel[r, j, k] * horizon) / hips.size
-        depth = np.inf
-        for p in range(planes.shape[0]):
-            depth = min(depth, planes[p, 0] * c[0] + planes[p, 1] * c[1] + planes[p, 2] * c[2] + planes[p, 3])
-        # False for a hip unknown: min() keeps the running depth when a plane gives NaN (NaN < x is False), so
-        # the NaN hip centre itself is tested
-        seen = depth >= inside_m and np.isfinite(c[0] + c[1] + c[2])
+        seen = inside_volume(planes, c[0], c[1], c[2], -inside_m)  # False for NaN (a hip unknown)
         if not (seen or matched[r]):
             continue
         rate = 1.0
