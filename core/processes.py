@@ -42,7 +42,8 @@ def can_fork_worker() -> bool:
 class Worker:
     """A daemon process forked to run target(*args, sender): what target sends on `sender` arrives through
     `receive`, through a pipe of `pipe_bytes` when given (Linux; elsewhere, or when refused, the system's
-    default). target should call `worker_signals` first and hand any failure over with `send_error`.
+    default). The worker's signal handling, the hand-over of target's error and the closing of `sender` are
+    the Worker's (`_serve`): target only computes and sends.
 
     Made first, started then, inside the try whose finally calls `stop`: a signal that arrives right after
     the fork (it is held back during it) then still finds the worker to stop.
@@ -57,10 +58,11 @@ class Worker:
         self._receiver, self._sender = context.Pipe(duplex=False)
         if pipe_bytes:
             _widen_pipe(self._sender, pipe_bytes)
-        self.process = context.Process(target=target, args=(*args, self._sender), name=name, daemon=True)
+        self.process = context.Process(target=_serve, args=(target, args, self._sender, what), name=name,
+                                       daemon=True)
 
     def start(self) -> None:
-        """Forks the worker. It is born with the ending signals blocked, until `worker_signals` has set its
+        """Forks the worker. It is born with the ending signals blocked, until `_worker_signals` has set its
         own handling: a Ctrl-C reaching the whole group a moment after the fork would otherwise raise in its
         start-up. (Here they wait for the fork, then arrive.)"""
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, _ENDING)
@@ -89,7 +91,21 @@ class Worker:
             stop_worker(self.process, self.what)
 
 
-def worker_signals() -> None:
+def _serve(target, args: tuple, sender, what: str) -> None:
+    """The worker process: its signal handling, then target(*args, sender); target's error is handed over to
+    be raised in the command, and a command that is gone (a broken pipe) ends the worker quietly."""
+    _worker_signals()
+    try:
+        target(*args, sender)
+    except BrokenPipeError:  # the command is gone
+        pass
+    except BaseException as e:
+        _send_error(sender, e, what)
+    finally:
+        sender.close()
+
+
+def _worker_signals() -> None:
     """In a worker: Ctrl-C is the command's to handle; SIGTERM and SIGHUP end the worker (the command's
     handlers, inherited through the fork, are not the worker's)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # (a Ctrl-C that came since the fork is dropped)
@@ -98,7 +114,7 @@ def worker_signals() -> None:
     signal.pthread_sigmask(signal.SIG_UNBLOCK, _ENDING)
 
 
-def send_error(sender, error: BaseException, what: str) -> None:
+def _send_error(sender, error: BaseException, what: str) -> None:
     """In a worker: hands `error` over to be raised in the command, with where it happened (a note with the
     worker's traceback); an error that cannot be pickled goes as a RuntimeError naming it."""
     error.add_note(f"raised in the {what} process:\n" + traceback.format_exc().rstrip())

@@ -369,8 +369,9 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
     table and the FPS figures are then left out (null).
 
     worker_process: compute the per-camera 2D scores of a tracks file in a second process (forked), which
-    reads the tracks file on its own while this one computes the rest: the same figures, in about half
-    the time at 240 cameras. None: where the machine has more than one core; True: wherever fork exists.
+    reads the tracks file on its own while this one computes the rest: the same figures, 1.2-1.4x sooner
+    at 240 cameras (docs/metrics.md, "Speed"). None: where the machine has more than one core; True:
+    wherever fork exists.
     """
     from tqdm import tqdm
 
@@ -432,22 +433,14 @@ _SCORE_WORKER = "2D scoring worker"  # (how errors and warnings name the process
 
 
 def _camera_2d_worker(truth, num_joints: int, cameras, tracks_path: Path, sender) -> None:
-    """The second process of `score`: the per-camera 2D scores of the tracks file, sent back (or its error)."""
-    from core import processes
+    """The second process of `score` (`processes.Worker`): the per-camera 2D scores of the tracks file."""
     from crossview import recording
     from crossview.scoring import TruthTimeline
     from crossview.scoring.per_camera import projected_2d_scores
 
-    processes.worker_signals()
-    try:
-        timeline = TruthTimeline(truth)
-        timeline.num_joints = num_joints
-        sender.send(("result", projected_2d_scores(recording.open_tracks(tracks_path).outputs(), cameras,
-                                                   timeline.at)))
-    except BaseException as e:
-        processes.send_error(sender, e, _SCORE_WORKER)
-    finally:
-        sender.close()
+    timeline = TruthTimeline(truth)
+    timeline.num_joints = num_joints
+    sender.send(("result", projected_2d_scores(recording.open_tracks(tracks_path).outputs(), cameras, timeline.at)))
 
 
 class _Counted:

@@ -124,7 +124,9 @@ class Cell:
         tracker_overrides: fields of the tracker's configuration set over its preset (the `tracker.*` axes).
         error: why the cell's scenario is invalid (a failed cell that needs no worker); None if it is valid.
         keep_recording: return the recording's bytes.
-        worker_process: simulate in a second process (`crossview.pipeline.generate`).
+        worker_process: simulate, and compute the per-camera 2D scores, in a second process
+            (`crossview.pipeline.generate`, `crossview.pipeline.score`); False where cells already run side by
+            side.
     """
 
     index: int
@@ -448,7 +450,7 @@ def run_cell(cell: Cell) -> dict:
             trk = pipeline.track(rec, tracks, method=cell.method, preset=cell.preset,
                                  overrides=cell.tracker_overrides or None, progress=False)
             t1 = time.perf_counter()
-            _, score = pipeline.score(rec, tracks, progress=False)
+            _, score = pipeline.score(rec, tracks, progress=False, worker_process=cell.worker_process)
             timings.update(generate_s=gen.wall_s, generate_realtime_factor=gen.realtime_factor, track_s=t1 - t0,
                            score_s=time.perf_counter() - t1, tracker_fps=trk.tracker_fps,
                            camera_frames_per_s=trk.camera_frames_per_s)

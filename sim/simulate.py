@@ -231,18 +231,10 @@ class Simulation:
             worker.stop()
 
     def _work(self, duration: float, sender) -> None:
-        """The worker process: simulates and sends every block, then the detector's counts (or its error)."""
-        processes.worker_signals()
-        try:
-            for block in self._blocks(duration, draws=False):
-                sender.send(("block", _pack_block(block, self.detector.min_size_px)))
-            sender.send(("end", self.detector.visibility_counts))
-        except BrokenPipeError:  # the consumer is gone
-            pass
-        except BaseException as e:  # handed over to be raised in the consumer, with where it happened
-            processes.send_error(sender, e, _WORKER)
-        finally:
-            sender.close()
+        """The worker process (`processes.Worker`): simulates and sends every block, then the detector's counts."""
+        for block in self._blocks(duration, draws=False):
+            sender.send(("block", _pack_block(block, self.detector.min_size_px)))
+        sender.send(("end", self.detector.visibility_counts))
 
 
 # A block is about 640 kB on the wire (store_layout2; the visibility of its 84 captures is two thirds): the
