@@ -368,10 +368,10 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
     A result file holds no detection assignments, cameras or timings: association accuracy, the per-camera
     table and the FPS figures are then left out (null).
 
-    worker_process: compute the per-camera 2D scores of a tracks file in a second process (forked), which
-    reads the tracks file on its own while this one computes the rest: the same figures, 1.2-1.4x sooner
-    at 240 cameras (docs/metrics.md, "Speed"). None: where the machine has more than one core; True:
-    wherever fork exists.
+    worker_process: compute most of the per-camera 2D scores of a tracks file in a second process (forked),
+    which reads the tracks file on its own while this one computes the rest (`SCORED_HERE` of the cameras'
+    2D scores, and everything else): the same figures, sooner at 240 cameras (docs/metrics.md, "Speed").
+    None: where the machine has more than one core; True: wherever fork exists.
     """
     from tqdm import tqdm
 
@@ -398,17 +398,23 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
     if worker_process is None:
         worker_process = processes.can_fork_worker()
     beside = None
-    if cameras is not None and worker_process and processes.can_fork():
-        # (forked after the truth is read: the worker shares its pages instead of reading it again)
-        beside = processes.Worker(_camera_2d_worker, (truth, rec.skeleton.num_joints, rec.cameras,
+    here: bool | set[str] = True
+    if cameras is not None and len(cameras) > 1 and worker_process and processes.can_fork():
+        # Every SCORED_HERE-th camera here, the others in the worker, forked after the truth is read: it
+        # shares its pages instead of reading it again.
+        here = {c.name for c in cameras[::SCORED_HERE]}
+        beside = processes.Worker(_camera_2d_worker, (truth, rec.skeleton.num_joints,
+                                                      [c for c in cameras if c.name not in here],
                                                       Path(tracks_path)), "crossview-score-2d", _SCORE_WORKER)
     try:
         if beside is not None:
             beside.start()
         report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
-                               skeleton=rec.skeleton, projected=beside is None)
+                               skeleton=rec.skeleton, projected=here)
         if beside is not None:
-            report.camera_2d = beside.receive()[1]
+            there = beside.receive()[1]
+            report.camera_2d = {c.name: report.camera_2d[c.name] if c.name in here else there[c.name]
+                                for c in cameras}
     finally:
         if beside is not None:
             beside.stop()
@@ -431,16 +437,24 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
 
 _SCORE_WORKER = "2D scoring worker"  # (how errors and warnings name the process)
 
+SCORED_HERE = 3
+"""`score` with a worker computes the 2D scores of every SCORED_HERE-th camera itself, the worker those of
+the others. The worker's reading of the tracks file and the 2D scores took about 14 s over 6 s of the
+hypermarket, while the rest took about 8 s (2-core test machine, 2026-11-26): a third of the cameras here
+about evens them."""
+
 
 def _camera_2d_worker(truth, num_joints: int, cameras, tracks_path: Path, sender) -> None:
-    """The second process of `score` (`processes.Worker`): the per-camera 2D scores of the tracks file."""
+    """The second process of `score` (`processes.Worker`): the per-camera 2D scores of `cameras`."""
     from crossview import recording
     from crossview.scoring import TruthTimeline
     from crossview.scoring.per_camera import projected_2d_scores
 
     timeline = TruthTimeline(truth)
     timeline.num_joints = num_joints
-    sender.send(("result", projected_2d_scores(recording.open_tracks(tracks_path).outputs(), cameras, timeline.at)))
+    names = {c.name for c in cameras}
+    outputs = (out for out in recording.open_tracks(tracks_path).outputs() if out.camera in names)
+    sender.send(("result", projected_2d_scores(outputs, cameras, timeline.at)))
 
 
 class _Counted:

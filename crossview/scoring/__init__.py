@@ -22,7 +22,7 @@ each camera. See docs/metrics.md.
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable, Sequence
+from collections.abc import Collection, Iterable, Sequence
 
 import numpy as np
 
@@ -148,7 +148,7 @@ def score(
     hota_zero_distance_m: float = HOTA_ZERO_DISTANCE_M,
     scored_area: tuple[float, float, float, float] | None = None,
     skeleton: Skeleton = COCO17,
-    projected: bool = True,
+    projected: bool | Collection[str] = True,
 ) -> ScoreReport:
     """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
 
@@ -164,8 +164,10 @@ def score(
         hota_zero_distance_m: distance at which the HOTA similarity reaches 0, metres.
         scored_area: (x_min, y_min, x_max, y_max) of the floor the cameras watch, metres; None: everywhere.
         skeleton: the joint layout of the truth and the targets (the recording's).
-        projected: with cameras, also the per-camera 2D scores (`camera_2d`); False leaves them to the caller
-            (`crossview.pipeline.score` computes them in a second process: `projected_2d_scores`).
+        projected: with cameras, the cameras whose per-camera 2D scores (`camera_2d`) are computed here:
+            True every camera, False none, or a collection of camera names (those only, in `cameras`' order).
+            The caller computes the others (`crossview.pipeline.score` leaves a share to a second process:
+            `projected_2d_scores`).
 
     Returns:
         the report; metrics that cannot be measured are None.
@@ -193,7 +195,12 @@ def score(
     names = None if cameras is None else {c.name for c in cameras}
     foreign: set[str] = set()
     num_outputs = inside = 0
-    projected = Projected2DAccumulator(cameras, timeline.at) if cameras is not None and projected else None
+    if cameras is None or projected is False:
+        projected_cameras = []
+    else:
+        projected_cameras = [c for c in cameras if projected is True or c.name in projected]
+    projected_names = {c.name for c in projected_cameras}
+    camera_2d = Projected2DAccumulator(projected_cameras, timeline.at) if projected_cameras else None
     association = AssociationAccumulator() if camera_frames is not None else None
     frames = iter(camera_frames) if camera_frames is not None else iter(())
     for out in outputs:
@@ -205,8 +212,8 @@ def score(
         k = int(np.searchsorted(ticks, out.stamp_s, side="left"))
         if k < num_ticks and (k not in latest or out.stamp_s >= latest[k].stamp_s):
             latest[k] = out
-        if projected is not None:
-            projected.add(out)
+        if out.camera in projected_names:
+            camera_2d.add(out)
         if association is not None:
             association.add_output(out)
             while association.waiting_outputs and (cf := next(frames, None)) is not None:
@@ -289,6 +296,6 @@ def score(
         report.false_positive_detections_assigned = a.false_positive_assigned
         if a.frames_without_output:
             logger.warning("association accuracy: %d camera frames had no tracker output", a.frames_without_output)
-    if projected is not None:
-        report.camera_2d = projected.result()
+    if camera_2d is not None:
+        report.camera_2d = camera_2d.result()
     return report

@@ -162,6 +162,26 @@ def test_targets_given_as_arrays_score_as_the_same_targets_listed():
     assert a.camera_2d["side"].num_truth > 0 and a.id_switches == 2
 
 
+def test_the_2d_scores_of_some_cameras_are_those_of_all():
+    """`projected` names the cameras whose 2D scores `score` computes (`crossview.pipeline.score` leaves the
+    others to a second process): each is what scoring every camera gives, and the 3D report is unchanged."""
+    cams = [_camera(), _camera("side", center=(3.0, 0.0, 4.0), dist=(-0.1, 0.01, 0.0, 0.0, 0.0))]
+    truth = [PoseTruth(t, np.array([1, 2]), np.stack([_walker(1, t), _walker(2, t)]))
+             for t in np.arange(0, 2.001, 0.01)]
+    outputs = [_output(cams[k % 2].name, t, [], [Target(i, _walker(p, t) + 0.03 * np.cos(k), t) for i, p in
+                                                 ((10, 1), (20, 2) if t < 1 else (20, 1))])
+               for k, t in enumerate(np.arange(0, 2.001, 0.05))]
+    whole = score(truth, outputs, cameras=cams)
+    run = dict(scenario="two walkers", seed=0, num_cameras=2, num_people=2, duration_s=2.0)
+    assert set(whole.camera_2d) == {"top", "side"} and whole.camera_2d["side"].num_truth > 0
+    for names in ({"side"}, {"top"}, set()):
+        part = score(truth, outputs, cameras=cams, projected=names)
+        assert part.camera_2d == {n: whole.camera_2d[n] for n in ("top", "side") if n in names}
+        part.camera_2d = whole.camera_2d
+        assert part.to_json(**run) == whole.to_json(**run)
+    assert score(truth, outputs, cameras=cams, projected=False).camera_2d == {}
+
+
 def test_output_without_targets_counts_visible_people_as_misses_in_2d():
     cam = _camera()
     truth = [PoseTruth(t, np.array([1]), _walker(1, t)[None]) for t in np.arange(0, 1.001, 0.01)]
