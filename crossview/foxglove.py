@@ -41,7 +41,7 @@ from google.protobuf.timestamp_pb2 import Timestamp
 
 from core.types import Camera, Skeleton
 from sim.types import Box, BoxKind, CameraFrame, PoseTruth
-from tracker.types import TrackerOutput
+from tracker.types import TargetArrays, TrackerOutput
 
 WORLD_FRAME = "world"
 FRUSTUM_DEPTH_M = 0.6  # how far the drawn frustum reaches along the optical axis
@@ -377,19 +377,21 @@ def truth_skeletons(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> SceneUpd
     return _replace_all(t_ns, entities)
 
 
-@functools.lru_cache(maxsize=4096)
-def _truth_entity_parts(person_id: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
-    """Constant wire pieces of a person's truth entity: the id field, the bone line before and after
-    its points, and what follows the pose in the label and in the top sphere."""
-    rgba = truth_color(person_id)
+def _entity_parts(kind: str, identity: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
+    """Constant wire pieces of a skeleton entity (`kind` "truth": a person's, "track": a target's): the id
+    field, the bone line before and after its points, and what follows the pose in the label and in the top
+    sphere."""
+    prefix, rgba, thickness, label = (("person", truth_color(identity), TRUTH_LINE_M, f"p{identity}")
+                                      if kind == "truth" else
+                                      ("target", track_color(identity), TRACK_LINE_M, f"T{identity}"))
     line_head = LinePrimitive(type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)),
-                              thickness=TRUTH_LINE_M).SerializeToString()
+                              thickness=thickness).SerializeToString()
     line_tail = LinePrimitive(color=rgba).SerializeToString()
     text_tail = TextPrimitive(billboard=True, font_size=12.0, scale_invariant=True, color=rgba,
-                              text=f"p{person_id}").SerializeToString()
+                              text=label).SerializeToString()
     sphere_tail = SpherePrimitive(size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
                                   color=rgba).SerializeToString()
-    return wire_string(3, f"person/{person_id}"), line_head, line_tail, text_tail, sphere_tail
+    return wire_string(3, f"{prefix}/{identity}"), line_head, line_tail, text_tail, sphere_tail
 
 
 _ORIENTATION_IDENTITY = Pose(orientation=Quaternion(w=1.0)).SerializeToString()
@@ -399,27 +401,45 @@ _LINE_POINTS_KEY = (_LINE_POINTS_FIELD << 3) | 2
 
 
 def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
-    """`truth_skeletons(...)` as its wire bytes, written by a compiled loop from cached pieces (what the
-    recording writes)."""
+    """`truth_skeletons(...)` as its wire bytes (what the recording writes): `_skeletons_bytes`."""
+    return _skeletons_bytes(truth.person_ids, truth.poses, _TRUTH_PIECES, skeleton, t_ns,
+                            lambda: truth_skeletons(truth, skeleton, t_ns))
+
+
+def tracker_skeletons_bytes(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> bytes:
+    """`tracker_skeletons(...)` as its wire bytes (what the tracks file writes): `_skeletons_bytes`."""
+    targets = output.targets
+    if isinstance(targets, TargetArrays):
+        ids, poses = targets.ids, targets.poses
+    else:
+        ids = np.array([t.id for t in targets], dtype=np.int64)
+        poses = np.array([t.pose for t in targets], dtype=np.float64).reshape(len(ids), skeleton.num_joints, 3)
+    return _skeletons_bytes(ids, poses, _TRACK_PIECES, skeleton, t_ns,
+                            lambda: tracker_skeletons(output, skeleton, t_ns))
+
+
+def _skeletons_bytes(ids, poses, pieces: _PieceTable, skeleton: Skeleton, t_ns: int, built) -> bytes:
+    """A skeleton scene's wire bytes, written by a compiled loop (`wire.skeletons`) from the cached pieces of
+    each id; `built()` makes the message the usual way where the loop cannot (a coordinate of exactly +0.0,
+    which protobuf leaves out: the rare instant goes through it)."""
     from crossview import wire  # (numba: loaded for writing only)
 
-    poses = np.ascontiguousarray(truth.poses, dtype=np.float64)
-    ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
+    poses = np.ascontiguousarray(poses, dtype=np.float64)
+    ids = np.ascontiguousarray(ids, dtype=np.int64)
     head = np.frombuffer(_length_delimited(1, _timestamp_bytes(t_ns)) + wire_string(2, WORLD_FRAME), dtype=np.uint8)
     deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
     deletion = np.frombuffer(_length_delimited(1, deletion), dtype=np.uint8)
     bones = _bone_table(tuple(skeleton.bones))[0]
-    pieces = _TRUTH_PIECES
-    while True:  # (a person seen for the first time gets a row of pieces, then the instant is encoded again)
+    while True:  # (an id seen for the first time gets a row of pieces, then the instant is encoded again)
         capacity = deletion.size + len(ids) * (head.size + pieces.table.shape[1] + len(bones) * 60 + 160)
         out = _annotation_buffer(capacity)
-        size = wire.truth_skeletons(out, poses, ids, pieces.lut, pieces.table, pieces.sizes, bones, head, deletion,
-                                    _ORIENTATION_IDENTITY_BYTES, _LINE_POINTS_KEY)
+        size = wire.skeletons(out, poses, ids, pieces.lut, pieces.table, pieces.sizes, bones, head, deletion,
+                              _ORIENTATION_IDENTITY_BYTES, _LINE_POINTS_KEY)
         if size != wire.NEW_STYLE:
             break
         pieces.add(ids)
-    if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: the rare instant goes through it
-        return truth_skeletons(truth, skeleton, t_ns).SerializeToString()
+    if size < 0:
+        return built().SerializeToString()
     return out[:size].tobytes()
 
 
@@ -564,7 +584,8 @@ class _PieceTable:
 
 
 _DETECTION_STYLES = _PieceTable(lambda pid: _detection_styles(pid)[:4], 4)
-_TRUTH_PIECES = _PieceTable(_truth_entity_parts, 5)
+_TRUTH_PIECES = _PieceTable(functools.partial(_entity_parts, "truth"), 5)
+_TRACK_PIECES = _PieceTable(functools.partial(_entity_parts, "track"), 5)
 _ANNOTATION_BUFFER = [np.empty(1 << 16, dtype=np.uint8)]
 
 

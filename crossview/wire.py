@@ -382,18 +382,19 @@ def _put_pose(out, pos, x, y, z, orientation):
 
 
 @_jit
-def truth_skeletons(out, poses, person_ids, piece_lut, pieces, piece_sizes, bones, head, deletion, orientation,
-                    points_key):
-    """`foxglove.truth_skeletons` (a SceneUpdate) into `out`; returns the number of bytes.
+def skeletons(out, poses, person_ids, piece_lut, pieces, piece_sizes, bones, head, deletion, orientation,
+              points_key):
+    """`foxglove.truth_skeletons` or `foxglove.tracker_skeletons` (a SceneUpdate) into `out`; returns the
+    number of bytes.
 
-    poses (P, J, 3), person_ids (P,); per person, row piece_lut[id + 1] of pieces (uint8 rows) holds its id
-    field, the bone line before and after its points, and what follows the pose in its label and in its top
-    sphere (sizes in piece_sizes (rows, 5)); bones (B, 2); head: the entities' timestamp and frame id
-    fields; deletion: the deletions field; orientation: the identity orientation field of a Pose;
-    points_key: the one-byte tag of LinePrimitive.points. Per person (in order) an entity: head, id, a
-    sphere and a label (at the highest known joint, the label 0.25 m above) when a joint is known, and
-    the line of the bones whose two ends are known. Returns -1 when a coordinate is exactly +0.0 (then
-    protobuf's own serialisation is needed) and NEW_STYLE when someone has no row of pieces yet.
+    poses (P, J, 3), person_ids (P,) (person or target ids); per id, row piece_lut[id + 1] of pieces (uint8
+    rows) holds its id field, the bone line before and after its points, and what follows the pose in its
+    label and in its top sphere (sizes in piece_sizes (rows, 5)); bones (B, 2); head: the entities'
+    timestamp and frame id fields; deletion: the deletions field; orientation: the identity orientation
+    field of a Pose; points_key: the one-byte tag of LinePrimitive.points. Per id (in order) an entity:
+    head, id, a sphere and a label (at the highest known joint, the label 0.25 m above) when a joint is
+    known, and the line of the bones whose two ends are known. Returns -1 when a coordinate is exactly +0.0
+    (then protobuf's own serialisation is needed) and NEW_STYLE when an id has no row of pieces yet.
     """
     P, J = poses.shape[0], poses.shape[1]
     for v in poses.reshape(-1).view(np.int64):

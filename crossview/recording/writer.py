@@ -323,8 +323,7 @@ class TracksWriter(_WriterContext):
         t_ns = to_ns(max(0.0, float(output.stamp_s)))
         self._out.add(self._outputs, t_ns, tracker_output_bytes(output, self.skeleton.num_joints))
         if t_ns >= self._next_scene_ns:
-            scene = foxglove.tracker_skeletons(output, self.skeleton, t_ns)
-            self._out.add(self._scene, t_ns, scene.SerializeToString())
+            self._out.add(self._scene, t_ns, foxglove.tracker_skeletons_bytes(output, self.skeleton, t_ns))
             self._next_scene_ns = t_ns + to_ns(TRACK_SCENE_PERIOD_S)
         targets = output.targets
         self._targets.update(targets.ids.tolist() if isinstance(targets, TargetArrays) else

@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 from core.types import COCO17, Camera, Frame
 from crossview import foxglove, recording
 from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
-from tracker.types import Target, TrackerOutput
+from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
 
 LAYOUT = Path(__file__).resolve().parents[2] / "crossview" / "foxglove" / "layout.json"
 
@@ -223,6 +223,19 @@ def test_byte_builders_write_what_protobuf_writes():
     poses[3, 0] = 0.0
     assert foxglove.truth_skeletons_bytes(truth, COCO17, 5) == \
         foxglove.truth_skeletons(truth, COCO17, 5).SerializeToString()
+    # The tracks file's scenes: the same compiled path, with the targets' pieces, as arrays or as a list.
+    poses[3, 0] = 1.0
+    codes = np.zeros((4, 17), dtype=np.uint8)
+    arrays = TargetArrays(np.array([0, 7, 12, 3000]), poses, codes, 0.37, TargetState.CONFIRMED)
+    for targets in (arrays, list(arrays)):
+        output = TrackerOutput(stamp_s=0.37, camera="cam00", targets=targets, detection_target_ids=np.zeros(0))
+        for t_ns in (0, 370_000_000):
+            assert foxglove.tracker_skeletons_bytes(output, COCO17, t_ns) == \
+                foxglove.tracker_skeletons(output, COCO17, t_ns).SerializeToString()
+    poses[0, 3] = 0.0
+    output = TrackerOutput(stamp_s=0.37, camera="cam00", targets=arrays, detection_target_ids=np.zeros(0))
+    assert foxglove.tracker_skeletons_bytes(output, COCO17, 5) == \
+        foxglove.tracker_skeletons(output, COCO17, 5).SerializeToString()
     base = rng.uniform(0, 600, (3, 17, 2))
     base[0, ::3] = np.nan
     # The compiled encoder's bytes, and (with a zero coordinate) protobuf's own path.
