@@ -96,13 +96,13 @@ def _put_uint_field(out, pos, field, value):
 
 @_jit
 def _put_doubles(out, pos, field, values):
-    """A packed double field of `values` (any shape, C order)."""
+    """A packed double (float64 `values`) or float (float32 `values`) field of `values` (any shape, C order)."""
     flat = values.reshape(-1)
     if flat.size == 0:
         return pos
-    pos = _put_key(out, pos, field, _LEN)
-    pos = _put_varint(out, pos, 8 * flat.size)
     raw = flat.view(np.uint8)
+    pos = _put_key(out, pos, field, _LEN)
+    pos = _put_varint(out, pos, raw.size)
     out[pos:pos + raw.size] = raw
     return pos + raw.size
 
@@ -195,8 +195,8 @@ def tracker_output(out, stamp_s, camera, ids, stamps, state_names, state_ends, s
 
     camera: the camera name's UTF-8 bytes; ids (T,) int64 >= 0; stamps (T,); state_names: the UTF-8 bytes of
     the state names one after another, name i ending at state_ends[i]; state_index (T,) each target's name;
-    poses (T, J, 3); joint_states (T, J) uint8 codes (< 128), written for the targets with has_states (T,);
-    detection_target_ids (D,) int64.
+    poses (T, J, 3) float32 (`pose_m32`); joint_states (T, J) uint8 codes (< 128), written for the targets
+    with has_states (T,); detection_target_ids (D,) int64.
     """
     T, J = poses.shape[0], poses.shape[1]
     pos = _put_double_field(out, 0, 1, stamp_s)
@@ -213,7 +213,7 @@ def tracker_output(out, stamp_s, camera, ids, stamps, state_names, state_ends, s
         if name_size:
             size += 1 + _varint_size(name_size) + name_size
         if J:
-            size += 1 + _varint_size(24 * J) + 24 * J
+            size += 1 + _varint_size(12 * J) + 12 * J
             if has_states[t]:
                 size += 1 + _varint_size(J) + J
         pos = _put_key(out, pos, 4, _LEN)
@@ -223,19 +223,19 @@ def tracker_output(out, stamp_s, camera, ids, stamps, state_names, state_ends, s
             pos = _put_varint(out, pos, ids[t])
         pos = _put_double_field(out, pos, 2, stamps[t])
         pos = _put_string(out, pos, 3, state_names[start:start + name_size])
-        pos = _put_doubles(out, pos, 4, poses[t])
         if J and has_states[t]:
             pos = _put_key(out, pos, 5, _LEN)
             pos = _put_varint(out, pos, J)
             for j in range(J):
                 out[pos + j] = joint_states[t, j]
             pos += J
+        pos = _put_doubles(out, pos, 6, poses[t])
     return _put_varints(out, pos, 5, detection_target_ids, True)
 
 
 def tracker_output_capacity(T: int, J: int, D: int, name_bytes: int, state_bytes: int) -> int:
     """An upper bound of the bytes of `tracker_output` (varints counted at their longest)."""
-    return 64 + name_bytes + T * (48 + state_bytes + 25 * J) + 11 * D
+    return 64 + name_bytes + T * (48 + state_bytes + 13 * J) + 11 * D
 
 
 def camera_frame_capacity(D: int, J: int, name_bytes: int) -> int:
@@ -521,13 +521,38 @@ def _double(typingctx, bits):
     return types.float64(bits), codegen
 
 
+@intrinsic
+def _single(typingctx, bits):
+    """The float32 whose 32 bits are the low 32 bits of the integer `bits`."""
+    if not isinstance(bits, types.Integer):
+        return None
+
+    def codegen(context, builder, sig, args):
+        low = builder.trunc(context.cast(builder, args[0], sig.args[0], types.int64), llvm_ir.IntType(32))
+        return builder.bitcast(low, llvm_ir.FloatType())
+
+    return types.float32(bits), codegen
+
+
+@_jit
+def _get_bits(buf, pos, size):
+    """The little-endian integer of the `size` (<= 8) bytes at pos, as an int64."""
+    bits = np.int64(0)
+    for i in range(size):
+        bits |= np.int64(buf[pos + i]) << (8 * i)
+    return bits
+
+
+@_jit
+def _get_f4(buf, pos):
+    """The little-endian float32 at pos."""
+    return _single(_get_bits(buf, pos, 4))
+
+
 @_jit
 def _get_f8(buf, pos):
     """The little-endian float64 at pos."""
-    bits = np.int64(0)
-    for i in range(8):
-        bits |= np.int64(buf[pos + i]) << (8 * i)
-    return _double(bits)
+    return _double(_get_bits(buf, pos, 8))
 
 
 @_jit
@@ -562,8 +587,8 @@ def tracker_output_arrays(buf):
     Returns (status, head, stamps, poses, rows, detection_target_ids):
     - status: 0, or `BAD_BYTES` for anything this scan does not read (a field it does not know, a repeated
       field not packed or in two runs, a joint state code over one byte, a pose not of num_joints x 3
-      doubles, bytes that end early): the caller reads the message with protobuf instead, which also
-      names what is wrong.
+      doubles (`pose_m`, formats 1 to 3) or floats (`pose_m32`) or in both fields, bytes that end early):
+      the caller reads the message with protobuf instead, which also names what is wrong.
     - head (4,) int64: the output's stamp bits (int64 of the float64), the camera name's start and end
       byte, num_joints J;
     - stamps (T,) and poses (T, J, 3) of the targets;
@@ -631,7 +656,7 @@ def tracker_output_arrays(buf):
                     k += 1
             elif field == 4:
                 rows[t, TARGET_ID] = 0
-                pose_doubles = 0
+                pose_values = 0
                 q = start
                 while q < stop:
                     key, q = _get_varint(buf, q, stop)
@@ -643,7 +668,7 @@ def tracker_output_arrays(buf):
                     elif sub == 2 and sub_type == _FIXED64 and q + 8 <= stop:
                         stamps[t] = _get_f8(buf, q)
                         q += 8
-                    elif 3 <= sub <= 5 and sub_type == _LEN:
+                    elif (3 <= sub <= 6) and sub_type == _LEN:
                         a, b = _run(buf, q, stop)
                         if a < 0:
                             return BAD_BYTES, head, stamps, poses, rows, ids
@@ -656,18 +681,20 @@ def tracker_output_arrays(buf):
                                 if buf[i] >= 128:
                                     return BAD_BYTES, head, stamps, poses, rows, ids
                             rows[t, TARGET_CODES], rows[t, TARGET_CODES_END] = a, b
-                        elif pose_doubles:  # a second run of the same pose: protobuf joins them
+                        elif pose_values:  # a second run of a pose (protobuf joins them), or both fields
                             return BAD_BYTES, head, stamps, poses, rows, ids
                         else:
-                            pose_doubles = (b - a) // 8
-                            if b - a != 24 * J:
+                            width = 8 if sub == 4 else 4  # pose_m (formats 1-3) or pose_m32
+                            pose_values = (b - a) // width
+                            if b - a != 3 * width * J:
                                 return BAD_BYTES, head, stamps, poses, rows, ids
-                            for i in range(pose_doubles):
-                                poses[t, i // 3, i % 3] = _get_f8(buf, a + 8 * i)
+                            for i in range(pose_values):
+                                poses[t, i // 3, i % 3] = (_get_f8(buf, a + 8 * i) if width == 8 else
+                                                           _get_f4(buf, a + 4 * i))
                         q = b
                     else:
                         return BAD_BYTES, head, stamps, poses, rows, ids
-                if pose_doubles != 3 * J:
+                if pose_values != 3 * J:
                     return BAD_BYTES, head, stamps, poses, rows, ids
                 t += 1
     return status, head, stamps, poses, rows, ids

@@ -266,7 +266,7 @@ def _target_arrays(targets, num_joints: int) -> tuple | None:
         return None
     T = len(targets)
     ids = np.ascontiguousarray(targets.ids, dtype=np.int64)
-    poses = np.ascontiguousarray(targets.poses, dtype=np.float64)
+    poses = np.ascontiguousarray(targets.poses, dtype=np.float32)
     codes = np.asarray(targets.joint_states)
     if ids.shape != (T,) or poses.shape != (T, num_joints, 3) or codes.shape != (T, num_joints) or (
             T and (ids.min() < 0 or codes.min() < 0 or codes.max() >= len(JointState))):
@@ -282,7 +282,7 @@ def _stacked_targets(output: TrackerOutput, num_joints: int) -> tuple:
     T, J = len(output.targets), num_joints
     try:  # the targets' arrays stacked at once; a wrong shape is found and named below
         poses = np.ascontiguousarray(np.stack([t.pose for t in output.targets]) if T else np.zeros((0, J, 3)),
-                                     dtype=np.float64)
+                                     dtype=np.float32)
     except ValueError:
         poses = None
     if poses is None or poses.shape != (T, J, 3):
@@ -329,7 +329,7 @@ def _tracker_output_to_msg(output: TrackerOutput, num_joints: int):
     for target in output.targets:
         pose = _checked_pose(output, target, num_joints)
         t = msg.targets.add(id=int(target.id), stamp_s=float(target.stamp_s), state=TargetState(target.state).value)
-        t.pose_m.extend(pose.ravel().tolist())
+        t.pose_m32.extend(pose.ravel().tolist())
         if target.joint_state is not None:
             t.joint_state.extend(_checked_joint_state(output, target, num_joints).tolist())
     msg.detection_target_ids.extend(np.asarray(output.detection_target_ids, dtype=np.int64).ravel().tolist())
@@ -378,9 +378,10 @@ def tracker_output_from_bytes(data: bytes) -> TrackerOutput:
 def _tracker_output_from_msg(msg) -> TrackerOutput:
     J = msg.num_joints
     # All targets' joints in one array (each target's pose is a row of it): one conversion per message.
-    if any(len(t.pose_m) != J * 3 for t in msg.targets):
-        raise ValueError(f"a target pose of {msg.camera}@{msg.stamp_s} does not hold {J} joints x 3")
-    poses = np.fromiter(itertools.chain.from_iterable(t.pose_m for t in msg.targets), np.float64,
+    # A pose is in pose_m32 (format 4) or in pose_m (formats 1 to 3), never in both.
+    if any(len(t.pose_m) + len(t.pose_m32) != J * 3 or (len(t.pose_m) and len(t.pose_m32)) for t in msg.targets):
+        raise ValueError(f"a target pose of {msg.camera}@{msg.stamp_s} does not hold {J} joints x 3 in one field")
+    poses = np.fromiter(itertools.chain.from_iterable(t.pose_m32 or t.pose_m for t in msg.targets), np.float64,
                         count=len(msg.targets) * J * 3).reshape(len(msg.targets), J, 3)
     known = [len(t.joint_state) == J and J > 0 for t in msg.targets]
     states = iter(np.fromiter(itertools.chain.from_iterable(t.joint_state for t, k in zip(msg.targets, known) if k),

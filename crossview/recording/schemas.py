@@ -18,12 +18,13 @@ from crossview import foxglove
 from sim.types import Box, BoxKind
 
 FORMAT_VERSION = 2  # of recordings
-TRACKS_FORMAT_VERSION = 3  # of tracks files; 3: targets carry joint_state (formats 1 and 2 are read too)
+TRACKS_FORMAT_VERSION = 4  # of tracks files; 3: targets carry joint_state; 4: poses as float32 (1 to 3 are read too)
 OLDEST_RECORDING_VERSION = 2  # format 1 stored every frame's poses at capture; this reader derives them
 MAGIC = b"\x89MCAP0\r\n"
 CHUNK_SIZE = 1 << 20  # bytes of uncompressed messages per chunk: the unit of reading and of CRC checks
-# mcap installs lz4 and zstandard both. LZ4 writes several times faster: on the hypermarket's tracks file (1 MiB
-# chunks) 690 MB/s against zstd's 310 MB/s at level 1 and 140 MB/s at level 3, which leave it only 1.3-1.4x smaller.
+# mcap installs lz4 and zstandard both. LZ4 writes several times faster: on the hypermarket's tracks file (format
+# 3, 1 MiB chunks) 690 MB/s against zstd's 310 MB/s at level 1 and 140 MB/s at level 3, which leave it only 1.3-1.4x
+# smaller.
 COMPRESSION = CompressionType.LZ4
 TRUTH_SCENE_PERIOD_S = 0.05  # the 3D truth skeletons people look at are drawn at 20 Hz, the data stay 100 Hz
 TRACK_SCENE_PERIOD_S = 0.05  # likewise for the tracker's skeletons in a tracks file
@@ -115,8 +116,9 @@ def _project_file() -> descriptor_pb2.FileDescriptorProto:
         ("id", _F.TYPE_INT64, False),
         ("stamp_s", _F.TYPE_DOUBLE, False),
         ("state", _F.TYPE_STRING, False),  # tracker.types.TargetState value
-        ("pose_m", _F.TYPE_DOUBLE, True),  # (J, 3)
+        ("pose_m", _F.TYPE_DOUBLE, True),  # (J, 3), formats 1 to 3
         ("joint_state", _F.TYPE_UINT32, True),  # (J,) tracker.types.JointState values; absent in format 2
+        ("pose_m32", _F.TYPE_FLOAT, True),  # (J, 3) from format 4: 1.9 µm at 40 m from the origin, half the bytes
     ])
     message("TrackerOutput", [
         ("stamp_s", _F.TYPE_DOUBLE, False),

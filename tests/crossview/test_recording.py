@@ -349,7 +349,7 @@ def test_tracks_round_trip_with_summary(tmp_path):
         assert [t.id for t in a.targets] == [t.id for t in b.targets]
         for ta, tb in zip(a.targets, b.targets):
             assert ta.state is tb.state and ta.stamp_s == tb.stamp_s
-            assert_same_arrays(ta.pose, tb.pose)
+            assert_same_arrays(ta.pose.astype(np.float32).astype(np.float64), tb.pose)  # format 4: float32
             assert (ta.joint_state is None and tb.joint_state is None) or np.array_equal(ta.joint_state,
                                                                                         tb.joint_state)
     # The tracker's skeletons are Foxglove SceneUpdates, readable independently.
@@ -819,6 +819,12 @@ def test_target_arrays_encode_as_their_targets_and_read_as_a_sequence():
         tracker_output_bytes(TrackerOutput(0.0, "c", bad, np.zeros(0, dtype=np.int64)), 17)
 
 
+def _as_stored(output: TrackerOutput) -> TrackerOutput:
+    """The output as a tracks file holds it: poses rounded to float32 (format 4)."""
+    return dataclasses.replace(output, targets=[
+        dataclasses.replace(t, pose=np.asarray(t.pose, dtype=np.float32).astype(np.float64)) for t in output.targets])
+
+
 def _same_output(a: TrackerOutput, b: TrackerOutput) -> bool:
     return (a.stamp_s == b.stamp_s and a.camera == b.camera and len(a.targets) == len(b.targets)
             and np.array_equal(a.detection_target_ids, b.detection_target_ids)
@@ -865,18 +871,29 @@ def test_tracker_outputs_read_by_the_compiled_scan_equal_protobufs_reading():
         data = tracker_output_bytes(output, 17)
         read = tracker_output_from_bytes(data)
         kinds.add(type(read.targets).__name__)
-        assert _same_output(read, protobufs(data)) and _same_output(read, output)
+        assert _same_output(read, protobufs(data)) and _same_output(read, _as_stored(output))
     assert kinds == {"TargetArrays", "list"}
     msg = _tracker_output_to_msg(outputs[0], 17)
     # An unknown field and a pose split in two runs (both valid protobuf) go through protobuf: the same output.
-    extra = msg.SerializeToString() + bytes([0x30, 0x05])  # field 6, varint 5
+    extra = msg.SerializeToString() + bytes([0x38, 0x05])  # field 7, varint 5
     assert _same_output(tracker_output_from_bytes(extra), protobufs(extra))
     f8 = np.float64(1.0).tobytes
-    target = (b"\x08\x01" + b"\x11" + f8() + b"\x1a\x09confirmed" + b"\x22\x08" + f8()
-              + b"\x22\x10" + np.array([2.0, 3.0]).tobytes() + b"\x2a\x01\x00")
-    halves = b"\x09" + f8() + b"\x12\x01c" + b"\x18\x01" + b"\x22" + bytes([len(target)]) + target
-    assert _same_output(tracker_output_from_bytes(halves), protobufs(halves))
-    np.testing.assert_array_equal(tracker_output_from_bytes(halves).targets[0].pose, [[1.0, 2.0, 3.0]])
+    head = b"\x08\x01" + b"\x11" + f8() + b"\x1a\x09confirmed"
+    # A format-3 pose (float64, pose_m) is read as written, by the scan and by protobuf; so is a format-4
+    # one (float32, pose_m32).
+    for key, dtype in ((b"\x22", np.float64), (b"\x32", np.float32)):
+        size = np.dtype(dtype).itemsize
+        target = (head + key + bytes([size]) + np.array([1.5], dtype).tobytes() + b"\x2a\x01\x00" + key
+                  + bytes([2 * size]) + np.array([2.0, -3.25], dtype).tobytes())
+        halves = b"\x09" + f8() + b"\x12\x01c" + b"\x18\x01" + b"\x22" + bytes([len(target)]) + target
+        assert _same_output(tracker_output_from_bytes(halves), protobufs(halves))
+        np.testing.assert_array_equal(tracker_output_from_bytes(halves).targets[0].pose, [[1.5, 2.0, -3.25]])
+        assert tracker_output_from_bytes(halves).targets[0].pose.dtype == np.float64
+    # A pose in both fields is refused, and named.
+    both = TrackerOutputMsg(stamp_s=1.0, camera="c", num_joints=1)
+    both.targets.add(id=1, pose_m=[1.0, 2.0, 3.0], pose_m32=[1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="does not hold 1 joints x 3 in one field"):
+        tracker_output_from_bytes(both.SerializeToString())
     # A pose of the wrong size is named; every prefix of a message reads as protobuf reads it, or is refused.
     short = TrackerOutputMsg(stamp_s=1.0, camera="c", num_joints=17)
     short.targets.add(id=1, pose_m=[0.0] * 50)
