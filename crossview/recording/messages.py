@@ -358,7 +358,11 @@ def tracker_output_from_bytes(data: bytes) -> TrackerOutput:
     stamp_s, J, T = float(head[:1].view(np.float64)[0]), int(head[3]), len(rows)
     if not T:
         return TrackerOutput(stamp_s=stamp_s, camera=camera, targets=[], detection_target_ids=detection_ids)
-    names = [data[a:b] for a, b in rows[:, wire.TARGET_STATE:wire.TARGET_STATE_END + 1].tolist()]  # b"": absent
+    starts, ends = rows[:, wire.TARGET_STATE], rows[:, wire.TARGET_STATE_END]  # -1, -1: absent (b"")
+    size = int(ends[0] - starts[0])
+    one_name = bool((ends - starts == size).all()) and (
+        size == 0 or bool((buf[starts[:, None] + np.arange(size)] == buf[starts[0]:ends[0]]).all()))
+    names = [data[starts[0]:ends[0]]] * T if one_name else [data[a:b] for a, b in zip(starts.tolist(), ends.tolist())]
     states = {name: _TARGET_STATES.get(name.decode()) or TargetState(name.decode()) for name in set(names)}
     known = (rows[:, wire.TARGET_CODES_END] - rows[:, wire.TARGET_CODES] == J) & (J > 0)
     if len(states) == 1 and known.all() and (stamps == stamps[0]).all():

@@ -865,6 +865,10 @@ def test_tracker_outputs_read_by_the_compiled_scan_equal_protobufs_reading():
             np.zeros(0, dtype=np.int64)),
         TrackerOutput(1.0, "c", [Target(id=-3, pose=np.ones((17, 3)), stamp_s=1.0)], np.zeros(0, dtype=np.int64)),
         TrackerOutput(1.0, "kamera-ü", [], np.array([-1, -1])),
+        TrackerOutput(2.0, "c", [Target(id=i, pose=np.ones((17, 3)), stamp_s=2.0, state=state,  # names of one length
+                                        joint_state=np.zeros(17, dtype=np.uint8))
+                                 for i, state in enumerate((TargetState.CONFIRMED, TargetState.TENTATIVE))],
+                      np.zeros(0, dtype=np.int64)),
     ]
     kinds = set()
     for output in outputs:
@@ -899,7 +903,7 @@ def test_tracker_outputs_read_by_the_compiled_scan_equal_protobufs_reading():
     short.targets.add(id=1, pose_m=[0.0] * 50)
     with pytest.raises(ValueError, match="does not hold 17 joints x 3"):
         tracker_output_from_bytes(short.SerializeToString())
-    whole = tracker_output_bytes(outputs[-4], 17)
+    whole = tracker_output_bytes(outputs[-5], 17)
     refused = 0
     for cut in range(len(whole)):
         try:
