@@ -414,6 +414,8 @@ def tracker_skeletons_bytes(output: TrackerOutput, skeleton: Skeleton, t_ns: int
     else:
         ids = np.array([t.id for t in targets], dtype=np.int64)
         poses = np.array([t.pose for t in targets], dtype=np.float64).reshape(len(ids), skeleton.num_joints, 3)
+    if (np.asarray(ids) < 0).any():  # (a plug-in's negative id: the piece table keys ids >= -1)
+        return tracker_skeletons(output, skeleton, t_ns).SerializeToString()
     return _skeletons_bytes(ids, poses, _TRACK_PIECES, skeleton, t_ns,
                             lambda: tracker_skeletons(output, skeleton, t_ns))
 

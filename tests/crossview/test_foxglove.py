@@ -236,6 +236,10 @@ def test_byte_builders_write_what_protobuf_writes():
     output = TrackerOutput(stamp_s=0.37, camera="cam00", targets=arrays, detection_target_ids=np.zeros(0))
     assert foxglove.tracker_skeletons_bytes(output, COCO17, 5) == \
         foxglove.tracker_skeletons(output, COCO17, 5).SerializeToString()
+    negative = TrackerOutput(stamp_s=0.37, camera="cam00", detection_target_ids=np.zeros(0),
+                             targets=[Target(id=i, pose=poses[1], stamp_s=0.37) for i in (-3, -1, 4)])
+    assert foxglove.tracker_skeletons_bytes(negative, COCO17, 5) == \
+        foxglove.tracker_skeletons(negative, COCO17, 5).SerializeToString()
     base = rng.uniform(0, 600, (3, 17, 2))
     base[0, ::3] = np.nan
     # The compiled encoder's bytes, and (with a zero coordinate) protobuf's own path.
