@@ -95,8 +95,8 @@ def _put_uint_field(out, pos, field, value):
 
 
 @_jit
-def _put_doubles(out, pos, field, values):
-    """A packed double (float64 `values`) or float (float32 `values`) field of `values` (any shape, C order)."""
+def _put_fixed(out, pos, field, values):
+    """A packed fixed-width field of `values` (any shape, C order): double for float64, float for float32."""
     flat = values.reshape(-1)
     if flat.size == 0:
         return pos
@@ -156,7 +156,7 @@ def pose_truth(out, pos, t_s, person_ids, poses):
     pos = _put_double_field(out, pos, 1, t_s)
     pos = _put_uint_field(out, pos, 2, poses.shape[1])
     pos = _put_varints(out, pos, 3, person_ids, True)
-    return _put_doubles(out, pos, 4, poses)
+    return _put_fixed(out, pos, 4, poses)
 
 
 @_jit
@@ -178,10 +178,10 @@ def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores,
     pos = _put_double_field(out, pos, 4, delivery_s)
     pos = _put_uint_field(out, pos, 5, keypoints.shape[0])
     pos = _put_uint_field(out, pos, 6, keypoints.shape[1])
-    pos = _put_doubles(out, pos, 7, keypoints)
-    pos = _put_doubles(out, pos, 8, scores)
+    pos = _put_fixed(out, pos, 7, keypoints)
+    pos = _put_fixed(out, pos, 8, scores)
     pos = _put_varints(out, pos, 9, person_ids, True)
-    pos = _put_doubles(out, pos, 10, true_keypoints)
+    pos = _put_fixed(out, pos, 10, true_keypoints)
     pos = _put_bools(out, pos, 11, in_image)
     pos = _put_bools(out, pos, 12, occluded)
     pos = _put_bools(out, pos, 13, self_occluded)
@@ -229,7 +229,7 @@ def tracker_output(out, stamp_s, camera, ids, stamps, state_names, state_ends, s
             for j in range(J):
                 out[pos + j] = joint_states[t, j]
             pos += J
-        pos = _put_doubles(out, pos, 6, poses[t])
+        pos = _put_fixed(out, pos, 6, poses[t])
     return _put_varints(out, pos, 5, detection_target_ids, True)
 
 
