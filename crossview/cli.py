@@ -30,8 +30,40 @@ class _Ended(BaseException):
         self.signum = signum
 
 
+_HELD: list[int] = []  # an ending signal held back while numba compiles (`_end`)
+_RETRY_S = 0.05  # how often a held signal looks again whether compiling is over, seconds
+_COMPILER = ("numba", "llvmlite")
+
+
 def _end(signum, frame):
+    """SIGINT, SIGTERM or SIGHUP: KeyboardInterrupt or `_Ended` raised where the command is, unless numba is
+    compiling there (a cold cache: a first run, a new version). An exception raised inside its compiler is
+    lost where llvmlite calls back through ctypes (which prints "Exception ignored" and goes on: the command
+    then ran to its end) or leaves numba half-built (a later call fails with a traceback). The signal is then
+    held, and raised once the compiler has returned (SIGALRM looks again every `_RETRY_S`)."""
+    if _in_compiler(frame):
+        _HELD[:] = [signum]
+        signal.setitimer(signal.ITIMER_REAL, _RETRY_S)
+        return
+    _HELD.clear()
+    if signum == signal.SIGINT:
+        raise KeyboardInterrupt
     raise _Ended(signum)
+
+
+def _retry_held(signum, frame):
+    """SIGALRM while a signal is held (`_end`)."""
+    if _HELD:
+        _end(_HELD[-1], frame)
+
+
+def _in_compiler(frame) -> bool:
+    """Whether Python code of numba or llvmlite is on the stack below `frame`."""
+    while frame is not None:
+        if frame.f_globals.get("__name__", "").partition(".")[0] in _COMPILER:
+            return True
+        frame = frame.f_back
+    return False
 
 
 class _Parser(argparse.ArgumentParser):
@@ -551,7 +583,9 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(name)s: %(message)s"
     )
     on_main_thread = threading.current_thread() is threading.main_thread()
-    previous = {s: signal.signal(s, _end) for s in _ENDING_SIGNALS} if on_main_thread else {}
+    handlers = {signal.SIGINT: _end, signal.SIGALRM: _retry_held, **{s: _end for s in _ENDING_SIGNALS}}
+    previous = {s: signal.signal(s, h) for s, h in handlers.items()} if on_main_thread else {}
+    _HELD.clear()
     try:
         COMMANDS[args.command](args)
     except _Ended as e:
@@ -571,6 +605,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"crossview {args.command}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
     finally:
+        if on_main_thread:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+        _HELD.clear()
         for ending, handler in previous.items():
             signal.signal(ending, handler)
     return 0
