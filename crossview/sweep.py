@@ -743,7 +743,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
     out = Path(out)
     workers = workers or processes.usable_cores()
     in_process = executor is Executor.SERIAL
-    cells = plan(spec, keep_recordings=keep_recordings, worker_process=in_process and processes.usable_cores() > 1)
+    cells = plan(spec, keep_recordings=keep_recordings, worker_process=in_process and processes.can_fork_worker())
     wanted = definition(spec, cells)
     check_output(out, wanted)
     disconnect = connect_ray(ray_address) if executor is Executor.RAY else False
