@@ -18,7 +18,7 @@ import numpy as np
 
 from core.types import COCO17, Camera
 from sim.cameras import in_image
-from sim.detector import person_size_px
+from sim.sensing.draws import person_size_px
 from sim.types import CameraFrame, DetectionEffect
 
 # OpenPose (BODY25) on the Shelf dataset (Belagiannis et al., CVPR 2014), 5 cameras, 301 frames, limb joints.

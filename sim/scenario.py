@@ -27,7 +27,7 @@ from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
 from sim.config import bounded, check_ranges, field_range, field_unit
 from sim.crowd import CrowdConfig
-from sim.detector import PROFILES, DetectorConfig, DetectorParams, DetectorProfile
+from sim.sensing.profiles import PROFILES, DetectorConfig, DetectorParams, DetectorProfile
 from sim.store import StoreConfig
 
 MAX_DURATION_S = 86400.0  # a day of simulated time

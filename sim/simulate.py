@@ -15,9 +15,10 @@ from core import jit, processes
 from core.types import COCO17
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
-from sim.detector import Detector, large_enough
 from sim.poses import interpolate_ticks
 from sim.rng import child_rng
+from sim.sensing.detector import Detector
+from sim.sensing.draws import large_enough
 from sim.types import CameraFrame, Capture, DetectionRows, PoseTruth
 
 TRUTH_RATE_HZ = 100.0
@@ -62,7 +63,7 @@ class Simulation:
         skeleton: the keypoint layout of the poses.
         world: the `sim.world.World`, built on first use (advanced by `events` only when no worker process
             simulates: a worker builds its own, so that this process meanwhile loads what it needs).
-        detector: the `sim.detector.Detector` of the latest `events` pass (its `visibility_counts` give
+        detector: the `sim.sensing.detector.Detector` of the latest `events` pass (its `visibility_counts` give
             the joints in the image, occluded and self-occluded per camera, over every person-view).
     """
 
@@ -261,7 +262,7 @@ def _pack_block(block: Block, min_size_px: np.ndarray) -> tuple:
     captures' cameras, times, people and visibility (their poses are left out: `_unpack_block` derives
     them from the truths). Of the person-views, only those with a joint in the image and no smaller than
     the camera's `min_size_px` (`Detector.min_size_px`) travel: the others make no detection and take no draw
-    (`sim.detector._draw_detections`), so the consumer draws the same rows."""
+    (`sim.sensing.draws.draw_detections`), so the consumer draws the same rows."""
     t, truths, requests, visible, _ = block
     seen = [r.poses.person_ids for r in requests]
     viewed = np.concatenate(seen).astype(np.int64, copy=False) if seen else np.zeros(0, dtype=np.int64)

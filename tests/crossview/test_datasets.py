@@ -174,7 +174,8 @@ def test_campus_pcp_from_ground_truth_2d_joints(campus, tmp_path):
 
 def _typical_detector(frames, cams, seed):
     """The simulator's `typical` detector errors (noise, misses, gross errors, swaps) on the true 2D joints."""
-    from sim.detector import Detector, DetectorConfig
+    from sim.sensing.detector import Detector
+    from sim.sensing.profiles import DetectorConfig
     from sim.types import Capture, PoseTruth
 
     detector = Detector(DetectorConfig(), list(cams), np.random.default_rng(seed), skeleton=CAMPUS14)

@@ -3,7 +3,7 @@ to get a frame (the simulation runs the same steps block by block)."""
 
 from __future__ import annotations
 
-from sim.detector import Detector
+from sim.sensing.detector import Detector
 from sim.types import CameraFrame, Capture, PoseTruth
 
 

@@ -402,7 +402,7 @@ def test_in_image_many_kernel_agrees_with_in_image_on_single_skeletons():
     """The detector projects each phantom skeleton (17 points, one camera) with the compiled kernel: the
     pixels and flags are `in_image`'s bit for bit, whatever the camera's lens terms."""
     from sim.cameras import in_image_many_kernel
-    from sim.detector import _TEMPLATE_COCO17
+    from sim.sensing.draws import TEMPLATE_COCO17 as _TEMPLATE_COCO17
 
     for layout in ("store_layout2", "store_layout1"):
         rig = build_rig(scenario_mod.load(layout), np.random.default_rng(0))

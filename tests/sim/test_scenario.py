@@ -6,7 +6,7 @@ import pytest
 
 from core.errors import ScenarioError
 from sim import scenario
-from sim.detector import DetectorProfile
+from sim.sensing.profiles import DetectorProfile
 
 SHIPPED = sorted(scenario.SCENARIO_DIR.glob("*.toml"))
 

@@ -118,7 +118,7 @@ def test_a_worker_process_gives_the_same_events_bit_for_bit(small, min_person_fr
 def test_the_worker_process_never_outlives_the_stream(small, monkeypatch):
     import multiprocessing
 
-    from sim.detector import Detector
+    from sim.sensing.detector import Detector
 
     # A consumer that stops early (or is interrupted) leaves no worker behind.
     events = Simulation(small, seed=4).events(5.0)

@@ -9,8 +9,11 @@ import pytest
 
 from core.types import COCO17
 from sim.cameras import CameraPlacement, CameraRigConfig, build_rig, in_image
-from sim.detector import _TEMPLATE_COCO17, Detector, DetectorConfig, DetectorProfile, person_size_px
 from sim.scenario import Scenario
+from sim.sensing.detector import Detector
+from sim.sensing.draws import TEMPLATE_COCO17 as _TEMPLATE_COCO17
+from sim.sensing.draws import person_size_px
+from sim.sensing.profiles import DetectorConfig, DetectorProfile
 from sim.store import StoreConfig
 from sim.types import Capture, DetectionEffect, PoseTruth
 from tests.reference.detector import detect
@@ -68,6 +71,16 @@ class BoxWorld:
         for i, joints in enumerate(_PARTS.values()):
             table[list(joints)] = i
         return table
+
+    def keypoint_parent_body_ids(self):
+        return self.keypoint_body_ids()  # (each keypoint lies in its own part's geoms only)
+
+    def geom_groups(self):
+        person = self.geom_person_ids()
+        return np.concatenate([[0], np.nonzero(person[1:] != person[:-1])[0] + 1, [person.size]])
+
+    def ray_geom_constants(self):
+        return self.model.geom_size.copy(), self.model.geom_rbound.copy(), self.geom_person_ids()
 
     def truth(self, t=0.0):
         return PoseTruth(t, np.arange(self.people), self.poses.copy())
@@ -347,8 +360,8 @@ def test_compiled_ray_caster_agrees_with_mj_multiray_in_the_store(name, times_s,
     import mujoco
 
     from sim import scenario as scenario_mod
-    from sim.detector import cast_visibility
     from sim.rng import child_rng
+    from sim.sensing.rays import cast_visibility
     from sim.world import World
 
     scenario = scenario_mod.load(name)
@@ -396,8 +409,8 @@ def test_block_visibility_of_snapshots_equals_visibility_at_each_tick():
     shared until they change) flag the joints exactly as casting at each tick does: blocks that fill the
     buffer, straddle two buffers, take ticks out of order, and span arrivals and departures."""
     from sim import scenario as scenario_mod
-    from sim.detector import _SCENE_ROWS
     from sim.rng import child_rng
+    from sim.sensing.detector import _SCENE_ROWS
     from sim.world import World
 
     scenario = scenario_mod.load("store_layout1")
@@ -430,8 +443,8 @@ def test_scene_now_reuses_a_buffer_only_when_no_snapshot_of_it_is_alive():
     """`scene_now` writes into recycled buffers, but never into one a kept snapshot (or a view of it) still
     points into: every kept snapshot keeps the values it was taken with."""
     from sim import scenario as scenario_mod
-    from sim.detector import _SCENE_ROWS
     from sim.rng import child_rng
+    from sim.sensing.detector import _SCENE_ROWS
     from sim.world import World
 
     scenario = scenario_mod.load("store_layout1")
@@ -442,7 +455,7 @@ def test_scene_now_reuses_a_buffer_only_when_no_snapshot_of_it_is_alive():
     for k in range(6 * _SCENE_ROWS):
         world.advance(k * 0.01)
         scene = detector.scene_now(world)
-        buffers.add(id(detector._scene_rows[0]))
+        buffers.add(id(scene.buffer.pos))
         block.append(scene)
         if k % 37 == 0:  # a snapshot kept, one through a view of a view
             kept.append((scene[0][1:], scene[1], world.data.geom_xpos[1:].copy(), world.data.geom_xmat.copy()))
@@ -456,7 +469,7 @@ def test_scene_now_reuses_a_buffer_only_when_no_snapshot_of_it_is_alive():
 
 
 def test_frame_order_is_lexsort_by_frame_then_key():
-    from sim.detector import _frame_order
+    from sim.sensing.draws import frame_order as _frame_order
 
     rng = np.random.default_rng(4)
     for n_rows, n_frames in ((0, 3), (1, 1), (40, 7), (300, 28), (50, 60)):

@@ -1,0 +1,445 @@
+"""The synthetic 2D detector: projection, visibility, occlusion, noise, misses and false positives.
+
+One call of `Detector.detect` turns the true 3D poses at a camera's capture time into the frame a
+bottom-up 2D pose detector (OpenPose-like) would deliver, plus the truth behind every row:
+
+1. project every keypoint with the camera's lens model; joints behind the camera or outside the
+   image are not detectable;
+2. cast one ray per remaining keypoint from the camera centre against the MuJoCo bodies (compiled
+   loops with MuJoCo's own ray formulas, the hits bit for bit those of `mujoco.mj_multiRay`, which
+   `cast_visibility` still calls as the reference): the first surface it meets tells whether the joint
+   is visible, occluded (a shelf, a wall, another person) or self-occluded (another limb of the same
+   person);
+3. miss whole people (more often the more they are occluded), drop occluded joints, add noise
+   scaled by the person's size in the image (heavy tailed, larger on occluded joints), gross errors,
+   left/right swaps and fragments, then add duplicates and phantom skeletons.
+
+Every effect has its own knob in [detector]; a knob left unset takes the value of the profile.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from core.types import COCO17, Camera, Skeleton
+from sim.cameras import in_image_many_kernel, monotonic_radius
+from sim.sensing.draws import (
+    FRAGMENTS_COCO17,
+    JOINT_NOISE_COCO17,
+    MIN_SCORE,
+    TEMPLATE_COCO17,
+    DrawnRows,
+    draw_detections,
+    frame_order,
+    large_enough,
+    left_right_permutation,
+    person_size_px,
+)
+from sim.sensing.profiles import DetectorConfig
+from sim.sensing.rays import RAY_GEOM_TYPES, cast_keypoint_rays, count_views
+from sim.types import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
+
+_SCENE_ROWS = 64  # ticks per buffer of `Detector.scene_now` (about 7 blocks of store_layout2)
+
+
+class _SceneBuffer:
+    """Rows of geom positions (_SCENE_ROWS, G, 3) and rotations (_SCENE_ROWS, G, 9) that `scene_now` fills tick
+    by tick; `used` rows are handed out, and once `retire` is set the next tick starts a new buffer (this one
+    stays with the ticks that still hold rows of it)."""
+
+    def __init__(self, G: int):
+        self.pos = np.empty((_SCENE_ROWS, G, 3))
+        self.mat = np.empty((_SCENE_ROWS, G, 9))
+        self.used = 0
+        self.retire = False
+
+
+class SceneTick(NamedTuple):
+    """What the ray caster needs of the bodies at one truth tick (`Detector.scene_now`).
+
+    Attributes:
+        xpos: (G, 3) geom positions, metres; xmat: (G, 9) geom rotations (row-major).
+        size: (G, 3) geom sizes; rbound: (G,) bounding radii; owner: (G,) person of each geom (-1: store).
+        buffer: the `_SceneBuffer` whose row `row` holds xpos and xmat (None: live arrays of the world).
+        row: that row (-1 without a buffer).
+    """
+
+    xpos: np.ndarray
+    xmat: np.ndarray
+    size: np.ndarray
+    rbound: np.ndarray
+    owner: np.ndarray
+    buffer: object
+    row: int
+
+
+class Detector:
+    """A synthetic 2D pose detector for a rig of cameras.
+
+    Args:
+        config: the [detector] section.
+        cameras: the rig.
+        rng: the "detector" generator.
+        skeleton: the keypoint layout of the poses (COCO-17).
+    """
+
+    def __init__(self, config: DetectorConfig, cameras: list[Camera], rng: np.random.Generator,
+                 skeleton: Skeleton = COCO17):
+        self.config = config
+        self.params = config.params()
+        self.cameras = list(cameras)
+        self.skeleton = skeleton
+        self._rng = rng
+        self._swap = left_right_permutation(skeleton)
+        coco = skeleton.name == COCO17.name
+        self._joint_noise = JOINT_NOISE_COCO17 if coco else np.ones(skeleton.num_joints)
+        self._fragments = FRAGMENTS_COCO17 if coco else tuple(
+            tuple(range(s, min(s + 4, skeleton.num_joints))) for s in range(0, skeleton.num_joints, 4)
+        )
+        self._fragment_masks = np.zeros((len(self._fragments), skeleton.num_joints), dtype=bool)
+        for i, part in enumerate(self._fragments):
+            self._fragment_masks[i, list(part)] = True
+        self._template = TEMPLATE_COCO17 if coco else None
+        self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
+        self._scene_of = None  # the world `_scene_cache` was made of
+        self._scene_buffer: _SceneBuffer | None = None  # where `scene_now` writes the next tick's geoms
+        self._points_buf: np.ndarray | None = None  # `block_visibility`'s keypoints, reused block to block
+        self._ray_held: tuple | None = None  # `_ray_scratch`'s arrays
+        self._centre_array = np.array(self._centres, dtype=np.float64).reshape(-1, 3)
+        # Per-camera constants stacked for projecting the captures of one truth tick at once.
+        self._R = np.array([c.R_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
+        self._t = np.array([c.t_cam_from_world for c in self.cameras], dtype=np.float64).reshape(-1, 3)
+        self._K = np.array([c.K for c in self.cameras], dtype=np.float64).reshape(-1, 3, 3)
+        self._dist = np.array([c.dist for c in self.cameras], dtype=np.float64).reshape(-1, 5)
+        self._size = np.array([(c.width_px, c.height_px) for c in self.cameras], dtype=np.float64).reshape(-1, 2)
+        self._max_radius = np.array([monotonic_radius(c.dist) for c in self.cameras], dtype=np.float64)
+        # Which cameras have tangential distortion and skew (`in_image_many` adds those terms for a batch
+        # only when some camera of it has them).
+        self._tangential = [bool(np.any(d[2:4])) for d in self._dist]
+        self._skew = [bool(k[0, 1]) for k in self._K]
+        # Per camera: the size in pixels below which nobody is detected (min_person_frac of the image height).
+        self.min_size_px = self.params.min_person_frac * self._size[:, 1]
+        # Per camera: joints in the image, occluded, self-occluded (all person views no smaller than
+        # min_size_px, detected or not).
+        self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
+
+    def visibility(self, camera_index: int, world, poses: PoseTruth):
+        """Projection and occlusion of everybody's joints in one camera (`visibility_many` of one capture).
+
+        Args:
+            camera_index: which camera.
+            world: a `sim.world.World` advanced to the poses' time (or None to skip ray casting).
+            poses: the true poses, (P, J, 3).
+
+        Returns:
+            px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J).
+        """
+        return self.visibility_many(world, [Capture(camera_index, poses, poses.t_s, poses.t_s, poses.t_s)])[0]
+
+    def visibility_many(self, world, requests) -> list[tuple]:
+        """`visibility` of several captures whose bodies are all in `world`'s data (one truth tick): the
+        projections and every ray of the tick in one compiled pass each.
+
+        Args:
+            world: the world (or None to skip ray casting).
+            requests: the captures (`Capture`).
+
+        Returns:
+            Per request: px (P, J, 2), in_img, occluded, self_occluded (P, J).
+        """
+        if not requests:
+            return []
+        J = self.skeleton.num_joints
+        for r in requests:
+            if np.shape(r.poses.poses)[1:] != (J, 3):
+                raise ValueError(f"visibility: poses of shape {np.shape(r.poses.poses)}, expected (P, {J}, 3)")
+        scenes = [self.scene_now(world, copy=False)] if world is not None else None
+        px, in_img, occluded, self_occluded = self.block_visibility(requests, scenes, [0] * len(requests))
+        bounds = np.cumsum([0] + [len(r.poses.person_ids) for r in requests]).tolist()
+        return [(px[a:b], in_img[a:b], occluded[a:b], self_occluded[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+
+    def scene_now(self, world, copy: bool = True) -> SceneTick | None:
+        """What rays need of `world`'s bodies now (None when occlusion is off), copied unless `copy` is False.
+
+        The copies are cheap: the positions and rotations go to the next row of a `_SceneBuffer` (consecutive
+        ticks' rows are then one slice for `block_visibility`, no stacking), and the sizes, radii and
+        owners are `World.ray_geom_constants`'s read-only snapshots, shared by every tick until they
+        change. Treat every array returned as read-only."""
+        if world is None or not self.config.occlusion:
+            return None
+        self._scene(world)
+        model, data = world.model, world.data
+        if not copy:
+            return SceneTick(data.geom_xpos, data.geom_xmat.reshape(-1, 9), model.geom_size, model.geom_rbound,
+                             np.asarray(world.geom_person_ids(), dtype=np.int64), None, -1)
+        size, rbound, owner = world.ray_geom_constants()
+        xpos = data.geom_xpos
+        buffer = self._scene_buffer
+        if buffer is None or buffer.used == _SCENE_ROWS or buffer.pos.shape[1] != xpos.shape[0] or buffer.retire:
+            buffer = self._scene_buffer = _SceneBuffer(xpos.shape[0])
+        i = buffer.used
+        buffer.pos[i] = xpos
+        buffer.mat[i] = data.geom_xmat.reshape(-1, 9)
+        buffer.used += 1
+        return SceneTick(buffer.pos[i], buffer.mat[i], size, rbound, owner, buffer, i)
+
+    def _scene_arrays(self, scenes: list[SceneTick]) -> tuple:
+        """The `scene_now` snapshots of several ticks as the ray caster takes them: positions (T, G, 3) and
+        rotations (T, G, 9) (a slice of the buffer when `scene_now` wrote them to consecutive rows), the
+        distinct sizes (U, G, 3), radii (U, G) and owners (U, G), and per tick its index in those (T,)."""
+        T = len(scenes)
+        first = scenes[0]
+        buffer = first.buffer
+        if buffer is not None and first.row + T <= buffer.used and all(
+                scene.buffer is buffer and scene.row == first.row + i for i, scene in enumerate(scenes)):
+            xpos, xmat = buffer.pos[first.row:first.row + T], buffer.mat[first.row:first.row + T]
+            if buffer is self._scene_buffer and first.row + T == buffer.used and buffer.used > _SCENE_ROWS - 16:
+                buffer.retire = True  # the next block starts a new buffer rather than straddle two
+        else:
+            xpos = np.stack([scene.xpos for scene in scenes])
+            xmat = np.stack([scene.xmat for scene in scenes]).reshape(T, -1, 9)
+        # The constant parts, once per distinct (sizes, radii, owners) triple (told apart by identity: the
+        # world hands out the same snapshots until they change).
+        distinct: list[SceneTick] = []
+        const_of = np.empty(T, dtype=np.int64)
+        for i, scene in enumerate(scenes):
+            for u, seen in enumerate(distinct):
+                if seen.size is scene.size and seen.rbound is scene.rbound and seen.owner is scene.owner:
+                    const_of[i] = u
+                    break
+            else:
+                const_of[i] = len(distinct)
+                distinct.append(scene)
+        size, rbound, owner = (np.stack([getattr(scene, k) for scene in distinct]) for k in ("size", "rbound", "owner"))
+        return xpos, xmat, size, rbound, owner.astype(np.int64, copy=False), const_of
+
+    def _ray_scratch(self, R: int, N: int, T: int, K: int) -> tuple:
+        """Scratch arrays for the ray caster, kept between blocks (new ones of this size each block cost
+        page faults): hit geoms (R, N) int32 and distances (R, N) (written, not read here), and the geom
+        and group boxes (T, G + K, 6)."""
+        G = len(self._scene_cache[2])
+        held = self._ray_held
+        if held is None or held[0].size < R * N or held[2].shape[0] < T or held[2].shape[1] != G + K:
+            size = max(R * N, 64 * 32 * 17)
+            held = self._ray_held = (np.empty(size, dtype=np.int32), np.empty(size), np.empty((max(T, 16), G + K, 6)))
+        return held[0][:R * N].reshape(R, N), held[1][:R * N].reshape(R, N), held[2][:T]
+
+    def block_visibility(self, requests, scenes: list | None, scene_of: list[int]) -> tuple:
+        """Projection and occlusion of the captures of several truth ticks, in two compiled passes.
+
+        Args:
+            requests: the captures (`Capture`); every pose (P, J, 3).
+            scenes: `scene_now` of each tick (None: no ray casting), the world of the latest `_scene` call.
+            scene_of: per request, the index of its tick in `scenes`; requests of one tick are one batch
+                (the tangential and skew terms of the lens are added for a batch when a camera of it has them).
+
+        Returns:
+            Every request's people in turn: px (sum P, J, 2), in_img, occluded, self_occluded (sum P, J); the
+            occlusion flags of people smaller than the camera's `min_size_px` are False (no rays: they make no
+            detection).
+        """
+        J = self.skeleton.num_joints
+        n_req = len(requests)
+        cams = np.array([r.camera for r in requests], dtype=np.int64)
+        counts = [len(r.poses.person_ids) for r in requests]
+        most = max(counts)
+        N = most * J
+        if min(counts) == most:
+            # Into a buffer kept between blocks (the points never leave this call): a new array each block
+            # cost page faults.
+            if self._points_buf is None or self._points_buf.shape[0] < n_req or self._points_buf.shape[1] != N:
+                self._points_buf = np.empty((max(n_req, 64), N, 3))
+            points = self._points_buf[:n_req]
+            np.concatenate([r.poses.poses for r in requests], out=points.reshape(n_req * most, J, 3))
+            ids = np.concatenate([r.poses.person_ids for r in requests]).astype(np.int64, copy=False)
+            ids = ids.reshape(n_req, most)
+        else:  # someone arrived or left between two captures: pad with NaN (never in view)
+            points = np.full((n_req, N, 3), np.nan)
+            ids = np.full((n_req, most), -1, dtype=np.int64)
+            for i, r in enumerate(requests):
+                points[i, :counts[i] * J] = np.asarray(r.poses.poses, dtype=np.float64).reshape(-1, 3)
+                ids[i, :counts[i]] = r.poses.person_ids
+        cam_list = cams.tolist()
+        batch_tangential, batch_skew = {}, {}
+        for c, k in zip(cam_list, scene_of):
+            batch_tangential[k] = batch_tangential.get(k, False) or self._tangential[c]
+            batch_skew[k] = batch_skew.get(k, False) or self._skew[c]
+        px = np.empty((n_req, N, 2))
+        in_img = np.empty((n_req, N), dtype=bool)
+        in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points, cams,
+                             np.array([batch_tangential[k] for k in scene_of]),
+                             np.array([batch_skew[k] for k in scene_of]), px, in_img)
+        occluded = np.zeros((n_req, N), dtype=bool)
+        self_occluded = np.zeros((n_req, N), dtype=bool)
+        cast = in_img
+        if self.params.min_person_frac > 0:
+            # No rays for the people too small to detect (`draw_detections` drops them): far across a large
+            # store they are most of the views.
+            large = large_enough(px.reshape(n_req * most, J, 2), np.repeat(self.min_size_px[cams], most))
+            cast = in_img & np.repeat(large.reshape(n_req, most), J, axis=1)
+        if scenes is not None and cast.any():
+            kp_bodies, geom_body, geom_type, groups = self._scene_cache
+            xpos, xmat, size, rbound, owner, const_of = self._scene_arrays(scenes)
+            geomid, dist, bounds = self._ray_scratch(n_req, N, len(scenes), len(groups) - 1)
+            cast_keypoint_rays(self._centre_array[cams], points, cast, ids, J, kp_bodies, geom_type, geom_body,
+                                groups, xpos, xmat, size, rbound, owner, const_of,
+                                np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
+                                self_occluded, geomid, dist, cams, self.visibility_counts, bounds)
+        else:
+            count_views(cams, cast, occluded, self_occluded, self.visibility_counts)
+        px = px.reshape(n_req, most, J, 2)
+        in_img, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_img, occluded, self_occluded))
+        if min(counts) == most:
+            return (px.reshape(-1, J, 2), in_img.reshape(-1, J), occluded.reshape(-1, J),
+                    self_occluded.reshape(-1, J))
+        return tuple(np.concatenate([a[i, :P] for i, P in enumerate(counts)])
+                     for a in (px, in_img, occluded, self_occluded))
+
+    def _scene(self, world) -> tuple:
+        """What the ray caster needs of `world` that does not change while it runs (cached per world):
+        (J, 2) body and parent body of each keypoint and, per geom, its body within its person, its type
+        and the groups of geoms that move together (`World.geom_groups`)."""
+        if self._scene_of is not world:
+            bodies = np.asarray(world.keypoint_body_ids(), dtype=np.int64)
+            if bodies.shape != (self.skeleton.num_joints,):
+                raise ValueError(f"World.keypoint_body_ids(): expected ({self.skeleton.num_joints},), "
+                                 f"got {bodies.shape}")
+            parents = np.asarray(world.keypoint_parent_body_ids(), dtype=np.int64)
+            geom_type = np.asarray(world.model.geom_type, dtype=np.int64)
+            unsupported = sorted(set(geom_type.tolist()) - set(RAY_GEOM_TYPES))
+            if unsupported:
+                raise ValueError(f"world geoms: mjtGeom types {unsupported} are not supported by the keypoint ray "
+                                 "caster (spheres, capsules, ellipsoids, cylinders and boxes are)")
+            self._scene_cache = (np.ascontiguousarray(np.stack([bodies, parents], axis=1)),
+                                 np.asarray(world.geom_body_ids(), dtype=np.int64), geom_type,
+                                 np.asarray(world.geom_groups(), dtype=np.int64))
+            self._scene_of = world
+        return self._scene_cache
+
+    def _cast(self, world, origins: np.ndarray, points: np.ndarray, mask: np.ndarray, person: np.ndarray):
+        """Occluded and self-occluded flags (R, N) of keypoints points (R, N, 3) seen from origins (R, 3),
+        where mask (R, N); person (R, N // J) is the person id of each row of J keypoints. Also the nearest
+        geom hit before each keypoint (R, N) (-1: none) and its distance."""
+        kp_bodies, geom_body, geom_type, groups = self._scene(world)
+        xpos, xmat, size, rbound, owner = self.scene_now(world, copy=False)[:5]
+        shape = mask.shape
+        occluded, self_occluded = np.empty(shape, dtype=bool), np.empty(shape, dtype=bool)
+        geomid, dist = np.empty(shape, dtype=np.int32), np.empty(shape)
+        cast_keypoint_rays(
+            np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(points, dtype=np.float64),
+            np.ascontiguousarray(mask), np.ascontiguousarray(person, dtype=np.int64), self.skeleton.num_joints,
+            kp_bodies, geom_type, geom_body, groups, xpos[None], xmat[None], size[None], rbound[None], owner[None],
+            np.zeros(1, dtype=np.int64), np.zeros(shape[0], dtype=np.int64), float(self.config.self_hit_margin_m),
+            occluded, self_occluded, geomid, dist, np.zeros(shape[0], dtype=np.int64), np.zeros((1, 3), dtype=np.int64),
+            np.empty((1, len(geom_type) + len(groups) - 1, 6)))
+        return occluded, self_occluded, geomid, dist
+
+    def detect_visible(self, requests, visibilities) -> list[CameraFrame]:
+        """The frames of captures whose visibility is already known (`visibility_many` of the same poses, or
+        a dataset's true 2D joints), with the detector's errors drawn for all of them at once.
+
+        Args:
+            requests: the captures (`Capture`).
+            visibilities: per capture, px (P, J, 2), in_img, occluded, self_occluded (P, J).
+        """
+        if not requests:
+            return []
+        rows, bounds = self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities])
+                                                           for k in range(4)))
+        return self.frames_from_rows(requests, rows, bounds)
+
+    def detection_rows_of(self, requests, px, in_img, occluded, self_occluded,
+                          person_ids: list | None = None) -> tuple[DetectionRows, np.ndarray]:
+        """`detection_rows` from the requests' visibility as `block_visibility` returns it (every request's
+        people in turn); person_ids: each request's people (None: its poses' ids), where the requests
+        came without their poses."""
+        if not requests:
+            return DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
+        if person_ids is None:
+            person_ids = [r.poses.person_ids for r in requests]
+        ids = np.concatenate(person_ids).astype(np.int64, copy=False)
+        group = np.repeat(np.arange(len(requests)), [len(p) for p in person_ids])
+        cams = np.array([r.camera for r in requests], dtype=np.int64)
+        rows = self._detections(ids, px, in_img, occluded, self_occluded, group, self.min_size_px[cams][group])
+        # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
+        n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
+        phantoms = [(i, ph) for i in np.repeat(np.arange(len(requests)), n_phantoms)
+                    for ph in [self._phantom(requests[i].camera)] if ph is not None]
+        if phantoms:
+            extra = [np.stack([ph[k] for _, ph in phantoms]) for k in range(8)]
+            extra.append(np.array([i for i, _ in phantoms], dtype=rows[-1].dtype))
+            rows = [np.concatenate([r, e]) for r, e in zip(rows, extra)]
+        # Each frame's rows in a random order: sort by frame, then by a uniform key.
+        order = np.empty(rows[-1].shape[0], dtype=np.int64)
+        frame_order(rows[-1].astype(np.int64, copy=False), self._rng.random(rows[-1].shape[0]), len(requests), order)
+        rows = [r[order] for r in rows]
+        return DetectionRows(*rows[:-1]), np.searchsorted(rows[-1], np.arange(len(requests) + 1))
+
+    def frames_from_rows(self, requests, rows: DetectionRows, bounds: np.ndarray) -> list[CameraFrame]:
+        """The frames of `requests` from their `detection_rows` (no randomness: any process can do it)."""
+        if not requests:
+            return []
+        bounds = bounds.tolist()
+        frames = []
+        for i, r in enumerate(requests):
+            frames.append(CameraFrame.from_rows(self.cameras[r.camera].name, r.stamp_s, r.capture_s, r.delivery_s,
+                                                rows, bounds[i], bounds[i + 1], r.poses))
+        return frames
+
+    def _detections(self, person_ids, px, in_img, occluded, self_occluded, group, min_px):
+        """The detections of real people, drawn by one compiled loop (`draw_detections`; rows: people
+        detected, then duplicates).
+
+        Args:
+            person_ids: (P,) ids; px (P, J, 2); in_img, occluded, self_occluded (P, J); group (P,) the
+                request each row belongs to; min_px (P,) the size below which it is not detected.
+
+        Returns:
+            ids (D,), keypoints (D, J, 2), scores (D, J), true px (D, J, 2), in_image, occluded,
+            self_occluded (D, J), effects (D,), group (D,).
+        """
+        P, J = in_img.shape
+        out = DrawnRows(np.empty(2 * P, dtype=np.int64), np.empty((2 * P, J, 2)), np.empty((2 * P, J)),
+                         np.empty((2 * P, J, 2)), *(np.empty((2 * P, J), dtype=bool) for _ in range(3)),
+                         np.empty(2 * P, dtype=np.int64), np.empty(2 * P, dtype=np.int64))
+        n = draw_detections(self._rng, np.ascontiguousarray(person_ids, dtype=np.int64), px, in_img, occluded,
+                             self_occluded, np.ascontiguousarray(group, dtype=np.int64),
+                             np.ascontiguousarray(min_px, dtype=np.float64), self._fragment_masks,
+                             self._joint_noise, self._swap, self.params, out)
+        return [r[:n] for r in out]
+
+    def _phantom(self, camera_index: int):
+        """A false-positive skeleton: a person template standing somewhere on the floor in view of a camera."""
+        rng = self._rng
+        p = self.params
+        J = self.skeleton.num_joints
+        if self._template is None:
+            return None
+        camera = self.cameras[camera_index]
+        # Pick a pixel, follow its ray to the floor and stand the template there.
+        pixel = np.array([rng.uniform(0, camera.width_px), rng.uniform(0, camera.height_px), 1.0])
+        ray = camera.R_cam_from_world.T @ np.linalg.solve(camera.K, pixel)
+        centre = self._centres[camera_index]
+        if ray[2] >= -1e-6:
+            return None
+        foot = centre - ray * (centre[2] / ray[2])
+        yaw = rng.uniform(0, 2 * np.pi)
+        rot = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+        points = self._template * rng.uniform(0.85, 1.1) @ rot.T + foot
+        # `in_image` of the camera, by the compiled projection (the same pixels; far less overhead).
+        px, inside = np.empty((1, J, 2)), np.empty((1, J), dtype=bool)
+        in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points[None],
+                             np.array([camera_index]), np.array([self._tangential[camera_index]]),
+                             np.array([self._skew[camera_index]]), px, inside)
+        px, inside = px[0], inside[0]
+        keep = inside & (rng.random(J) < 0.7)
+        if keep.sum() < 3:
+            return None
+        kp = np.where(keep[:, None], px + 0.03 * person_size_px(px) * rng.standard_normal((J, 2)), np.nan)
+        scores = np.where(keep, np.clip(0.35 + p.score_std * rng.standard_normal(J), MIN_SCORE, 1.0), 0.0)
+        nan = np.full((J, 2), np.nan)
+        false = np.zeros(J, dtype=bool)
+        return (-1, kp, scores, nan, false, false, false, int(DetectionEffect.PHANTOM))
+

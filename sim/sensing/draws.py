@@ -1,0 +1,242 @@
+"""The detector's draws: person size in the image, and the compiled loop that turns visible joints into
+detections (misses, drops, noise, gross errors, swaps, fragments, duplicates) and orders a frame's rows."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from core.jit import jit
+from core.types import Skeleton
+from sim.types import DetectionEffect, DetectionRows
+
+# Per-joint noise multipliers (COCO-17): wrists worst, knees and ankles best, as OpenPose on Shelf.
+JOINT_NOISE_COCO17 = np.array([0.8, 0.8, 0.8, 0.9, 0.9, 1.0, 1.0, 1.2, 1.2, 1.6, 1.6, 1.1, 1.1, 0.85, 0.85, 0.9, 0.9])
+# Body parts a fragment may keep (COCO-17 indices), each fewer than 6 joints.
+FRAGMENTS_COCO17 = (
+    (0, 1, 2, 3, 4), (5, 7, 9), (6, 8, 10), (5, 6, 7, 8), (11, 13, 15), (12, 14, 16), (11, 12, 13, 14),
+    (0, 5, 6), (13, 14, 15, 16),
+)
+_GROSS_MIN_FRAC, _GROSS_MAX_FRAC = 0.2, 0.5
+_DUPLICATE_OFFSET_FRAC = 0.05
+_DUPLICATE_KEEP = 0.6  # share of its joints a duplicate repeats
+_DUPLICATE_SCORE = 0.6  # its scores, relative to the original's
+MIN_SCORE = 0.05
+# A canonical standing COCO-17 person 1.7 m tall facing +x (body frame, metres), used for phantoms.
+TEMPLATE_COCO17 = np.array([
+    [0.08, 0.0, 1.62], [0.07, 0.03, 1.66], [0.07, -0.03, 1.66], [0.0, 0.07, 1.64], [0.0, -0.07, 1.64],
+    [0.0, 0.19, 1.42], [0.0, -0.19, 1.42], [0.0, 0.23, 1.13], [0.0, -0.23, 1.13], [0.05, 0.24, 0.86],
+    [0.05, -0.24, 0.86], [0.0, 0.1, 0.92], [0.0, -0.1, 0.92], [0.02, 0.1, 0.5], [0.02, -0.1, 0.5],
+    [0.0, 0.1, 0.08], [0.0, -0.1, 0.08],
+])
+
+
+# What `draw_detections` writes: `DetectionRows`' arrays, then each row's capture in the block.
+DrawnRows = NamedTuple("DrawnRows", [(name, np.ndarray) for name in (*DetectionRows._fields, "group")])
+
+
+def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
+    """The person's size in the image: the larger side of the bounding box of its true joints.
+
+    Args:
+        keypoints_px: (..., J, 2) true pixel positions, NaN where unknown.
+
+    Returns:
+        (...,) size in pixels (NaN when no joint is known).
+    """
+    kp = np.ascontiguousarray(keypoints_px, dtype=np.float64)
+    sizes = _person_sizes(kp.reshape((int(np.prod(kp.shape[:-2])),) + kp.shape[-2:]))  # `_person_size` each
+    return sizes.reshape(kp.shape[:-2])
+
+
+def left_right_permutation(skeleton: Skeleton) -> np.ndarray:
+    """(J,) joint order that swaps every left_* joint with its right_* partner."""
+    order = np.arange(skeleton.num_joints)
+    for i, name in enumerate(skeleton.joints):
+        for a, b in (("left_", "right_"), ("right_", "left_")):
+            if name.startswith(a) and b + name[len(a):] in skeleton.joints:
+                order[i] = skeleton.index(b + name[len(a):])
+    return order
+
+
+
+_FRAGMENT, _GROSS_ERROR, _LEFT_RIGHT_SWAP, _DUPLICATE = (int(e) for e in (
+    DetectionEffect.FRAGMENT, DetectionEffect.GROSS_ERROR, DetectionEffect.LEFT_RIGHT_SWAP, DetectionEffect.DUPLICATE))
+
+
+@jit
+def frame_order(frame, key, n_frames, order):
+    """np.lexsort((key, frame)) into order (D,): rows by frame (0 <= frame < n_frames), each frame's by key,
+    ties in input order (a counting sort, then an insertion sort of each frame's few rows)."""
+    start = np.zeros(n_frames + 1, dtype=np.int64)
+    for d in range(frame.shape[0]):
+        start[frame[d] + 1] += 1
+    for f in range(n_frames):
+        start[f + 1] += start[f]
+    fill = start[:n_frames].copy()
+    for d in range(frame.shape[0]):
+        order[fill[frame[d]]] = d
+        fill[frame[d]] += 1
+    for f in range(n_frames):
+        for i in range(start[f] + 1, start[f + 1]):
+            d = order[i]
+            k = i - 1
+            while k >= start[f] and key[order[k]] > key[d]:
+                order[k + 1] = order[k]
+                k -= 1
+            order[k + 1] = d
+
+
+
+@jit
+def _person_size(px, p):
+    """The size in the image of person-view px[p] (J, 2): the larger side of the bounding box of its known
+    joints, NaN with none (`person_size_px` of any shape, compiled)."""
+    high0 = high1 = -np.inf
+    low0 = low1 = np.inf
+    for j in range(px.shape[1]):
+        x, y = px[p, j, 0], px[p, j, 1]
+        if not np.isnan(x):
+            high0, low0 = max(high0, x), min(low0, x)
+        if not np.isnan(y):
+            high1, low1 = max(high1, y), min(low1, y)
+    extent = max(-np.inf, high0 - low0, high1 - low1)
+    return extent if np.isfinite(extent) else np.nan
+
+
+@jit
+def _person_sizes(px):
+    """(P,) `_person_size` of every person-view of px (P, J, 2)."""
+    out = np.empty(px.shape[0])
+    for p in range(px.shape[0]):
+        out[p] = _person_size(px, p)
+    return out
+
+
+@jit
+def large_enough(px, min_px):
+    """(P,) whether each person-view of px (P, J, 2) is at least min_px[p] in the image (`person_size_px`)."""
+    out = np.empty(px.shape[0], dtype=np.bool_)
+    for p in range(px.shape[0]):
+        out[p] = _person_size(px, p) >= min_px[p]
+    return out
+
+
+@jit
+def draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group, min_px, fragment_masks,
+                     joint_noise, swap_order, model, out):
+    """The detections of real people (`Detector._detections`): every draw from `rng` (a numpy Generator,
+    whose stream numba reads and advances as numpy would) and what it does, person-view by person-view,
+    each value drawn only where it is used.
+
+    Per person-view (rows of px (P, J, 2), in_img, occluded, self_occluded (P, J), person_ids and group
+    (P,)): never detected with fewer than `min_visible` visible joints in the image or smaller than
+    min_px (P,) in it (`person_size_px`), else missed with probability miss + gain x its occluded share;
+    a detection reports each joint in the image unless
+    dropped (by the joint's occlusion), may keep only one body part (fragment), has Student-t noise
+    scaled by the person's size in the image (`person_size_px`), the joint's noise factor and its
+    occlusion, gross jumps of a uniform fraction of that size in a uniform direction, clipped normal
+    scores, and may have left and right swapped; joints not reported are NaN with score 0. A detection
+    with a joint reported may come with a duplicate: a second copy shifted by a normal offset of
+    `_DUPLICATE_OFFSET_FRAC` of the size, repeating each joint with probability `_DUPLICATE_KEEP`, at
+    `_DUPLICATE_SCORE` of the scores.
+
+    model: the `DetectorParams`. Writes the rows (detections in person-view order, then their duplicates)
+    into `out` (a `DrawnRows` of 2P rows) and returns how many it wrote.
+    """
+    ids, kp, scores, true_px, out_in, out_occluded, out_self, effects, out_group = out
+    dof = model.noise_tail_dof
+    heavy = math.isfinite(dof)
+    P, J = in_img.shape
+    n_parts = fragment_masks.shape[0]
+    reported = np.empty(J, dtype=np.bool_)
+    value = np.empty((J, 2))
+    score = np.empty(J)
+    n = 0
+    originals = np.empty(P, dtype=np.int64)  # rows of the detections, for their duplicates
+    sizes = np.empty(P)
+    for p in range(P):
+        n_in = n_visible = n_occluded = 0
+        for j in range(J):
+            n_in += in_img[p, j]
+            n_visible += in_img[p, j] and not occluded[p, j]
+            n_occluded += occluded[p, j]
+        if n_in == 0 or n_visible < model.min_visible_joints:
+            continue
+        size = _person_size(px, p)
+        if not size >= min_px[p]:  # too small to detect (NaN: no joint known)
+            continue
+        if rng.random() < model.miss_prob + model.miss_occlusion_gain * n_occluded / n_in:
+            continue
+        effect = 0
+        for j in range(J):
+            drop = model.occluded_drop_prob if occluded[p, j] else (
+                model.self_occluded_drop_prob if self_occluded[p, j] else model.joint_drop_prob)
+            reported[j] = in_img[p, j] and rng.random() >= drop
+        # Fragments keep one body part (if it holds a reported joint).
+        if rng.random() < model.fragment_prob:
+            part = rng.integers(0, n_parts)
+            any_part = False
+            for j in range(J):
+                any_part = any_part or (reported[j] and fragment_masks[part, j])
+            if any_part:
+                for j in range(J):
+                    reported[j] = reported[j] and fragment_masks[part, j]
+                effect |= _FRAGMENT
+        any_reported = False
+        for j in range(J):
+            if not reported[j]:
+                value[j, 0] = value[j, 1] = np.nan
+                score[j] = 0.0
+                continue
+            any_reported = True
+            scale = model.noise_frac * size * joint_noise[j]
+            scale = scale * (model.occluded_noise_scale if occluded[p, j] else (
+                model.self_occluded_noise_scale if self_occluded[p, j] else 1.0))
+            z0, z1 = rng.standard_normal(), rng.standard_normal()
+            if heavy:  # Student-t: the normal core over the root of a chi-square / dof
+                stretch = math.sqrt(dof / rng.chisquare(dof))
+                z0, z1 = z0 * stretch, z1 * stretch
+            value[j, 0], value[j, 1] = px[p, j, 0] + scale * z0, px[p, j, 1] + scale * z1
+            if rng.random() < model.gross_error_prob:
+                angle = rng.uniform(0.0, 2.0 * np.pi)
+                jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC) * size
+                value[j, 0] += jump * math.cos(angle)
+                value[j, 1] += jump * math.sin(angle)
+                effect |= _GROSS_ERROR
+            base = model.score_occluded if occluded[p, j] else model.score_visible
+            score[j] = min(max(base + model.score_std * rng.standard_normal(), MIN_SCORE), 1.0)
+        if not any_reported:
+            continue
+        swap = rng.random() < model.swap_prob
+        if swap:
+            effect |= _LEFT_RIGHT_SWAP
+        for j in range(J):
+            k = swap_order[j] if swap else j
+            kp[n, j, 0], kp[n, j, 1], scores[n, j] = value[k, 0], value[k, 1], score[k]
+            true_px[n, j, 0], true_px[n, j, 1] = px[p, j, 0], px[p, j, 1]
+            out_in[n, j], out_occluded[n, j], out_self[n, j] = in_img[p, j], occluded[p, j], self_occluded[p, j]
+        ids[n], effects[n], out_group[n] = person_ids[p], effect, group[p]
+        originals[n], sizes[n] = p, size
+        n += 1
+    # Duplicates: a second, partial, shifted and less confident copy of a detection.
+    D = n
+    for d in range(D):
+        if not rng.random() < model.duplicate_prob:
+            continue
+        p = originals[d]
+        shift0 = _DUPLICATE_OFFSET_FRAC * sizes[d] * rng.standard_normal()
+        shift1 = _DUPLICATE_OFFSET_FRAC * sizes[d] * rng.standard_normal()
+        for j in range(J):
+            repeat = not np.isnan(kp[d, j, 0]) and rng.random() < _DUPLICATE_KEEP
+            kp[n, j, 0] = kp[d, j, 0] + shift0 if repeat else np.nan
+            kp[n, j, 1] = kp[d, j, 1] + shift1 if repeat else np.nan
+            scores[n, j] = scores[d, j] * _DUPLICATE_SCORE if repeat else 0.0
+            true_px[n, j, 0], true_px[n, j, 1] = px[p, j, 0], px[p, j, 1]
+            out_in[n, j], out_occluded[n, j], out_self[n, j] = in_img[p, j], occluded[p, j], self_occluded[p, j]
+        ids[n], effects[n], out_group[n] = ids[d], effects[d] | _DUPLICATE, out_group[d]
+        n += 1
+    return n
+
