@@ -117,19 +117,22 @@ def load(name_or_path: str | Path | None = None, overrides: dict | None = None) 
         raise ScenarioError(f"{path}: no such scenario file (shipped scenarios: {shipped})") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ScenarioError(f"{path}: cannot read scenario: {e}") from None
-    return dataclasses.replace(_from_text(text, overrides, str(path), path.stem), source_path=str(path))
+    return dataclasses.replace(_from_text(text, overrides, str(path), path.stem, path.parent), source_path=str(path))
 
 
 _OVERRIDE_NOTE = "\n# override: "
 
 
-def _from_text(text: str, overrides: dict, where: str, name: str) -> Scenario:
+def _from_text(text: str, overrides: dict, where: str, name: str, folder: Path | None = None) -> Scenario:
     """The scenario of a file's text with `overrides` applied; its `source_text` is the text with the
-    overrides noted under it."""
+    overrides noted under it. A detector profile file the text names is resolved against `folder` (the
+    scenario file's; one an override names, against the working folder), and its parameters become overrides
+    too, so that the recorded text simulates the same without the file."""
     try:
         tree = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{where}: malformed TOML: {e}") from None
+    overrides = _with_profile_file(tree, overrides, folder)
     for dotted, value in overrides.items():
         *parents, leaf = dotted.split(".")
         table = tree
@@ -143,6 +146,73 @@ def _from_text(text: str, overrides: dict, where: str, name: str) -> Scenario:
     # Overrides are part of what was simulated, so they are part of the recorded description.
     note = "".join(f"{_OVERRIDE_NOTE}{k} = {v!r}" for k, v in sorted(overrides.items()))
     return dataclasses.replace(scenario, source_text=text + note)
+
+
+PROFILE_FILE_SUFFIX = ".toml"
+
+
+def is_profile_file(profile) -> bool:
+    """Whether a `detector.profile` value names a profile file rather than a shipped profile."""
+    return isinstance(profile, str) and profile.endswith(PROFILE_FILE_SUFFIX)
+
+
+def load_profile_file(path: Path) -> dict:
+    """A detector profile file (what `crossview fit-detector` writes): `base`, the shipped profile it starts
+    from (default typical), and any parameters of `DetectorParams`, each checked as a [detector] key is.
+
+    Returns:
+        {"profile": base, parameter: value, ...} as TOML values.
+
+    Raises:
+        ScenarioError: the file is missing, unreadable or malformed, or a key is unknown or invalid; the
+            message names the file and the key.
+    """
+    try:
+        tree = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ScenarioError(f"{path}: no such detector profile file (detector.profile names a shipped profile, "
+                            f"{', '.join(p.value for p in DetectorProfile)}, or a profile file)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(f"{path}: cannot read the detector profile: {e}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: malformed TOML: {e}") from None
+    base = tree.pop("base", DetectorProfile.TYPICAL.value)
+    valid = [p.value for p in DetectorProfile]
+    if base not in valid:
+        raise ScenarioError(f"{path}: base = {base!r} is not one of {valid}")
+    unknown = sorted(set(tree) - set(DetectorParams._fields))
+    if unknown:
+        raise ScenarioError(f"{path}: unknown key '{unknown[0]}' (valid keys: base, "
+                            f"{', '.join(DetectorParams._fields)})")
+    from_dict(DetectorConfig, {**tree, "profile": base}, str(path), "")  # every value checked, naming the file
+    return {"profile": base, **tree}
+
+
+def _with_profile_file(tree: dict, overrides: dict, folder: Path | None) -> dict:
+    """`overrides` with the parameters of the profile file that `detector.profile` names, if it names one: the
+    file's base profile as the profile, and each of its parameters that neither the scenario's [detector] nor
+    an override sets."""
+    table = tree.get("detector") if isinstance(tree.get("detector"), dict) else {}
+    profile = overrides.get("detector.profile", table.get("profile"))
+    if not is_profile_file(profile):
+        return overrides
+    path = Path(profile)
+    if not path.is_absolute() and "detector.profile" not in overrides and folder is not None:
+        path = folder / path
+    inline = load_profile_file(path)
+    explicit = set(table) | {k.split(".", 1)[1] for k in overrides if k.startswith("detector.")}
+    merged = dict(overrides)
+    merged["detector.profile"] = inline.pop("profile")
+    merged.update({f"detector.{k}": v for k, v in inline.items() if k not in explicit})
+    return merged
+
+
+def profile_file_text(params: DetectorParams, base: DetectorProfile, comment: str) -> str:
+    """A profile file holding every parameter of `params` (what `load_profile_file` reads back)."""
+    lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
+    lines += ["", f"base = {_toml_value(base.value)}"]
+    lines += [f"{name} = {_toml_value(getattr(params, name))}" for name in DetectorParams._fields]
+    return "\n".join(lines) + "\n"
 
 
 def from_source_text(source_text: str, name: str, where: str) -> Scenario:
@@ -164,7 +234,10 @@ def from_source_text(source_text: str, name: str, where: str) -> Scenario:
         try:
             overrides[key] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
-            raise ScenarioError(f"{where}: unreadable override note {note!r} in the scenario text") from None
+            try:  # an infinite number (a profile's Gaussian tails): repr wrote TOML's `inf`
+                overrides[key] = tomllib.loads(f"v = {value}")["v"]
+            except tomllib.TOMLDecodeError:
+                raise ScenarioError(f"{where}: unreadable override note {note!r} in the scenario text") from None
     scenario = _from_text(text, overrides, where, name)
     if scenario.source_text != source_text:
         raise ScenarioError(f"{where}: the scenario text's override notes do not read back as written")

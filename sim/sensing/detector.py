@@ -27,16 +27,20 @@ from core.types import COCO17, Camera, Skeleton
 from sim.cameras import in_image_many_kernel, monotonic_radius
 from sim.sensing.draws import (
     FRAGMENTS_COCO17,
-    JOINT_NOISE_COCO17,
     MIN_SCORE,
     TEMPLATE_COCO17,
     DrawnRows,
+    DrawState,
+    DrawTables,
+    Views,
     draw_detections,
     frame_order,
+    joint_groups,
     large_enough,
     left_right_permutation,
     person_size_px,
 )
+from sim.sensing.offsets import JointOffsets
 from sim.sensing.profiles import DetectorConfig
 from sim.sensing.rays import RAY_GEOM_TYPES, cast_keypoint_rays, count_views
 from sim.types import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
@@ -92,15 +96,19 @@ class Detector:
         self.cameras = list(cameras)
         self.skeleton = skeleton
         self._rng = rng
-        self._swap = left_right_permutation(skeleton)
         coco = skeleton.name == COCO17.name
-        self._joint_noise = JOINT_NOISE_COCO17 if coco else np.ones(skeleton.num_joints)
         self._fragments = FRAGMENTS_COCO17 if coco else tuple(
             tuple(range(s, min(s + 4, skeleton.num_joints))) for s in range(0, skeleton.num_joints, 4)
         )
         self._fragment_masks = np.zeros((len(self._fragments), skeleton.num_joints), dtype=bool)
         for i, part in enumerate(self._fragments):
             self._fragment_masks[i, list(part)] = True
+        self._tables = DrawTables(self._fragment_masks, joint_groups(skeleton), left_right_permutation(skeleton))
+        # The detector's own joints (offset from the truth's); their seed is the detector stream's first draw.
+        self.offsets = JointOffsets(self.params, skeleton, int(rng.integers(2**62)))
+        # What the draws remember per (camera, person): `_slot_of` maps person id x cameras + camera to a row.
+        self._state = DrawState.empty(256, skeleton.num_joints)
+        self._slot_of: dict[int, int] = {}
         self._template = TEMPLATE_COCO17 if coco else None
         self._centres = [np.ascontiguousarray(c.center_world) for c in self.cameras]
         self._scene_of = None  # the world `_scene_cache` was made of
@@ -134,7 +142,8 @@ class Detector:
             poses: the true poses, (P, J, 3).
 
         Returns:
-            px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J).
+            px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J), and
+            found_px (P, J, 2) the detector's own joints' pixels (`JointOffsets`; NaN for people it cannot detect).
         """
         return self.visibility_many(world, [Capture(camera_index, poses, poses.t_s, poses.t_s, poses.t_s)])[0]
 
@@ -147,7 +156,7 @@ class Detector:
             requests: the captures (`Capture`).
 
         Returns:
-            Per request: px (P, J, 2), in_img, occluded, self_occluded (P, J).
+            Per request: px (P, J, 2), in_img, occluded, self_occluded (P, J), found_px (P, J, 2).
         """
         if not requests:
             return []
@@ -156,9 +165,9 @@ class Detector:
             if np.shape(r.poses.poses)[1:] != (J, 3):
                 raise ValueError(f"visibility: poses of shape {np.shape(r.poses.poses)}, expected (P, {J}, 3)")
         scenes = [self.scene_now(world, copy=False)] if world is not None else None
-        px, in_img, occluded, self_occluded = self.block_visibility(requests, scenes, [0] * len(requests))
+        visible = self.block_visibility(requests, scenes, [0] * len(requests))
         bounds = np.cumsum([0] + [len(r.poses.person_ids) for r in requests]).tolist()
-        return [(px[a:b], in_img[a:b], occluded[a:b], self_occluded[a:b]) for a, b in zip(bounds[:-1], bounds[1:])]
+        return [tuple(v[a:b] for v in visible) for a, b in zip(bounds[:-1], bounds[1:])]
 
     def scene_now(self, world, copy: bool = True) -> SceneTick | None:
         """What rays need of `world`'s bodies now (None when occlusion is off), copied unless `copy` is False.
@@ -236,9 +245,10 @@ class Detector:
                 (the tangential and skew terms of the lens are added for a batch when a camera of it has them).
 
         Returns:
-            Every request's people in turn: px (sum P, J, 2), in_img, occluded, self_occluded (sum P, J); the
-            occlusion flags of people smaller than the camera's `min_size_px` are False (no rays: they make no
-            detection).
+            Every request's people in turn: px (sum P, J, 2), in_img, occluded, self_occluded (sum P, J) and
+            found_px (sum P, J, 2), the detector's own joints (`JointOffsets`) projected, for the people it may
+            detect (NaN for the others); the occlusion flags of people smaller than the camera's `min_size_px`
+            are False (no rays: they make no detection).
         """
         J = self.skeleton.num_joints
         n_req = len(requests)
@@ -266,11 +276,12 @@ class Detector:
         for c, k in zip(cam_list, scene_of):
             batch_tangential[k] = batch_tangential.get(k, False) or self._tangential[c]
             batch_skew[k] = batch_skew.get(k, False) or self._skew[c]
+        tangential = np.array([batch_tangential[k] for k in scene_of])
+        skew = np.array([batch_skew[k] for k in scene_of])
         px = np.empty((n_req, N, 2))
         in_img = np.empty((n_req, N), dtype=bool)
         in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points, cams,
-                             np.array([batch_tangential[k] for k in scene_of]),
-                             np.array([batch_skew[k] for k in scene_of]), px, in_img)
+                             tangential, skew, px, in_img)
         occluded = np.zeros((n_req, N), dtype=bool)
         self_occluded = np.zeros((n_req, N), dtype=bool)
         cast = in_img
@@ -289,13 +300,26 @@ class Detector:
                                 self_occluded, geomid, dist, cams, self.visibility_counts, bounds)
         else:
             count_views(cams, cast, occluded, self_occluded, self.visibility_counts)
-        px = px.reshape(n_req, most, J, 2)
+        found = px
+        if self.offsets.active:
+            # The detector's own joints, for the person-views it may detect (the others take no draw).
+            r_idx, p_idx = np.nonzero(cast.reshape(n_req, most, J).any(axis=2))
+            shifted = np.full((n_req, most, J, 3), np.nan)
+            if len(r_idx):
+                true = points.reshape(n_req, most, J, 3)[r_idx, p_idx]
+                capture_s = np.array([r.capture_s for r in requests])[r_idx]
+                shifted[r_idx, p_idx] = true + self.offsets.offsets(ids[r_idx, p_idx], capture_s, true)
+            found = np.empty((n_req, N, 2))
+            in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius,
+                                 shifted.reshape(n_req, N, 3), cams, tangential, skew, found,
+                                 np.empty((n_req, N), dtype=bool))
+        px, found = px.reshape(n_req, most, J, 2), found.reshape(n_req, most, J, 2)
         in_img, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_img, occluded, self_occluded))
         if min(counts) == most:
             return (px.reshape(-1, J, 2), in_img.reshape(-1, J), occluded.reshape(-1, J),
-                    self_occluded.reshape(-1, J))
+                    self_occluded.reshape(-1, J), found.reshape(-1, J, 2))
         return tuple(np.concatenate([a[i, :P] for i, P in enumerate(counts)])
-                     for a in (px, in_img, occluded, self_occluded))
+                     for a in (px, in_img, occluded, self_occluded, found))
 
     def _scene(self, world) -> tuple:
         """What the ray caster needs of `world` that does not change while it runs (cached per world):
@@ -342,19 +366,23 @@ class Detector:
 
         Args:
             requests: the captures (`Capture`).
-            visibilities: per capture, px (P, J, 2), in_img, occluded, self_occluded (P, J).
+            visibilities: per capture, px (P, J, 2), in_img, occluded, self_occluded (P, J), and optionally
+                found_px (P, J, 2) (without it, the detector's joints are the true ones: a dataset's 2D joints).
         """
         if not requests:
             return []
         rows, bounds = self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities])
-                                                           for k in range(4)))
+                                                           for k in range(len(visibilities[0]))))
         return self.frames_from_rows(requests, rows, bounds)
 
-    def detection_rows_of(self, requests, px, in_img, occluded, self_occluded,
+    def detection_rows_of(self, requests, px, in_img, occluded, self_occluded, found_px=None,
                           person_ids: list | None = None) -> tuple[DetectionRows, np.ndarray]:
         """`detection_rows` from the requests' visibility as `block_visibility` returns it (every request's
-        people in turn); person_ids: each request's people (None: its poses' ids), where the requests
-        came without their poses."""
+        people in turn; found_px None: the detector's joints are the true ones); person_ids: each request's
+        people (None: its poses' ids), where the requests came without their poses.
+
+        The requests of successive calls must come in capture-time order per camera: the draws remember each
+        camera's errors and misses per person (`DrawState`)."""
         if not requests:
             return DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
         if person_ids is None:
@@ -362,7 +390,11 @@ class Detector:
         ids = np.concatenate(person_ids).astype(np.int64, copy=False)
         group = np.repeat(np.arange(len(requests)), [len(p) for p in person_ids])
         cams = np.array([r.camera for r in requests], dtype=np.int64)
-        rows = self._detections(ids, px, in_img, occluded, self_occluded, group, self.min_size_px[cams][group])
+        capture_s = np.array([r.capture_s for r in requests], dtype=np.float64)
+        views = Views(ids, px, px if found_px is None else found_px, in_img, occluded, self_occluded, group,
+                      np.ascontiguousarray(self.min_size_px[cams][group], dtype=np.float64),
+                      self._slots(ids, cams[group]), capture_s[group])
+        rows = self._detections(views)
         # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
         n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
         phantoms = [(i, ph) for i in np.repeat(np.arange(len(requests)), n_phantoms)
@@ -388,26 +420,36 @@ class Detector:
                                                 rows, bounds[i], bounds[i + 1], r.poses))
         return frames
 
-    def _detections(self, person_ids, px, in_img, occluded, self_occluded, group, min_px):
+    def _slots(self, person_ids: np.ndarray, cams: np.ndarray) -> np.ndarray:
+        """(P,) the `DrawState` row of each (person, camera) pair, new rows for pairs not seen before."""
+        C = len(self.cameras)
+        slot_of = self._slot_of
+        keys = (person_ids * C + cams).tolist()
+        for key in keys:
+            if key not in slot_of:
+                slot_of[key] = len(slot_of)
+        if len(slot_of) > self._state.noise.shape[0]:  # grow by doubling, keeping what is remembered
+            old = self._state
+            grown = DrawState.empty(2 * len(slot_of), self.skeleton.num_joints)
+            for kept, new in zip(old, grown):
+                new[:len(kept)] = kept
+            self._state = grown
+        return np.array([slot_of[k] for k in keys], dtype=np.int64)
+
+    def _detections(self, views: Views):
         """The detections of real people, drawn by one compiled loop (`draw_detections`; rows: people
         detected, then duplicates).
-
-        Args:
-            person_ids: (P,) ids; px (P, J, 2); in_img, occluded, self_occluded (P, J); group (P,) the
-                request each row belongs to; min_px (P,) the size below which it is not detected.
 
         Returns:
             ids (D,), keypoints (D, J, 2), scores (D, J), true px (D, J, 2), in_image, occluded,
             self_occluded (D, J), effects (D,), group (D,).
         """
-        P, J = in_img.shape
+        P, J = views.in_img.shape
         out = DrawnRows(np.empty(2 * P, dtype=np.int64), np.empty((2 * P, J, 2)), np.empty((2 * P, J)),
-                         np.empty((2 * P, J, 2)), *(np.empty((2 * P, J), dtype=bool) for _ in range(3)),
-                         np.empty(2 * P, dtype=np.int64), np.empty(2 * P, dtype=np.int64))
-        n = draw_detections(self._rng, np.ascontiguousarray(person_ids, dtype=np.int64), px, in_img, occluded,
-                             self_occluded, np.ascontiguousarray(group, dtype=np.int64),
-                             np.ascontiguousarray(min_px, dtype=np.float64), self._fragment_masks,
-                             self._joint_noise, self._swap, self.params, out)
+                        np.empty((2 * P, J, 2)), *(np.empty((2 * P, J), dtype=bool) for _ in range(3)),
+                        np.empty(2 * P, dtype=np.int64), np.empty(2 * P, dtype=np.int64))
+        views = Views(*(np.ascontiguousarray(v) for v in views))
+        n = draw_detections(self._rng, views, self._state, self._tables, self.params, out)
         return [r[:n] for r in out]
 
     def _phantom(self, camera_index: int):
@@ -434,7 +476,7 @@ class Detector:
                              np.array([camera_index]), np.array([self._tangential[camera_index]]),
                              np.array([self._skew[camera_index]]), px, inside)
         px, inside = px[0], inside[0]
-        keep = inside & (rng.random(J) < 0.7)
+        keep = inside & (rng.random(J) < p.phantom_keep_prob)
         if keep.sum() < 3:
             return None
         kp = np.where(keep[:, None], px + 0.03 * person_size_px(px) * rng.standard_normal((J, 2)), np.nan)

@@ -10,10 +10,9 @@ import numpy as np
 
 from core.jit import jit
 from core.types import Skeleton
+from sim.sensing.profiles import JOINT_GROUPS
 from sim.types import DetectionEffect, DetectionRows
 
-# Per-joint noise multipliers (COCO-17): wrists worst, knees and ankles best, as OpenPose on Shelf.
-JOINT_NOISE_COCO17 = np.array([0.8, 0.8, 0.8, 0.9, 0.9, 1.0, 1.0, 1.2, 1.2, 1.6, 1.6, 1.1, 1.1, 0.85, 0.85, 0.9, 0.9])
 # Body parts a fragment may keep (COCO-17 indices), each fewer than 6 joints.
 FRAGMENTS_COCO17 = (
     (0, 1, 2, 3, 4), (5, 7, 9), (6, 8, 10), (5, 6, 7, 8), (11, 13, 15), (12, 14, 16), (11, 12, 13, 14),
@@ -49,6 +48,18 @@ def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
     kp = np.ascontiguousarray(keypoints_px, dtype=np.float64)
     sizes = _person_sizes(kp.reshape((int(np.prod(kp.shape[:-2])),) + kp.shape[-2:]))  # `_person_size` each
     return sizes.reshape(kp.shape[:-2])
+
+
+def joint_groups(skeleton: Skeleton) -> np.ndarray:
+    """(J,) int64 the index in `profiles.JOINT_GROUPS` of each joint, read off its name (a joint that names no
+    limb joint is the head's: COCO-17's face points, Campus-14's top and bottom of the head)."""
+    limb = {"shoulder": "shoulders", "elbow": "elbows", "wrist": "wrists", "hip": "hips", "knee": "knees",
+            "ankle": "ankles"}
+    groups = []
+    for name in skeleton.joints:
+        group = next((g for key, g in limb.items() if key in name), "head")
+        groups.append(JOINT_GROUPS.index(group))
+    return np.array(groups, dtype=np.int64)
 
 
 def left_right_permutation(skeleton: Skeleton) -> np.ndarray:
@@ -124,33 +135,109 @@ def large_enough(px, min_px):
     return out
 
 
-@jit
-def draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group, min_px, fragment_masks,
-                     joint_noise, swap_order, model, out):
-    """The detections of real people (`Detector._detections`): every draw from `rng` (a numpy Generator,
-    whose stream numba reads and advances as numpy would) and what it does, person-view by person-view,
-    each value drawn only where it is used.
+class Views(NamedTuple):
+    """The person-views of a block that the draws turn into detections (P rows, every capture's people in turn).
 
-    Per person-view (rows of px (P, J, 2), in_img, occluded, self_occluded (P, J), person_ids and group
-    (P,)): never detected with fewer than `min_visible` visible joints in the image or smaller than
-    min_px (P,) in it (`person_size_px`), else missed with probability miss + gain x its occluded share;
-    a detection reports each joint in the image unless
-    dropped (by the joint's occlusion), may keep only one body part (fragment), has Student-t noise
-    scaled by the person's size in the image (`person_size_px`), the joint's noise factor and its
-    occlusion, gross jumps of a uniform fraction of that size in a uniform direction, clipped normal
-    scores, and may have left and right swapped; joints not reported are NaN with score 0. A detection
-    with a joint reported may come with a duplicate: a second copy shifted by a normal offset of
+    Attributes:
+        person_ids: (P,) int64 true person of each row.
+        px: (P, J, 2) the scoring truth's joints projected (distorted pixels; NaN where unknown).
+        found_px: (P, J, 2) the detector's own joints projected (`sim.sensing.offsets`): what its noise is
+            around (NaN: use px).
+        in_img, occluded, self_occluded: (P, J) bool visibility of each true joint.
+        group: (P,) int64 the capture each row belongs to.
+        min_px: (P,) the size in pixels below which the row is not detected.
+        slot: (P,) int64 the row of `DrawState` that holds this camera's state for this person.
+        t_s: (P,) capture time of each row, seconds.
+    """
+
+    person_ids: np.ndarray
+    px: np.ndarray
+    found_px: np.ndarray
+    in_img: np.ndarray
+    occluded: np.ndarray
+    self_occluded: np.ndarray
+    group: np.ndarray
+    min_px: np.ndarray
+    slot: np.ndarray
+    t_s: np.ndarray
+
+
+class DrawState(NamedTuple):
+    """What the draws remember between frames, per (camera, person) slot and joint: the detector's errors
+    persist and its misses come in runs (docs/sensor-model.md).
+
+    Attributes:
+        noise: (S, J, 2) the latest noise of the joint, in units of its std (an AR(1) process in time).
+        noise_t_s: (S, J) when it was drawn (-inf: never).
+        missed: (S, J) bool whether the joint was missed then.
+        miss_t_s: (S, J) when that was drawn (-inf: never).
+    """
+
+    noise: np.ndarray
+    noise_t_s: np.ndarray
+    missed: np.ndarray
+    miss_t_s: np.ndarray
+
+    @staticmethod
+    def empty(slots: int, J: int) -> DrawState:
+        return DrawState(np.zeros((slots, J, 2)), np.full((slots, J), -np.inf), np.zeros((slots, J), dtype=np.bool_),
+                         np.full((slots, J), -np.inf))
+
+
+class DrawTables(NamedTuple):
+    """The skeleton's constants the draws need.
+
+    Attributes:
+        fragment_masks: (F, J) bool the body parts a fragment may keep.
+        joint_group: (J,) int64 each joint's index in `profiles.JOINT_GROUPS`.
+        swap_order: (J,) int64 the joint order that swaps left and right (`left_right_permutation`).
+    """
+
+    fragment_masks: np.ndarray
+    joint_group: np.ndarray
+    swap_order: np.ndarray
+
+
+@jit
+def _decay(now_s, then_s, time_s):
+    """exp(-(now - then) / time): how much of a state drawn at `then_s` is left at `now_s` (0 when never drawn or
+    with no memory)."""
+    if not time_s > 0.0 or not then_s > -np.inf:
+        return 0.0
+    return math.exp(-max(now_s - then_s, 0.0) / time_s)
+
+
+@jit
+def draw_detections(rng, views, state, tables, model, out):
+    """The detections of real people (`Detector._detections`): every draw from `rng` (a numpy Generator,
+    whose stream numba reads and advances as numpy would) and what it does, person-view by person-view in
+    the order of `views` (captures in time order, so each slot's state moves forward in time).
+
+    Per person-view (`Views`): never detected with fewer than `min_visible` visible joints in the image or
+    smaller than min_px in it (`person_size_px`), else missed with probability miss + gain x its occluded
+    share. A detection reports each joint in the image unless it is missed (a two-state process per slot and
+    joint with the group's stationary rate `joint_miss_prob` and memory `miss_time_s`) or dropped by its
+    occlusion; it may keep only one body part (fragment). A reported joint lies at the detector's own joint
+    (`found_px`) plus noise scaled by the person's size in the image, the joint's occlusion and `noise_frac`:
+    an AR(1) process per slot and joint, whose Student-t innovations keep its std (correlation
+    exp(-Δt / noise_time_s) between draws Δt apart); gross jumps of a uniform fraction of that size in a uniform
+    direction; clipped normal scores; left and right may be swapped. Joints not reported are NaN with score 0.
+    A detection with a joint reported may come with a duplicate: a second copy shifted by a normal offset of
     `_DUPLICATE_OFFSET_FRAC` of the size, repeating each joint with probability `_DUPLICATE_KEEP`, at
     `_DUPLICATE_SCORE` of the scores.
 
     model: the `DetectorParams`. Writes the rows (detections in person-view order, then their duplicates)
-    into `out` (a `DrawnRows` of 2P rows) and returns how many it wrote.
+    into `out` (a `DrawnRows` of 2P rows), updates `state` (`DrawState`), and returns how many rows it wrote.
     """
     ids, kp, scores, true_px, out_in, out_occluded, out_self, effects, out_group = out
+    px, found, in_img, occluded, self_occluded = views.px, views.found_px, views.in_img, views.occluded, \
+        views.self_occluded
     dof = model.noise_tail_dof
     heavy = math.isfinite(dof)
+    # Student-t innovations scaled to unit variance, so that the AR(1) process keeps the std it is given.
+    unit_t = math.sqrt((dof - 2.0) / dof) if heavy and dof > 2.0 else 1.0
     P, J = in_img.shape
-    n_parts = fragment_masks.shape[0]
+    n_parts = tables.fragment_masks.shape[0]
     reported = np.empty(J, dtype=np.bool_)
     value = np.empty((J, 2))
     score = np.empty(J)
@@ -166,40 +253,62 @@ def draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group,
         if n_in == 0 or n_visible < model.min_visible_joints:
             continue
         size = _person_size(px, p)
-        if not size >= min_px[p]:  # too small to detect (NaN: no joint known)
+        if not size >= views.min_px[p]:  # too small to detect (NaN: no joint known)
             continue
         if rng.random() < model.miss_prob + model.miss_occlusion_gain * n_occluded / n_in:
             continue
+        s, t = views.slot[p], views.t_s[p]
         effect = 0
         for j in range(J):
+            reported[j] = False
+            if not in_img[p, j]:
+                continue
+            # The joint's miss process: P(missed) relaxes from its last state to the stationary rate.
+            rate = model.joint_miss_prob[tables.joint_group[j]]
+            last = 1.0 if state.missed[s, j] else 0.0
+            missed = rng.random() < rate + (last - rate) * _decay(t, state.miss_t_s[s, j], model.miss_time_s)
+            state.missed[s, j], state.miss_t_s[s, j] = missed, t
             drop = model.occluded_drop_prob if occluded[p, j] else (
-                model.self_occluded_drop_prob if self_occluded[p, j] else model.joint_drop_prob)
-            reported[j] = in_img[p, j] and rng.random() >= drop
+                model.self_occluded_drop_prob if self_occluded[p, j] else 0.0)
+            reported[j] = not missed and (drop == 0.0 or rng.random() >= drop)
         # Fragments keep one body part (if it holds a reported joint).
         if rng.random() < model.fragment_prob:
             part = rng.integers(0, n_parts)
             any_part = False
             for j in range(J):
-                any_part = any_part or (reported[j] and fragment_masks[part, j])
+                any_part = any_part or (reported[j] and tables.fragment_masks[part, j])
             if any_part:
                 for j in range(J):
-                    reported[j] = reported[j] and fragment_masks[part, j]
+                    reported[j] = reported[j] and tables.fragment_masks[part, j]
                 effect |= _FRAGMENT
         any_reported = False
         for j in range(J):
+            if not in_img[p, j]:
+                value[j, 0] = value[j, 1] = np.nan
+                score[j] = 0.0
+                continue
+            # The camera's noise on this joint: AR(1) in time, drawn for every joint in the image so that its
+            # memory does not depend on what was reported.
+            rho = _decay(t, state.noise_t_s[s, j], model.noise_time_s)
+            z0, z1 = rng.standard_normal(), rng.standard_normal()
+            if heavy:  # Student-t: the normal core over the root of a chi-square / dof
+                stretch = math.sqrt(dof / rng.chisquare(dof)) * unit_t
+                z0, z1 = z0 * stretch, z1 * stretch
+            keep = math.sqrt(1.0 - rho * rho)
+            state.noise[s, j, 0] = rho * state.noise[s, j, 0] + keep * z0
+            state.noise[s, j, 1] = rho * state.noise[s, j, 1] + keep * z1
+            state.noise_t_s[s, j] = t
             if not reported[j]:
                 value[j, 0] = value[j, 1] = np.nan
                 score[j] = 0.0
                 continue
             any_reported = True
-            scale = model.noise_frac * size * joint_noise[j]
-            scale = scale * (model.occluded_noise_scale if occluded[p, j] else (
+            scale = model.noise_frac * size * (model.occluded_noise_scale if occluded[p, j] else (
                 model.self_occluded_noise_scale if self_occluded[p, j] else 1.0))
-            z0, z1 = rng.standard_normal(), rng.standard_normal()
-            if heavy:  # Student-t: the normal core over the root of a chi-square / dof
-                stretch = math.sqrt(dof / rng.chisquare(dof))
-                z0, z1 = z0 * stretch, z1 * stretch
-            value[j, 0], value[j, 1] = px[p, j, 0] + scale * z0, px[p, j, 1] + scale * z1
+            cx, cy = found[p, j, 0], found[p, j, 1]
+            if not (cx == cx and cy == cy):  # the detector's joint did not project: the truth's instead
+                cx, cy = px[p, j, 0], px[p, j, 1]
+            value[j, 0], value[j, 1] = cx + scale * state.noise[s, j, 0], cy + scale * state.noise[s, j, 1]
             if rng.random() < model.gross_error_prob:
                 angle = rng.uniform(0.0, 2.0 * np.pi)
                 jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC) * size
@@ -214,11 +323,11 @@ def draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group,
         if swap:
             effect |= _LEFT_RIGHT_SWAP
         for j in range(J):
-            k = swap_order[j] if swap else j
+            k = tables.swap_order[j] if swap else j
             kp[n, j, 0], kp[n, j, 1], scores[n, j] = value[k, 0], value[k, 1], score[k]
             true_px[n, j, 0], true_px[n, j, 1] = px[p, j, 0], px[p, j, 1]
             out_in[n, j], out_occluded[n, j], out_self[n, j] = in_img[p, j], occluded[p, j], self_occluded[p, j]
-        ids[n], effects[n], out_group[n] = person_ids[p], effect, group[p]
+        ids[n], effects[n], out_group[n] = views.person_ids[p], effect, views.group[p]
         originals[n], sizes[n] = p, size
         n += 1
     # Duplicates: a second, partial, shifted and less confident copy of a detection.
@@ -239,4 +348,3 @@ def draw_detections(rng, person_ids, px, in_img, occluded, self_occluded, group,
         ids[n], effects[n], out_group[n] = ids[d], effects[d] | _DUPLICATE, out_group[d]
         n += 1
     return n
-

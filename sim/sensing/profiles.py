@@ -18,15 +18,34 @@ class DetectorProfile(enum.Enum):
     HARSH = "harsh"
 
 
+JOINT_GROUPS = ("head", "shoulders", "elbows", "wrists", "hips", "knees", "ankles")
+"""The joint groups a per-group parameter has one value for, in this order (COCO-17: nose, eyes and ears are
+the head; Campus-14: top and bottom of the head are)."""
+
+Groups = tuple[float, float, float, float, float, float, float]
+"""One number per joint group (`JOINT_GROUPS`)."""
+
+
 class DetectorParams(NamedTuple):
     """The effective error model (a profile with the scenario's knobs applied); the compiled draws take it as
-    it is (a named tuple of numbers).
+    it is (a named tuple of numbers and per-group tuples). docs/sensor-model.md gives the real statistic each
+    `typical` value was set from.
 
     Attributes:
-        noise_frac: per-axis std of the joint noise core, as a fraction of the person's size in the image.
+        noise_frac: per-axis std of one camera's noise on a joint, as a fraction of the person's size in the
+            image (the larger side of the box of its true joints).
         noise_tail_dof: degrees of freedom of the Student-t noise (smaller: heavier tails; inf: Gaussian).
+        noise_time_s: correlation time of that noise: one camera's errors on one joint of one person Δt apart
+            correlate by exp(-Δt / noise_time_s) (0: independent frame to frame).
         occluded_noise_scale: noise multiplier on occluded joints.
         self_occluded_noise_scale: noise multiplier on self-occluded joints.
+        offset_m: per joint group, per-axis std of the offset between the point the detector finds and the
+            scoring truth's joint (metres; the same for every camera, so it survives triangulation), in the
+            frame of the joint's body segment (it turns with the body).
+        offset_tail_dof: degrees of freedom of the Student-t scale of a person's offsets (heavy tails across
+            people and joints; inf: Gaussian).
+        offset_time_s: correlation time of the offset (it varies slowly: sleeves, clothing, pose).
+        lift_m: per joint group, how far above the truth's joint (world up, metres) the detector's joint sits.
         gross_error_prob: per-joint probability of a jump of 0.2-0.5 of the person's size.
         miss_prob: probability of missing a fully visible person.
         miss_occlusion_gain: extra miss probability per unit occluded share of the person's joints.
@@ -35,11 +54,15 @@ class DetectorParams(NamedTuple):
             their joints' box) are never detected.
         occluded_drop_prob: probability that an occluded joint is not reported.
         self_occluded_drop_prob: probability that a self-occluded joint is not reported.
-        joint_drop_prob: probability that a visible joint is not reported.
+        joint_miss_prob: per joint group, the share of frames in which a detected person's visible joint is not
+            reported (the stationary rate of a two-state miss process per camera, person and joint).
+        miss_time_s: correlation time of that miss process: a joint missed at t is missed at t + Δt with
+            probability joint_miss_prob + (1 - joint_miss_prob) exp(-Δt / miss_time_s).
         fragment_prob: probability that a detection keeps only one body part (fewer than 6 joints).
         swap_prob: probability that a detection has its left and right joints swapped.
         duplicate_prob: probability that a detection comes with a second, partial copy.
-        phantom_rate: mean number of phantom skeletons per frame (Poisson).
+        phantom_rate: mean number of phantom skeletons (false-positive people) per frame (Poisson).
+        phantom_keep_prob: probability that a phantom reports each of its joints inside the image.
         score_visible: mean score of a visible joint.
         score_occluded: mean score of an occluded joint.
         score_std: std of the joint scores.
@@ -47,8 +70,13 @@ class DetectorParams(NamedTuple):
 
     noise_frac: float
     noise_tail_dof: float
+    noise_time_s: float
     occluded_noise_scale: float
     self_occluded_noise_scale: float
+    offset_m: Groups
+    offset_tail_dof: float
+    offset_time_s: float
+    lift_m: Groups
     gross_error_prob: float
     miss_prob: float
     miss_occlusion_gain: float
@@ -56,43 +84,59 @@ class DetectorParams(NamedTuple):
     min_person_frac: float
     occluded_drop_prob: float
     self_occluded_drop_prob: float
-    joint_drop_prob: float
+    joint_miss_prob: Groups
+    miss_time_s: float
     fragment_prob: float
     swap_prob: float
     duplicate_prob: float
     phantom_rate: float
+    phantom_keep_prob: float
     score_visible: float
     score_occluded: float
     score_std: float
 
 
+_NONE = (0.0,) * len(JOINT_GROUPS)
+
 PROFILES: dict[DetectorProfile, DetectorParams] = {
     DetectorProfile.IDEAL: DetectorParams(
-        noise_frac=0.0, noise_tail_dof=math.inf, occluded_noise_scale=1.0, self_occluded_noise_scale=1.0,
+        noise_frac=0.0, noise_tail_dof=math.inf, noise_time_s=0.0, occluded_noise_scale=1.0,
+        self_occluded_noise_scale=1.0, offset_m=_NONE, offset_tail_dof=math.inf, offset_time_s=0.0, lift_m=_NONE,
         gross_error_prob=0.0, miss_prob=0.0, miss_occlusion_gain=0.0, min_visible_joints=1, min_person_frac=0.0,
-        occluded_drop_prob=0.0, self_occluded_drop_prob=0.0, joint_drop_prob=0.0, fragment_prob=0.0,
-        swap_prob=0.0, duplicate_prob=0.0, phantom_rate=0.0, score_visible=1.0, score_occluded=1.0, score_std=0.0,
+        occluded_drop_prob=0.0, self_occluded_drop_prob=0.0, joint_miss_prob=_NONE, miss_time_s=0.0,
+        fragment_prob=0.0, swap_prob=0.0, duplicate_prob=0.0, phantom_rate=0.0, phantom_keep_prob=1.0,
+        score_visible=1.0, score_occluded=1.0, score_std=0.0,
     ),
-    # Calibrated against OpenPose (BODY25) detections on the Shelf dataset; see docs/sensor-model.md. Shelf's
-    # people are all large: min_person_frac follows COCO instead (docs/sensor-model.md, "People too small to
-    # detect").
+    # Set from OpenPose (BODY25) on the Shelf dataset, measured against its annotated 3D truth (docs/
+    # sensor-model.md derives each value; `crossview fit-detector --target` refits them on the shelf rig).
+    # Shelf's people are all large: min_person_frac follows COCO instead (docs/sensor-model.md, "People too
+    # small to detect").
     DetectorProfile.TYPICAL: DetectorParams(
-        noise_frac=0.013, noise_tail_dof=5.0, occluded_noise_scale=1.6, self_occluded_noise_scale=1.3,
-        gross_error_prob=0.001, miss_prob=0.03, miss_occlusion_gain=0.15, min_visible_joints=2, min_person_frac=0.1,
-        occluded_drop_prob=0.4, self_occluded_drop_prob=0.1, joint_drop_prob=0.02, fragment_prob=0.07,
-        swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.02, score_visible=0.8, score_occluded=0.45,
-        score_std=0.12,
+        noise_frac=0.010, noise_tail_dof=5.0, noise_time_s=0.06, occluded_noise_scale=1.6,
+        self_occluded_noise_scale=1.3,
+        offset_m=(0.025, 0.018, 0.017, 0.032, 0.034, 0.015, 0.015), offset_tail_dof=4.0, offset_time_s=2.0,
+        lift_m=(0.0, 0.024, 0.012, 0.024, 0.039, 0.0, 0.0),
+        gross_error_prob=0.004, miss_prob=0.02, miss_occlusion_gain=0.1, min_visible_joints=2,
+        min_person_frac=0.1, occluded_drop_prob=0.4, self_occluded_drop_prob=0.1,
+        joint_miss_prob=(0.08, 0.05, 0.12, 0.18, 0.03, 0.04, 0.06), miss_time_s=0.24,
+        fragment_prob=0.05, swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.26, phantom_keep_prob=0.53,
+        score_visible=0.8, score_occluded=0.45, score_std=0.12,
     ),
     DetectorProfile.HARSH: DetectorParams(
-        noise_frac=0.022, noise_tail_dof=3.0, occluded_noise_scale=2.5, self_occluded_noise_scale=1.5,
-        gross_error_prob=0.01, miss_prob=0.10, miss_occlusion_gain=0.4, min_visible_joints=4, min_person_frac=0.13,
-        occluded_drop_prob=0.6, self_occluded_drop_prob=0.2, joint_drop_prob=0.05, fragment_prob=0.15,
-        swap_prob=0.02, duplicate_prob=0.05, phantom_rate=0.2, score_visible=0.7, score_occluded=0.35,
-        score_std=0.15,
+        noise_frac=0.018, noise_tail_dof=3.0, noise_time_s=0.1, occluded_noise_scale=2.5,
+        self_occluded_noise_scale=1.5,
+        offset_m=(0.04, 0.03, 0.03, 0.05, 0.05, 0.025, 0.025), offset_tail_dof=3.0, offset_time_s=2.0,
+        lift_m=(0.0, 0.035, 0.02, 0.035, 0.055, 0.0, 0.0),
+        gross_error_prob=0.01, miss_prob=0.10, miss_occlusion_gain=0.4, min_visible_joints=4,
+        min_person_frac=0.13, occluded_drop_prob=0.6, self_occluded_drop_prob=0.2,
+        joint_miss_prob=(0.12, 0.08, 0.18, 0.28, 0.06, 0.07, 0.1), miss_time_s=0.4,
+        fragment_prob=0.15, swap_prob=0.02, duplicate_prob=0.05, phantom_rate=0.6, phantom_keep_prob=0.5,
+        score_visible=0.7, score_occluded=0.35, score_std=0.15,
     ),
 }
 
 MAX_PHANTOM_RATE = 100.0  # phantom skeletons per frame, on average
+MAX_TIME_S = 3600.0  # correlation times: an hour is already "constant over any recording"
 
 
 @dataclass(frozen=True)
@@ -103,7 +147,8 @@ class DetectorConfig:
     profile (see `DetectorParams` for their meaning).
 
     Attributes:
-        profile: the preset error model: ideal (no errors), typical (calibrated to OpenPose on Shelf) or harsh.
+        profile: the preset error model: ideal (no errors), typical (set from OpenPose on Shelf) or harsh; a
+            scenario may name a profile file instead (`load_profile_file`), whose parameters it then holds.
         self_hit_margin_m: rays that end this close to a keypoint on its own body count as reaching it.
         occlusion: cast rays for occlusion by shelves, other people and the person's own body (false: every
             joint inside the image counts as visible).
@@ -112,8 +157,13 @@ class DetectorConfig:
     profile: DetectorProfile = DetectorProfile.TYPICAL
     noise_frac: float | None = bounded(None, 0.0, 1.0)
     noise_tail_dof: float | None = bounded(None, 2.0, low_open=True, finite=False, unit="degrees of freedom")
+    noise_time_s: float | None = bounded(None, 0.0, MAX_TIME_S)
     occluded_noise_scale: float | None = bounded(None, 1.0, 100.0, unit="times")
     self_occluded_noise_scale: float | None = bounded(None, 1.0, 100.0, unit="times")
+    offset_m: Groups | None = bounded(None, 0.0, 1.0)
+    offset_tail_dof: float | None = bounded(None, 2.0, low_open=True, finite=False, unit="degrees of freedom")
+    offset_time_s: float | None = bounded(None, 0.0, MAX_TIME_S)
+    lift_m: Groups | None = bounded(None, -1.0, 1.0)
     gross_error_prob: float | None = bounded(None, 0.0, 1.0)
     miss_prob: float | None = bounded(None, 0.0, 1.0)
     miss_occlusion_gain: float | None = bounded(None, 0.0, 10.0, unit="probability per occluded share")
@@ -121,11 +171,13 @@ class DetectorConfig:
     min_person_frac: float | None = bounded(None, 0.0, 1.0, unit="fraction of the image height")
     occluded_drop_prob: float | None = bounded(None, 0.0, 1.0)
     self_occluded_drop_prob: float | None = bounded(None, 0.0, 1.0)
-    joint_drop_prob: float | None = bounded(None, 0.0, 1.0)
+    joint_miss_prob: Groups | None = bounded(None, 0.0, 1.0)
+    miss_time_s: float | None = bounded(None, 0.0, MAX_TIME_S)
     fragment_prob: float | None = bounded(None, 0.0, 1.0)
     swap_prob: float | None = bounded(None, 0.0, 1.0)
     duplicate_prob: float | None = bounded(None, 0.0, 1.0)
     phantom_rate: float | None = bounded(None, 0.0, MAX_PHANTOM_RATE, unit="skeletons per frame")
+    phantom_keep_prob: float | None = bounded(None, 0.0, 1.0)
     score_visible: float | None = bounded(None, 0.0, 1.0, unit="score")
     score_occluded: float | None = bounded(None, 0.0, 1.0, unit="score")
     score_std: float | None = bounded(None, 0.0, 1.0, unit="score")
