@@ -200,9 +200,9 @@ class DetectorStatsAccumulator:
         views = [(r.camera, v) for r in records for v in r.views.values()]
         frames_measured = sum(c["frames"] for c in self._counts)
         members = group_members()
-        err = np.array([v.error for _, v in views]).reshape(-1, 12, 2)
-        detected = np.array([v.detected for _, v in views]).reshape(-1, 12)
-        inside = np.array([v.inside for _, v in views]).reshape(-1, 12)
+        err = np.array([v.error for _, v in views], dtype=np.float64).reshape(-1, 12, 2)
+        detected = np.array([v.detected for _, v in views], dtype=bool).reshape(-1, 12)
+        inside = np.array([v.inside for _, v in views], dtype=bool).reshape(-1, 12)
         norm = np.linalg.norm(err, axis=-1)  # (N, 12), NaN where not measured
         pairs = _consecutive_pairs(records)
         lag_a, lag_b, miss_now, miss_next = _pair_arrays(pairs)
@@ -233,7 +233,7 @@ class DetectorStatsAccumulator:
         stats = figures(range(12))
         total = {k: sum(c[k] for c in self._counts) for k in
                  ("person_views", "missed_person_views", "false_positive_people", "false_positive_people_ge6")}
-        sizes = np.array([v.size_px for _, v in views])
+        sizes = np.array([v.size_px for _, v in views], dtype=np.float64)
         stats.update({
             "frames": self._frames, "frames_measured": frames_measured, "matched_detections": len(views),
             "person_views": total["person_views"],
