@@ -171,8 +171,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="describe a complete file from its summary alone, without reading every chunk and "
                         "checking its CRC")
 
-    p = sub.add_parser("detector-stats", help="measure the synthetic detector's error statistics in a recording")
-    p.add_argument("recording", type=Path)
+    p = sub.add_parser("detector-stats", help="measure a recording's 2D detections against its projected 3D truth, "
+                       "beside real OpenPose on Shelf")
+    p.add_argument("recording", type=Path, help="a recording with 3D truth: `crossview generate`, or `crossview "
+                   "convert` of a dataset folder with annotation_3d.json")
+    p.add_argument("--json", "-o", "--output", dest="json", type=Path, help="write the figures as JSON here")
 
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
@@ -430,15 +433,15 @@ def _cmd_info(args) -> None:
 
 
 def _cmd_detector_stats(args) -> None:
-    from core.types import COCO17
-    from crossview import recording
-    from crossview.detector_stats import detector_stats, format_detector_stats
+    from crossview import pipeline
+    from crossview.detector_stats import format_detector_stats, recording_detector_stats
 
-    rec = recording.open_recording(args.recording)
-    if rec.skeleton.name != COCO17.name:
-        raise CrossviewError(f"{args.recording}: holds {rec.skeleton.name} joints; detector-stats measures the "
-                             "synthetic COCO-17 detector, so give it a recording made by `crossview generate`")
-    print(format_detector_stats(detector_stats(rec.frames(with_poses=True), rec.cameras)))
+    if args.json:
+        pipeline.check_writable(args.json, inputs=(args.recording,))
+    stats = recording_detector_stats(args.recording)
+    print(format_detector_stats(stats))
+    if args.json:
+        pipeline.write_json(stats, args.json, inputs=(args.recording,))
 
 
 def _cmd_world_stats(args) -> None:

@@ -1,206 +1,515 @@
-"""Detector statistics measured from camera frames and their truth, beside OpenPose's on Shelf.
+"""Detector statistics: a recording's 2D detections measured against its 3D truth projected into each camera,
+beside real OpenPose on the Shelf dataset.
 
-The figures mirror how a real detector was measured (OpenPose BODY25 on the Shelf dataset, against its
-projected 3D truth, 301 frames of 5 cameras): per-joint error
-normalised by the person's size in the image on limb joints, gross errors above 0.2 of that size,
-person-views (at least half of the joints inside the image) with no detection, and fragments
-(fewer than 6 of the 15 BODY25 body joints) among detections of person-views at least half inside the
-image (Shelf's people are in full view; `fragment_rate_all` counts every detection, people cut by the
-image border included).
+The measurement is the one made on the real detector, so that a synthetic recording (`crossview generate`) and
+a real one (`crossview convert` of a dataset folder with 3D truth) give comparable figures:
+
+- **Truth**: the recording's 3D ground truth (what the scorer uses) at each frame's capture time, projected
+  through the camera's lens model (`sim.cameras.in_image`). The per-detection truth a synthetic recording
+  also stores is not used: real data has none, and the detector's joint need not be the scorer's.
+- **Joints**: the 12 joints both skeleton layouts name alike (`JOINTS_12`: shoulders, elbows, wrists, hips,
+  knees, ankles; COCO-17 and the Campus/Shelf 14 joints). Person size: the larger side of the box of the
+  person's 12 projected joints (about 400 px on Shelf). Errors are divided by it; pixel offsets are given
+  at a 400 px person (`SIZE_AT_PX`).
+- **Matching**: per camera frame, detections are assigned to the true people by the Hungarian algorithm on
+  the mean distance of their common joints divided by the person's size; a pair further apart than
+  `MATCH_GATE` is no match. An unmatched detection is a false-positive person; a person-view (at least half
+  of the 12 joints inside the image) without a matched detection is a missed person-view.
+- **Joint miss**: a matched detection lacks a joint that is inside the image. Persistence and the lag-1
+  correlation pair the same person, joint and camera in consecutive frames of that camera.
+- **Cross-view agreement**: the matched detections of one person in the frames of different cameras
+  captured within half a frame interval (`CROSS_VIEW_WINDOW_FRAC`) of each other are triangulated per joint
+  (DLT, at least `CROSS_VIEW_MIN_VIEWS` views): how far the detections lie from the point they agree on
+  (reprojection, px at 400) and how far that point lies from the true joint (metres).
+
+A camera frame whose truth holds nobody is not measured: datasets leave the frames they did not annotate
+empty, so such a frame says nothing about the detector (a synthetic store that is empty is skipped alike).
 """
 
 from __future__ import annotations
 
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import linear_sum_assignment
 
-from core.types import COCO17, Camera
+from core.errors import CrossviewError
+from core.types import JOINT_GROUPS, Camera, Skeleton
 from sim.cameras import in_image
-from sim.sensing.draws import person_size_px
-from sim.types import CameraFrame, DetectionEffect
+from sim.types import CameraFrame
+from tracker.geometry import undistort_points
+from tracker.triangulation import PLANE_ROW, reprojection_error_px, triangulate
 
-# OpenPose (BODY25) on the Shelf dataset (Belagiannis et al., CVPR 2014), 5 cameras, 301 frames, limb joints.
-SHELF_OPENPOSE = {
-    "error_median": 0.02,
-    "error_p95": 0.06,
-    "error_p99": 0.11,
-    "miss_rate": 0.04,
-    "gross_error_rate": 0.003,
-    "fragment_rate": 0.07,
-}
-# Limb joints of COCO-17 (hips and neck are defined differently in Shelf, so the reference skips them).
-LIMB_JOINTS = tuple(COCO17.index(n) for n in (
+JOINTS_12 = (
     "left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist",
-    "left_knee", "right_knee", "left_ankle", "right_ankle",
-))
+    "left_hip", "right_hip", "left_knee", "right_knee", "left_ankle", "right_ankle",
+)
+"""The joints measured, by name: those COCO-17 and the Campus/Shelf 14-joint layout share."""
+GROUPS = ("wrists", "hips", "shoulders", "elbows", "ankles", "knees")
+"""Joint groups of the table, in its order (`core.types.JOINT_GROUPS` names which joints each holds)."""
+
+MATCH_GATE = 0.5
+"""Largest mean joint distance of a detection from a true person, as a fraction of the person's size, that
+still counts as a detection of that person (a detection's own error is a few hundredths; two people side by
+side are about a third of a size apart, and the assignment takes the nearer)."""
 GROSS_ERROR_FRAC = 0.2
-FRAGMENT_MAX_JOINTS = 6  # a fragment has fewer than this many of the 15 BODY25 body joints
+"""A joint further than this fraction of the person's size from the truth is a gross error."""
 HALF_IN_IMAGE = 0.5
-_NOSE = COCO17.index("nose")
-_SHOULDERS = (COCO17.index("left_shoulder"), COCO17.index("right_shoulder"))
-_HIPS = (COCO17.index("left_hip"), COCO17.index("right_hip"))
-_BODY = tuple(range(5, 17))
+"""A person-view is a person with at least this fraction of the 12 joints inside the image."""
+PERSON_LIKE_JOINTS = 6
+"""A false-positive person with at least this many of the 12 joints is person-like."""
+SIZE_AT_PX = 400.0
+"""Pixel offsets are reported at this person size (Shelf's people are about this size)."""
+MIN_MATCHED_DETECTIONS = 20
+"""Fewer matched detections than this in a recording measure nothing: refused."""
+CROSS_VIEW_WINDOW_FRAC = 0.5
+"""Frames of different cameras captured within this fraction of the rig's median frame interval of the first
+frame of a group are taken as one instant for the cross-view figures."""
+CROSS_VIEW_MIN_VIEWS = 3
+"""A joint is triangulated for the cross-view figures from at least this many views (two views always agree
+up to the epipolar constraint)."""
+
+# OpenPose (BODY25) on the Shelf dataset (Belagiannis et al., CVPR 2014; 5 cameras, 1032 x 776, 301 frames),
+# against its annotated 3D joints projected into each camera, person size about 400 px; measured for this
+# project on 2026-11-27 by the definitions of this module. A pair is a range over the joints of the group.
+SHELF_OPENPOSE: dict = {
+    "error_over_size_median": 0.027, "error_over_size_p90": 0.060, "error_over_size_p99": 0.162,
+    "lag1_error_correlation": (0.83, 0.94), "gross_error_rate": 0.0073, "miss_rate": 0.104,
+    "miss_persistence": 0.86, "missed_person_view_rate": 0.038, "false_positive_people_per_frame": 0.29,
+    "false_positive_people_ge6_per_frame": 0.18, "cross_view_reprojection_px_at_400": 5.0,
+    "per_group": {
+        "wrists": {"error_over_size_median": 0.036, "vertical_offset_px_at_400": (-8.0, -6.0),
+                   "miss_rate": (0.19, 0.23), "cross_view_error_m": (0.05, 0.08)},
+        "hips": {"error_over_size_median": 0.044, "vertical_offset_px_at_400": (-12.0, -11.0), "miss_rate": 0.05,
+                 "cross_view_error_m": (0.05, 0.08)},
+        "shoulders": {"error_over_size_median": 0.028, "vertical_offset_px_at_400": -7.0, "miss_rate": 0.075},
+        "elbows": {"error_over_size_median": 0.023, "vertical_offset_px_at_400": (-4.0, -3.0),
+                   "miss_rate": (0.14, 0.16)},
+        "ankles": {"error_over_size_median": 0.020},
+        "knees": {},
+    },
+}
 
 
-def body25_joint_count(detected: np.ndarray) -> np.ndarray:
-    """(D,) how many of BODY25's 15 body joints a COCO-17 detection holds.
+def joint_indices(skeleton: Skeleton) -> np.ndarray:
+    """(12,) the index in `skeleton` of each of `JOINTS_12`.
 
-    Neck and mid-hip, which COCO-17 lacks, count when either shoulder or either hip is there.
-
-    Args:
-        detected: (D, 17) bool, the joint was reported.
+    Raises:
+        CrossviewError: the skeleton lacks one of them.
     """
-    return (
-        detected[:, _NOSE].astype(int)
-        + detected[:, _BODY].sum(axis=1)
-        + detected[:, _SHOULDERS].any(axis=1)
-        + detected[:, _HIPS].any(axis=1)
-    )
+    missing = [name for name in JOINTS_12 if name not in skeleton.joints]
+    if missing:
+        raise CrossviewError(f"skeleton {skeleton.name} has no {', '.join(missing)}; detector-stats measures "
+                             f"{', '.join(JOINTS_12)}")
+    return np.array([skeleton.index(name) for name in JOINTS_12])
 
 
-def detector_stats(camera_frames: Iterable[CameraFrame],
-                   cameras: Sequence[Camera] | Mapping[str, Camera] | None = None) -> dict:
-    """Measures the detector's figures from delivered frames and their truth.
+def group_members() -> dict[str, tuple[int, ...]]:
+    """Group name -> the positions in `JOINTS_12` of its joints, in `GROUPS` order."""
+    return {g: tuple(i for i, name in enumerate(JOINTS_12) if any(w in name for w in JOINT_GROUPS[g]))
+            for g in GROUPS}
+
+
+def person_sizes_px(points_px: np.ndarray) -> np.ndarray:
+    """(P,) the larger side of the box of each person's projected joints points_px (P, J, 2); NaN joints are
+    left out, and a person with none has size NaN."""
+    finite = np.isfinite(points_px).all(axis=-1)[..., None]  # (P, J, 1)
+    extent = (np.where(finite, points_px, -np.inf).max(axis=1) - np.where(finite, points_px, np.inf).min(axis=1))
+    extent = extent.max(axis=-1)
+    return np.where(np.isfinite(extent), extent, np.nan)
+
+
+@dataclass
+class _View:
+    """One matched detection: a person seen by one camera in one frame (12 joints)."""
+
+    detection_px: np.ndarray  # (12, 2) reported pixels, NaN missing
+    error: np.ndarray  # (12, 2) (detection - truth) / size, NaN where either is missing
+    detected: np.ndarray  # (12,) bool
+    inside: np.ndarray  # (12,) bool, the true joint is inside the image
+    size_px: float
+    truth_m: np.ndarray  # (12, 3) the true joints at the capture time
+
+
+@dataclass
+class _FrameRecord:
+    camera: int
+    capture_s: float
+    views: dict[int, _View] = field(default_factory=dict)  # person id -> view
+
+
+class DetectorStatsAccumulator:
+    """Measures detections frame by frame (`add`), then gives the figures (`result`).
 
     Args:
-        camera_frames: the frames (any order).
-        cameras: the rig; needed for the miss rate (which people were in view), else it is None.
+        cameras: the rig (a sequence or name -> Camera).
+        skeleton: the joint layout of both the frames and the truth.
+    """
+
+    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], skeleton: Skeleton):
+        cams = list(cameras.values()) if isinstance(cameras, Mapping) else list(cameras)
+        self.cameras = cams
+        self._camera_of = {c.name: i for i, c in enumerate(cams)}
+        self._joints = joint_indices(skeleton)
+        self._records: list[_FrameRecord] = []
+        self._frames = 0
+        self._counts = [defaultdict(int) for _ in cams]
+
+    def add(self, camera_frame: CameraFrame) -> None:
+        """Measures one delivered frame; its `poses_at_capture` must be given (`Recording.frames(with_poses=True)`).
+
+        Raises:
+            CrossviewError: the frame's camera is not in the rig.
+        """
+        frame, poses = camera_frame.frame, camera_frame.poses_at_capture
+        if frame.camera not in self._camera_of:
+            raise CrossviewError(f"frame of camera {frame.camera!r}, which is not in the rig "
+                                 f"({', '.join(self._camera_of)})")
+        if poses is None:
+            raise ValueError("detector stats need each frame's poses_at_capture")
+        self._frames += 1
+        if len(poses.person_ids) == 0:
+            return
+        c = self._camera_of[frame.camera]
+        counts = self._counts[c]
+        truth_m = np.asarray(poses.poses, dtype=np.float64)[:, self._joints]  # (P, 12, 3)
+        truth_px, inside = in_image(self.cameras[c], truth_m)  # (P, 12, 2), (P, 12)
+        size = person_sizes_px(truth_px)  # (P,)
+        detections = np.asarray(frame.keypoints_px, dtype=np.float64)[:, self._joints]  # (D, 12, 2)
+        record = _FrameRecord(c, float(camera_frame.truth.capture_s))
+        counts["frames"] += 1
+        matched_truth, matched_det = _match(truth_px, size, detections)
+        for p, d in zip(matched_truth, matched_det):
+            error = (detections[d] - truth_px[p]) / size[p]
+            record.views[int(poses.person_ids[p])] = _View(
+                detections[d], error, np.isfinite(detections[d, :, 0]), inside[p], float(size[p]), truth_m[p])
+        view = inside.mean(axis=1) >= HALF_IN_IMAGE
+        counts["person_views"] += int(view.sum())
+        counts["missed_person_views"] += int(np.count_nonzero(view & ~np.isin(np.arange(len(view)), matched_truth)))
+        unmatched = np.setdiff1d(np.arange(len(detections)), matched_det)
+        counts["false_positive_people"] += len(unmatched)
+        counts["false_positive_people_ge6"] += int(
+            np.count_nonzero(np.isfinite(detections[unmatched, :, 0]).sum(axis=1) >= PERSON_LIKE_JOINTS))
+        self._records.append(record)
+
+    def result(self) -> dict:
+        """The figures (see the module docstring); None where nothing was measured."""
+        records = self._records
+        views = [(r.camera, v) for r in records for v in r.views.values()]
+        frames_measured = sum(c["frames"] for c in self._counts)
+        members = group_members()
+        err = np.array([v.error for _, v in views], dtype=np.float64).reshape(-1, 12, 2)
+        detected = np.array([v.detected for _, v in views], dtype=bool).reshape(-1, 12)
+        inside = np.array([v.inside for _, v in views], dtype=bool).reshape(-1, 12)
+        norm = np.linalg.norm(err, axis=-1)  # (N, 12), NaN where not measured
+        pairs = _consecutive_pairs(records)
+        lag_a, lag_b, miss_now, miss_next = _pair_arrays(pairs)
+        cross = _cross_view(records, self.cameras)
+
+        def figures(joints) -> dict:
+            joints = list(joints)
+            e = norm[:, joints]
+            e = e[np.isfinite(e)]
+            dy = err[:, joints, 1]
+            dy = dy[np.isfinite(dy)]
+            in_img = inside[:, joints]
+            missed = in_img & ~detected[:, joints]
+            now = miss_now[:, joints]
+            return {
+                "error_over_size_median": _quantile(e, 50), "error_over_size_p90": _quantile(e, 90),
+                "error_over_size_p99": _quantile(e, 99),
+                "gross_error_rate": _ratio(np.count_nonzero(e > GROSS_ERROR_FRAC), e.size),
+                "vertical_offset_px_at_400": None if dy.size == 0 else float(np.median(dy) * SIZE_AT_PX),
+                "lag1_error_correlation": _lag1_correlation(lag_a[:, joints], lag_b[:, joints]),
+                "miss_rate": _ratio(np.count_nonzero(missed), np.count_nonzero(in_img)),
+                "miss_persistence": _ratio(np.count_nonzero(now & miss_next[:, joints]), np.count_nonzero(now)),
+                "cross_view_reprojection_px_at_400": _median(cross["reprojection"], joints),
+                "cross_view_error_m": _median(cross["error"], joints),
+                "joints_measured": int(e.size),
+            }
+
+        stats = figures(range(12))
+        total = {k: sum(c[k] for c in self._counts) for k in
+                 ("person_views", "missed_person_views", "false_positive_people", "false_positive_people_ge6")}
+        sizes = np.array([v.size_px for _, v in views], dtype=np.float64)
+        stats.update({
+            "frames": self._frames, "frames_measured": frames_measured, "matched_detections": len(views),
+            "person_views": total["person_views"],
+            "missed_person_view_rate": _ratio(total["missed_person_views"], total["person_views"]),
+            "false_positive_people_per_frame": _ratio(total["false_positive_people"], frames_measured),
+            "false_positive_people_ge6_per_frame": _ratio(total["false_positive_people_ge6"], frames_measured),
+            "person_size_px_median": _quantile(sizes, 50), "cross_view_joints": cross["count"],
+            "match_gate": MATCH_GATE,
+            "per_joint": {name: figures([j]) for j, name in enumerate(JOINTS_12)},
+            "per_group": {g: figures(js) for g, js in members.items()},
+            "per_camera": {},
+        })
+        for c, cam in enumerate(self.cameras):
+            counts = self._counts[c]
+            if not counts["frames"]:
+                continue
+            mine = np.array([i for i, (vc, _) in enumerate(views) if vc == c], dtype=np.int64)
+            e = norm[mine]
+            e = e[np.isfinite(e)]
+            stats["per_camera"][cam.name] = {
+                "frames_measured": counts["frames"], "matched_detections": len(mine),
+                "error_over_size_median": _quantile(e, 50),
+                "miss_rate": _ratio(np.count_nonzero(inside[mine] & ~detected[mine]), np.count_nonzero(inside[mine])),
+                "missed_person_view_rate": _ratio(counts["missed_person_views"], counts["person_views"]),
+                "false_positive_people_per_frame": _ratio(counts["false_positive_people"], counts["frames"]),
+            }
+        return stats
+
+
+def _match(truth_px: np.ndarray, size_px: np.ndarray, detections_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Hungarian assignment of detections to true people on the mean distance of their common joints over the
+    person's size, pairs beyond `MATCH_GATE` dropped.
+
+    Args:
+        truth_px: (P, J, 2) projected truth; size_px: (P,) person sizes; detections_px: (D, J, 2).
 
     Returns:
-        A flat dict of fractions and counts (missing figures are None), plus "per_camera": a dict
-        camera name -> {"occluded_share", "self_occluded_share", "detections", "miss_rate"}.
+        (truth rows, detection columns) of the matched pairs.
     """
-    if cameras is not None and not isinstance(cameras, Mapping):
-        cameras = {c.name: c for c in cameras}
-    errors, joint_errors = [], defaultdict(list)
-    counts = defaultdict(int)
-    per_camera = defaultdict(lambda: defaultdict(int))
+    P, D = len(truth_px), len(detections_px)
+    if P == 0 or D == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    dist = np.linalg.norm(truth_px[:, None] - detections_px[None], axis=-1)  # (P, D, J)
+    common = np.isfinite(dist)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cost = np.where(common, dist, 0.0).sum(axis=-1) / common.sum(axis=-1) / size_px[:, None]  # (P, D)
+    cost = np.where(np.isfinite(cost), cost, np.inf)
+    allowed = cost <= MATCH_GATE
+    rows, cols = linear_sum_assignment(np.where(allowed, cost, 2 * MATCH_GATE + 1))
+    keep = allowed[rows, cols]
+    return rows[keep], cols[keep]
+
+
+def _consecutive_pairs(records: list[_FrameRecord]) -> list[tuple[_View, _View]]:
+    """(view at frame k, view at frame k + 1) of the same person in consecutive measured frames of a camera."""
+    by_camera = defaultdict(list)
+    for r in records:
+        by_camera[r.camera].append(r)
+    pairs = []
+    for frames in by_camera.values():
+        frames.sort(key=lambda r: r.capture_s)
+        for now, after in zip(frames, frames[1:]):
+            pairs.extend((now.views[pid], after.views[pid]) for pid in now.views.keys() & after.views.keys())
+    return pairs
+
+
+def _pair_arrays(pairs) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The errors (N, 12, 2) at k and k + 1, and (N, 12) bool: missed (inside, not detected) at k with the
+    joint inside at k + 1, and missed at k + 1."""
+    if not pairs:
+        return np.zeros((0, 12, 2)), np.zeros((0, 12, 2)), np.zeros((0, 12), bool), np.zeros((0, 12), bool)
+    a = np.array([p[0].error for p in pairs])
+    b = np.array([p[1].error for p in pairs])
+    in_both = np.array([p[0].inside & p[1].inside for p in pairs])
+    now = np.array([~p[0].detected for p in pairs]) & in_both
+    after = np.array([~p[1].detected for p in pairs]) & in_both
+    return a, b, now, after
+
+
+def _lag1_correlation(a: np.ndarray, b: np.ndarray) -> float | None:
+    """Pearson correlation of a joint's error with its error one frame later, both image axes pooled.
+
+    Args:
+        a, b: (N, J, 2) errors at frames k and k + 1 (NaN where not measured). Each joint's and axis's own
+            mean is taken out (the vertical bias is no correlation), then all are pooled.
+    """
+    ok = np.isfinite(a).all(axis=-1) & np.isfinite(b).all(axis=-1)  # (N, J)
+    if ok.sum() < 2:
+        return None
+    x_all, y_all = [], []
+    for j in range(a.shape[1]):
+        x, y = a[ok[:, j], j], b[ok[:, j], j]  # (n, 2)
+        if len(x):
+            x_all.append(x - x.mean(axis=0))
+            y_all.append(y - y.mean(axis=0))
+    x, y = np.concatenate(x_all), np.concatenate(y_all)
+    denominator = np.sqrt((x * x).sum() * (y * y).sum())
+    return float((x * y).sum() / denominator) if denominator > 0 else None
+
+
+def _frame_interval_s(records: list[_FrameRecord]) -> float | None:
+    """The median interval between consecutive captures of a camera, over the rig."""
+    by_camera = defaultdict(list)
+    for r in records:
+        by_camera[r.camera].append(r.capture_s)
+    gaps = np.concatenate([np.diff(np.sort(t)) for t in by_camera.values()]) if by_camera else np.zeros(0)
+    gaps = gaps[gaps > 0]
+    return float(np.median(gaps)) if gaps.size else None
+
+
+def _cross_view(records: list[_FrameRecord], cameras: list[Camera]) -> dict:
+    """Per joint, the reprojection distances (px at 400) and 3D errors (m) of the joints of a person
+    triangulated from the frames of several cameras at one instant (see the module docstring).
+
+    Returns:
+        {"reprojection": list of 12 arrays, "error": list of 12 arrays, "count": joints triangulated}.
+    """
+    reprojection = [[] for _ in range(12)]
+    error = [[] for _ in range(12)]
+    interval = _frame_interval_s(records)
+    ordered = sorted(records, key=lambda r: r.capture_s)
+    P = np.array([c.P for c in cameras])
+    i = 0
+    while interval is not None and i < len(ordered):
+        start, group = ordered[i].capture_s, {}
+        while i < len(ordered) and ordered[i].capture_s - start < CROSS_VIEW_WINDOW_FRAC * interval:
+            group.setdefault(ordered[i].camera, ordered[i])
+            i += 1
+        if len(group) < CROSS_VIEW_MIN_VIEWS:
+            continue
+        people = defaultdict(list)
+        for r in group.values():
+            for pid, view in r.views.items():
+                people[pid].append((r.camera, view))
+        for seen in people.values():
+            if len(seen) < CROSS_VIEW_MIN_VIEWS:
+                continue
+            cams = [c for c, _ in seen]
+            points = np.stack([undistort_points(cameras[c], v.detection_px) for c, v in seen], axis=1)  # (12, V, 2)
+            X = triangulate(P[cams], points, min_views=CROSS_VIEW_MIN_VIEWS, row_norm=PLANE_ROW)  # (12, 3)
+            scale = SIZE_AT_PX / np.array([v.size_px for _, v in seen])
+            distances = reprojection_error_px(P[cams], X, points) * scale  # (12, V)
+            truth = np.mean([v.truth_m for _, v in seen], axis=0)  # (12, 3): the instant's mean over the views
+            off = np.linalg.norm(X - truth, axis=-1)
+            for j in range(12):
+                if np.isfinite(off[j]):
+                    error[j].append(off[j])
+                    d = distances[j]
+                    reprojection[j].extend(d[np.isfinite(d)].tolist())
+    return {"reprojection": [np.array(r) for r in reprojection], "error": [np.array(e) for e in error],
+            "count": sum(len(e) for e in error)}
+
+
+def _median(per_joint: list[np.ndarray], joints) -> float | None:
+    values = np.concatenate([per_joint[j] for j in joints])
+    return float(np.median(values)) if values.size else None
+
+
+def _quantile(values: np.ndarray, q: float) -> float | None:
+    return float(np.percentile(values, q)) if values.size else None
+
+
+def _ratio(a: float, b: float) -> float | None:
+    return float(a / b) if b else None
+
+
+def detector_stats(camera_frames: Iterable[CameraFrame], cameras: Sequence[Camera] | Mapping[str, Camera],
+                   skeleton: Skeleton) -> dict:
+    """Measures detections against their projected 3D truth (see the module docstring).
+
+    Args:
+        camera_frames: the frames, each with `poses_at_capture`.
+        cameras: the rig.
+        skeleton: the joint layout of the frames and the truth.
+
+    Returns:
+        The figures: the keys of `SHELF_OPENPOSE` at the top level (all joints) and, the same per joint
+        name ("per_joint"), per group ("per_group"), a few per camera ("per_camera"), and the counts
+        behind them.
+    """
+    acc = DetectorStatsAccumulator(cameras, skeleton)
     for cf in camera_frames:
-        frame, truth = cf.frame, cf.truth
-        cam = per_camera[frame.camera]
-        counts["frames"] += 1
-        effects = np.asarray(truth.effects, dtype=np.int64)
-        ids = np.asarray(truth.person_ids)
-        detected = ~np.isnan(frame.keypoints_px[..., 0])
-        phantom = ids < 0
-        duplicate = (effects & DetectionEffect.DUPLICATE) != 0
-        real = ~phantom & ~duplicate
-        counts["detections"] += len(ids)
-        counts["phantoms"] += int(phantom.sum())
-        counts["duplicates"] += int(duplicate.sum())
-        counts["real"] += int(real.sum())
-        counts["swaps"] += int(((effects & DetectionEffect.LEFT_RIGHT_SWAP) != 0)[real].sum())
-        cam["detections"] += len(ids)
-        if real.any():
-            fragment = body25_joint_count(detected[real]) < FRAGMENT_MAX_JOINTS
-            in_view = truth.in_image[real].mean(axis=1) >= HALF_IN_IMAGE
-            counts["fragments_all"] += int(fragment.sum())
-            counts["fragments"] += int((fragment & in_view).sum())
-            counts["real_in_view"] += int(in_view.sum())
-            in_img = truth.in_image[real]
-            for name, flags in (("occluded", truth.occluded[real]), ("self_occluded", truth.self_occluded[real])):
-                counts[name] += int((flags & in_img).sum())
-                cam[name] += int((flags & in_img).sum())
-            counts["in_image"] += int(in_img.sum())
-            cam["in_image"] += int(in_img.sum())
-            true_px = truth.keypoints_px[real]
-            size = person_size_px(true_px)
-            err = np.linalg.norm(frame.keypoints_px[real] - true_px, axis=-1) / size[:, None]
-            limb = err[:, LIMB_JOINTS]
-            errors.append(limb[np.isfinite(limb)])
-            for j in LIMB_JOINTS:
-                e = err[:, j]
-                joint_errors[COCO17.joints[j]].append(e[np.isfinite(e)])
-        if cameras is not None and frame.camera in cameras:
-            poses = cf.poses_at_capture
-            if len(poses.person_ids):
-                _, inside = in_image(cameras[frame.camera], poses.poses)
-                in_view = inside.mean(axis=1) >= HALF_IN_IMAGE
-                seen = set(ids[real].tolist())
-                missed = sum(1 for pid in np.asarray(poses.person_ids)[in_view] if int(pid) not in seen)
-                counts["person_views"] += int(in_view.sum())
-                counts["missed"] += missed
-                cam["person_views"] += int(in_view.sum())
-                cam["missed"] += missed
-    errors = np.concatenate(errors) if errors else np.zeros(0)
+        acc.add(cf)
+    return acc.result()
 
-    def ratio(a, b):
-        return a / b if b else None
 
-    def pct(q):
-        return float(np.percentile(errors, q)) if errors.size else None
+def recording_detector_stats(path) -> dict:
+    """`detector_stats` of a recording file, refused when it cannot be measured.
 
-    stats = {
-        "frames": counts["frames"],
-        "detections": counts["detections"],
-        "limb_joints_measured": int(errors.size),
-        "error_median": pct(50),
-        "error_p95": pct(95),
-        "error_p99": pct(99),
-        "gross_error_rate": float(np.mean(errors > GROSS_ERROR_FRAC)) if errors.size else None,
-        "miss_rate": ratio(counts["missed"], counts["person_views"]) if cameras is not None else None,
-        "person_views": counts["person_views"] if cameras is not None else None,
-        "fragment_rate": ratio(counts["fragments"], counts["real_in_view"]),
-        "fragment_rate_all": ratio(counts["fragments_all"], counts["real"]),
-        "false_positive_rate": ratio(counts["phantoms"] + counts["duplicates"], counts["detections"]),
-        "phantom_rate": ratio(counts["phantoms"], counts["detections"]),
-        "duplicate_rate": ratio(counts["duplicates"], counts["detections"]),
-        "phantoms_per_frame": ratio(counts["phantoms"], counts["frames"]),
-        "swap_rate": ratio(counts["swaps"], counts["real"]),
-        "occluded_share": ratio(counts["occluded"], counts["in_image"]),
-        "self_occluded_share": ratio(counts["self_occluded"], counts["in_image"]),
-        "joint_error_median": {
-            name: float(np.median(np.concatenate(v))) if sum(len(x) for x in v) else None
-            for name, v in joint_errors.items()
-        },
-        "per_camera": {
-            name: {
-                "detections": c["detections"],
-                "occluded_share": ratio(c["occluded"], c["in_image"]),
-                "self_occluded_share": ratio(c["self_occluded"], c["in_image"]),
-                "miss_rate": ratio(c["missed"], c["person_views"]) if cameras is not None else None,
-            }
-            for name, c in sorted(per_camera.items())
-        },
-    }
+    Raises:
+        RecordingError: the file is not a readable recording.
+        CrossviewError: it holds no 3D truth at its frames' times, or fewer than `MIN_MATCHED_DETECTIONS`
+            detections match a true person; the message names the file.
+    """
+    from crossview import recording
+
+    rec = recording.open_recording(path)
+    try:
+        stats = detector_stats(rec.frames(with_poses=True), rec.cameras, rec.skeleton)
+    except CrossviewError as e:
+        raise CrossviewError(f"{path}: {e}") from None
+    if stats["frames_measured"] == 0:
+        raise CrossviewError(f"{path}: no 3D truth at the times of its {stats['frames']} camera frames; "
+                             "detector-stats needs a recording with truth (`crossview generate`, or `crossview "
+                             "convert` of a dataset folder with annotation_3d.json)")
+    if stats["matched_detections"] < MIN_MATCHED_DETECTIONS:
+        raise CrossviewError(f"{path}: only {stats['matched_detections']} detections match a true person (at "
+                             f"most {MATCH_GATE} of its size away on average); detector-stats needs at least "
+                             f"{MIN_MATCHED_DETECTIONS}")
     return stats
 
 
-def format_detector_stats(stats: dict) -> str:
-    """A plain-text table of `detector_stats` output beside the Shelf/OpenPose reference."""
+def _fmt(value, kind: str) -> str:
+    """A figure or a reference (a number or a (low, high) range) for the table."""
+    if value is None:
+        return "-"
+    if isinstance(value, tuple):
+        return " to ".join(_fmt(v, kind) for v in value)
+    if kind == "%":
+        return f"{100 * value:.2f} %"
+    if kind == "signed px":
+        return f"{value:+.1f}"
+    if kind == "px":
+        return f"{value:.1f}"
+    if kind == "cm":
+        return f"{100 * value:.1f}"
+    return f"{value:.3f}"
 
-    def fmt(value, percent=False):
-        if value is None:
-            return "-"
-        return f"{100 * value:.2f} %" if percent else f"{value:.4f}"
 
-    rows = [
-        ("normalised error, median", "error_median", False),
-        ("normalised error, p95", "error_p95", False),
-        ("normalised error, p99", "error_p99", False),
-        ("gross errors (> 0.2)", "gross_error_rate", True),
-        ("missed person-views", "miss_rate", True),
-        ("fragments (< 6 of 15 joints)", "fragment_rate", True),
-        ("  of all detections", "fragment_rate_all", True),
-        ("false positives", "false_positive_rate", True),
-        ("  duplicates", "duplicate_rate", True),
-        ("  phantoms", "phantom_rate", True),
-        ("left/right swaps", "swap_rate", True),
-        ("occluded joints", "occluded_share", True),
-        ("self-occluded joints", "self_occluded_share", True),
+def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE) -> str:
+    """The statistics table: the measured figures beside `reference` (real OpenPose on Shelf)."""
+    groups, ref_groups = stats["per_group"], reference.get("per_group", {})
+    rows = [("joint error / person size: median", stats, reference, "error_over_size_median", ""),
+            ("  p90", stats, reference, "error_over_size_p90", ""),
+            ("  p99", stats, reference, "error_over_size_p99", "")]
+    per_group = [
+        ("error / size median", "error_over_size_median", ""),
+        ("vertical offset px at 400 (+ below truth)", "vertical_offset_px_at_400", "signed px"),
+        ("lag-1 correlation of a joint's error", "lag1_error_correlation", ""),
+        ("joint miss rate", "miss_rate", "%"),
     ]
-    lines = [f"{stats['frames']} frames, {stats['detections']} detections, "
-             f"{stats['limb_joints_measured']} limb joints measured",
-             f"{'figure':<32}{'measured':>12}{'Shelf OpenPose':>16}"]
-    for label, key, percent in rows:
-        ref = SHELF_OPENPOSE.get(key)
-        lines.append(f"{label:<32}{fmt(stats.get(key), percent):>12}{fmt(ref, percent):>16}")
+    for label, key, kind in per_group:
+        if key in ("lag1_error_correlation", "miss_rate"):
+            rows.append((f"{label}: all", stats, reference, key, kind))
+        else:
+            rows.append((f"{label}:", None, None, key, kind))
+        rows.extend((f"  {g}", groups[g], ref_groups.get(g, {}), key, kind) for g in GROUPS)
+    rows += [
+        ("gross errors (> 0.2 x size)", stats, reference, "gross_error_rate", "%"),
+        ("P(joint missed next frame | missed now)", stats, reference, "miss_persistence", ""),
+        ("missed person-views", stats, reference, "missed_person_view_rate", "%"),
+        ("false-positive people per camera frame", stats, reference, "false_positive_people_per_frame", ""),
+        (f"  with >= {PERSON_LIKE_JOINTS} of 12 joints", stats, reference, "false_positive_people_ge6_per_frame", ""),
+        (f"cross-view reprojection px at 400 (>= {CROSS_VIEW_MIN_VIEWS} views): all", stats, reference,
+         "cross_view_reprojection_px_at_400", "px"),
+        *((f"  {g}", groups[g], ref_groups.get(g, {}), "cross_view_reprojection_px_at_400", "px") for g in GROUPS),
+        ("cross-view 3D distance to the true joint, cm: all", stats, reference, "cross_view_error_m", "cm"),
+        *((f"  {g}", groups[g], ref_groups.get(g, {}), "cross_view_error_m", "cm") for g in GROUPS),
+    ]
+    size = stats["person_size_px_median"]
+    lines = [f"{stats['frames_measured']} of {stats['frames']} camera frames measured (truth at their capture "
+             f"time), {stats['matched_detections']} matched detections, {stats['person_views']} person-views, "
+             f"person size median {'-' if size is None else f'{size:.0f}'} px, "
+             f"{stats['cross_view_joints']} joints triangulated across views",
+             f"{'statistic':<56}{'measured':>12}{'real OpenPose, Shelf':>24}"]
+    for label, measured, ref, key, kind in rows:
+        if measured is None:
+            lines.append(label)
+            continue
+        lines.append(f"{label:<56}{_fmt(measured.get(key), kind):>12}{_fmt(ref.get(key), kind):>24}")
     if stats["per_camera"]:
-        lines.append("")
-        lines.append(f"{'camera':<16}{'detections':>12}{'occluded':>12}{'self-occl.':>12}{'missed':>12}")
+        lines += ["", f"{'camera':<16}{'frames':>8}{'matched':>9}{'error/size':>12}{'joint miss':>12}"
+                      f"{'missed views':>14}{'FP / frame':>12}"]
         for name, c in stats["per_camera"].items():
-            lines.append(f"{name:<16}{c['detections']:>12}{fmt(c['occluded_share'], True):>12}"
-                         f"{fmt(c['self_occluded_share'], True):>12}{fmt(c['miss_rate'], True):>12}")
+            lines.append(f"{name:<16}{c['frames_measured']:>8}{c['matched_detections']:>9}"
+                         f"{_fmt(c['error_over_size_median'], ''):>12}{_fmt(c['miss_rate'], '%'):>12}"
+                         f"{_fmt(c['missed_person_view_rate'], '%'):>14}"
+                         f"{_fmt(c['false_positive_people_per_frame'], ''):>12}")
     return "\n".join(lines)

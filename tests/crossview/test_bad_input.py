@@ -113,9 +113,31 @@ def test_a_bad_tracker_config_is_refused_in_one_line(text, expected, campus_reco
     assert "c.toml: " in err and expected in err, err
 
 
-def test_detector_stats_refuses_a_recording_of_other_joints(campus_recording, tmp_path, capsys):
-    err = _refused(capsys, ["detector-stats", campus_recording], tmp_path)
-    assert "campus.mcap: holds campus14 joints; detector-stats measures the synthetic COCO-17 detector" in err
+# Recordings that detector-stats cannot measure: (id, the Campus fixture's files to keep, frames of its 2D
+# input to keep (None: all), what the line must say).
+DETECTOR_STATS_CASES = [
+    ("no-truth", ("calibration.json", "annotation_2d.json"), None, "no 3D truth at the times of its 1353 camera "
+     "frames; detector-stats needs a recording with truth"),
+    ("too-few-matches", ("calibration.json", "annotation_2d.json", "annotation_3d.json"),
+     ("Camera0/0014.000.jpg", "Camera0/0014.040.jpg"), "only 2 detections match a true person"),
+]
+
+
+@pytest.mark.parametrize("files, frames, expected", [c[1:] for c in DETECTOR_STATS_CASES],
+                         ids=[c[0] for c in DETECTOR_STATS_CASES])
+def test_detector_stats_refuses_a_recording_it_cannot_measure(files, frames, expected, tmp_path, capsys):
+    dataset = tmp_path / "dataset"
+    dataset.mkdir()
+    for name in files:
+        shutil.copy(CAMPUS / name, dataset / name)
+    if frames is not None:
+        d = json.loads((dataset / "annotation_2d.json").read_text())
+        d["frames"] = {k: d["frames"][k] for k in frames}
+        (dataset / "annotation_2d.json").write_text(json.dumps(d))
+    rec = tmp_path / "rec.mcap"
+    assert main(["--no-progress", "convert", str(dataset), "-o", str(rec)]) == 0
+    err = _refused(capsys, ["detector-stats", rec, "--json", tmp_path / "out" / "stats.json"], tmp_path)
+    assert f"{rec}: {expected}" in err, err
 
 
 def _cam0(d):
