@@ -51,15 +51,11 @@ def person_size_px(keypoints_px: np.ndarray) -> np.ndarray:
 
 
 def joint_groups(skeleton: Skeleton) -> np.ndarray:
-    """(J,) int64 the index in `profiles.JOINT_GROUPS` of each joint, read off its name (a joint that names no
-    limb joint is the head's: COCO-17's face points, Campus-14's top and bottom of the head)."""
-    limb = {"shoulder": "shoulders", "elbow": "elbows", "wrist": "wrists", "hip": "hips", "knee": "knees",
-            "ankle": "ankles"}
-    groups = []
-    for name in skeleton.joints:
-        group = next((g for key, g in limb.items() if key in name), "head")
-        groups.append(JOINT_GROUPS.index(group))
-    return np.array(groups, dtype=np.int64)
+    """(J,) int64 the index in `JOINT_GROUPS` of each joint (`Skeleton.joint_groups`)."""
+    group = np.zeros(skeleton.num_joints, dtype=np.int64)
+    for name, members in skeleton.joint_groups().items():
+        group[list(members)] = JOINT_GROUPS.index(name)
+    return group
 
 
 def left_right_permutation(skeleton: Skeleton) -> np.ndarray:

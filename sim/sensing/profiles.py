@@ -7,6 +7,7 @@ import math
 from dataclasses import dataclass
 from typing import NamedTuple
 
+import core.types
 from sim.config import bounded, check_ranges
 
 
@@ -18,9 +19,9 @@ class DetectorProfile(enum.Enum):
     HARSH = "harsh"
 
 
-JOINT_GROUPS = ("head", "shoulders", "elbows", "wrists", "hips", "knees", "ankles")
-"""The joint groups a per-group parameter has one value for, in this order (COCO-17: nose, eyes and ears are
-the head; Campus-14: top and bottom of the head are)."""
+JOINT_GROUPS = tuple(core.types.JOINT_GROUPS)
+"""The joint groups a per-group parameter has one value for, in this order (head, shoulders, elbows, wrists,
+hips, knees, ankles; `core.types.Skeleton.joint_groups` says which joints each holds)."""
 
 Groups = tuple[float, float, float, float, float, float, float]
 """One number per joint group (`JOINT_GROUPS`)."""
