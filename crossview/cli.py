@@ -177,6 +177,22 @@ def build_parser() -> argparse.ArgumentParser:
                    "convert` of a dataset folder with annotation_3d.json")
     p.add_argument("--json", "-o", "--output", dest="json", type=Path, help="write the figures as JSON here")
 
+    p = sub.add_parser("fit-detector", help="fit a detector profile to a recording's detector statistics (or to "
+                       "real OpenPose on Shelf), by simulating the rig with candidate profiles")
+    p.add_argument("recording", type=Path, nargs="?", help="a recording whose detections to fit (synthetic, or "
+                   "converted from a dataset with 3D truth); leave out with --target")
+    p.add_argument("-o", "--output", type=Path, required=True, help="the profile file to write (TOML)")
+    p.add_argument("--target", choices=["shelf-openpose"], help="fit to a published table instead of a recording: "
+                   "real OpenPose on the Shelf dataset")
+    p.add_argument("--scenario", help="the rig to simulate (default: the recording's own scenario; with --target: "
+                   "shelf)")
+    p.add_argument("--start", default="typical", help="the profile the fit starts from: a shipped name or a profile "
+                   "file (default typical)")
+    p.add_argument("--seed", type=_non_negative_int, help="seed of every round (default: the recording's, else the "
+                   "scenario's)")
+    p.add_argument("--duration", type=_positive_float, default=20.0, help="simulated seconds per round (default 20)")
+    p.add_argument("--rounds", type=_positive_int, default=8, help="rounds of simulate, measure, update (default 8)")
+
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
@@ -444,6 +460,50 @@ def _cmd_detector_stats(args) -> None:
         pipeline.write_json(stats, args.json, inputs=(args.recording,))
 
 
+def _cmd_fit_detector(args) -> None:
+    from crossview import pipeline, recording
+    from crossview.detector_fit import deviations, fit
+    from crossview.detector_stats import SHELF_OPENPOSE, format_detector_stats, recording_detector_stats
+    from sim import scenario as scenario_mod
+    from sim.sensing.profiles import DetectorProfile
+
+    if (args.recording is None) == (args.target is None):
+        raise CrossviewError("fit-detector: give a recording to fit, or --target shelf-openpose (not both)")
+    inputs = tuple(p for p in (args.recording, args.scenario, args.start) if p and str(p).endswith((".mcap", ".toml")))
+    pipeline.check_writable(args.output, inputs=tuple(Path(p) for p in inputs))
+    seed = args.seed
+    if args.recording is not None:
+        target = recording_detector_stats(args.recording)
+        where = f"{args.recording}"
+        if args.scenario is None:
+            header = recording.open_recording(args.recording).header
+            if not header.scenario_text:
+                raise CrossviewError(f"{args.recording}: holds no scenario to simulate (a converted dataset); give "
+                                     "--scenario, a scenario of the rig it was recorded on")
+            scenario = scenario_mod.from_source_text(header.scenario_text, header.scenario_name, str(args.recording))
+            seed = header.seed if seed is None else seed
+        else:
+            scenario = pipeline.load_scenario(args.scenario)
+    else:
+        target, where = SHELF_OPENPOSE, "real OpenPose on the Shelf dataset"
+        scenario = pipeline.load_scenario(args.scenario or "shelf")
+    seed = scenario.seed if seed is None else seed
+    start = scenario_mod.profile_params(args.start)
+
+    def report(k, result):
+        print(f"round {k + 1}/{args.rounds}: largest deviation {100 * result.worst:.1f} %", flush=True)
+
+    best = fit(target, scenario, start, seed=seed, duration_s=args.duration, rounds=args.rounds, on_round=report)
+    print(format_detector_stats(best.stats, reference=target))
+    (key, group), worst = max(deviations(best.stats, target).items(), key=lambda kv: abs(kv[1]))
+    comment = (f"Detector profile fitted by `crossview fit-detector` to {where}, on {scenario.name} (seed {seed}, "
+               f"{args.duration:g} s a round, {args.rounds} rounds, from {args.start}).\nLargest deviation of a "
+               f"row from the target: {100 * worst:+.1f} % ({key}{'' if group is None else ', ' + group}).")
+    pipeline.write_text(scenario_mod.profile_file_text(best.params, DetectorProfile.TYPICAL, comment), args.output,
+                        inputs=tuple(Path(p) for p in inputs))
+    print(f"{args.output}: the fitted profile (largest deviation {100 * best.worst:.1f} %)")
+
+
 def _cmd_world_stats(args) -> None:
     import json
 
@@ -551,6 +611,7 @@ COMMANDS = {
     "score": _cmd_score,
     "info": _cmd_info,
     "detector-stats": _cmd_detector_stats,
+    "fit-detector": _cmd_fit_detector,
     "world-stats": _cmd_world_stats,
     "scenarios": _cmd_scenarios,
     "evaluate": _cmd_evaluate,

@@ -188,6 +188,16 @@ def load_profile_file(path: Path) -> dict:
     return {"profile": base, **tree}
 
 
+def profile_params(profile: str) -> DetectorParams:
+    """The parameters of a shipped profile (by name) or of a profile file (a path ending in .toml)."""
+    if is_profile_file(profile):
+        return from_dict(DetectorConfig, load_profile_file(Path(profile)), profile, "").params()
+    valid = [p.value for p in DetectorProfile]
+    if profile not in valid:
+        raise ScenarioError(f"profile {profile!r}: not one of {valid} nor a profile file (.toml)")
+    return PROFILES[DetectorProfile(profile)]
+
+
 def _with_profile_file(tree: dict, overrides: dict, folder: Path | None) -> dict:
     """`overrides` with the parameters of the profile file that `detector.profile` names, if it names one: the
     file's base profile as the profile, and each of its parameters that neither the scenario's [detector] nor

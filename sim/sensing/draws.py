@@ -166,18 +166,25 @@ class DrawState(NamedTuple):
         noise: (S, J, 2) the latest noise of the joint, in units of its std (an AR(1) process in time).
         noise_t_s: (S, J) when it was drawn (-inf: never).
         missed: (S, J) bool whether the joint was missed then.
-        miss_t_s: (S, J) when that was drawn (-inf: never).
+        gross: (S, J) bool whether the joint was off by a gross jump then.
+        jump: (S, J, 2) that jump, as a fraction of the person's size.
+        fail_t_s: (S, J) when `missed` and `gross` were drawn (-inf: never).
+
+    The gross errors remember as the noise does (`noise_time_s`: they are its large excursions), the misses
+    with their own `miss_time_s`.
     """
 
     noise: np.ndarray
     noise_t_s: np.ndarray
     missed: np.ndarray
-    miss_t_s: np.ndarray
+    gross: np.ndarray
+    jump: np.ndarray
+    fail_t_s: np.ndarray
 
     @staticmethod
     def empty(slots: int, J: int) -> DrawState:
         return DrawState(np.zeros((slots, J, 2)), np.full((slots, J), -np.inf), np.zeros((slots, J), dtype=np.bool_),
-                         np.full((slots, J), -np.inf))
+                         np.zeros((slots, J), dtype=np.bool_), np.zeros((slots, J, 2)), np.full((slots, J), -np.inf))
 
 
 class DrawTables(NamedTuple):
@@ -211,13 +218,15 @@ def draw_detections(rng, views, state, tables, model, out):
 
     Per person-view (`Views`): never detected with fewer than `min_visible` visible joints in the image or
     smaller than min_px in it (`person_size_px`), else missed with probability miss + gain x its occluded
-    share. A detection reports each joint in the image unless it is missed (a two-state process per slot and
-    joint with the group's stationary rate `joint_miss_prob` and memory `miss_time_s`) or dropped by its
-    occlusion; it may keep only one body part (fragment). A reported joint lies at the detector's own joint
-    (`found_px`) plus noise scaled by the person's size in the image, the joint's occlusion and `noise_frac`:
-    an AR(1) process per slot and joint, whose Student-t innovations keep its std (correlation
-    exp(-Δt / noise_time_s) between draws Δt apart); gross jumps of a uniform fraction of that size in a uniform
-    direction; clipped normal scores; left and right may be swapped. Joints not reported are NaN with score 0.
+    share. A detection reports each joint in the image unless it is missed: a two-state process per slot and
+    joint whose stationary rate is the group's `joint_miss_prob`, or the occlusion's drop probability where
+    that is larger, with memory `miss_time_s`. It may keep only one body part (fragment). A reported joint lies
+    at the detector's own joint (`found_px`) plus noise scaled by the person's size in the image, the joint's
+    occlusion and `noise_frac`: an AR(1) process per slot and joint, whose Student-t innovations keep its std
+    (correlation exp(-Δt / noise_time_s) between draws Δt apart); plus, while the joint is in a gross error (a
+    two-state process like the misses, rate `gross_error_prob`, memory `noise_time_s`), a jump of a uniform
+    fraction of the size in a uniform direction, drawn when the error starts and kept while it lasts. Scores
+    are clipped normals; left and right may be swapped. Joints not reported are NaN with score 0.
     A detection with a joint reported may come with a duplicate: a second copy shifted by a normal offset of
     `_DUPLICATE_OFFSET_FRAC` of the size, repeating each joint with probability `_DUPLICATE_KEEP`, at
     `_DUPLICATE_SCORE` of the scores.
@@ -259,14 +268,24 @@ def draw_detections(rng, views, state, tables, model, out):
             reported[j] = False
             if not in_img[p, j]:
                 continue
-            # The joint's miss process: P(missed) relaxes from its last state to the stationary rate.
+            # The joint's failures: P(missed), P(gross) relax from their last states to their stationary rates.
+            memory = _decay(t, state.fail_t_s[s, j], model.miss_time_s)
+            gross_memory = _decay(t, state.fail_t_s[s, j], model.noise_time_s)
             rate = model.joint_miss_prob[tables.joint_group[j]]
+            if occluded[p, j]:
+                rate = max(rate, model.occluded_drop_prob)
+            elif self_occluded[p, j]:
+                rate = max(rate, model.self_occluded_drop_prob)
             last = 1.0 if state.missed[s, j] else 0.0
-            missed = rng.random() < rate + (last - rate) * _decay(t, state.miss_t_s[s, j], model.miss_time_s)
-            state.missed[s, j], state.miss_t_s[s, j] = missed, t
-            drop = model.occluded_drop_prob if occluded[p, j] else (
-                model.self_occluded_drop_prob if self_occluded[p, j] else 0.0)
-            reported[j] = not missed and (drop == 0.0 or rng.random() >= drop)
+            missed = rng.random() < rate + (last - rate) * memory
+            last = 1.0 if state.gross[s, j] else 0.0
+            gross = rng.random() < model.gross_error_prob + (last - model.gross_error_prob) * gross_memory
+            if gross and not state.gross[s, j]:  # a new gross error: its own jump
+                angle = rng.uniform(0.0, 2.0 * np.pi)
+                jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC)
+                state.jump[s, j, 0], state.jump[s, j, 1] = jump * math.cos(angle), jump * math.sin(angle)
+            state.missed[s, j], state.gross[s, j], state.fail_t_s[s, j] = missed, gross, t
+            reported[j] = not missed
         # Fragments keep one body part (if it holds a reported joint).
         if rng.random() < model.fragment_prob:
             part = rng.integers(0, n_parts)
@@ -305,11 +324,9 @@ def draw_detections(rng, views, state, tables, model, out):
             if not (cx == cx and cy == cy):  # the detector's joint did not project: the truth's instead
                 cx, cy = px[p, j, 0], px[p, j, 1]
             value[j, 0], value[j, 1] = cx + scale * state.noise[s, j, 0], cy + scale * state.noise[s, j, 1]
-            if rng.random() < model.gross_error_prob:
-                angle = rng.uniform(0.0, 2.0 * np.pi)
-                jump = rng.uniform(_GROSS_MIN_FRAC, _GROSS_MAX_FRAC) * size
-                value[j, 0] += jump * math.cos(angle)
-                value[j, 1] += jump * math.sin(angle)
+            if state.gross[s, j]:
+                value[j, 0] += state.jump[s, j, 0] * size
+                value[j, 1] += state.jump[s, j, 1] * size
                 effect |= _GROSS_ERROR
             base = model.score_occluded if occluded[p, j] else model.score_visible
             score[j] = min(max(base + model.score_std * rng.standard_normal(), MIN_SCORE), 1.0)

@@ -47,18 +47,20 @@ class DetectorParams(NamedTuple):
             people and joints; inf: Gaussian).
         offset_time_s: correlation time of the offset (it varies slowly: sleeves, clothing, pose).
         lift_m: per joint group, how far above the truth's joint (world up, metres) the detector's joint sits.
-        gross_error_prob: per-joint probability of a jump of 0.2-0.5 of the person's size.
+        gross_error_prob: the share of frames in which a joint is off by a jump of 0.2-0.5 of the person's size
+            (a two-state process like the misses, with the noise's memory `noise_time_s`: a gross error lasts).
         miss_prob: probability of missing a fully visible person.
         miss_occlusion_gain: extra miss probability per unit occluded share of the person's joints.
         min_visible_joints: people with fewer visible (unoccluded, in-image) joints are never detected.
         min_person_frac: people smaller in the image than this fraction of its height (the larger side of
             their joints' box) are never detected.
-        occluded_drop_prob: probability that an occluded joint is not reported.
-        self_occluded_drop_prob: probability that a self-occluded joint is not reported.
+        occluded_drop_prob: the share of frames in which an occluded joint is not reported (its miss rate while
+            occluded, where that is above its group's).
+        self_occluded_drop_prob: the same for a self-occluded joint.
         joint_miss_prob: per joint group, the share of frames in which a detected person's visible joint is not
             reported (the stationary rate of a two-state miss process per camera, person and joint).
-        miss_time_s: correlation time of that miss process: a joint missed at t is missed at t + Δt with
-            probability joint_miss_prob + (1 - joint_miss_prob) exp(-Δt / miss_time_s).
+        miss_time_s: correlation time of the miss process: a joint missed at t is missed at t + Δt with
+            probability rate + (1 - rate) exp(-Δt / miss_time_s).
         fragment_prob: probability that a detection keeps only one body part (fewer than 6 joints).
         swap_prob: probability that a detection has its left and right joints swapped.
         duplicate_prob: probability that a detection comes with a second, partial copy.
@@ -118,9 +120,9 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
         offset_m=(0.025, 0.018, 0.017, 0.032, 0.034, 0.015, 0.015), offset_tail_dof=4.0, offset_time_s=2.0,
         lift_m=(0.0, 0.024, 0.012, 0.024, 0.039, 0.0, 0.0),
         gross_error_prob=0.004, miss_prob=0.02, miss_occlusion_gain=0.1, min_visible_joints=2,
-        min_person_frac=0.1, occluded_drop_prob=0.4, self_occluded_drop_prob=0.1,
+        min_person_frac=0.1, occluded_drop_prob=0.2, self_occluded_drop_prob=0.05,
         joint_miss_prob=(0.08, 0.05, 0.12, 0.18, 0.03, 0.04, 0.06), miss_time_s=0.24,
-        fragment_prob=0.05, swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.26, phantom_keep_prob=0.53,
+        fragment_prob=0.0, swap_prob=0.002, duplicate_prob=0.01, phantom_rate=0.26, phantom_keep_prob=0.53,
         score_visible=0.8, score_occluded=0.45, score_std=0.12,
     ),
     DetectorProfile.HARSH: DetectorParams(
