@@ -262,6 +262,7 @@ def test_the_ideal_detector_measures_no_error_in_a_generated_recording(tmp_path)
                       progress=False)
     stats = recording_detector_stats(out)
     assert stats["matched_detections"] > 100
+    assert 350 < stats["person_size_px_median"] < 450  # px: the shelf rig sees people at about Shelf's size
     assert stats["error_over_size_p99"] < 1e-6
     assert stats["miss_rate"] == 0.0 and stats["missed_person_view_rate"] == 0.0
     assert stats["false_positive_people_per_frame"] == 0.0
