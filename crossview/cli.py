@@ -175,7 +175,8 @@ def build_parser() -> argparse.ArgumentParser:
                        "beside real OpenPose on Shelf")
     p.add_argument("recording", type=Path, help="a recording with 3D truth: `crossview generate`, or `crossview "
                    "convert` of a dataset folder with annotation_3d.json")
-    p.add_argument("--json", "-o", "--output", dest="json", type=Path, help="write the figures as JSON here")
+    p.add_argument("--json", "-o", "--output", dest="json", type=Path, metavar="FILE",
+                   help="write the figures as JSON here")
 
     p = sub.add_parser("fit-detector", help="fit a detector profile to a recording's detector statistics (or to "
                        "real OpenPose on Shelf), by simulating the rig with candidate profiles")

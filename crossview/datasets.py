@@ -282,7 +282,8 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
     (else both are the stamp). The per-detection truth holds the ids and joints of annotation_2d.json when
     its 2D input is that file, or when detection.json comes with an annotation_2d.json of the same frames and
     poses (as `export_dataset` writes); with detection.json alone the ids are -1. The 3D truth of
-    annotation_3d.json is written when its poses have the 2D joints' layout (CAMPUS14, or COCO17 as exported).
+    annotation_3d.json is written when its poses have the 2D joints' layout (CAMPUS14, or COCO17 as exported),
+    and as COCO-17 (`campus14_to_coco17`) when COCO-17 detections come with the published 14-joint truth.
     calibration.json's `points_2d_distorted` and scene.json are read when present (see `export_dataset`).
     A folder with no 2D file but one sub-folder of OpenPose output per camera is read with `crossview.openpose`
     (source "openpose"; `fps` gives the stamps that its timestamps.json does not).
@@ -321,9 +322,15 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
         try:
             truth = load_truth_3d(dataset_dir, skeleton.num_joints)
         except DatasetError:
-            if skeleton.num_joints == 14:
+            if skeleton.num_joints == CAMPUS14.num_joints:
                 raise
-            truth = []  # the published 14-joint truth cannot be stored with COCO-17 frames in one recording
+            # COCO-17 detections beside the published 14-joint truth (Shelf, Campus): the truth is stored as
+            # COCO-17, its twelve limb joints exactly (`campus14_to_coco17`); a file in neither layout is left out.
+            try:
+                truth = [(t, ids, campus14_to_coco17(poses))
+                         for t, ids, poses in load_truth_3d(dataset_dir, CAMPUS14.num_joints)]
+            except DatasetError:
+                truth = []
     truth.sort(key=lambda entry: entry[0])
     scene = read_json(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
     digest = hashlib.sha256()

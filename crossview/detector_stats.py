@@ -373,6 +373,7 @@ def _cross_view(records: list[_FrameRecord], cameras: list[Camera]) -> dict:
                 continue
             cams = [c for c, _ in seen]
             points = np.stack([undistort_points(cameras[c], v.detection_px) for c, v in seen], axis=1)  # (12, V, 2)
+            # The standard DLT (eq. 8-9) on undistorted pixels, rows divided as distances in metres (PLANE_ROW).
             X = triangulate(P[cams], points, min_views=CROSS_VIEW_MIN_VIEWS, row_norm=PLANE_ROW)  # (12, 3)
             scale = SIZE_AT_PX / np.array([v.size_px for _, v in seen])
             distances = reprojection_error_px(P[cams], X, points) * scale  # (12, V)

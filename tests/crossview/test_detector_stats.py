@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from core.types import COCO17, Camera, Frame
+from core.types import CAMPUS14, COCO17, Camera, Frame
 from crossview import datasets, pipeline
 from crossview.cli import main
 from crossview.detector_stats import (
@@ -231,12 +231,38 @@ def test_campus_ground_truth_2d_joints_agree_with_the_projected_3d_truth(campus_
     assert stats["cross_view_error_m"] < 0.005  # m
 
 
+def test_coco17_detections_beside_the_published_14_joint_truth_are_measured_alike(campus_recording, tmp_path):
+    # A folder shaped as the published Shelf one: COCO-17 detection.json (here the Campus ground-truth 2D
+    # joints under their COCO-17 names, face unknown) beside the 14-joint annotation_3d.json.
+    folder = tmp_path / "coco"
+    folder.mkdir()
+    for name in ("calibration.json", "annotation_3d.json"):
+        (folder / name).write_bytes((CAMPUS / name).read_bytes())
+    data = json.loads((CAMPUS / "annotation_2d.json").read_text())
+    to_coco = [(COCO17.index(name), CAMPUS14.index(name)) for name in JOINTS_12]
+    for frame in data["frames"].values():
+        for pose in frame["poses"]:
+            points, scores = [[0.0, 0.0]] * J, [0.0] * J
+            for c, k in to_coco:
+                points[c], scores[c] = pose["points_2d"][k], 1.0
+            pose.update(points_2d=points, scores=scores, id=-1)
+    (folder / "detection.json").write_text(json.dumps(data))
+    out = tmp_path / "coco.mcap"
+    datasets.convert(folder, out)
+    coco, campus = recording_detector_stats(out), recording_detector_stats(campus_recording)
+    for key in ("matched_detections", "person_views", "joints_measured", "false_positive_people_per_frame"):
+        assert coco[key] == campus[key], key
+    for key in ("error_over_size_median", "error_over_size_p99", "cross_view_error_m"):
+        assert coco[key] == pytest.approx(campus[key], abs=1e-9), key
+
+
 def test_the_ideal_detector_measures_no_error_in_a_generated_recording(tmp_path):
     out = tmp_path / "shelf.mcap"
     pipeline.generate(scenario_mod.load("shelf", {"duration_s": 1.0, "seed": 0, "detector.profile": "ideal"}), out,
                       progress=False)
     stats = recording_detector_stats(out)
     assert stats["matched_detections"] > 100
+    assert 350 < stats["person_size_px_median"] < 450  # px: the shelf rig sees people at about Shelf's size
     assert stats["error_over_size_p99"] < 1e-6
     assert stats["miss_rate"] == 0.0 and stats["missed_person_view_rate"] == 0.0
     assert stats["false_positive_people_per_frame"] == 0.0
