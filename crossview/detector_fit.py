@@ -134,7 +134,7 @@ def update(params: DetectorParams, stats: dict, target: dict) -> DetectorParams:
             and value(target, "false_positive_people_ge6_per_frame") is not None:
         share_got = value(stats, "false_positive_people_ge6_per_frame") / got_fp
         share_want = value(target, "false_positive_people_ge6_per_frame") / want_fp
-        keep = float(np.clip(keep + share_want - share_got, 0.05, 1.0))
+        keep = float(np.clip(keep + DAMPING * (share_want - share_got), 0.05, 1.0))
     return params._replace(
         offset_m=tuple(offset), lift_m=tuple(lift), joint_miss_prob=tuple(miss),
         noise_frac=params.noise_frac * _ratio(value(stats, "cross_view_reprojection_px_at_400"),
