@@ -97,7 +97,8 @@ def test_fit_detector_refuses_what_it_cannot_fit_and_writes_nothing(tmp_path, ca
     ("joint_miss_prob = [0.1, 0.1, 0.1, 1.2, 0.1, 0.1, 0.1]\n", r"bad\.toml: joint_miss_prob\[3\]: 1\.2 must be"),
     ('base = "perfect"\n', r"bad\.toml: base = 'perfect' is not one of"),
     ("offset_m = [0.1]\n", r"bad\.toml: offset_m must have 7 elements"),
-])
+], ids=["unknown-key", "negative", "nan", "probability-above-1", "group-probability-above-1", "unknown-base",
+        "wrong-length"])
 def test_a_bad_profile_file_names_the_file_and_the_key(tmp_path, text, message, capsys):
     (tmp_path / "bad.toml").write_text(text)
     (tmp_path / "s.toml").write_text('[detector]\nprofile = "bad.toml"\n')
