@@ -492,7 +492,9 @@ def _cmd_fit_detector(args) -> None:
     start = scenario_mod.profile_params(args.start)
 
     def report(k, result):
-        print(f"round {k + 1}/{args.rounds}: largest deviation {100 * result.worst:.1f} %", flush=True)
+        (key, group), worst = max(deviations(result.stats, target).items(), key=lambda kv: abs(kv[1]))
+        print(f"round {k + 1}/{args.rounds}: largest deviation {100 * worst:+.1f} % ({key}"
+              f"{'' if group is None else ', ' + group})", flush=True)
 
     best = fit(target, scenario, start, seed=seed, duration_s=args.duration, rounds=args.rounds, on_round=report)
     print(format_detector_stats(best.stats, reference=target))

@@ -64,14 +64,21 @@ def value(stats: dict, key: str, group: str | None = None) -> float | None:
     return None if v is None or not math.isfinite(v) else float(v)
 
 
+OFFSET_FLOOR_PX = 2.0
+"""A vertical offset is compared relative to its target, or to this many pixels (at 400) where the target is
+smaller: the knees' and ankles' offsets are a fraction of a pixel, and a tenth of that is no statistic."""
+
+
 def deviations(stats: dict, target: dict) -> dict[tuple[str, str | None], float]:
-    """Per row of `ROWS` that both tables have: measured / target - 1 (a target of 0: the difference)."""
+    """Per row of `ROWS` that both tables have: (measured - target) / target, relative to at least
+    `OFFSET_FLOOR_PX` for vertical offsets (a target of 0 elsewhere: the difference)."""
     out = {}
     for key, group in ROWS:
         got, want = value(stats, key, group), value(target, key, group)
         if got is None or want is None:
             continue
-        out[(key, group)] = got / want - 1.0 if want else got - want
+        scale = max(abs(want), OFFSET_FLOOR_PX) if key == "vertical_offset_px_at_400" else abs(want)
+        out[(key, group)] = (got - want) / scale if scale else got - want
     return out
 
 
