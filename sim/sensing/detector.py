@@ -397,11 +397,11 @@ class Detector:
         rows = self._detections(views)
         # Phantom skeletons: a Poisson number per frame (drawn for all frames at once), appended as rows.
         n_phantoms = self._rng.poisson(self.params.phantom_rate, len(requests))
-        phantoms = [(i, ph) for i in np.repeat(np.arange(len(requests)), n_phantoms)
-                    for ph in [self._phantom(requests[i].camera)] if ph is not None]
-        if phantoms:
-            extra = [np.stack([ph[k] for _, ph in phantoms]) for k in range(8)]
-            extra.append(np.array([i for i, _ in phantoms], dtype=rows[-1].dtype))
+        if n_phantoms.any() and self._template is not None:
+            group = np.repeat(np.arange(len(requests)), n_phantoms)
+            extra = self._phantoms(cams[group])
+            keep = extra[0]
+            extra = [e[keep] for e in extra[1:]] + [group[keep].astype(rows[-1].dtype)]
             rows = [np.concatenate([r, e]) for r, e in zip(rows, extra)]
         # Each frame's rows in a random order: sort by frame, then by a uniform key.
         order = np.empty(rows[-1].shape[0], dtype=np.int64)
@@ -452,36 +452,42 @@ class Detector:
         n = draw_detections(self._rng, views, self._state, self._tables, self.params, out)
         return [r[:n] for r in out]
 
-    def _phantom(self, camera_index: int):
-        """A false-positive skeleton: a person template standing somewhere on the floor in view of a camera."""
-        rng = self._rng
-        p = self.params
-        J = self.skeleton.num_joints
-        if self._template is None:
-            return None
-        camera = self.cameras[camera_index]
-        # Pick a pixel, follow its ray to the floor and stand the template there.
-        pixel = np.array([rng.uniform(0, camera.width_px), rng.uniform(0, camera.height_px), 1.0])
-        ray = camera.R_cam_from_world.T @ np.linalg.solve(camera.K, pixel)
-        centre = self._centres[camera_index]
-        if ray[2] >= -1e-6:
-            return None
-        foot = centre - ray * (centre[2] / ray[2])
-        yaw = rng.uniform(0, 2 * np.pi)
-        rot = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
-        points = self._template * rng.uniform(0.85, 1.1) @ rot.T + foot
-        # `in_image` of the camera, by the compiled projection (the same pixels; far less overhead).
-        px, inside = np.empty((1, J, 2)), np.empty((1, J), dtype=bool)
-        in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points[None],
-                             np.array([camera_index]), np.array([self._tangential[camera_index]]),
-                             np.array([self._skew[camera_index]]), px, inside)
-        px, inside = px[0], inside[0]
-        keep = inside & (rng.random(J) < p.phantom_keep_prob)
-        if keep.sum() < 3:
-            return None
-        kp = np.where(keep[:, None], px + 0.03 * person_size_px(px) * rng.standard_normal((J, 2)), np.nan)
-        scores = np.where(keep, np.clip(0.35 + p.score_std * rng.standard_normal(J), MIN_SCORE, 1.0), 0.0)
-        nan = np.full((J, 2), np.nan)
-        false = np.zeros(J, dtype=bool)
-        return (-1, kp, scores, nan, false, false, false, int(DetectionEffect.PHANTOM))
+    def _phantoms(self, cams: np.ndarray) -> list[np.ndarray]:
+        """False-positive skeletons, one per entry of cams (N,): a person template standing on the floor where a
+        random pixel's ray meets it, turned and scaled at random, reporting each joint inside the image with
+        `phantom_keep_prob` plus a little noise; only those with 3 or more joints reported are kept.
+
+        Returns:
+            keep (N,) bool, then the rows' ids (N,) (-1), keypoints (N, J, 2), scores (N, J), true px (NaN),
+            in_image, occluded, self_occluded (N, J) (False) and effects (N,) (`PHANTOM`).
+        """
+        rng, p, J, N = self._rng, self.params, self.skeleton.num_joints, len(cams)
+        pixel = np.stack([rng.uniform(0, 1, N) * self._size[cams, 0], rng.uniform(0, 1, N) * self._size[cams, 1],
+                          np.ones(N)], axis=1)
+        yaw = rng.uniform(0, 2 * np.pi, N)
+        scale = rng.uniform(0.85, 1.1, N)
+        keep_joint = rng.random((N, J)) < p.phantom_keep_prob
+        noise = rng.standard_normal((N, J, 2))
+        score_noise = rng.standard_normal((N, J))
+        # The pixel's ray (world frame) and where it meets the floor.
+        ray = np.einsum("nji,nj->ni", self._R[cams], np.linalg.solve(self._K[cams], pixel[..., None])[..., 0])
+        down = ray[:, 2] < -1e-6
+        centre = self._centre_array[cams]
+        foot = centre - ray * (centre[:, 2] / np.where(down, ray[:, 2], -1.0))[:, None]
+        cos, sin = np.cos(yaw), np.sin(yaw)
+        rot = np.zeros((N, 3, 3))
+        rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1], rot[:, 2, 2] = cos, -sin, sin, cos, 1.0
+        points = np.einsum("jb,nab->nja", self._template, rot) * scale[:, None, None] + foot[:, None, :]
+        # `in_image` of each camera, by the compiled projection.
+        px, inside = np.empty((N, J, 2)), np.empty((N, J), dtype=bool)
+        in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, points, cams,
+                             np.array(self._tangential)[cams], np.array(self._skew)[cams], px, inside)
+        shown = inside & keep_joint
+        keep = down & (shown.sum(axis=1) >= 3)
+        size = person_size_px(px)
+        kp = np.where(shown[..., None], px + 0.03 * size[:, None, None] * noise, np.nan)
+        scores = np.where(shown, np.clip(0.35 + p.score_std * score_noise, MIN_SCORE, 1.0), 0.0)
+        false = np.zeros((N, J), dtype=bool)
+        return [keep, np.full(N, -1, dtype=np.int64), kp, scores, np.full((N, J, 2), np.nan), false, false, false,
+                np.full(N, int(DetectionEffect.PHANTOM), dtype=np.int64)]
 

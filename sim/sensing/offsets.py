@@ -60,10 +60,10 @@ class JointOffsets:
                         self._parent[i] = index[side + parent]
         self._torso = tuple(index.get(n, -1) for n in ("left_hip", "right_hip", "left_shoulder", "right_shoulder"))
         self._slot_of: dict[int, int] = {}
-        J = self._J
-        self._omega = np.empty((0, J, 3, _FEATURES))  # rad/s
-        self._phase = np.empty((0, J, 3, _FEATURES))
-        self._scale = np.empty((0, J, 3))
+        # Per person (a row each): the features' angular frequencies (rad/s) and phases, (S, J, 3, 2, K), and
+        # each axis's amplitude (S, J, 3): offset_m x the person's Student-t scale x sqrt(2 / K).
+        self._fourier = np.empty((0, self._J, 3, 2, _FEATURES))
+        self._amplitude_m = np.empty((0, self._J, 3))
 
     def offsets(self, person_ids: np.ndarray, t_s: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, J, 3) where the detector's joints lie relative to the truth's, metres (world frame).
@@ -79,9 +79,10 @@ class JointOffsets:
         slots = self._slots(person_ids)
         # u(t) = sqrt(2 / K) Σ_k cos(ω_k t + φ_k), ω_k ~ Cauchy(0, 1 / time): unit variance, correlation
         # exp(-|Δt| / time) (the spectral density of that kernel is the Cauchy's).
-        angle = self._omega[slots] * np.asarray(t_s, dtype=np.float64)[:, None, None, None] + self._phase[slots]
-        u = math.sqrt(2.0 / _FEATURES) * np.cos(angle).sum(axis=-1)  # (N, J, 3)
-        local = self.std_m[None, :, None] * self._scale[slots] * u
+        fourier = self._fourier[slots]  # (N, J, 3, 2, K)
+        angle = fourier[..., 0, :] * np.asarray(t_s, dtype=np.float64)[:, None, None, None]
+        angle += fourier[..., 1, :]
+        local = np.cos(angle, out=angle).sum(axis=-1) * self._amplitude_m[slots]  # (N, J, 3)
         world = np.einsum("njab,njb->nja", self._frames(np.asarray(poses, dtype=np.float64)), local)
         world[..., 2] += self.lift_m
         return world
@@ -92,18 +93,18 @@ class JointOffsets:
         new = [pid for pid in dict.fromkeys(person_ids.tolist()) if pid not in slot_of]
         if new:
             J = self._J
-            omega, phase, scale = (np.empty((len(new), J, 3, _FEATURES)), np.empty((len(new), J, 3, _FEATURES)),
-                                   np.empty((len(new), J, 3)))
+            fourier, scale = np.empty((len(new), J, 3, 2, _FEATURES)), np.empty((len(new), J, 3))
             for i, pid in enumerate(new):
                 rng = np.random.default_rng([self._seed, pid])
-                omega[i] = rng.standard_cauchy((J, 3, _FEATURES)) / self._time_s if self._time_s > 0 else 0.0
-                phase[i] = rng.uniform(0.0, 2.0 * np.pi, (J, 3, _FEATURES))
+                omega = rng.standard_cauchy((J, 3, _FEATURES))
+                fourier[i, :, :, 0] = omega / self._time_s if self._time_s > 0 else 0.0
+                fourier[i, :, :, 1] = rng.uniform(0.0, 2.0 * np.pi, (J, 3, _FEATURES))
                 # Student-t scale mixture: N(0, 1) x sqrt(dof / chi2(dof)) is Student-t.
                 scale[i] = np.sqrt(self._dof / rng.chisquare(self._dof, (J, 3))) if math.isfinite(self._dof) else 1.0
-                slot_of[pid] = len(self._omega) + i
-            self._omega = np.concatenate([self._omega, omega])
-            self._phase = np.concatenate([self._phase, phase])
-            self._scale = np.concatenate([self._scale, scale])
+                slot_of[pid] = len(self._fourier) + i
+            self._fourier = np.concatenate([self._fourier, fourier])
+            amplitude = self.std_m[None, :, None] * scale * math.sqrt(2.0 / _FEATURES)
+            self._amplitude_m = np.concatenate([self._amplitude_m, amplitude])
         return np.array([slot_of[pid] for pid in person_ids.tolist()], dtype=np.int64)
 
     def _frames(self, poses: np.ndarray) -> np.ndarray:
