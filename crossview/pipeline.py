@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import CrossviewError
+from core.head import HeadConvention, HeadPoints
+from core.types import COCO17
 from crossview import outputs
 from sim import scenario as scenario_mod
 from sim.types import BoxKind, PoseTruth
@@ -350,6 +352,25 @@ def watched_floor(boxes) -> tuple[float, float, float, float] | None:
     return (*xy.min(axis=0).tolist(), *xy.max(axis=0).tolist())
 
 
+def truth_head(rec) -> HeadPoints | None:
+    """Where PCP puts the true head joints of an opened recording (`crossview.scoring.score`'s `truth_head`):
+    on the humanoid's head (`sim.humanoid.ANNOTATED_HEAD`) when the scenario it keeps says `[scoring]
+    truth_head = "annotated"` and its truth is COCO-17; else None, evaluate.py's mapping. A recording converted
+    from a dataset keeps no scenario, and its 14-joint truth already holds the annotated head joints.
+
+    Raises:
+        ScenarioError: the scenario text the recording keeps is not a valid scenario.
+    """
+    if rec.skeleton.name != COCO17.name or not rec.header.scenario_text:
+        return None
+    scenario = scenario_mod.from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
+    if scenario.scoring.truth_head is HeadConvention.ANNOTATED:
+        from sim.humanoid import ANNOTATED_HEAD
+
+        return ANNOTATED_HEAD
+    return None
+
+
 def open_run(rec_path: Path, tracks_path: Path):
     """Opens a recording and a tracks file made from it; (Recording, Tracks). CrossviewError when the tracks
     were made from another scenario or seed."""
@@ -410,7 +431,7 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
         if beside is not None:
             beside.start()
         report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
-                               skeleton=rec.skeleton, projected=here)
+                               skeleton=rec.skeleton, projected=here, truth_head=truth_head(rec))
         if beside is not None:
             there = beside.receive()[1]
             report.camera_2d = {c.name: report.camera_2d[c.name] if c.name in here else there[c.name]

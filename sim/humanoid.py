@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.head import HeadPoints
+
 REFERENCE_HEIGHT_M = 1.75
 # Heights a body can be built for; scenario heights outside are rejected.
 SUPPORTED_HEIGHT_M = (1.40, 2.10)
@@ -115,12 +117,29 @@ NECK_ABOVE_LUMBAR = 0.23
 NECK_LENGTH = 0.045
 UPPER_ARM = 0.186
 FOREARM = 0.146
+# The skull: an ellipsoid in the head body's frame (origin at the top of the neck), metres at the reference height.
+HEAD_CENTRE_M = (0.01, 0.0, 0.095)
+HEAD_RADII_M = (0.1, 0.078, 0.115)
 # Fraction of a leg's full reach the gait lets it stretch to (a knee is never locked straight).
 MAX_LEG_STRETCH = 0.995
 
 
 def _v(*xs: float) -> str:
     return " ".join(f"{x:.12g}" for x in xs)
+
+
+def _annotated_head() -> HeadPoints:
+    """The head joints of the Campus/Shelf annotations on this head: the bottom of the head at the head body's
+    origin (where the neck ends and the head turns: the base of the skull, at the level of the chin), the top
+    at the vertex of the skull (the top of its ellipsoid), both in the frame of the nose and ear sites."""
+    sites = {name: np.array(offset) for name, (body, offset) in zip(KEYPOINT_NAMES, KEYPOINTS) if body == "head"}
+    vertex = np.array(HEAD_CENTRE_M) + np.array([0.0, 0.0, HEAD_RADII_M[2]])
+    return HeadPoints.of(np.zeros(3), vertex, sites["nose"], sites["left_ear"], sites["right_ear"])
+
+
+ANNOTATED_HEAD = _annotated_head()
+"""Bottom and top of the head as the datasets annotate them, in the nose-ear frame (`core.head`); the same for
+every height, since the whole body scales."""
 
 
 def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
@@ -191,7 +210,8 @@ def humanoid_xml(prefix: str, height_m: float = REFERENCE_HEIGHT_M) -> str:
         + f'<body name="{P}neck" pos="{_v(0, 0, NECK_ABOVE_LUMBAR * H)}">' + hinge("neck_flex") + hinge("neck_twist")
         + f'<geom type="capsule" fromto="{_v(0, 0, -0.02 * s, 0, 0, NECK_LENGTH * H)}" size="{0.05 * s:.12g}"/>'
         + f'<body name="{P}head" pos="{_v(0, 0, NECK_LENGTH * H)}">' + hinge("head_nod") + hinge("head_tilt")
-        + f'<geom type="ellipsoid" pos="{_v(0.01 * s, 0, 0.095 * s)}" size="{_v(0.1 * s, 0.078 * s, 0.115 * s)}"/>'
+        + f'<geom type="ellipsoid" pos="{_v(*np.multiply(HEAD_CENTRE_M, s))}" '
+        f'size="{_v(*np.multiply(HEAD_RADII_M, s))}"/>'
         + sites("head")
         + "</body></body>"
         + arm("left", 1.0) + arm("right", -1.0)

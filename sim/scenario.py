@@ -23,6 +23,7 @@ from pathlib import Path
 
 import scenarios
 from core.errors import ScenarioError
+from core.head import HeadConvention
 from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
 from sim.config import bounded, check_ranges, field_range, field_unit
@@ -37,6 +38,21 @@ DEFAULT_SCENARIO = "store_layout1"
 
 
 @dataclass(frozen=True)
+class ScoringConfig:
+    """[scoring]: how `crossview score` compares the tracker's poses with this scenario's truth.
+
+    Attributes:
+        truth_head: where PCP's true head joints (bottom and top of the head) lie. "evaluate": mapped from the
+            true shoulders and nose with evaluate.py's factors, as the estimate is. "annotated": where the
+            Campus and Shelf annotators mark them, on the simulated head: the base of the head at the top of the
+            neck, and the vertex of the skull. The estimate is always mapped with evaluate.py's factors
+            (docs/metrics.md, "Joint conventions").
+    """
+
+    truth_head: HeadConvention = HeadConvention.EVALUATE
+
+
+@dataclass(frozen=True)
 class Scenario:
     """A whole scenario: the store, the people, the cameras, their clocks and the detector.
 
@@ -46,6 +62,7 @@ class Scenario:
         duration_s: default simulated duration.
         seed: default seed of the scenario's random generator.
         store, crowd, cameras, clock, detector: the sections, each owned by its module.
+        scoring: how the truth is scored (read by `crossview score`, not by the simulator).
     """
 
     name: str
@@ -57,6 +74,7 @@ class Scenario:
     cameras: CameraRigConfig = field(default_factory=CameraRigConfig)
     clock: ClockConfig = field(default_factory=ClockConfig)
     detector: DetectorConfig = field(default_factory=DetectorConfig)
+    scoring: ScoringConfig = field(default_factory=ScoringConfig)
     source_text: str = field(default="", repr=False, compare=False)
     source_path: str = field(default="", repr=False, compare=False)
 

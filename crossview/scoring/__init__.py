@@ -27,6 +27,7 @@ from collections.abc import Collection, Iterable, Sequence
 import numpy as np
 
 from core.errors import CrossviewError
+from core.head import HeadConvention, HeadPoints
 from core.types import COCO17, Camera, Skeleton
 from crossview.scoring.association import SCORED_STATES, AssociationAccumulator, scored_targets
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
@@ -149,6 +150,7 @@ def score(
     scored_area: tuple[float, float, float, float] | None = None,
     skeleton: Skeleton = COCO17,
     projected: bool | Collection[str] = True,
+    truth_head: HeadPoints | None = None,
 ) -> ScoreReport:
     """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
 
@@ -168,6 +170,8 @@ def score(
             True every camera, False none, or a collection of camera names (those only, in `cameras`' order).
             The caller computes the others (`crossview.pipeline.score` leaves a share to a second process:
             `projected_2d_scores`).
+        truth_head: with a COCO-17 truth, PCP's true head joints as points of the true head (the scenario's
+            `scoring.truth_head` "annotated", `crossview.pipeline.truth_head`); None: mapped as the estimate's.
 
     Returns:
         the report; metrics that cannot be measured are None.
@@ -226,11 +230,13 @@ def score(
             "the tracks belong to another recording"
         )
 
-    pose_acc = PoseAccumulator(skeleton=skeleton)
+    pose_acc = PoseAccumulator(skeleton=skeleton, truth_head=truth_head)
     id_acc = IdentityAccumulator(root_threshold_m, skeleton)
     hota_truth, hota_targets, hota_sims = [], [], []
+    evaluated = truth_head is None and skeleton.name == COCO17.name  # a 14-joint truth is a dataset's annotation
     report = ScoreReport(eval_rate_hz=eval_rate_hz, root_threshold_m=root_threshold_m,
-                         hota_zero_distance_m=hota_zero_distance_m)
+                         hota_zero_distance_m=hota_zero_distance_m,
+                         truth_head=(HeadConvention.EVALUATE if evaluated else HeadConvention.ANNOTATED).value)
     scored_ticks = 0
     chosen: TrackerOutput | None = None
     compared: list[tuple[float, np.ndarray, np.ndarray]] = []  # per identity update: time, person ids, roots

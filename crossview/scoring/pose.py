@@ -5,6 +5,10 @@ PCP (percentage of correctly estimated parts) follows the evaluation script publ
 both poses are brought to the 14-joint Campus layout, ten bones are checked, a bone is correct when the
 mean of its two end-point errors is at most alpha times the true bone length (alpha = 0.5), and every true
 person is compared with the estimate nearest to it (no one-to-one assignment, identities ignored).
+
+The estimate's head joints are always placed as evaluate.py places them; a COCO-17 truth's can instead be the
+points of the true head that the datasets' annotators mark (`core.head.HeadPoints`, docs/metrics.md, "Joint
+conventions"), so that a simulated truth is scored as a real one is.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from core.head import HeadPoints
 from core.types import CAMPUS14, COCO17, Skeleton
 
 PCP_ALPHA = 0.5
@@ -51,15 +56,19 @@ PCP_BONE_GROUPS: OrderedDict[str, tuple[int, ...]] = OrderedDict(
 
 
 
-def coco17_to_campus14(poses: np.ndarray) -> np.ndarray:
-    """Maps COCO-17 poses to the 14-joint Campus/Shelf layout exactly as the dataset's evaluate.py does.
+def coco17_to_campus14(poses: np.ndarray, head: HeadPoints | None = None) -> np.ndarray:
+    """Maps COCO-17 poses to the 14-joint Campus/Shelf layout exactly as the dataset's evaluate.py does, or
+    with the head joints on the head itself.
 
-    The head joints do not exist in COCO-17: bottom-head and top-head are placed on the line from the
-    mid-shoulders to the nose with fixed per-axis factors (z up in the Campus world frame). A NaN input
-    joint gives NaN in every output joint built from it.
+    The head joints do not exist in COCO-17: evaluate.py places bottom-head and top-head on the line from the
+    mid-shoulders to the nose with fixed per-axis factors (z up in the Campus world frame). With `head`, they
+    are its points of the rigid head of the nose and ears instead. A NaN input joint gives NaN in every output
+    joint built from it.
 
     Args:
         poses: (..., 17, 3) joint positions.
+        head: None: evaluate.py's head joints (the protocol's, for estimates); else the bottom and the top of
+            the head in the nose-ear frame (a simulated truth scored as the datasets annotate theirs).
 
     Returns:
         (..., 14, 3) joint positions in the Campus order.
@@ -69,6 +78,9 @@ def coco17_to_campus14(poses: np.ndarray) -> np.ndarray:
         raise ValueError(f"coco17_to_campus14: expected (..., 17, 3), got {poses.shape}")
     out = np.empty(poses.shape[:-2] + (14, 3))
     out[..., :12, :] = poses[..., _COCO_TO_CAMPUS12, :]
+    if head is not None:
+        out[..., 12:, :] = head.locate(poses)
+        return out
     mid_shoulder = (out[..., 8, :] + out[..., 9, :]) / 2
     to_nose = poses[..., 0, :] - mid_shoulder
     out[..., 13, :] = mid_shoulder + to_nose * _TOP_HEAD_FACTORS
@@ -180,13 +192,14 @@ class PoseScores:
     num_nan_joints: int = 0
 
 
-def to_campus14(poses: np.ndarray, skeleton: Skeleton) -> np.ndarray:
-    """(..., 14, 3) poses in the layout the PCP protocol checks, from COCO-17 (evaluate.py's mapping) or
-    Campus-14 (as they are)."""
+def to_campus14(poses: np.ndarray, skeleton: Skeleton, head: HeadPoints | None = None) -> np.ndarray:
+    """(..., 14, 3) poses in the layout the PCP protocol checks, from COCO-17 (`coco17_to_campus14`, with
+    `head` when given) or Campus-14 (as they are, `head` or not: a dataset's annotated truth already has its
+    head joints, and they are never mapped again)."""
     if skeleton.name == CAMPUS14.name:
         return np.asarray(poses, dtype=np.float64)
     if skeleton.name == COCO17.name:
-        return coco17_to_campus14(poses)
+        return coco17_to_campus14(poses, head)
     raise ValueError(f"PCP: no mapping of the {skeleton.name} layout to the protocol's 14 joints "
                      f"(known: {COCO17.name}, {CAMPUS14.name})")
 
@@ -199,6 +212,9 @@ class PoseAccumulator:
         pck_thresholds_m: PCK thresholds, metres.
         mpjpe_match_max_m: largest mean joint error at which a true person enters MPJPE, metres.
         skeleton: the joint layout of the poses (COCO-17 or Campus-14; MPJPE and PCK by its body parts).
+        truth_head: with a COCO-17 truth, where PCP's true head joints lie (`coco17_to_campus14`'s `head`);
+            None: evaluate.py's mapping, as for the estimate. MPJPE and PCK compare the COCO-17 joints as
+            they are.
     """
 
     def __init__(
@@ -207,6 +223,7 @@ class PoseAccumulator:
         pck_thresholds_m: tuple[float, ...] = PCK_THRESHOLDS_M,
         mpjpe_match_max_m: float = MPJPE_MATCH_MAX_M,
         skeleton: Skeleton = COCO17,
+        truth_head: HeadPoints | None = None,
     ):
         if not 0 < alpha:
             raise ValueError(f"alpha={alpha}: must be > 0 (the protocol uses 0.5)")
@@ -216,6 +233,7 @@ class PoseAccumulator:
         self.pck_thresholds_m = tuple(pck_thresholds_m)
         self.mpjpe_match_max_m = mpjpe_match_max_m
         self.skeleton = skeleton
+        self.truth_head = truth_head
         self.joint_groups = skeleton.joint_groups()
         J = skeleton.num_joints
         self._bones: dict[int, list[np.ndarray]] = {}
@@ -241,7 +259,7 @@ class PoseAccumulator:
         if len(truth_ids) != len(truth_poses):
             raise ValueError(f"truth_ids has {len(truth_ids)} rows, truth_poses {len(truth_poses)}")
         # The protocol matches in the 14-joint layout (evaluate.py maps results before `_match_gts`).
-        truth14 = to_campus14(truth_poses, self.skeleton)
+        truth14 = to_campus14(truth_poses, self.skeleton, self.truth_head)
         est14 = to_campus14(estimates, self.skeleton)
         idx = match_nearest(truth14, est14)
         for g, pid in enumerate(np.asarray(truth_ids).tolist()):

@@ -79,6 +79,9 @@ class ScoreReport:
     truth_person_instants: int = 0
     root_threshold_m: float = 1.0
     hota_zero_distance_m: float = 2.0
+    # Where PCP's true head joints lie: "evaluate" (mapped as the estimate's) or "annotated" (on the true head,
+    # or a dataset's annotated truth); `core.head.HeadConvention`.
+    truth_head: str = "evaluate"
 
     def to_json(
         self,
@@ -138,6 +141,7 @@ class ScoreReport:
             "truth_person_instants": self.truth_person_instants,
             "root_threshold_m": self.root_threshold_m,
             "hota_zero_distance_m": self.hota_zero_distance_m,
+            "truth_head": self.truth_head,
         }
         return _clean({**head, **extra})
 

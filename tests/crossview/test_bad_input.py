@@ -51,6 +51,8 @@ SCENARIO_CASES = [
     ("calibration-without-image-size",
      f'[cameras]\ncalibration = {json.dumps(str(CAMPUS / "calibration.json"))}\ncalibration_format = "dataset"\n', [],
      "calibration.json' as a dataset calibration: key 'image_wh' missing"),
+    ("truth-head-unknown", '[scoring]\ntruth_head = "vertex"\n', [],
+     "scoring.truth_head = 'vertex' is not one of ['evaluate', 'annotated']"),
     ("crowd-above-the-floor", None, ["--people", "400"],
      "crowd.people: 400 people need 400 m² of walkable floor (1.0 m² each) but the store has 12.8 m²; use at "
      "most 12 people"),

@@ -40,6 +40,7 @@ def test_run_writes_recording_tracks_and_a_complete_score(short_run):
     # Four people in an open store seen by twelve cameras: the tracker must find them.
     assert score["pcp"] > 0.8 and score["idf1"] > 0.8
     assert score["tracker_fps"] > 0
+    assert score["truth_head"] == "evaluate"  # the stores score the true head as evaluate.py maps an estimate
 
 
 def test_the_campus_rig_scenario_runs_end_to_end(tmp_path):
@@ -49,6 +50,7 @@ def test_the_campus_rig_scenario_runs_end_to_end(tmp_path):
     assert status == 0
     score = json.loads((tmp_path / "campus.score.json").read_text())
     assert (score["scenario"], score["num_cameras"], score["num_people"], score["duration_s"]) == ("campus", 3, 3, 3)
+    assert score["truth_head"] == "annotated"  # the rig's scenario scores the head as Campus annotates it
     # Three people, each seen by at least two of the three cameras: the tracker must find them.
     assert score["pcp"] > 0.8 and score["idf1"] > 0.8
 
@@ -209,3 +211,28 @@ def test_every_shipped_scenario_generates_at_every_seed_and_awkward_duration(nam
             rec = recording.open_recording(out)
             assert sum(1 for _ in rec.frames()) == result.num_frames, (name, seed, duration)
             assert max(truth.t_s for truth in rec.truth()) >= duration, (name, seed, duration)
+
+
+def test_the_truth_head_is_the_one_the_recorded_scenario_names(store_recording, tmp_path):
+    """`crossview score` reads the head convention from the scenario the recording keeps; a recording converted
+    from a dataset keeps none, and its 14-joint truth already holds the annotated head joints."""
+    from pathlib import Path
+
+    from crossview import datasets, recording
+    from sim.humanoid import ANNOTATED_HEAD
+
+    def head_of(scenario_name, **overrides):
+        path = tmp_path / f"{scenario_name}-{len(overrides)}.mcap"
+        pipeline.generate(pipeline.load_scenario(scenario_name, duration_s=0.2, overrides=overrides), path,
+                          progress=False)
+        return pipeline.truth_head(recording.open_recording(path))
+
+    # The campus rig's file says "annotated", an override on the command line says otherwise ...
+    assert head_of("campus") is ANNOTATED_HEAD
+    assert head_of("campus", **{"scoring.truth_head": "evaluate"}) is None
+    # ... the stores keep the default, and a converted dataset is scored on its own annotations.
+    assert pipeline.truth_head(recording.open_recording(store_recording)) is None
+    converted = tmp_path / "campus_real.mcap"
+    datasets.convert(Path(__file__).resolve().parents[1] / "data" / "campus", converted)
+    real = recording.open_recording(converted)
+    assert real.skeleton.name == "campus14" and pipeline.truth_head(real) is None

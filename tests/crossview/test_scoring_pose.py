@@ -3,13 +3,19 @@
 import numpy as np
 import pytest
 
+from core.head import HeadPoints
 from core.types import CAMPUS14, COCO17
 from crossview.scoring.pose import (
+    PCP_BONE_GROUPS,
     PoseAccumulator,
     coco17_to_campus14,
     match_nearest,
     pcp_bones,
 )
+
+# A head convention as the simulator's humanoid gives one: the base of the head below the ears and the vertex
+# above them, in the nose-ear frame (coefficients of the ear-to-ear distance).
+HEAD = HeadPoints(bottom_head=(0.08, 0.0, -0.54), top_head=(-0.05, 0.0, 0.8))
 
 
 @pytest.fixture
@@ -113,3 +119,55 @@ def test_no_estimates_score_zero_not_a_crash(rng):
     s = acc.result()
     assert s.pcp == 0.0 and s.pck[100] == 0.0 and s.mpjpe_mm is None
     assert PoseAccumulator().result().pcp is None
+
+
+def test_a_head_convention_places_only_the_head_joints_on_the_head(rng):
+    coco = _person(rng)
+    evaluated, annotated = coco17_to_campus14(coco), coco17_to_campus14(coco, HEAD)
+    # The limb joints are the same; the head joints are the convention's points of the nose-ear frame.
+    np.testing.assert_array_equal(annotated[:12], evaluated[:12])
+    np.testing.assert_array_equal(annotated[12:], HEAD.locate(coco))
+    assert not np.allclose(annotated[12:], evaluated[12:])
+
+
+def _upright(rng, offset):
+    """A COCO-17 pose facing +x whose nose and ears make an upright head 1.6 m high, metres."""
+    pose = _person(rng, offset) * [1, 1, 0.2]
+    ears = np.array([offset[0], offset[1], 1.6])
+    pose[COCO17.index("left_ear")], pose[COCO17.index("right_ear")] = ears + [0, 0.078, 0], ears - [0, 0.078, 0]
+    pose[COCO17.index("nose")] = ears + [0.105, 0, -0.015]
+    pose[COCO17.index("left_shoulder")], pose[COCO17.index("right_shoulder")] = ears + [0, 0.18, -0.27], \
+        ears - [0, 0.18, 0.27]
+    return pose
+
+
+def test_the_truth_head_convention_applies_to_the_truth_only_and_pcp_alone(rng):
+    truth = np.stack([_upright(rng, (0, 0)), _upright(rng, (3, 0))])
+    estimate = truth.copy()
+    estimate[:, COCO17.index("nose")] += [0.1, 0.0, 0.0]  # each estimate's nose 10 cm ahead of the true one
+    evaluate, annotated = PoseAccumulator(), PoseAccumulator(truth_head=HEAD)
+    for acc in (evaluate, annotated):
+        acc.update(np.array([1, 2]), truth, estimate)
+    a, e = annotated.result(), evaluate.result()
+    # The estimate is mapped by evaluate.py's factors against a truth on the head: PCP is that comparison ...
+    expected = [pcp_bones(coco17_to_campus14(estimate[g]), coco17_to_campus14(truth[g], HEAD)) for g in range(2)]
+    assert a.pcp == pytest.approx(np.mean(expected))
+    head = PCP_BONE_GROUPS["head"][0]
+    assert a.pcp_per_group["head"] == pytest.approx(np.mean([bones[head] for bones in expected]))
+    # ... in which evaluate.py's head, low and forward of the true one, misses where the same mapping on both
+    # sides would have forgiven the nose's error ...
+    assert e.pcp_per_group["head"] == 1.0 and a.pcp_per_group["head"] == 0.0
+    assert a.pcp_per_group["torso"] == e.pcp_per_group["torso"] == 1.0
+    # ... while MPJPE and PCK compare the COCO-17 joints as they are.
+    assert (a.mpjpe_mm, a.pck) == (e.mpjpe_mm, e.pck)
+
+
+def test_a_14_joint_truth_is_never_mapped_again(rng):
+    """A dataset's annotated truth (CAMPUS14) already has its head joints: a head convention leaves it alone."""
+    truth = np.stack([coco17_to_campus14(_upright(rng, (0, 0)))])
+    estimate = truth + rng.normal(0.0, 0.02, truth.shape)
+    plain, with_head = PoseAccumulator(skeleton=CAMPUS14), PoseAccumulator(skeleton=CAMPUS14, truth_head=HEAD)
+    for acc in (plain, with_head):
+        acc.update(np.array([1]), truth, estimate)
+    assert with_head.result() == plain.result()
+    assert plain.result().pcp == pytest.approx(pcp_bones(estimate[0], truth[0]).mean())

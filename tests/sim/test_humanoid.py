@@ -105,3 +105,41 @@ def test_heights_come_from_an_adult_distribution_within_bounds():
     assert h.min() >= 1.50 and h.max() <= 1.95
     assert 1.66 < h.mean() < 1.73  # mix of women (1.63) and men (1.76)
     assert 0.07 < h.std() < 0.11
+
+
+def _quaternion(axis, angle_rad: float) -> np.ndarray:
+    axis = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+    return np.concatenate([[math.cos(angle_rad / 2)], math.sin(angle_rad / 2) * axis])
+
+
+# Head poses: (root turn about z, root lean axis and angle, hinge angles in radians).
+HEAD_POSES = [
+    (0.0, (1, 0, 0), 0.0, {}),  # upright, facing +x
+    (1.1, (1, 0, 0), 0.0, {"neck_twist": 0.9, "head_tilt": 0.35}),  # turned and tilted sideways
+    (-2.4, (0, 1, 0), 0.3, {"neck_flex": 0.7, "head_nod": 0.4}),  # leaning, looking down
+    (0.5, (1, 1, 0), -0.25, {"neck_flex": -0.5, "neck_twist": -1.1, "head_nod": -0.35, "head_tilt": -0.3,
+                              "spine_flex": 0.6, "spine_twist": 0.4}),  # looking up over the shoulder, bent
+]
+
+
+@pytest.mark.parametrize("height", [1.45, 1.75, 2.05])
+def test_the_annotated_head_joints_are_the_neck_top_and_the_skull_vertex_in_every_head_pose(height):
+    """`ANNOTATED_HEAD` places the bottom of the head at the head body's origin (the top of the neck) and the
+    top at the vertex of the skull geom, found by MuJoCo's kinematics, from the nose and ear sites alone."""
+    model, data = _model(height)
+    head = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, "p_head")
+    skull = next(g for g in range(model.ngeom) if model.geom_bodyid[g] == head)
+    for turn_rad, lean_axis, lean_rad, hinges in HEAD_POSES:
+        data.qpos[:] = model.qpos0
+        q = np.zeros(4)
+        mujoco.mju_mulQuat(q, _quaternion((0, 0, 1), turn_rad), _quaternion(lean_axis, lean_rad))
+        data.qpos[3:7] = q
+        for name, angle in hinges.items():
+            data.qpos[7 + hm.J[name]] = angle
+        mujoco.mj_forward(model, data)
+        base = data.xpos[head]
+        vertex = data.geom_xpos[skull] + data.geom_xmat[skull].reshape(3, 3) @ [0.0, 0.0, model.geom_size[skull, 2]]
+        np.testing.assert_allclose(hm.ANNOTATED_HEAD.locate(_keypoints(model, data)), [base, vertex],
+                                   atol=1e-3)  # m
+        # The head bone of the annotations: about 0.21 m at the reference height, scaling with the body.
+        assert np.linalg.norm(vertex - base) == pytest.approx(0.2102 * height / hm.REFERENCE_HEIGHT_M, abs=1e-3)
