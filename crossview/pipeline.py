@@ -74,7 +74,7 @@ def check_writable(path: Path, inputs: tuple = ()) -> None:
 @dataclass(frozen=True)
 class GenerateResult:
     """What `generate` made and how long it took: `wall_s` in all, of which `startup_s` before the first
-    event came to be written (building the world, loading the compiled kernels, the worker's first block)."""
+    block came to be written (building the world, loading the compiled kernels, the worker's first block)."""
 
     path: Path
     num_cameras: int

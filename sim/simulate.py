@@ -254,7 +254,7 @@ class Blocks:
             self.close()
 
     def close(self) -> None:
-        """Stops and reaps the worker process, if one was started (again: nothing)."""
+        """Stops and reaps the worker process, if one was started; closing again does nothing."""
         if self._worker is not None:
             self._worker.stop()
 
