@@ -22,7 +22,7 @@ from core.head import HeadConvention, HeadPoints
 from core.types import COCO17
 from crossview import outputs
 from sim import scenario as scenario_mod
-from sim.types import BoxKind, PoseTruth
+from sim.types import BoxKind
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +76,7 @@ def check_writable(path: Path, inputs: tuple = ()) -> None:
 @dataclass(frozen=True)
 class GenerateResult:
     """What `generate` made and how long it took: `wall_s` in all, of which `startup_s` before the first
-    event came to be written (building the world, loading the compiled kernels, the worker's first block)."""
+    block came to be written (building the world, loading the compiled kernels, the worker's first block)."""
 
     path: Path
     num_cameras: int
@@ -98,7 +98,6 @@ class GenerateResult:
         return self.duration_s / (self.wall_s - self.startup_s)
 
 
-_WRITE_BATCH = 64  # events handed to the writer at once
 MAX_CAMERA_FRAMES = 5_000_000
 """Most camera frames one generation may schedule (duration x frame rate x cameras): store_layout2's 28
 cameras for about 5 hours, the supermarket's 60 for 2.3 hours."""
@@ -135,67 +134,46 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             f"{MAX_CAMERA_FRAMES:,} one recording may hold (their schedule is made up front, about "
             f"{_SCHEDULE_BYTES_PER_FRAME * scheduled / 2**30:.1f} GiB); generate a shorter duration, or several")
     frames = 0
+    started = math.nan
     with contextlib.ExitStack() as stack:
-        opened: list = []  # the writer and the progress bar, made while the simulation worker starts
+        # The simulation starts first: while its worker process builds the world, this process imports the
+        # writer's modules, opens the file and loads the encoders. (Left in any way, the stack aborts the
+        # file and stops the worker.)
+        blocks = stack.enter_context(sim.blocks(scenario.duration_s, with_poses=False))
+        from tqdm import tqdm
 
-        def open_writer() -> None:
-            # The writer's modules are imported here, not before: while the worker process builds its
-            # world, this process imports them, opens the file and loads the encoders.
-            from tqdm import tqdm
+        from crossview import recording
 
-            from crossview import recording
+        header = recording.RecordingHeader(
+            scenario_name=scenario.name,
+            scenario_text=scenario.source_text,
+            scenario_digest=scenario.digest,
+            seed=scenario.seed,
+            duration_s=scenario.duration_s,
+            skeleton_name=sim.skeleton.name,
+            software_version=recording.software_version(),
+            format_version=recording.FORMAT_VERSION,
+        )
+        writer = stack.enter_context(recording.RecordingWriter(out, header, sim.cameras, sim.boxes,
+                                                               inputs=(scenario.source_path or None,)))
+        bar = stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
+                                       disable=not progress, leave=False))
+        recording.warm_up(sim.skeleton)
+        images = None
+        if images_per_s is not None:  # (made here, after the worker's fork: its OpenGL context stays here)
+            from sim.render import FrameImages
 
-            header = recording.RecordingHeader(
-                scenario_name=scenario.name,
-                scenario_text=scenario.source_text,
-                scenario_digest=scenario.digest,
-                seed=scenario.seed,
-                duration_s=scenario.duration_s,
-                skeleton_name=sim.skeleton.name,
-                software_version=recording.software_version(),
-                format_version=recording.FORMAT_VERSION,
-            )
-            opened.append(stack.enter_context(recording.RecordingWriter(
-                out, header, sim.cameras, sim.boxes, inputs=(scenario.source_path or None,))))
-            opened.append(stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
-                                                   disable=not progress, leave=False)))
-            recording.warm_up(sim.skeleton)
-            if images_per_s is not None:  # (made here, after the worker's fork: its OpenGL context stays here)
-                from sim.render import FrameImages
-
-                opened.append(stack.enter_context(FrameImages(scenario, scenario.seed, sim.cameras, images_per_s,
-                                                              scenario.clock.fps)))
-
-        def encoded(requests, rows, bounds) -> list:
-            """A block's frames encoded straight from the detector's rows, in one compiled call (no
-            CameraFrame objects: the writer takes the encoded frames in their place in the order), with the
-            pictures of those that get one (the requests come in capture order)."""
-            cameras = [r.camera for r in requests]
-            times = [(r.stamp_s, r.capture_s, r.delivery_s) for r in requests]
-            frames = opened[0].encode_frames(cameras, np.array(times, dtype=np.float64).reshape(-1, 3), bounds, rows)
-            if images_per_s is None:
-                return frames
-            pictures = opened[2].pictures(cameras, [r.capture_s for r in requests])
-            return [f if p is None else f._replace(image=p) for f, p in zip(frames, pictures, strict=True)]
-
-        batch: list = []  # written many at a time
-        started = math.nan
-        # (closed, the simulation worker stopped, when this block ends in any way)
-        events = stack.enter_context(contextlib.closing(sim.events(
-            scenario.duration_s, with_poses=False, while_starting=open_writer, frames_of=encoded)))
-        for event in events:
-            if math.isnan(started):  # the first event: the start-up ends
+            images = stack.enter_context(FrameImages(scenario, scenario.seed, sim.cameras, images_per_s,
+                                                     scenario.clock.fps))
+        for block in blocks:
+            if math.isnan(started):  # the first block: the start-up ends
                 started = time.perf_counter() - start
-                writer, bar = opened[:2]
-            batch.append(event)
-            if not isinstance(event, PoseTruth):
-                frames += 1
-            elif len(batch) >= _WRITE_BATCH:
-                writer.write_many(batch)
-                batch = []
-                bar.update(max(0.0, min(event.t_s, scenario.duration_s) - bar.n))
-        opened[0].write_many(batch)  # (`events` calls open_writer before its first event)
-        images = opened[2] if images_per_s is not None else None
+            pictures = None
+            if images is not None and block.requests:  # (the requests come in capture order)
+                pictures = images.pictures([r.camera for r in block.requests], [r.capture_s for r in block.requests])
+            # The writer encodes the block's frames and writes what is due, in log-time order.
+            frames += writer.write_block(block, pictures)
+            bar.update(max(0.0, min(block.t, scenario.duration_s) - bar.n))
     return GenerateResult(out, len(sim.cameras), frames, time.perf_counter() - start, started, scenario.duration_s,
                           images.count if images else 0, images.render_s if images else 0.0)
 

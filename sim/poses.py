@@ -1,9 +1,5 @@
-"""Everybody's true pose between two truth ticks: the one rule the simulator uses for the poses at a
-camera's capture time and a recording's reader uses to derive them again from the stored ticks.
-
-The rule: at a tick's own time, that tick's poses exactly; strictly between two ticks, linear in time
-for the people present at both, and someone present at only one tick is taken from it when the time lies
-in that tick's half of the interval; before the first tick or after the last, the nearest tick's poses.
+"""Everybody's true pose between truth ticks as `PoseTruth`: the rule of `core.truth` for one capture time
+(`interpolate_poses`), and for the captures of many ticks at once (`interpolate_ticks`, the same bits).
 """
 
 from __future__ import annotations
@@ -13,37 +9,19 @@ import math
 import numpy as np
 
 from core.jit import jit
+from core.truth import truth_between
 from sim.types import PoseTruth
 
 
 def interpolate_poses(before: PoseTruth | None, after: PoseTruth | None, t_s: float) -> PoseTruth:
-    """Everybody's pose at `t_s`, with `before.t_s < t_s <= after.t_s` (see the module docstring).
+    """Everybody's pose at `t_s`, with `before.t_s < t_s <= after.t_s` (`core.truth.truth_between`).
 
     Args:
         before: the truth at the earlier tick (None: only `after` is known).
         after: the truth at the later tick (None: only `before` is known).
         t_s: the time wanted.
     """
-    if after is None:
-        if before is None:
-            raise ValueError("interpolate_poses: no tick given")
-        return PoseTruth(float(t_s), before.person_ids, before.poses)
-    if before is None or after.t_s <= before.t_s or t_s >= after.t_s:
-        return PoseTruth(float(t_s), after.person_ids, after.poses)
-    a = (t_s - before.t_s) / (after.t_s - before.t_s)
-    if np.array_equal(before.person_ids, after.person_ids):
-        return PoseTruth(float(t_s), after.person_ids, before.poses + (after.poses - before.poses) * a)
-    ids = np.union1d(before.person_ids, after.person_ids)
-    in_before = np.isin(ids, before.person_ids)
-    in_after = np.isin(ids, after.person_ids)
-    keep = (in_before & in_after) | (in_after & (a > 0.5)) | (in_before & (a <= 0.5))
-    ids = ids[keep]
-    poses = np.empty((ids.size, *after.poses.shape[1:]))
-    for i, pid in enumerate(ids):
-        b = before.poses[np.searchsorted(before.person_ids, pid)] if pid in before.person_ids else None
-        f = after.poses[np.searchsorted(after.person_ids, pid)] if pid in after.person_ids else None
-        poses[i] = b + (f - b) * a if b is not None and f is not None else (f if f is not None else b)
-    return PoseTruth(float(t_s), ids, poses)
+    return PoseTruth(float(t_s), *truth_between(before, after, t_s))
 
 
 def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_of: np.ndarray,

@@ -1,12 +1,9 @@
-"""The simulation driver: world, camera rig, clocks and detector merged into one time-ordered stream."""
+"""The simulation driver: world, camera rig, clocks and detector, giving out blocks of truth ticks and
+detected captures (`sim.stream.Block`) in time order; `events` puts their contents in log-time order."""
 
 from __future__ import annotations
 
-import contextlib
-import heapq
-import itertools
 from collections.abc import Iterator
-from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -19,33 +16,13 @@ from sim.poses import interpolate_ticks
 from sim.rng import child_rng
 from sim.sensing.detector import Detector
 from sim.sensing.draws import large_enough
+from sim.stream import CAPTURE, DELIVERY, STAMP, Block, LogTimeOrder, frame_times
 from sim.types import CameraFrame, Capture, DetectionRows, PoseTruth
 
 TRUTH_RATE_HZ = 100.0
-# Order of events that share a log time: the truth first, then frames by camera index.
-_TRUTH_KIND, _FRAME_KIND = 0, 1
 # The captures of this many truth ticks (0.3 s) are projected, ray cast and given their detector errors
 # together, so that the per-call costs are shared by many frames (about 84 of store_layout2).
 _DETECT_BLOCK_TICKS = 30
-
-
-class Block(NamedTuple):
-    """One block of `_DETECT_BLOCK_TICKS` truth ticks, as `Simulation._blocks` gives it.
-
-    Attributes:
-        t: the block's last tick time, seconds: every later event has a later log time.
-        truths: the block's truth ticks (`PoseTruth`), in time order.
-        requests: the captures taken during the block (`Capture`), by capture time.
-        rows: their detections (`DetectionRows`); or, from a block left without the detector's draws, the
-            captures' visibility (`Detector.block_visibility`).
-        bounds: (R + 1,) capture i owns rows bounds[i]:bounds[i + 1] (None without the draws).
-    """
-
-    t: float
-    truths: list
-    requests: list
-    rows: object
-    bounds: np.ndarray | None
 
 
 class Simulation:
@@ -53,18 +30,19 @@ class Simulation:
 
     Args:
         scenario: a loaded `sim.scenario.Scenario`.
-        seed: the seed of every random stream; None uses the scenario's seed.
+        seed: the seed of every random stream; None uses the scenario's.
         worker_process: simulate in a second process (forked; where the machine has more than one core),
-            pipelined with whatever consumes `events` here (writing the recording): the events are the same.
+            pipelined with whatever consumes the blocks here (writing the recording): the blocks are the same.
 
     Attributes:
         cameras: the rig, in camera-index order.
         boxes: the store's boxes (floor, walls, shelves, ...).
         skeleton: the keypoint layout of the poses.
-        world: the `sim.world.World`, built on first use (advanced by `events` only when no worker process
+        world: the `sim.world.World`, built on first use (advanced by a pass only when no worker process
             simulates: a worker builds its own, so that this process meanwhile loads what it needs).
-        detector: the `sim.sensing.detector.Detector` of the latest `events` pass (its `visibility_counts` give
-            the joints in the image, occluded and self-occluded per camera, over every person-view).
+        detector: the `sim.sensing.detector.Detector` of the latest pass (`blocks`, `events`; its
+            `visibility_counts` give the joints in the image, occluded and self-occluded per camera, over every
+            person-view).
     """
 
     def __init__(self, scenario, seed: int | None = None, *, worker_process: bool = True):
@@ -91,70 +69,75 @@ class Simulation:
             self._world = World(self.scenario, child_rng(self.seed, "crowd"))
         return self._world
 
-    def events(self, duration_s: float | None = None, *, with_poses: bool = True, while_starting=None,
-               frames_of=None) -> Iterator[PoseTruth | CameraFrame]:
-        """Everything a recording holds, in log-time order.
+    def blocks(self, duration_s: float | None = None, *, with_poses: bool = True) -> Blocks:
+        """One pass of the simulation, a block of `_DETECT_BLOCK_TICKS` truth ticks (0.3 s) at a time, in
+        time order: each block's truth ticks (100 Hz) and the captures taken during them, with their
+        detections (`Block`). A block's frames are delivered after its time, some after later blocks' ticks:
+        `sim.stream.LogTimeOrder` puts the contents of the blocks in log-time order.
 
-        PoseTruth at 100 Hz (log time `t_s`) and CameraFrame (log time `truth.delivery_s`). Ties
-        break by kind (truth first) then camera index then capture time. The world moves forward one
-        truth tick at a time; the captures since the previous tick are projected and ray cast against
-        the bodies interpolated to their capture time, and the detector's error draws are made once per
-        block of ticks. A frame waits in a small heap until no later event can come before it, so memory
-        stays bounded by the delivery delay (plus one block).
+        The world moves forward one truth tick at a time; the captures since the previous tick are projected
+        and ray cast against the bodies interpolated to their capture time, and the detector's error draws
+        are made once per block. Use the pass as a context manager to start the simulation before the first
+        block is wanted (a worker process then builds its world while the consumer gets ready, e.g. opens its
+        output) and to stop it however the consumer ends.
 
         Args:
             duration_s: simulated duration; None uses the scenario's.
-            with_poses: give each CameraFrame its `poses_at_capture` (False: None, which is all a recording
-                writer needs: a recording stores the truth ticks, from which its reader derives them).
-            while_starting: a function called once the worker process has started, while it builds its
-                world (e.g. to load what the consumer will need); with no worker, at the start.
-            frames_of: what stands for a block's frames, in their place in the order: a function of the
-                block's capture requests, detection rows and bounds (`Detector.detection_rows`) that gives
-                one item per request. None: the CameraFrames (`Detector.frames_from_rows`). A recording
-                writer encodes them straight from the rows (`RecordingWriter.encode_frames`).
+            with_poses: give each capture request its poses (False: None, which is all a recording writer
+                needs: a recording stores the truth ticks, from which its reader derives them).
         """
         duration = self.scenario.duration_s if duration_s is None else float(duration_s)
         if not duration > 0:
             raise ValueError(f"duration_s: {duration} must be > 0")
+        return Blocks(self, duration, with_poses)
+
+    def events(self, duration_s: float | None = None, *, with_poses: bool = True) -> Iterator[PoseTruth | CameraFrame]:
+        """Everything a recording holds, in log-time order (`sim.stream.LogTimeOrder`): PoseTruth at 100 Hz
+        (log time `t_s`) and CameraFrame (log time `truth.delivery_s`), from the blocks of one pass (`blocks`).
+
+        Args:
+            duration_s: simulated duration; None uses the scenario's.
+            with_poses: give each CameraFrame its `poses_at_capture` (False: None).
+        """
+        order = LogTimeOrder()
+        # (the simulation worker is stopped as soon as this stream ends, however it ends: a failure here must
+        # not leave it running while something still holds the traceback)
+        with self.blocks(duration_s, with_poses=with_poses) as blocks:
+            for block in blocks:
+                # A block can hold no capture at all (a short last block, a slow or dropping clock).
+                frames = (self.detector.frames_from_rows(block.requests, block.rows, block.bounds)
+                          if block.requests else ())
+                yield from order.add(block, frames)
+        yield from order.rest()
+
+    def _start(self, duration: float) -> processes.Worker | None:
+        """A pass's start: its detector, and where a worker process will simulate, that worker, made (not yet
+        started)."""
         if self._used:  # a second pass starts again from the same initial state
             self._world = None
         self._used = True
         self.detector = Detector(self.scenario.detector, self.cameras, child_rng(self.seed, "detector"),
                                  self.skeleton)
-        frames_of = frames_of or self.detector.frames_from_rows
-        if self.worker_process and processes.can_fork_worker():
-            blocks = self._blocks_from_worker(duration, with_poses, while_starting)
-        else:
-            if while_starting is not None:
-                while_starting()
-            blocks = self._blocks(duration)
-            if not with_poses:
-                blocks = (Block(b.t, b.truths, [r._replace(poses=None) for r in b.requests], b.rows, b.bounds)
-                          for b in blocks)
-        pending: list = []
-        seq = itertools.count()
-        # The blocks are closed (the worker stopped) as soon as this stream ends, however it ends: a failure
-        # here must not leave the worker running while something still holds the traceback.
-        with contextlib.closing(blocks):
-            for t, truths, requests, rows, bounds in blocks:  # (a Block)
-                for poses in truths:
-                    heapq.heappush(pending, (poses.t_s, _TRUTH_KIND, -1, poses.t_s, next(seq), poses))
-                # A block can hold no capture at all (a short last block, a slow or dropping clock).
-                for request, event in zip(requests, frames_of(requests, rows, bounds) if requests else ()):
-                    heapq.heappush(pending, (request.delivery_s, _FRAME_KIND, request.camera, request.capture_s,
-                                             next(seq), event))
-                # Everything later has a log time > t (a later capture is after t, and delivered after it).
-                while pending and pending[0][0] <= t:
-                    yield heapq.heappop(pending)[-1]
-        while pending:
-            yield heapq.heappop(pending)[-1]
+        if not (self.worker_process and processes.can_fork_worker()):
+            return None
+        jit.prepare()  # (once here instead of once in each process)
+        # OpenCV's worker threads do not survive a fork, and one caught holding its pool's lock at the fork
+        # would hang the worker's first parallel OpenCV call (the store's distance transform) on that lock:
+        # OpenCV runs on the calling thread alone from here on (its calls in this project are small).
+        cv2.setNumThreads(0)
+        return processes.Worker(self._work, (duration,), "crossview-simulation", _WORKER, _PIPE_BYTES)
 
-    def _blocks(self, duration: float, draws: bool = True) -> Iterator[tuple]:
-        """The simulation proper, one block of `_DETECT_BLOCK_TICKS` truth ticks at a time: (the block's
-        last tick time, its truths, its capture requests, their `Detector.detection_rows` and bounds).
+    def _blocks_here(self, duration: float, with_poses: bool) -> Iterator[Block]:
+        """`_blocks` in this process, the captures' poses left out unless `with_poses`."""
+        for block in self._blocks(duration):
+            yield block if with_poses else block._replace(requests=[r._replace(poses=None) for r in block.requests])
 
-        With `draws` False the last two are the requests' visibility (`Detector.block_visibility`) and
-        None: the error draws are left to the consumer (`_blocks_from_worker`), with the same detector state.
+    def _blocks(self, duration: float, draws: bool = True) -> Iterator[Block]:
+        """The simulation proper, one `Block` of `_DETECT_BLOCK_TICKS` truth ticks at a time.
+
+        With `draws` False a block's rows are the requests' visibility (`Detector.block_visibility`) and its
+        bounds None: the error draws are left to the consumer (`_blocks_from_worker`), with the same detector
+        state.
         """
         world, detector = self.world, self.detector
         cams, _, capture_times, stamp_s, delivery_s = clock_mod.schedule(
@@ -193,49 +176,96 @@ class Simulation:
             previous, first = truths[-1], end
             truths, scenes, scene_of, tick_of = [], [], [], []
 
-    def _blocks_from_worker(self, duration: float, with_poses: bool, while_starting=None) -> Iterator[tuple]:
-        """`_blocks` computed in a forked process and received here, block by block. The captures' poses
-        do not travel: they are derived here again from the truth ticks (`sim.poses`, the same arithmetic),
-        and only when `with_poses` (else None).
-
-        The worker ignores Ctrl-C (the whole process group gets it; this side decides) and is stopped and
-        reaped whenever this generator ends: done, failed, interrupted or dropped unfinished. Its
-        failures are raised here.
+    def _blocks_from_worker(self, worker: processes.Worker, with_poses: bool) -> Iterator[Block]:
+        """`_blocks` computed in the started `worker` process and received here, block by block. The captures'
+        poses do not travel: they are derived here again from the truth ticks (`sim.poses`, the same
+        arithmetic), and only when `with_poses` (else None). The worker's failures are raised here.
         """
-        jit.prepare()  # (once here instead of once in each process)
-        # OpenCV's worker threads do not survive a fork, and one caught holding its pool's lock at the fork
-        # would hang the worker's first parallel OpenCV call (the store's distance transform) on that lock:
-        # OpenCV runs on the calling thread alone from here on (its calls in this project are small).
-        cv2.setNumThreads(0)
-        worker = processes.Worker(self._work, (duration,), "crossview-simulation", _WORKER, _PIPE_BYTES)
         previous = None  # the last truth tick of the previous block
-        try:
-            worker.start()
-            _load_draw_kernels(self.detector)
-            if while_starting is not None:
-                while_starting()
-            while True:
-                kind, payload = worker.receive()  # (its error is raised here)
-                if kind == "block":
-                    t, truths, requests, visible, people = _unpack_block(payload, previous, with_poses)
-                    previous = truths[-1] if truths else previous
-                    # The detector's draws are made here: the worker only does geometry (the two processes
-                    # then take about the same time per block). The same draws, in the same order.
-                    rows, bounds = DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
-                    if requests:
-                        rows, bounds = self.detector.detection_rows_of(requests, *visible, person_ids=people)
-                    yield Block(t, truths, requests, rows, bounds)
-                else:  # "end": the counts of the detector that ran there
-                    self.detector.visibility_counts[:] = payload
-                    return
-        finally:
-            worker.stop()
+        while True:
+            kind, payload = worker.receive()  # (its error is raised here)
+            if kind == "block":
+                t, truths, requests, visible, people = _unpack_block(payload, previous, with_poses)
+                previous = truths[-1] if truths else previous
+                # The detector's draws are made here: the worker only does geometry (the two processes then
+                # take about the same time per block). The same draws, in the same order.
+                rows, bounds = DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
+                if requests:
+                    rows, bounds = self.detector.detection_rows_of(requests, *visible, person_ids=people)
+                yield Block(t, truths, requests, rows, bounds)
+            else:  # "end": the counts of the detector that ran there
+                self.detector.visibility_counts[:] = payload
+                return
 
     def _work(self, duration: float, sender) -> None:
         """The worker process (`processes.Worker`): simulates and sends every block, then the detector's counts."""
         for block in self._blocks(duration, draws=False):
             sender.send(("block", _pack_block(block, self.detector.min_size_px)))
         sender.send(("end", self.detector.visibility_counts))
+
+
+class Blocks:
+    """One pass of a `Simulation` (`Simulation.blocks`): its `Block`s in time order, iterated once.
+
+    As a context manager the pass starts on entering, before the first block is wanted: where a worker
+    process simulates, it is forked then and builds its world while the consumer gets ready, and this
+    process loads the kernels of the detector's draws meanwhile. Leaving stops the worker, however the
+    block is left. Iterated without one, the pass starts at the first block and the worker is stopped at
+    the last, or when the iterator is closed.
+
+    The worker ignores Ctrl-C (the whole process group gets it; this side decides); its failures are raised
+    here, with its traceback as a note.
+    """
+
+    def __init__(self, sim: Simulation, duration_s: float, with_poses: bool):
+        self._sim = sim
+        self.duration_s = duration_s
+        self.with_poses = with_poses
+        self._worker: processes.Worker | None = None
+        self._started = self._iterated = False
+
+    def start(self) -> None:
+        """Starts the pass (once; iterating starts it too)."""
+        if self._started:
+            return
+        self._started = True
+        self._worker = self._sim._start(self.duration_s)
+        if self._worker is None:
+            return
+        try:  # (made first, started then: a signal right after the fork still finds the worker to stop)
+            self._worker.start()
+            _load_draw_kernels(self._sim.detector)
+        except BaseException:
+            self.close()
+            raise
+
+    def __iter__(self) -> Iterator[Block]:
+        if self._iterated:
+            raise RuntimeError("a pass of Simulation.blocks is iterated once: call blocks() again for another")
+        self.start()
+        self._iterated = True
+        return self._received()
+
+    def _received(self) -> Iterator[Block]:
+        try:
+            if self._worker is None:
+                yield from self._sim._blocks_here(self.duration_s, self.with_poses)
+            else:
+                yield from self._sim._blocks_from_worker(self._worker, self.with_poses)
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stops and reaps the worker process, if one was started; closing again does nothing."""
+        if self._worker is not None:
+            self._worker.stop()
+
+    def __enter__(self) -> Blocks:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 # A block is about 640 kB on the wire (store_layout2; the visibility of its 84 captures is two thirds): the
@@ -280,15 +310,14 @@ def _pack_block(block: Block, min_size_px: np.ndarray) -> tuple:
     poses = [p.poses for p in truths]
     joints = np.concatenate([p.reshape(-1, 3) for p in poses]).astype(np.float64, copy=False)
     shapes = [p.shape[1:] for p in poses]
-    meta = (np.array([r.camera for r in requests], dtype=np.int64),
-            np.array([(r.capture_s, r.stamp_s, r.delivery_s) for r in requests]).reshape(-1, 3))
+    meta = (np.array([r.camera for r in requests], dtype=np.int64), frame_times(requests))
     return t, times, counts, ids, joints, shapes, meta, visible, people
 
 
 def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -> tuple:
     """`_pack_block` undone; each capture's poses interpolated between the tick it was taken at (the
     first at or after its capture time) and the tick before (`previous`: the previous block's last)."""
-    t, times, counts, ids, joints, shapes, (cams, capture_times), visible, (seen, sizes) = packed
+    t, times, counts, ids, joints, shapes, (cams, frame_times_s), visible, (seen, sizes) = packed
     ends = np.cumsum(sizes).tolist()
     seen = [seen[end - size:end] for end, size in zip(ends, sizes.tolist())]
     people = np.concatenate([[0], np.cumsum(counts)]).tolist()
@@ -297,10 +326,11 @@ def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -
         rows_of.append(rows_of[-1] + n * (shape[0] if shape else 0))
     truths = [PoseTruth(t_s, ids[people[i]:people[i + 1]], joints[rows_of[i]:rows_of[i + 1]].reshape(-1, *shapes[i]))
               for i, t_s in enumerate(times.tolist())]
-    capture_list = capture_times.tolist()
-    poses: list = [None] * len(capture_list)
-    if with_poses and capture_list:
-        tick_of = np.searchsorted(times, capture_times[:, 0], side="left")
-        poses = interpolate_ticks(previous, truths, tick_of, capture_times[:, 0])
-    requests = [Capture(c, p, *times_i) for c, p, times_i in zip(cams.tolist(), poses, capture_list)]
+    capture_s = frame_times_s[:, CAPTURE]
+    poses: list = [None] * len(capture_s)
+    if with_poses and len(capture_s):
+        tick_of = np.searchsorted(times, capture_s, side="left")
+        poses = interpolate_ticks(previous, truths, tick_of, capture_s)
+    requests = list(map(Capture, cams.tolist(), poses, capture_s.tolist(), frame_times_s[:, STAMP].tolist(),
+                        frame_times_s[:, DELIVERY].tolist()))
     return t, truths, requests, visible, seen

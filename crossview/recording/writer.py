@@ -47,6 +47,7 @@ from crossview.recording.schemas import (
     camera_topic,
     to_ns,
 )
+from sim.stream import Block, LogTimeOrder, frame_times
 from sim.types import Box, CameraFrame, DetectionRows, PoseTruth
 from tracker.types import TargetArrays, TrackerOutput
 
@@ -151,8 +152,9 @@ class _WriterContext:
 
 
 class RecordingWriter(_WriterContext):
-    """Writes a recording atomically. Events must come in log-time order (truth at t_s, frames at
-    delivery_s), which makes the file streamable in that order.
+    """Writes a recording atomically, in log-time order (truth at t_s, frames at delivery_s), which makes the
+    file streamable in that order: either a simulation's blocks, which the writer puts in that order itself
+    (`write_block`), or events that come in that order (`write`, `write_many`).
 
     Use as a context manager: the file appears under `path` only when the block exits cleanly; on an
     exception (KeyboardInterrupt included) the temporary file is removed.
@@ -210,6 +212,7 @@ class RecordingWriter(_WriterContext):
         self._people: set[int] = set()
         self._counts = {"truth": 0, "frames": 0, "images": 0}
         self._camera_of = {c.name: c for c in self.cameras}
+        self._order = LogTimeOrder()  # the blocks' truth ticks and encoded frames not yet due
 
     def _log_time(self, t_ns: int, what: str) -> int:
         if t_ns < self._last_ns:
@@ -256,13 +259,38 @@ class RecordingWriter(_WriterContext):
                                 f"{type(event).__name__}")
         self._out.add_many(messages)
 
+    def write_block(self, block: Block, images: Sequence[bytes | None] | None = None) -> int:
+        """Takes a simulation's next block (`sim.simulate.Simulation.blocks`): encodes its frames straight from
+        the detector's rows (`encode_frames`, no CameraFrame objects in between) and writes whatever of the
+        recording is now due, in log-time order (`sim.stream.LogTimeOrder`); the rest waits for the next
+        blocks, or `close`. Returns the number of the block's frames.
+
+        Args:
+            block: the block after the previous one written; its detections drawn.
+            images: per capture request of the block, its rendered JPEG picture or None (`--images`).
+        """
+        requests = block.requests
+        frames: list = []
+        if requests:  # (a block can hold no capture at all: a short last block, a slow or dropping clock)
+            frames = self.encode_frames([r.camera for r in requests], frame_times(requests), block.bounds, block.rows)
+        if images is not None:
+            frames = [f if p is None else f._replace(image=p) for f, p in zip(frames, images, strict=True)]
+        self.write_many(self._order.add(block, frames))
+        return len(frames)
+
     def encode_frames(self, cameras: Sequence[int], times: np.ndarray, bounds: np.ndarray,
                       rows: DetectionRows) -> list[EncodedFrame]:
-        """`encode_frames` (the module's) of frames from this recording's cameras, given by index."""
+        """`encode_frames` (the module's) of frames from this recording's cameras, given by index; `times` (n, 3)
+        in the columns of `sim.stream.frame_times`."""
         names = [self.cameras[i].name for i in cameras]
         return encode_frames(names, times, bounds, rows, self.skeleton)
 
     def close(self) -> None:
+        try:
+            self.write_many(self._order.rest())  # (the blocks' frames delivered after the last tick)
+        except BaseException:
+            self.abort()
+            raise
         summary = {
             "num_people": len(self._people),
             "num_truth": self._counts["truth"],

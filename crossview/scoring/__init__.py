@@ -28,6 +28,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.head import HeadConvention, HeadPoints
+from core.truth import truth_between
 from core.types import COCO17, Camera, Skeleton
 from crossview.scoring.association import SCORED_STATES, AssociationAccumulator, scored_targets
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
@@ -51,10 +52,9 @@ class ScoringError(CrossviewError):
 
 
 class TruthTimeline:
-    """The ground-truth stream, interpolated linearly in time.
-
-    A person is present at t only when present in both neighbouring samples; outside the sampled span
-    the nearest end sample is used up to half a sampling period away, beyond that nobody is present.
+    """The ground-truth stream at any time t: between two samples, the project's one rule for the truth at t
+    (`core.truth.truth_between`, the rule the simulator made the camera frames with); outside the sampled
+    span, the nearest end sample up to half a sampling period away, beyond that nobody.
 
     Args:
         truth: PoseTruth samples (any order), poses (P, J, 3).
@@ -68,31 +68,26 @@ class TruthTimeline:
         self._edge_s = period / 2 + 1e-9
         self.num_joints = next((np.asarray(s.poses).shape[1] for s in self.samples if len(s.person_ids)), None)
 
-    def _sample(self, i: int) -> tuple[np.ndarray, np.ndarray]:
+    def _sample(self, i: int) -> PoseTruth:
         s = self.samples[i]
         ids = np.asarray(s.person_ids, dtype=np.int64).reshape(-1)
-        return ids, np.asarray(s.poses, dtype=np.float64).reshape(len(ids), self.num_joints, 3)
+        return PoseTruth(s.t_s, ids, np.asarray(s.poses, dtype=np.float64).reshape(len(ids), self.num_joints, 3))
 
     def at(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(ids (P,), poses (P, J, 3)) of the people present at time t."""
-        empty = (np.zeros(0, dtype=np.int64), np.zeros((0, self.num_joints, 3)))
         n = len(self.times)
         if n == 0:
-            return empty
-        i = int(np.searchsorted(self.times, t, side="right")) - 1
+            return np.zeros(0, dtype=np.int64), np.zeros((0, self.num_joints, 3))
+        i = int(np.searchsorted(self.times, t, side="right")) - 1  # times[i] <= t < times[i + 1]
         if i < 0 or i >= n - 1:
             edge = 0 if i < 0 else n - 1
-            return self._sample(edge) if abs(self.times[edge] - t) <= self._edge_s else empty
-        t0, t1 = self.times[i], self.times[i + 1]
-        ids0, poses0 = self._sample(i)
-        if t == t0 or t1 == t0:
-            return ids0, poses0
-        ids1, poses1 = self._sample(i + 1)
-        common, i0, i1 = np.intersect1d(ids0, ids1, assume_unique=True, return_indices=True)
-        keep = np.sort(i0)  # first sample's order
-        j1 = i1[np.argsort(i0)]
-        w = (t - t0) / (t1 - t0)
-        return ids0[keep], (1 - w) * poses0[keep] + w * poses1[j1]
+            if abs(self.times[edge] - t) <= self._edge_s:
+                return truth_between(None, self._sample(edge), t)
+            return np.zeros(0, dtype=np.int64), np.zeros((0, self.num_joints, 3))
+        before = self._sample(i)
+        if t == self.times[i]:
+            return before.person_ids, before.poses
+        return truth_between(before, self._sample(i + 1), t)
 
     @property
     def span(self) -> tuple[float, float]:

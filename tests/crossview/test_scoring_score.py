@@ -38,16 +38,40 @@ def _outputs(rate_hz=25.0, ids=lambda t: (10, 20), modify=lambda pose: pose):
     return outs
 
 
-def test_truth_interpolates_linearly_and_drops_people_absent_at_a_neighbour():
+def test_truth_between_samples_follows_the_one_rule_arrivals_and_departures_included():
+    """Between two samples, the truth is `core.truth`'s rule: linear for the people at both, and a person
+    at only one sample is there in that sample's half of the interval; off the span, nobody beyond half a
+    sampling period."""
     truth = [
         PoseTruth(0.0, np.array([1, 2]), np.stack([np.zeros((17, 3)), np.ones((17, 3))])),
         PoseTruth(0.01, np.array([2]), np.full((1, 17, 3), 2.0)),
     ]
     ids, poses = TruthTimeline(truth).at(0.0025)
-    assert ids.tolist() == [2]
-    np.testing.assert_allclose(poses[0], 1.25)
+    assert ids.tolist() == [1, 2]  # person 1 leaves after the first sample: still there a quarter of the way
+    np.testing.assert_allclose(poses[0], 0.0)  # m
+    np.testing.assert_allclose(poses[1], 1.25)  # m
+    assert TruthTimeline(truth).at(0.0075)[0].tolist() == [2]
     assert TruthTimeline(truth).at(0.0)[0].tolist() == [1, 2]
+    assert TruthTimeline(truth).at(0.014)[0].tolist() == [2]  # within half a period of the last sample
     assert len(TruthTimeline(truth).at(0.5)[0]) == 0  # beyond the recording: nobody
+
+
+def test_the_scored_truth_at_a_capture_time_is_what_the_camera_saw():
+    """Scoring and the simulator share the truth-at-t rule: at each frame's true capture time, the truth a
+    score compares with is, bit for bit, the poses the frame was made from (`poses_at_capture`)."""
+    from sim.scenario import load
+    from sim.simulate import Simulation
+    from sim.types import CameraFrame
+
+    scenario = load("store_layout1", {"crowd.people": 3, "cameras.rows": 2, "cameras.cols": 2})
+    events = list(Simulation(scenario, seed=3, worker_process=False).events(1.0))
+    timeline = TruthTimeline([e for e in events if isinstance(e, PoseTruth)])
+    frames = [e for e in events if isinstance(e, CameraFrame)]
+    assert len(frames) > 30
+    for frame in frames:
+        ids, poses = timeline.at(frame.truth.capture_s)
+        assert ids.tolist() == frame.poses_at_capture.person_ids.tolist()
+        assert poses.tobytes() == frame.poses_at_capture.poses.tobytes()
 
 
 def test_truth_fed_back_as_tracks_scores_perfectly():

@@ -140,25 +140,60 @@ def test_the_worker_process_never_outlives_the_stream(small, monkeypatch):
     assert multiprocessing.active_children() == []
 
 
-def test_a_consumer_failure_mid_stream_stops_the_worker_at_once(small):
-    """An error raised while the consumer turns a block into frames (inside `events`) ends the stream and
-    stops the worker then and there, even while the caller keeps the traceback (as a long-lived process,
-    or pytest, does): nothing is left for a garbage collection to stop later, in whatever process."""
+def test_a_consumer_failure_mid_pass_stops_the_worker_at_once(small):
+    """An error raised while the consumer handles a block (inside the pass's `with`, as `generate` and
+    `events` hold it) stops the worker then and there, even while the caller keeps the traceback (as a
+    long-lived process, or pytest, does): nothing is left for a garbage collection to stop later, in whatever
+    process."""
     import multiprocessing
-
-    calls = []
-
-    def frames_of(requests, rows, bounds):
-        calls.append(len(requests))
-        if len(calls) == 3:
-            raise ArithmeticError("consumer broke")
-        return [None] * len(requests)
 
     kept = []
     for seed in range(3):  # (again and again in one process, each failure kept)
         with pytest.raises(ArithmeticError, match="consumer broke") as failure:
-            for _ in Simulation(small, seed=seed).events(5.0, with_poses=False, frames_of=frames_of):
-                pass
+            with Simulation(small, seed=seed).blocks(5.0, with_poses=False) as blocks:
+                for i, _ in enumerate(blocks):
+                    if i == 2:
+                        raise ArithmeticError("consumer broke")
         kept.append(failure)
-        calls.clear()
         assert multiprocessing.active_children() == []
+
+
+def test_a_pass_starts_on_entering_and_is_iterated_once(small):
+    """Entered, a pass has its worker simulating before the first block is asked for (where there is one:
+    two cores and fork), so that the consumer can get ready meanwhile; a pass is iterated once."""
+    import multiprocessing
+
+    from core import processes
+
+    sim = Simulation(small, seed=1)
+    with sim.blocks(0.5) as blocks:
+        assert len(multiprocessing.active_children()) == int(processes.can_fork_worker())
+        first = list(blocks)
+        with pytest.raises(RuntimeError, match="iterated once"):
+            iter(blocks)
+    assert multiprocessing.active_children() == []
+    # Another pass replays the same blocks.
+    again = list(sim.blocks(0.5))
+    assert [(b.t, [r.delivery_s for r in b.requests]) for b in again] == [
+        (b.t, [r.delivery_s for r in b.requests]) for b in first]
+
+
+def test_blocks_cover_time_in_order_and_events_are_their_contents_in_log_time_order(small):
+    """Each block holds the truth ticks after the previous block's time up to its own, and the captures
+    taken in that stretch, delivered after their capture; `events` gives exactly the blocks' truths and
+    frames, sorted by log time, then truth before frames, then camera index, then capture time (a sort of
+    everything at once: the reference for the streaming merge)."""
+    blocks = list(Simulation(small, seed=6, worker_process=False).blocks(2.0))
+    previous_t = -1.0
+    for block in blocks:
+        assert all(previous_t < p.t_s <= block.t for p in block.truths)
+        assert all(previous_t < r.capture_s <= block.t and r.delivery_s >= r.capture_s for r in block.requests)
+        assert len(block.bounds) == len(block.requests) + 1
+        previous_t = block.t
+    assert blocks[-1].t == pytest.approx(2.0)
+    keys = [(p.t_s, 0, -1, p.t_s) for b in blocks for p in b.truths]
+    keys += [(r.delivery_s, 1, r.camera, r.capture_s) for b in blocks for r in b.requests]
+    sim = Simulation(small, seed=6, worker_process=False)
+    index = {c.name: i for i, c in enumerate(sim.cameras)}
+    assert [(e.t_s, 0, -1, e.t_s) if isinstance(e, PoseTruth) else
+            (e.truth.delivery_s, 1, index[e.frame.camera], e.truth.capture_s) for e in sim.events(2.0)] == sorted(keys)
