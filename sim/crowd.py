@@ -5,13 +5,16 @@ asks for poses, so the same scenario and seed give the same motion bit for bit. 
 
 1. arrivals through the entrance and departures through the exit;
 2. each person's wish: follow the planned path (grid shortest path, string-pulled; `StoreGeometry.plan`)
-   toward a shelf, a place to stand, the checkout or the exit, or stand still facing a shelf;
+   toward a shelf, a place to stand, the checkout or the exit at a pace that varies along the way, now and
+   then stopping on the way turned to one side, or stand still facing a shelf;
 3. local avoidance: steer off predicted close passes with other people (time to closest approach);
 4. integration with bounded acceleration and turn rate;
 5. hard constraints: pelvis centres at least `SEPARATION_M` apart, at least `SHELF_CLEARANCE_M` from
    shelf faces and inside the walls; a person whose step would break them keeps the last valid position;
 6. gait: the phase advances with a cadence that follows speed; a foot is locked to the floor in stance
-   and swings from where it left the floor to where the body will be at touchdown.
+   and swings from where it left the floor to where the body will be at touchdown;
+7. arms, gaze and weight: what each person does with their hands, where they look and which foot bears
+   their weight (`sim.gestures`).
 
 `Crowd.state` holds everything `sim.world` needs to pose the bodies, one row per body slot.
 """

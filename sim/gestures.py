@@ -17,10 +17,11 @@ never repeats), whose amplitudes ramp with the same profile.
 
 Amplitudes and timings: reach durations of 0.6-1.2 s, as people reach; the sizes of the hand movements are
 set from the wrist speeds of real actors at a shelf (Shelf dataset, 25 fps): standing people's wrists move a
-median 0.14 m/s over one second (store_layout2, 3 min: 0.135 m/s). Frame to frame the real wrists move a
-median 0.33 m/s; the synthetic ones 0.19 m/s, the rest of the real figure being the annotation's own noise
-(1 cm of independent error in each frame's 3D point alone gives about 0.5 m/s over 0.04 s), which the truth of
-a synthetic person does not have. `sim.world.measure` (`crossview world-stats`) reports both for a scenario.
+median 0.14 m/s over one second (store_layout2, 3 min: 0.137 m/s). Frame to frame the real wrists move a
+median 0.33 m/s, the synthetic ones 0.19 m/s; the rest of the real figure is most likely the annotation's own
+noise (1 cm of independent error in each frame's 3D point alone gives about 0.5 m/s over 0.04 s), which the
+truth of a synthetic person does not have, so the sizes are set from the one-second figure.
+`sim.world.measure` (`crossview world-stats`) reports both for a scenario.
 """
 
 from __future__ import annotations
@@ -96,7 +97,7 @@ LOOK_AT_PHONE_RAD = 0.55
 # Durations, seconds (min, max): a move to the next pose, holds.
 REACH_MOVE_S = (0.6, 1.2)
 SEARCH_HOLD_S = (0.4, 1.2)
-BRING_MOVE_S = (0.5, 0.9)
+BRING_MOVE_S = (0.6, 1.0)
 INSPECT_HOLD_S = (1.5, 5.0)
 PUT_BACK_SHARE = 0.5  # of items picked up: the rest are kept (lowered to the side, as into a basket)
 PUT_BACK_HOLD_S = (0.2, 0.6)
@@ -119,7 +120,7 @@ TO_SWING_S = 0.5
 GLANCE_TWIST_RAD = (0.3, 1.0)
 GLANCE_NOD_RAD = (-0.15, 0.25)
 GLANCE_TILT_RAD = 0.1
-GLANCE_MOVE_S = (0.35, 0.8)
+GLANCE_MOVE_S = (0.5, 0.9)
 GLANCE_HOLD_S = (0.5, 2.0)
 # Weight shifts of someone standing: the pelvis moves this far toward one foot in SHIFT_MOVE_S and stays
 # SHIFT_HOLD_S (slow and most of the time, as standing people sway).
@@ -146,7 +147,8 @@ def reach_pose(height_m: float, target_m: float, forward_m: float) -> tuple[tupl
 
     Returns:
         (arm pose (5,) in the order of REST, trunk flexion, neck flexion added to the gait's 0.12), radians.
-        A target out of reach gives the arm pointing straight at it.
+        The wrist lands on the target in front of the shoulder (no abduction or rotation); a target out of
+        reach gives the arm pointing straight at it, nearly stretched.
     """
     H = height_m
     spine = min(max(BEND_BELOW_M - target_m, 0.0) * TRUNK_BEND_RAD_M, MAX_TRUNK_BEND_RAD)
@@ -164,10 +166,10 @@ def reach_pose(height_m: float, target_m: float, forward_m: float) -> tuple[tupl
     flex = flex_world + spine
     down = math.atan2(EYE_FRAC * H - target_m, forward_m + 0.15)
     neck = min(max(down - 0.12 - spine, -0.5), 0.7)
-    return (flex, 0.05, 0.15, elbow, 0.2), spine, neck
+    return (flex, 0.0, 0.0, elbow, 0.2), spine, neck
 
 
-def _arms(left, right, w_left: float = 1.0, w_right: float = 1.0, spine: float = 0.0, neck: float = 0.0):
+def _arms(left, right, w_left: float, w_right: float, spine: float = 0.0, neck: float = 0.0):
     """The arms track's channels (14,) from two arm poses, their weights, trunk and neck flexion."""
     return np.array([*left, *right, w_left, w_right, spine, neck])
 
@@ -317,8 +319,8 @@ class Gestures:
         """(target, amplitudes, fidget sizes) of the arms track with `pose` on one hand and `other` on the
         other; the second sinusoid has half the first's amplitudes."""
         if right:
-            return _arms(other, pose), self._amp(s, other_amp, amp), self._amp(s, other_fidget, fidget)
-        return _arms(pose, other), self._amp(s, amp, other_amp), self._amp(s, fidget, other_fidget)
+            return _arms(other, pose, 1.0, 1.0), self._amp(s, other_amp, amp), self._amp(s, other_fidget, fidget)
+        return _arms(pose, other, 1.0, 1.0), self._amp(s, amp, other_amp), self._amp(s, fidget, other_fidget)
 
     def _shelf(self, s: int) -> list[Segment]:
         """At a shelf: reach to a height on it, search, bring the item to the chest, turn it over, then put it
@@ -396,7 +398,7 @@ class Gestures:
         right = self._right_handed()
         target = _arms(REST, PHONE_CHEST, 0.0, 1.0) if right else _arms(PHONE_CHEST, REST, 1.0, 0.0)
         target[NECK_FLEX] = LOOK_AT_PHONE_RAD * 0.6
-        amp = _arms(ZERO, PHONE_A) if right else _arms(PHONE_A, ZERO)
+        amp = _arms(ZERO, PHONE_A, 0.0, 0.0) if right else _arms(PHONE_A, ZERO, 0.0, 0.0)
         return [(target, TO_SWING_S, rng.uniform(*WALK_PHONE_S), amp, amp * 0.5, self._hz()),
                 (swing, TO_SWING_S, math.inf, zero, zero, None)]
 
