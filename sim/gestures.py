@@ -123,10 +123,11 @@ GLANCE_TILT_RAD = 0.1
 GLANCE_MOVE_S = (0.5, 0.9)
 GLANCE_HOLD_S = (0.5, 2.0)
 # Weight shifts of someone standing: the pelvis moves this far toward one foot in SHIFT_MOVE_S and stays
-# SHIFT_HOLD_S (slow and most of the time, as standing people sway).
+# SHIFT_HOLD_S: slowly and most of the time, as standing people sway (their hips then move a median 0.006-0.008
+# m/s, within the 0.5-1 cm/s that a quietly standing body's centre of mass sways at).
 SHIFT_M = (0.01, 0.04)
 SHIFT_MOVE_S = (1.5, 4.0)
-SHIFT_HOLD_S = (0.5, 4.0)
+SHIFT_HOLD_S = (0.0, 1.5)
 
 # A planned motion of one track: target (its channels), move time, hold time, amplitudes of the two
 # sinusoids (its channels), frequency (Hz; None keeps the current one).
