@@ -27,6 +27,7 @@ truth of a synthetic person does not have, so the sizes are set from the one-sec
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -129,9 +130,18 @@ SHIFT_M = (0.01, 0.04)
 SHIFT_MOVE_S = (1.5, 4.0)
 SHIFT_HOLD_S = (0.0, 1.5)
 
-# A planned motion of one track: target (its channels), move time, hold time, amplitudes of the two
-# sinusoids (its channels), frequency (Hz; None keeps the current one).
-Segment = tuple
+
+
+class Segment(NamedTuple):
+    """A planned motion of one track: move to `target` in move_s, then hold it for hold_s."""
+
+    target: np.ndarray  # (n,) the track's channels
+    move_s: float
+    hold_s: float
+    amp_a: np.ndarray  # (n,) amplitudes of the first sinusoid at the target
+    amp_b: np.ndarray  # (n,) and of the second
+    hz: float | None  # frequency of the sinusoids from now on (None: keep the current one)
+
 
 # Plain ints (an enum member's lookup is slow in per-person loops).
 _WALK, _BROWSE, _CHECKOUT = int(Activity.WALK), int(Activity.BROWSE), int(Activity.CHECKOUT)
@@ -307,12 +317,12 @@ class Gestures:
         target plus a normal draw of std `fidget` (14,) per channel (turning an item over, re-gripping a phone,
         the next gesture)."""
         rng = self.rng
-        out = [(target, move_s, 0.0, amp, amp_b, self._hz())]
+        out = [Segment(target, move_s, 0.0, amp, amp_b, self._hz())]
         left = hold_s
         while left > 0:
             move, hold = rng.uniform(*FIDGET_MOVE_S), rng.uniform(*FIDGET_HOLD_S)
-            out.append((target + rng.standard_normal(target.size) * fidget, move, min(hold, max(left - move, 0.0)),
-                        amp, amp_b, None))
+            out.append(Segment(target + rng.standard_normal(target.size) * fidget, move,
+                               min(hold, max(left - move, 0.0)), amp, amp_b, None))
             left -= move + hold
         return out
 
@@ -395,13 +405,13 @@ class Gestures:
         swing = _arms(REST, REST, 0.0, 0.0)
         zero = swing * 0.0
         if rng.random() >= WALK_PHONE_SHARE:
-            return [(swing, TO_SWING_S, math.inf, zero, zero, None)]
+            return [Segment(swing, TO_SWING_S, math.inf, zero, zero, None)]
         right = self._right_handed()
         target = _arms(REST, PHONE_CHEST, 0.0, 1.0) if right else _arms(PHONE_CHEST, REST, 1.0, 0.0)
         target[NECK_FLEX] = LOOK_AT_PHONE_RAD * 0.6
         amp = _arms(ZERO, PHONE_A, 0.0, 0.0) if right else _arms(PHONE_A, ZERO, 0.0, 0.0)
-        return [(target, TO_SWING_S, rng.uniform(*WALK_PHONE_S), amp, amp * 0.5, self._hz()),
-                (swing, TO_SWING_S, math.inf, zero, zero, None)]
+        return [Segment(target, TO_SWING_S, rng.uniform(*WALK_PHONE_S), amp, amp * 0.5, self._hz()),
+                Segment(swing, TO_SWING_S, math.inf, zero, zero, None)]
 
     def _glance(self, activity: int) -> list[Segment]:
         """A look to one side (and back ahead), at the config's rate."""
@@ -411,20 +421,20 @@ class Gestures:
         rate = self.config.look_rate_hz
         wait = rng.exponential(1 / rate) if rate > 0 else math.inf
         if rate <= 0:
-            return [(zero, u(*GLANCE_MOVE_S), wait, zero, zero, None)]
+            return [Segment(zero, u(*GLANCE_MOVE_S), wait, zero, zero, None)]
         twist = u(*GLANCE_TWIST_RAD) * (1.0 if rng.random() < 0.5 else -1.0)
         look = np.array([twist, twist / 3, u(*GLANCE_NOD_RAD), u(-GLANCE_TILT_RAD, GLANCE_TILT_RAD)])
-        return [(look, u(*GLANCE_MOVE_S), u(*GLANCE_HOLD_S), zero, zero, None),
-                (zero, u(*GLANCE_MOVE_S), wait, zero, zero, None)]
+        return [Segment(look, u(*GLANCE_MOVE_S), u(*GLANCE_HOLD_S), zero, zero, None),
+                Segment(zero, u(*GLANCE_MOVE_S), wait, zero, zero, None)]
 
     def _weight(self, activity: int) -> list[Segment]:
         """Standing: the weight moves onto one foot and stays a while; walking: the gait's own sway."""
         rng = self.rng
         zero = np.zeros(1)
         if activity == _WALK:
-            return [(zero, TO_SWING_S, math.inf, zero, zero, None)]
+            return [Segment(zero, TO_SWING_S, math.inf, zero, zero, None)]
         shift = rng.uniform(*SHIFT_M) * (1.0 if rng.random() < 0.5 else -1.0)
-        return [(np.array([shift]), rng.uniform(*SHIFT_MOVE_S), rng.uniform(*SHIFT_HOLD_S), zero, zero, None)]
+        return [Segment(np.array([shift]), rng.uniform(*SHIFT_MOVE_S), rng.uniform(*SHIFT_HOLD_S), zero, zero, None)]
 
 
 @jit
