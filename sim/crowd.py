@@ -5,20 +5,22 @@ asks for poses, so the same scenario and seed give the same motion bit for bit. 
 
 1. arrivals through the entrance and departures through the exit;
 2. each person's wish: follow the planned path (grid shortest path, string-pulled; `StoreGeometry.plan`)
-   toward a shelf, a place to stand, the checkout or the exit, or stand still facing a shelf;
+   toward a shelf, a place to stand, the checkout or the exit at a pace that varies along the way, now and
+   then stopping on the way turned to one side, or stand still facing a shelf;
 3. local avoidance: steer off predicted close passes with other people (time to closest approach);
 4. integration with bounded acceleration and turn rate;
 5. hard constraints: pelvis centres at least `SEPARATION_M` apart, at least `SHELF_CLEARANCE_M` from
    shelf faces and inside the walls; a person whose step would break them keeps the last valid position;
 6. gait: the phase advances with a cadence that follows speed; a foot is locked to the floor in stance
-   and swings from where it left the floor to where the body will be at touchdown.
+   and swings from where it left the floor to where the body will be at touchdown;
+7. arms, gaze and weight: what each person does with their hands, where they look and which foot bears
+   their weight (`sim.gestures`).
 
 `Crowd.state` holds everything `sim.world` needs to pose the bodies, one row per body slot.
 """
 
 from __future__ import annotations
 
-import enum
 import math
 from dataclasses import dataclass
 
@@ -27,8 +29,10 @@ import numpy as np
 from core.errors import ScenarioError
 from core.jit import jit
 from sim.config import bounded, check_ranges
+from sim.gestures import Gestures
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
 from sim.store import StoreGeometry, _astar, _segment_free
+from sim.types import Activity
 
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
 STEP_S = 0.1
@@ -58,24 +62,20 @@ VANISH_DEPTH_M = 0.25
 # Fastest anybody moves, walking or pushed aside.
 MAX_SPEED_M_S = 2.0
 MAX_TURN_RAD_S = 3.0
-# A walker who has not moved for this long gives up on the current goal.
+# A walker who has not moved for this long gives up on the current goal (a stop on the way is shorter).
 STUCK_S = 4.0
+# A walker's pace is redrawn after this long (seconds, min and max).
+PACE_HOLD_S = (2.0, 6.0)
+# Walkers stop on the way only with at least this much path left, and turn this far (radians) to look.
+PAUSE_CLEAR_M = 1.5
+PAUSE_TURN_RAD = (0.4, 1.3)
 # Bounds of the [crowd] section: people at once, and any duration of a visit or an activity (a day).
 MAX_PEOPLE = 500
 _MAX_TIME_S = 86400.0
 
 
-class Activity(enum.IntEnum):
-    """What a person is doing (also what the statistics count)."""
-
-    WALK = 0
-    STAND = 1
-    BROWSE = 2
-    CHECKOUT = 3
-
-
-# The same as plain module constants: an enum member's class attribute lookup is slow in per-person loops.
-_WALK, _BROWSE, _CHECKOUT = Activity.WALK, Activity.BROWSE, Activity.CHECKOUT
+# The same as a plain module constant: an enum member's class attribute lookup is slow in per-person loops.
+_WALK = Activity.WALK
 
 
 @dataclass(frozen=True)
@@ -95,6 +95,17 @@ class CrowdConfig:
         browse_s: (min, max) time a person browses a shelf, min <= max.
         checkout_s: (min, max) time a person pays at the checkout, min <= max.
         area_per_person_m2: walkable floor each person needs; more people than the floor holds is an error.
+        pace_range: (min, max) a walker's pace as a fraction of their preferred speed, redrawn every 2 to 6 s
+            of walking, min <= max.
+        pause_rate_hz: how often a walker stops on the way to look at something, per second of walking (0:
+            never).
+        pause_s: (min, max) how long such a stop lasts, min <= max (shorter than the 4 s after which a walker
+            who does not move gives up the goal).
+        look_rate_hz: how often a person glances to one side (neck and trunk twist), per second.
+        handling_hz: (min, max) frequency of the hand movements of someone handling an item, a phone or
+            talking with their hands, min <= max.
+        hand_motion_scale: scale of the sizes of those hand movements (1: standing people's wrists move a
+            median 0.14 m/s over one second, as real actors' at a shelf; 0: hands still while they hold a pose).
     """
 
     people: int = bounded(4, 0, MAX_PEOPLE, unit="people")
@@ -109,12 +120,18 @@ class CrowdConfig:
     browse_s: tuple[float, float] = bounded((5.0, 15.0), 0.0, _MAX_TIME_S, low_open=True)
     checkout_s: tuple[float, float] = bounded((5.0, 15.0), 0.0, _MAX_TIME_S, low_open=True)
     area_per_person_m2: float = bounded(1.0, 0.0, 100.0, low_open=True)
+    pace_range: tuple[float, float] = bounded((0.85, 1.1), 0.3, 1.5, unit="fraction of the preferred speed")
+    pause_rate_hz: float = bounded(0.05, 0.0, 10.0, unit="Hz")
+    pause_s: tuple[float, float] = bounded((0.8, 3.0), 0.0, STUCK_S, low_open=True, high_open=True)
+    look_rate_hz: float = bounded(0.2, 0.0, 10.0, unit="Hz")
+    handling_hz: tuple[float, float] = bounded((0.6, 1.4), 0.0, 5.0, low_open=True, unit="Hz")
+    hand_motion_scale: float = bounded(1.0, 0.0, 3.0, unit="times")
 
     def __post_init__(self):
         check_ranges(self)
         if not self.height_range_m[0] < self.height_range_m[1]:
             raise ValueError(f"height_range_m: {self.height_range_m} must have min < max")
-        for name in ("speed_range_m_s", "stand_s", "browse_s", "checkout_s"):
+        for name in ("speed_range_m_s", "stand_s", "browse_s", "checkout_s", "pace_range", "pause_s", "handling_hz"):
             a, b = getattr(self, name)
             if not a <= b:
                 raise ValueError(f"{name}: {getattr(self, name)} must have min <= max")
@@ -148,8 +165,9 @@ def cadence_steps_s(speed_m_s: np.ndarray, height_m: np.ndarray) -> np.ndarray:
 class _Agent:
     """Per-person bookkeeping that is not numeric state (goals, paths, timers)."""
 
-    __slots__ = ("activity", "path", "rest", "goal_kind", "goal", "goal_heading", "until", "depart_at", "reaches",
-                 "stuck", "leaving", "in_door", "checked_out")
+    __slots__ = ("activity", "path", "rest", "goal_kind", "goal", "goal_heading", "goal_top", "until", "depart_at",
+                 "stuck", "leaving", "in_door", "checked_out", "pace", "pace_until", "next_pause", "pause_until",
+                 "pause_heading")
 
     def __init__(self):
         self.activity = Activity.WALK
@@ -158,10 +176,15 @@ class _Agent:
         self.goal_kind = Activity.STAND
         self.goal: np.ndarray | None = None
         self.goal_heading: float | None = None
+        self.goal_top = 0.0  # top of the shelf or counter at the goal (0: none)
         self.until = 0.0
         self.depart_at = math.inf
-        self.reaches: list[tuple[float, float, float, float]] = []  # (start, end, height, side)
         self.stuck = 0.0
+        self.pace = 1.0  # fraction of the preferred speed
+        self.pace_until = 0.0
+        self.next_pause = math.inf  # when a walker next stops on the way
+        self.pause_until = -math.inf
+        self.pause_heading = 0.0
         self.leaving = False
         self.in_door = False
         self.checked_out = False
@@ -181,8 +204,8 @@ class Crowd:
         stride: (S,) stride length (distance per gait cycle) at the current speed.
         feet: (S, 2, 2) world xy of the left and right ankles.
         swing_len: (S, 2) length of each foot's current swing (0 when it stays put).
-        reach: (S,) how far the browsing arm is raised, 0..1; reach_height (S,) its target height; reach_side
-            (S,) +1 left arm, -1 right arm.
+        gestures: what everybody does with their arms, gaze and weight (`sim.gestures`); `gestures.value`
+            (S, NUM_CHANNELS) holds the joint angles and the shift `sim.world` poses.
         arrivals, departures: counts so far.
     """
 
@@ -206,10 +229,7 @@ class Crowd:
         self.feet = np.zeros((S, 2, 2))
         self.liftoff = np.zeros((S, 2, 2))
         self.swing_len = np.zeros((S, 2))
-        self.reach = np.zeros(S)
-        self.reach_height = np.ones(S)
-        self.reach_side = np.ones(S)
-        self.look = np.zeros(S)
+        self.gestures = Gestures(S, rng, config)
         self.arrivals = 0
         self.departures = 0
         self.agents = [_Agent() for _ in range(S)]
@@ -218,6 +238,7 @@ class Crowd:
         _warm_up()
         checkout = [o for o in store.obstacles if o.key == "store.checkout_m"]
         self._checkout_spots = []
+        self._checkout_top = checkout[0].height if checkout else 0.0
         if checkout:
             ob = checkout[0]
             for side in (-1.0, 1.0):
@@ -293,7 +314,6 @@ class Crowd:
         self.omega[s] = 0.0
         self.phase[s] = self.rng.uniform(0.0, 1.0)
         self.stride[s] = 0.0
-        self.reach[s] = 0.0
         c, sn = math.cos(self.heading[s]), math.sin(self.heading[s])
         lateral = np.array([-sn, c]) * HIP_HALF_WIDTH * self.height[s]
         self.feet[s, 0] = self.pos[s] + lateral
@@ -329,6 +349,7 @@ class Crowd:
         rng = self.rng
         store = self.store
         heading = None
+        top = 0.0
         if agent.leaving or self.time_s >= agent.depart_at:
             agent.leaving = True
             open_tills = [spot for spot in self._checkout_spots if not self._taken(spot[0], s)]
@@ -336,15 +357,17 @@ class Crowd:
                 # Pay at a free till; with every till busy, leave without queueing (self-checkout).
                 goal, heading = open_tills[int(rng.integers(len(open_tills)))]
                 kind = Activity.CHECKOUT
+                top = self._checkout_top
             else:
                 goal, kind = store.exit.inside, Activity.WALK
         else:
             goal, kind = None, Activity.STAND
             if self._spots and rng.random() < self.config.browse_share:
                 for _ in range(8):
-                    p, h, _shelf = self._spots[int(rng.integers(len(self._spots)))]
+                    p, h, shelf = self._spots[int(rng.integers(len(self._spots)))]
                     if not self._taken(p, s):
                         goal, heading, kind = p, h, Activity.BROWSE
+                        top = store.obstacles[shelf].height
                         break
             if goal is None:
                 for _ in range(20):
@@ -367,8 +390,12 @@ class Crowd:
         agent.goal = np.asarray(goal, float)
         agent.goal_kind = kind
         agent.goal_heading = heading
+        agent.goal_top = top
         agent.activity = Activity.WALK
         agent.stuck = 0.0
+        agent.pace_until = self.time_s
+        rate = self.config.pause_rate_hz
+        agent.next_pause = self.time_s + rng.exponential(1 / rate) if rate > 0 else math.inf
 
     def _start_activity(self, s: int, kind: Activity):
         agent = self.agents[s]
@@ -382,14 +409,7 @@ class Crowd:
         elif kind in (Activity.BROWSE, Activity.CHECKOUT):
             lo, hi = cfg.browse_s if kind == Activity.BROWSE else cfg.checkout_s
             agent.until = self.time_s + rng.uniform(lo, hi)
-            agent.reaches = []
-            t = self.time_s + 1.2  # turn to the shelf first
-            top = 1.0 if kind == Activity.CHECKOUT else 1.85
-            while t + 3.0 < agent.until:
-                dur = rng.uniform(1.8, 3.0)
-                agent.reaches.append((t, t + dur, rng.uniform(0.35, top) if kind == Activity.BROWSE else 0.95,
-                                      1.0 if rng.random() < 0.5 else -1.0))
-                t += dur + rng.uniform(0.8, 3.0)
+        self.gestures.set_reach_top(s, agent.goal_top if kind != Activity.STAND else 0.0)
         if kind == Activity.CHECKOUT:
             agent.checked_out = True
 
@@ -440,8 +460,10 @@ class Crowd:
                         active[s] = False
                         continue
                     self._start_activity(s, agent.goal_kind)
+                elif self._pausing(s, agent, t, d + agent.rest[0]):
+                    want_heading[s] = agent.pause_heading
                 else:
-                    speed = min(preferred[s], 0.35 + 0.8 * (d + agent.rest[0])) / d
+                    speed = min(preferred[s] * agent.pace, 0.35 + 0.8 * (d + agent.rest[0])) / d
                     want[s] = ((tx - px) * speed, (ty - py) * speed)
                     agent.stuck = agent.stuck + dt if speed_now[s] < 0.15 else 0.0
                     if agent.stuck > STUCK_S:
@@ -467,7 +489,28 @@ class Crowd:
         self.pos = new
         _turn_and_gait_kernel(old, new, want_heading, active, self.height, self.vel, self.heading, self.omega,
                               self.phase, self.stride, self.feet, self.liftoff, self.swing_len)
-        self._arms(active)
+        self.gestures.update(t, dt, self.person_id, self.activities(), self.height)
+
+    def _pausing(self, s: int, agent: _Agent, t: float, left_m: float) -> bool:
+        """Whether a walker stands still on the way now (stopping to look at something, turned to one side),
+        and their pace: redrawn every PACE_HOLD_S, a stop started at `next_pause` unless near the goal or a door."""
+        rng, cfg = self.rng, self.config
+        if t >= agent.pace_until:
+            agent.pace = rng.uniform(*cfg.pace_range)
+            agent.pace_until = t + rng.uniform(*PACE_HOLD_S)
+        if t < agent.pause_until:
+            return True
+        if t >= agent.next_pause:
+            agent.next_pause = math.inf
+            if left_m > PAUSE_CLEAR_M and not (agent.in_door or agent.leaving):
+                agent.pause_until = t + rng.uniform(*cfg.pause_s)
+                agent.pause_heading = float(self.heading[s]) + rng.uniform(*PAUSE_TURN_RAD) * (
+                    1.0 if rng.random() < 0.5 else -1.0)
+                agent.next_pause = agent.pause_until + rng.exponential(1 / cfg.pause_rate_hz)
+                agent.stuck = 0.0
+                return True
+            agent.next_pause = t + rng.exponential(1 / cfg.pause_rate_hz)
+        return False
 
     def _passed(self, agent: _Agent, px: float, py: float) -> bool:
         """Whether someone pushed off their path is already past its next waypoint (closer to the one after)."""
@@ -540,21 +583,6 @@ class Crowd:
             if not bad.any():
                 return out
             out[idx[bad]] = old[idx[bad]]
-
-    def _arms(self, active: np.ndarray):
-        """How far each browsing arm is raised (ramps up, holds, ramps down), its height and side."""
-        t = self.time_s
-        reach = [0.0] * self.slots
-        for s, agent in enumerate(self.agents):
-            if (agent.activity == _BROWSE or agent.activity == _CHECKOUT) and active[s]:
-                for start, end, height, side in agent.reaches:
-                    if start <= t <= end:
-                        up = min(0.7, (end - start) / 3)
-                        reach[s] = min(1.0, (t - start) / up, (end - t) / up)
-                        self.reach_height[s] = height
-                        self.reach_side[s] = side
-                        break
-        self.reach[:] = reach
 
     def activities(self) -> np.ndarray:
         """(S,) `Activity` of each slot (WALK for empty slots)."""

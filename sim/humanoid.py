@@ -110,6 +110,8 @@ SHIN = 0.246
 THIGH = 0.245
 HIP_HEIGHT = ANKLE_HEIGHT + SHIN + THIGH  # 0.530: hip joint centre above the floor, standing
 HIP_HALF_WIDTH = 0.05
+# Knee flex of a standing person, as a fraction of the straight-leg hip height.
+STAND_HIP_FRACTION = 0.985
 LUMBAR_ABOVE_HIP = 0.07
 SHOULDER_ABOVE_LUMBAR = 0.218
 SHOULDER_HALF_WIDTH = 0.105

@@ -14,6 +14,15 @@ import numpy as np
 from core.types import Frame
 
 
+class Activity(enum.IntEnum):
+    """What a person is doing (also what the statistics count); `sim.crowd` decides it."""
+
+    WALK = 0
+    STAND = 1
+    BROWSE = 2
+    CHECKOUT = 3
+
+
 class BoxKind(enum.Enum):
     """What a box of the store is, for drawing and for occlusion bookkeeping."""
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from core.jit import jit
 from core.types import COCO17, Skeleton
+from sim import gestures as gs
 from sim import humanoid as hm
 from sim.crowd import FULL_LIFT_STRIDE_M, STANCE_FRACTION, STEP_S, SWING_LIFT_M, Activity, Crowd
 from sim.crowd import validate as validate_crowd
@@ -33,11 +34,7 @@ from sim.types import Box, BoxKind, PoseTruth
 
 # Where the bodies of empty slots wait: far below the floor slab, where no camera ray can reach.
 PARK_Z_M = -50.0
-# Standing sway: amplitude and frequency of the slow weight shift of someone standing.
-SWAY_M = 0.015
-SWAY_HZ = 0.25
-# Knee flex of a standing person, as a fraction of the straight-leg hip height.
-STAND_HIP_FRACTION = 0.985
+STAND_HIP_FRACTION = hm.STAND_HIP_FRACTION
 # Lowest the pelvis goes in walking, as a fraction of the straight-leg hip height.
 LOWEST_HIP_FRACTION = 0.94
 
@@ -340,57 +337,51 @@ class World:
             "ankle_h": (hm.ANKLE_HEIGHT * H)[:, None],
             "z_stand": hm.HIP_HEIGHT * H * STAND_HIP_FRACTION,
             "z_low": hm.HIP_HEIGHT * H * LOWEST_HIP_FRACTION,
-            "shoulder": (hm.LUMBAR_ABOVE_HIP + hm.SHOULDER_ABOVE_LUMBAR) * H,
-            "arm": (hm.UPPER_ARM + hm.FOREARM + 0.05) * H,
         }
-        # The same per slot for `_qpos_kernel` (S, 9): thigh, shin, reach², hip half width, ankle height,
-        # standing and lowest hip heights, shoulder above hip, arm length.
+        # The same per slot for `_qpos_kernel` (S, 7): thigh, shin, reach², hip half width, ankle height,
+        # standing and lowest hip heights.
         k = self._k
         self._k_rows = np.ascontiguousarray(np.column_stack([
             k["thigh"][:, 0], k["shin"][:, 0], k["reach2"][:, 0], k["hw"][:, 0], k["ankle_h"][:, 0], k["z_stand"],
-            k["z_low"], k["shoulder"], k["arm"]]), dtype=float)
+            k["z_low"]]), dtype=float)
 
     def _snapshot(self) -> _Snapshot:
         crowd = self.crowd
         q = np.zeros((self.slots, hm.NQ))
-        _qpos_kernel(crowd.pos, crowd.vel, crowd.heading, crowd.phase, crowd.feet, crowd.swing_len, crowd.reach,
-                     crowd.reach_height, crowd.reach_side, float(crowd.time_s), crowd.person_id, self._k_rows, self._lo,
-                     self._hi, q)
+        _qpos_kernel(crowd.pos, crowd.vel, crowd.heading, crowd.phase, crowd.feet, crowd.swing_len,
+                     crowd.gestures.value, self._k_rows, self._lo, self._hi, q)
         return _Snapshot(crowd.time_s, crowd.person_id.copy(), q, crowd.heading.copy())
 
 
 @jit
-def _qpos_kernel(pos, vel, heading_, phase_, feet, swing_len, reach_, reach_height, reach_side_, t, person_id, k,
-                 lo, hi, q):
-    """Fills q (S, NQ) with joint positions at time t from the crowd's state (`Crowd` attributes of the
-    same names: pelvis ground point, velocity, heading, gait phase, feet, swing lengths, reach).
+def _qpos_kernel(pos, vel, heading_, phase_, feet, swing_len, motion, k, lo, hi, q):
+    """Fills q (S, NQ) with joint positions from the crowd's state (`Crowd` attributes of the same names:
+    pelvis ground point, velocity, heading, gait phase, feet, swing lengths) and motion (S, NUM_CHANNELS), the
+    arms, gaze and weight channels of `sim.gestures`.
 
-    The pelvis follows the crowd's ground point and heading; each ankle goes where the crowd put its
-    foot (lifted in swing) by two-link inverse kinematics (`tests/reference/humanoid.py` has it as numpy); the pelvis
-    drops as far as needed (within limits) to keep both feet in reach; arms swing against the legs or
-    reach to a shelf. k (S, 9): per slot thigh, shin, squared leg reach, hip half width, ankle height,
-    standing and lowest hip heights, shoulder above hip, arm length. Hinges are clipped to [lo, hi].
+    The pelvis follows the crowd's ground point and heading, shifted sideways over the stance foot in walking
+    and by the weight channel in standing; each ankle goes where the crowd put its foot (lifted in swing) by
+    two-link inverse kinematics (`tests/reference/humanoid.py` has it as numpy); the pelvis drops as far as
+    needed (within limits) to keep both feet in reach; each arm blends the gait's swing against the legs with
+    its gesture pose by the arm's weight channel; trunk and neck add the gesture channels to the gait's lean
+    and counter-rotation. k (S, 7): per slot thigh, shin, squared leg reach, hip half width, ankle height,
+    standing and lowest hip heights. Hinges are clipped to [lo, hi].
     """
     pi = math.pi
     two_pi = 2 * math.pi
     lift_gain = SWING_LIFT_M / FULL_LIFT_STRIDE_M
     swing_scale = 1 / (1 - STANCE_FRACTION)
-    sway_arg = (2 * math.pi * SWAY_HZ) * t
-    look_arg = (2 * math.pi * 0.11) * t
     for n in range(pos.shape[0]):
         x, y, heading, phase = pos[n, 0], pos[n, 1], heading_[n], phase_[n]
-        reach, reach_h, reach_side = reach_[n], reach_height[n], reach_side_[n]
         speed = math.sqrt(vel[n, 0] * vel[n, 0] + vel[n, 1] * vel[n, 1])
         thigh, shin, reach2, hw, ankle_h = k[n, 0], k[n, 1], k[n, 2], k[n, 3], k[n, 4]
-        z_stand, z_low, shoulder, arm = k[n, 5], k[n, 6], k[n, 7], k[n, 8]
-        pid = float(person_id[n])
+        z_stand, z_low = k[n, 5], k[n, 6]
         c, s = math.cos(heading), math.sin(heading)
         walk = min(speed * (1 / 0.6), 1.0)
-        stand = 1.0 - walk
         ph = two_pi * phase
         sin_ph, cos_ph = math.sin(ph), math.cos(ph)
-        # Pelvis over the stance foot while walking, slow weight shift while standing.
-        sway = 0.02 * walk * sin_ph + SWAY_M * stand * math.sin(sway_arg + 2.4 * pid)
+        # Pelvis over the stance foot while walking, plus the weight shift of someone standing.
+        sway = 0.02 * walk * sin_ph + motion[n, gs.SHIFT]
         px, py = x - s * sway, y + c * sway
         # Per leg (0 left, 1 right): foot minus hip joint (world), ankle height, lift, swing fraction.
         rx = [0.0, 0.0]
@@ -426,25 +417,29 @@ def _qpos_kernel(pos, vel, heading_, phase_, feet, swing_len, reach_, reach_heig
             q[n, C_KNEE + leg * LEG_STRIDE] = knee
             # Foot flat on the floor, toes down a little in swing.
             q[n, C_ANKLE + leg * LEG_STRIDE] = flex - knee + (0.25 * sin_u[leg] if lift[leg] > 0 else 0.0)
-        # Trunk: slight forward lean with speed, counter-rotation with the stride, bend for low shelves.
-        low = min(max((0.8 - reach_h) * (1 / 0.45), 0.0), 1.0) * reach
-        q[n, C_SPINE_FLEX] = 0.06 * speed + 0.55 * low
-        q[n, C_SPINE_TWIST] = -0.08 * walk * cos_ph
+        # Trunk and head: slight forward lean with speed, counter-rotation with the stride, and the gestures'
+        # bend (for low shelves), pitch (looking at the hands), twist and tilt (glances).
+        q[n, C_SPINE_FLEX] = 0.06 * speed + motion[n, gs.SPINE_FLEX]
+        q[n, C_SPINE_TWIST] = -0.08 * walk * cos_ph + motion[n, gs.SPINE_TWIST]
         q[n, C_SPINE_LATERAL] = 0.03 * walk * sin_ph
-        q[n, C_NECK_FLEX] = 0.12 + 0.35 * low - 0.06 * speed
-        q[n, C_NECK_TWIST] = 0.5 * stand * max(1.0 - 4 * reach, 0.0) * math.sin(look_arg + 1.7 * pid)
-        # Arms: swing opposite to the legs when walking; one arm reaches to the shelf when browsing.
+        q[n, C_NECK_FLEX] = 0.12 - 0.06 * speed + motion[n, gs.NECK_FLEX]
+        q[n, C_NECK_TWIST] = motion[n, gs.NECK_TWIST]
+        q[n, C_HEAD_NOD] = motion[n, gs.HEAD_NOD]
+        q[n, C_HEAD_TILT] = motion[n, gs.HEAD_TILT]
+        # Arms: the swing opposite to the legs (`gs.REST` at zero speed), blended by each arm's weight
+        # channel with its gesture pose (internal rotation turns the left arm about -z, the right about +z).
         swing0 = -0.4 * min(speed * (1 / 1.3), 1.2) * cos_ph
-        reach_flex = math.acos(min(max((z + shoulder * math.cos(0.55 * low) - reach_h) / arm, -1.0), 1.0))
         for leg in range(2):
             side = 1.0 - 2.0 * leg
             swing = swing0 * side
-            ra = reach if reach_side == side else 0.0
-            rest = 1.0 - ra
-            q[n, C_SHOULDER_FLEX + leg * ARM_STRIDE] = rest * swing + ra * reach_flex
-            q[n, C_SHOULDER_ABD + leg * ARM_STRIDE] = 0.07 + 0.08 * ra
-            q[n, C_ELBOW + leg * ARM_STRIDE] = rest * (0.25 + 0.25 * max(swing, 0.0)) + 0.12 * ra
-            q[n, C_WRIST + leg * ARM_STRIDE] = 0.1 + 0.25 * ra
+            m0 = gs.LEFT_ARM + leg * gs.ARM_DOF
+            w = min(max(motion[n, gs.W_LEFT + leg], 0.0), 1.0)
+            rest = 1.0 - w
+            q[n, C_SHOULDER_FLEX + leg * ARM_STRIDE] = rest * swing + w * motion[n, m0]
+            q[n, C_SHOULDER_ABD + leg * ARM_STRIDE] = rest * gs.REST[1] + w * motion[n, m0 + 1]
+            q[n, C_SHOULDER_ROT + leg * ARM_STRIDE] = -side * w * motion[n, m0 + 2]
+            q[n, C_ELBOW + leg * ARM_STRIDE] = rest * (gs.REST[3] + 0.25 * max(swing, 0.0)) + w * motion[n, m0 + 3]
+            q[n, C_WRIST + leg * ARM_STRIDE] = rest * gs.REST[4] + w * motion[n, m0 + 4]
         for j in range(lo.shape[0]):
             q[n, 7 + j] = min(max(q[n, 7 + j], lo[j]), hi[j])
 
@@ -455,12 +450,14 @@ C_SPINE_FLEX, C_SPINE_LATERAL, C_SPINE_TWIST, C_NECK_FLEX, C_NECK_TWIST = (
     7 + hm.J[name] for name in ("spine_flex", "spine_lateral", "spine_twist", "neck_flex", "neck_twist"))
 C_HIP_ABD, C_HIP_FLEX, C_KNEE, C_ANKLE = (7 + hm.J[f"left_{n}"] for n in ("hip_abd", "hip_flex", "knee", "ankle"))
 LEG_STRIDE = hm.J["right_hip_abd"] - hm.J["left_hip_abd"]
-C_SHOULDER_FLEX, C_SHOULDER_ABD, C_ELBOW, C_WRIST = (
-    7 + hm.J[f"left_{n}"] for n in ("shoulder_flex", "shoulder_abd", "elbow", "wrist"))
+C_HEAD_NOD, C_HEAD_TILT = 7 + hm.J["head_nod"], 7 + hm.J["head_tilt"]
+C_SHOULDER_FLEX, C_SHOULDER_ABD, C_SHOULDER_ROT, C_ELBOW, C_WRIST = (
+    7 + hm.J[f"left_{n}"] for n in ("shoulder_flex", "shoulder_abd", "shoulder_rot", "elbow", "wrist"))
 ARM_STRIDE = hm.J["right_shoulder_flex"] - hm.J["left_shoulder_flex"]
 MAX_LEG_STRETCH = hm.MAX_LEG_STRETCH
 if any(hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != LEG_STRIDE for n in ("hip_flex", "knee", "ankle")) or any(
-        hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != ARM_STRIDE for n in ("shoulder_abd", "elbow", "wrist")):
+        hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != ARM_STRIDE
+        for n in ("shoulder_abd", "shoulder_rot", "elbow", "wrist")):
     raise RuntimeError("humanoid hinge layout: right limbs are not the left ones shifted")
 
 
@@ -511,7 +508,7 @@ def _pose_kernel(q0, q1, h0, h1, a, present, qpos, order, body, tables, hinges, 
             for h in range(tables[b, 1], tables[b, 1] + tables[b, 2]):
                 angle = qpos[base + hinges[h, 0]] * hinges[h, 2]
                 if angle == 0.0:
-                    continue  # (the hinges the posing never moves: shoulder and hip rotation, head nod and tilt)
+                    continue  # (hinges at rest: hip rotation always, the others often)
                 c, sn = math.cos(angle), math.sin(angle)
                 # Right-multiplying by a turn about unit axis k mixes the other two columns u, v.
                 u, v = (hinges[h, 1] + 1) % 3, (hinges[h, 1] + 2) % 3
@@ -592,9 +589,11 @@ def measure(scenario, seed: int | None = None, minutes: float = 10.0, rate_hz: f
     Returns a flat dict: the minimum pelvis-pelvis and pelvis-shelf distances (hip midpoints of the
     keypoints), the mean horizontal speed of ankles in stance (ankle within 1 cm of its standing
     height, over consecutive samples), the share of person-time walking, standing, browsing and paying,
-    arrivals and departures, walking speeds (percentiles and a histogram, sampled once per second), and
-    the simulation speed at 10 Hz and 100 Hz (`simulation_speed`, 60 s each).
+    arrivals and departures, walking speeds (percentiles and a histogram, sampled once per second), the speeds
+    of wrists, ankles and hips of standing and walking people over one 25 fps frame and over one second
+    (`sim.limb_speeds`), and the simulation speed at 10 Hz and 100 Hz (`simulation_speed`, 60 s each).
     """
+    from sim.limb_speeds import LimbSpeeds
     from sim.rng import child_rng
     from sim.store import rect_distance
 
@@ -612,8 +611,11 @@ def measure(scenario, seed: int | None = None, minutes: float = 10.0, rate_hz: f
     la, ra = COCO17.index("left_ankle"), COCO17.index("right_ankle")
     lh, rh = COCO17.index("left_hip"), COCO17.index("right_hip")
     per_second = int(round(rate_hz))
+    limbs = LimbSpeeds(rate_hz)
     for k in range(n + 1):
         truth = world.advance(k / rate_hz)
+        doing = world.activities()
+        limbs.add(truth, np.array([doing[p] == Activity.WALK for p in truth.person_ids.tolist()], dtype=bool))
         pelvis = (truth.poses[:, lh, :2] + truth.poses[:, rh, :2]) / 2
         if len(pelvis) > 1:
             dd = np.linalg.norm(pelvis[:, None] - pelvis[None], axis=-1)
@@ -662,6 +664,7 @@ def measure(scenario, seed: int | None = None, minutes: float = 10.0, rate_hz: f
     }
     for lo, hi, h in zip(edges[:-1], edges[1:], hist):
         out[f"walk_speed_share_{lo:.1f}_{hi:.1f}_m_s"] = float(h)
+    out.update(limbs.summary())
     for rate in (10.0, 100.0):
         sp = simulation_speed(scenario, 60.0, rate, seed)
         out[f"realtime_factor_{rate:.0f}hz"] = sp["realtime_factor"]

@@ -18,6 +18,11 @@ from sim.store import StoreGeometry
     (dict(speed_range_m_s=(0.6, 3.0)), "speed_range_m_s"),
     (dict(browse_share=1.5), "browse_share"),
     (dict(stand_s=(5.0, 2.0)), "stand_s"),
+    (dict(pace_range=(1.1, 0.9)), "pace_range"),
+    (dict(pause_s=(1.0, 5.0)), r"pause_s\[1\]: 5.0 must be in \(0, 4\) s"),
+    (dict(handling_hz=(0.0, 1.0)), r"handling_hz\[0\]"),
+    (dict(look_rate_hz=float("nan")), "look_rate_hz"),
+    (dict(hand_motion_scale=-1.0), "hand_motion_scale"),
 ])
 def test_bad_crowd_settings_name_the_field(kwargs, key):
     with pytest.raises(ValueError, match=key):

@@ -278,7 +278,7 @@ def test_person_ids_are_one_array_while_the_same_people_are_present():
     consumer tells two ticks with the same people by identity), and another one when someone does."""
     world = _world("store_layout1", mean_visit_s=4.0, mean_arrival_gap_s=0.5)
     seen = []
-    for k in range(400):
+    for k in range(600):
         truth = world.advance(k / 20.0)
         seen.append((truth.person_ids, truth.person_ids.tolist()))
     changes = 0
