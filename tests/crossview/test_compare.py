@@ -71,7 +71,7 @@ def test_trackers_methods_and_result_files_are_scored_alike(store_recording, sto
     (["=crossview"], "expected LABEL=METHOD[@PRESET] or LABEL=file:PATH"),
 ])
 def test_a_bad_tracker_is_refused_before_any_work(store_recording, tmp_path, capsys, trackers, message):
-    argv = ["--no-progress", "compare", str(store_recording), "--out", str(tmp_path / "out")]
+    argv = ["--no-progress", "compare", str(store_recording), "-o", str(tmp_path / "out")]
     status = main(argv + [f"--tracker={t}" for t in trackers])
     err = capsys.readouterr().err.strip()
     assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1 and message in err, err

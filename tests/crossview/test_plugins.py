@@ -202,7 +202,7 @@ def test_verbose_shows_the_plugins_own_traceback(short_recording, tmp_path):
 def test_the_example_tracks_and_scores_through_the_command_line(short_recording, tmp_path, capsys):
     tracks, score_json = tmp_path / "t.mcap", tmp_path / "s.json"
     assert main(["--no-progress", "track", str(short_recording), "-o", str(tracks), "--method", EXAMPLE]) == 0
-    assert main(["--no-progress", "score", str(short_recording), str(tracks), "--json", str(score_json)]) == 0
+    assert main(["--no-progress", "score", str(short_recording), str(tracks), "-o", str(score_json)]) == 0
     assert recording.open_tracks(tracks).header.method == EXAMPLE
     score = json.loads(score_json.read_text())
     # Four people in an open store, twelve cameras: plain triangulation of stale views still finds them all.

@@ -26,7 +26,7 @@ GRID = ["store_layout1", "--people", "2,3", "--cameras", "6,12", "--seeds", "0,1
 
 
 def _sweep(out, *extra) -> int:
-    return main(["--no-progress", "sweep", *GRID, "--out", str(out), *extra])
+    return main(["--no-progress", "sweep", *GRID, "-o", str(out), *extra])
 
 
 def _sha256(path) -> str:
@@ -106,7 +106,7 @@ def test_a_cell_too_crowded_for_the_floor_fails_alone_and_kept_recordings_verify
     # store_layout1 holds at most a dozen people: the 200-people cell fails with its one-line error.
     out = tmp_path / "kept"
     assert main(["--no-progress", "sweep", "store_layout1", "--people", "2,200", "--duration", "1", "--workers", "1",
-                 "--keep-recordings", "--out", str(out)]) == 0
+                 "--keep-recordings", "-o", str(out)]) == 0
     cells = json.loads((out / "results.json").read_text())["cells"]
     assert cells[0]["status"] == "ok"
     # The one-line error names the scenario file as the user knows it, not where it lies on this machine.
@@ -160,7 +160,7 @@ def _run_bad(capsys, argv):
 ])
 def test_bad_input_is_one_line_exit_2_before_any_cell(tmp_path, capsys, args, named):
     out = tmp_path / "out"
-    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", *args, "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", *args, "-o", str(out)])
     assert named in err
     assert not out.exists()
 
@@ -168,7 +168,7 @@ def test_bad_input_is_one_line_exit_2_before_any_cell(tmp_path, capsys, args, na
 def test_ray_asked_for_but_not_installed_names_the_extra(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)  # what `import ray` meets where it is not installed
     out = tmp_path / "out"
-    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", "--ray", "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", "--ray", "-o", str(out)])
     assert "Ray is not installed" in err and "crossview-testbed[ray]" in err
     assert not out.exists()
 
@@ -177,7 +177,7 @@ def test_a_folder_holding_another_sweep_is_refused(serial, tmp_path, capsys):
     out = tmp_path / "other"
     shutil.copytree(serial, out)
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    err = _run_bad(capsys, ["sweep", "store_layout1", "--people", "2,4", "--duration", "1", "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--people", "2,4", "--duration", "1", "-o", str(out)])
     assert "holds another sweep's results" in err
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
 
@@ -231,7 +231,7 @@ def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, cap
     shutil.copytree(serial, out)
     with caplog.at_level("WARNING", logger="crossview.sweep"):
         assert main(["--no-progress", "sweep", "store_layout1", "--people", "3", "--cameras", "12,6", "--seeds", "1",
-                     "--duration", "1", "--workers", "1", "--out", str(out)]) == 0
+                     "--duration", "1", "--workers", "1", "-o", str(out)]) == 0
     assert "2 of 2 cells already finished" in caplog.text
     rows = json.loads((out / "results.json").read_text())["cells"]
     full = {r["key"]: r for r in json.loads((serial / "results.json").read_text())["cells"]}
@@ -256,7 +256,7 @@ def test_a_folder_holding_a_different_sweep_is_refused(serial, tmp_path, capsys,
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     if "--duration" not in args:
         args = [*args, "--duration", "1"]
-    err = _run_bad(capsys, ["sweep", *args, "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", *args, "-o", str(out)])
     assert "holds another sweep's results" in err and named in err
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
 
@@ -265,7 +265,7 @@ def test_a_kept_sweep_of_a_scenario_with_a_relative_calibration_verifies_from_an
     # panoptic_dome names its calibration relative to its own file: the manifest carries the file itself.
     out = tmp_path / "dome"
     assert main(["--no-progress", "sweep", "panoptic_dome", "--people", "1", "--duration", "0.2", "--workers", "1",
-                 "--keep-recordings", "--out", str(out)]) == 0
+                 "--keep-recordings", "-o", str(out)]) == 0
     assert json.loads((out / "results.json").read_text())["cells"][0]["status"] == "ok"
     text = (out / "manifest.json").read_text()
     assert str(SCENARIOS) not in text and str(tmp_path) not in text
@@ -286,7 +286,7 @@ def test_a_kept_sweep_of_a_scenario_with_a_relative_calibration_verifies_from_an
 
 def _command(out, duration_s: str) -> list[str]:
     return [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
-            "--seeds", "0,1", "--duration", duration_s, "--workers", "2", "--out", str(out)]
+            "--seeds", "0,1", "--duration", duration_s, "--workers", "2", "-o", str(out)]
 
 
 @pytest.mark.parametrize("ending", ["SIGTERM to the sweep", "Ctrl-C to its process group"])
