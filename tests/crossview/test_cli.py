@@ -91,6 +91,11 @@ def test_scenarios_show_prints_a_file_that_loads_and_reference_is_the_docs(tmp_p
     assert main(["scenarios", "--show", "store_layout2"]) == 0
     (tmp_path / "mine.toml").write_text(capsys.readouterr().out)
     assert scenario.load(tmp_path / "mine.toml").store == scenario.load("store_layout2").store
+    # An explicit name is kept, so the printed file saved under another name is still that scenario.
+    (tmp_path / "named.toml").write_text('name = "pharmacy"\n[crowd]\npeople = 2\n')
+    assert main(["scenarios", "--show", str(tmp_path / "named.toml")]) == 0
+    (tmp_path / "copy.toml").write_text(capsys.readouterr().out)
+    assert scenario.load(tmp_path / "copy.toml").name == "pharmacy"
     assert main(["scenarios", "--reference"]) == 0
     assert capsys.readouterr().out == scenario.reference_markdown()
     err = _run_bad(capsys, ["scenarios", "--show", "nowhere"])
