@@ -23,6 +23,7 @@ import os
 import random
 import resource
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -55,6 +56,11 @@ SWEEP_FORMAT = 1
 # Environment of Ray workers on a cluster (local workers inherit the driver's, which the CLI sets): one BLAS
 # thread per process, and no MuJoCo rendering back-end to look for.
 RAY_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
+
+# Ray's authentication mode (its environment variable) for a local instance the sweep starts: token, Ray's own
+# default for a new local instance (`connect_ray`).
+RAY_AUTH_MODE_ENV = "RAY_AUTH_MODE"
+RAY_LOCAL_AUTH_MODE = "token"
 
 # Modules a pool's fork server imports once, so that each worker it forks starts with them loaded.
 _PRELOAD = ["crossview.sweep", "crossview.recording", "crossview.scoring", "sim.simulate", "tracker.tracker"]
@@ -557,6 +563,11 @@ def connect_ray(address: str | None) -> bool:
     Raises:
         CrossviewError: Ray is not installed, or the address cannot be reached.
     """
+    if not address and not os.environ.get("RAY_ADDRESS") and "ray" not in sys.modules:
+        # The local instance this starts keeps Ray's default, token authentication, said explicitly: Ray warns
+        # on every start where the mode is left unset (and only there). Ray reads the mode when it is first
+        # imported, so only before that. A mode the user set is kept; a cluster joined decides its own.
+        os.environ.setdefault(RAY_AUTH_MODE_ENV, RAY_LOCAL_AUTH_MODE)
     try:
         import ray
     except ImportError:
@@ -764,17 +775,19 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
     cells = plan(spec, keep_recordings=keep_recordings, worker_process=in_process and processes.can_fork_worker())
     wanted = definition(spec, cells)
     check_output(out, wanted)
-    disconnect = connect_ray(ray_address) if executor is Executor.RAY else False
+    stored: dict[str, dict] = {}
+    for cell in cells:
+        found = _finished(out, cell, keep_recordings)
+        if found is not None:
+            stored[cell.key] = found
+    pending = [c for c in cells if c.key not in stored]
+    if stored:  # (a resume, as asked: progress, not a problem)
+        log.info("%d of %d cells already finished in %s: skipped", len(stored), len(cells), out)
+    # Nothing to run starts nothing: no Ray, no pool. (Ray is joined before anything is written: a bad
+    # address leaves no folder.)
+    disconnect = connect_ray(ray_address) if executor is Executor.RAY and pending else False
     try:
         pipeline.write_json(wanted, out / "sweep.json")  # (checks that the folder can be written)
-        stored: dict[str, dict] = {}
-        for cell in cells:
-            found = _finished(out, cell, keep_recordings)
-            if found is not None:
-                stored[cell.key] = found
-        pending = [c for c in cells if c.key not in stored]
-        if stored:
-            log.warning("%d of %d cells already finished in %s: skipped", len(stored), len(cells), out)
         with tqdm(total=len(cells), initial=len(stored), unit="cell", desc="sweep", disable=not progress) as bar:
             def started(cell: Cell) -> None:
                 bar.set_postfix_str(cell.label)
@@ -782,7 +795,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
             runner = {Executor.SERIAL: lambda: _serial(pending, started),
                       Executor.POOL: lambda: _pool(pending, workers),
                       Executor.RAY: lambda: _ray(pending)}[executor]
-            with runner() as outcomes:
+            with runner() if pending else contextlib.nullcontext(iter(())) as outcomes:
                 for cell, outcome in outcomes:
                     stored[cell.key] = _record(out, cell, outcome)
                     if outcome["status"] != "ok":

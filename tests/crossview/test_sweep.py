@@ -18,6 +18,7 @@ import pytest
 import scenarios
 from crossview import sweep, sweep_report
 from crossview.cli import EXIT_BAD_INPUT, main
+from sim import scenario as scenario_mod
 
 SCENARIOS = Path(scenarios.__file__).parent
 
@@ -95,11 +96,37 @@ def test_a_rerun_skips_finished_cells_and_gives_the_same_results(serial, tmp_pat
         lost.unlink()
     for written in ("results.json", "results.csv", "timings.json", "report.md"):
         (out / written).unlink()
-    # The rerun runs only the three missing cells.
-    with caplog.at_level("WARNING", logger="crossview.sweep"):
+    # The rerun runs only the three missing cells, and says so as progress (INFO), not as a problem.
+    with caplog.at_level("INFO", logger="crossview.sweep"):
         assert _sweep(out, "--workers", "1") == 0
+    resumed = [r for r in caplog.records if "cells already finished" in r.getMessage()]
+    assert [r.levelname for r in resumed] == ["INFO"]
     assert f"5 of {len(cells)} cells already finished" in caplog.text
     assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_rerun_with_nothing_left_starts_nothing(serial, tmp_path, capsys):
+    # Every cell finished: Ray is not started nor joined (the address, where nothing listens, would be refused
+    # in one line if it were tried), and the results are written again from the cells' files.
+    out = tmp_path / "done"
+    shutil.copytree(serial, out)
+    (out / "results.json").unlink()
+    assert _sweep(out, "--ray", "127.0.0.1:1") == 0
+    assert "8 already finished (skipped), 0 run" in capsys.readouterr().out
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_method_label_names_the_method_in_the_results(tmp_path, capsys):
+    out = tmp_path / "labelled"
+    assert main(["--no-progress", "sweep", "store_layout1", "--people", "2", "--duration", "1", "--workers", "1",
+                 "--method", "mine=crossview", "-o", str(out)]) == 0
+    cells = json.loads((out / "results.json").read_text())["cells"]
+    assert [c["method"] for c in cells] == ["mine"] and cells[0]["status"] == "ok"
+    assert cells[0]["seed"] == scenario_mod.load("store_layout1").seed  # no --seeds: the scenario's
+    # One label for two methods is refused before any cell runs.
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--method", "a=crossview,a=baseline", "-o", str(tmp_path / "x")])
+    assert "--method: the label 'a' is given twice" in err
+    assert not (tmp_path / "x").exists()
 
 
 def test_a_cell_too_crowded_for_the_floor_fails_alone_and_kept_recordings_verify(tmp_path, capsys):
@@ -339,3 +366,17 @@ def test_tracker_axes_valid_only_together_are_planned_not_refused():
                                                    r"alpha_3d_m 0.9"):
         sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, seeds=(0,), methods=("crossview",),
                                    presets=("shelf",), duration_s=1.0))
+
+
+def _report_row(people: int, pcp: float, idf1: float = 1.0) -> dict:
+    return {"values": [["crowd.people", people]], "status": "ok", "score": {"pcp": pcp, "idf1": idf1},
+            "method": "crossview", "preset": "store"}
+
+
+def test_a_line_below_the_bar_at_its_first_value_is_not_said_to_break_there():
+    wanted = {"axes": [{"key": "crowd.people", "values": [4, 8, 12]}], "methods": ["crossview"], "presets": ["store"]}
+    breaks_later = [_report_row(4, 0.99), _report_row(8, 0.95), _report_row(12, 0.5)]
+    below_first = [_report_row(4, 0.5), _report_row(8, 0.4), _report_row(12, 0.3)]
+    assert sweep_report.breaking_points(wanted, breaks_later)[0].startswith("all: breaks at crowd.people = 12 (PCP")
+    assert sweep_report.breaking_points(wanted, below_first)[0].startswith(
+        "all: already below the bar at the first value, crowd.people = 4 (PCP 0.500")
