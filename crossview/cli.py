@@ -189,6 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario file or shipped name")
     add_output(p, "the map to write (.png; default: the shares only)", required=False, metavar="MAP.png")
     p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
+    p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
+                   "scenario's)")
 
     p = sub.add_parser("track", help="run a tracker over a recording")
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate or convert")
@@ -439,7 +441,7 @@ def _warn_coverage(scenario) -> None:
 def _cmd_coverage(args) -> None:
     from crossview import coverage, pipeline
 
-    scenario = pipeline.load_scenario(args.scenario, cameras=args.cameras)
+    scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
     if args.output:
         pipeline.check_writable(args.output)
     cov = coverage.coverage(scenario)
