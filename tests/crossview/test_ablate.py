@@ -66,7 +66,7 @@ def test_a_pool_gives_the_same_numbers_and_a_rerun_resumes(tiny, tmp_path, caplo
         # A rerun (an interrupted run's too) finds every finished cell and runs none again.
         before = (other / "results.json").read_bytes()
         (other / "results.json").unlink()
-        with caplog.at_level(logging.WARNING, logger="crossview.sweep"):
+        with caplog.at_level(logging.INFO, logger="crossview.sweep"):  # (a resume is progress: INFO)
             ablate.run(other, ["reconstruction", "affinity"], quick=True, workers=2, progress=False)
     assert "4 of 4 cells already finished" in caplog.text and "1 of 1 cells already finished" in caplog.text
     assert (other / "results.json").read_bytes() == before
