@@ -344,19 +344,19 @@ def check_output(out: Path, quick: bool) -> dict:
     wanted = {"format": ABLATE_FORMAT, "quick": quick, "version": software_version()}
     out = Path(out)
     if out.exists() and not out.is_dir():
-        raise CrossviewError(f"--out {out}: is a file; choose a folder for the ablations")
+        raise CrossviewError(f"--output {out}: is a file; choose a folder for the ablations")
     found = out / "ablate.json"
     if found.is_file():
         try:
             held = json.loads(found.read_text(encoding="utf-8"))
         except (OSError, ValueError, UnicodeDecodeError) as e:
-            raise CrossviewError(f"{found}: unreadable ({e}); choose another --out") from None
+            raise CrossviewError(f"{found}: unreadable ({e}); choose another --output") from None
         for key, value in wanted.items():
             if held.get(key) != value:
-                raise CrossviewError(f"--out {out}: holds ablations with {key} {json.dumps(held.get(key))}, these "
-                                     f"have {json.dumps(value)}; choose another --out or remove that folder")
+                raise CrossviewError(f"--output {out}: holds ablations with {key} {json.dumps(held.get(key))}, these "
+                                     f"have {json.dumps(value)}; choose another --output or remove that folder")
     elif out.is_dir() and any(out.iterdir()):
-        raise CrossviewError(f"--out {out}: is not empty and holds no ablate.json; choose another --out")
+        raise CrossviewError(f"--output {out}: is not empty and holds no ablate.json; choose another --output")
     return wanted
 
 

@@ -188,7 +188,7 @@ def markdown(payload: dict) -> str:
     lines = [
         "# Benchmarks",
         "",
-        "Written by `crossview bench --duration {:g} --json bench.json --markdown docs/benchmarks.md` from one run;"
+        "Written by `crossview bench --duration {:g} -o bench.json --markdown docs/benchmarks.md` from one run;"
         .format(cases[0]["duration_s"]),
         "the only place in the docs with speed figures. Compare figures only within one run: the project's test",
         "machine moves by up to 3x from day to day.",

@@ -1,4 +1,4 @@
-"""The `crossview` command line: generate, track, score, run, info, bench and the dataset tools.
+"""The `crossview` command line: run, generate, track and score a scenario, and the tools around them.
 
 Every command prints a one-line error and exits with status 2 on bad input; only this module prints.
 """
@@ -18,7 +18,7 @@ from core.errors import CrossviewError
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
 _ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
-MAX_MINUTES = 1440.0  # world-stats' simulated minutes: a day, as a scenario's duration_s
+MAX_WORLD_STATS_S = 86400.0  # world-stats' simulated seconds: a day, as a scenario's duration_s
 
 
 class _Ended(BaseException):
@@ -83,11 +83,19 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _minutes(text: str) -> float:
+def _world_stats_s(text: str) -> float:
     value = _positive_float(text)
-    if not value <= MAX_MINUTES:
-        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_MINUTES:g} minutes (a day)")
+    if not value <= MAX_WORLD_STATS_S:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_WORLD_STATS_S:g} s (a day)")
     return value
+
+
+def _minutes_as_s(text: str) -> float:
+    """world-stats' old --minutes, in seconds."""
+    value = _positive_float(text)
+    if not value <= MAX_WORLD_STATS_S / 60:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_WORLD_STATS_S / 60:g} minutes (a day)")
+    return 60.0 * value
 
 
 def _non_negative_int(text: str) -> int:
@@ -107,11 +115,33 @@ def _positive_int(text: str) -> int:
     return value
 
 
+def add_output(p: argparse.ArgumentParser, help: str, *, required: bool = True, default: Path | None = None,
+               old: tuple[str, ...] = (), metavar: str = "PATH") -> None:
+    """Adds `-o/--output`: a command's one main output file or folder, spelt the same on every command.
+
+    Args:
+        p: the command's parser.
+        help: what is written there (and its default, when not required).
+        required: whether the command needs it.
+        default: the path when it is not given.
+        old: the spellings it had before (`--out`, `--json`), still accepted for one version but hidden from
+            --help; one beside -o/--output is refused in one line, exit 2.
+        metavar: the placeholder in --help (PATH, DIR, REC.mcap, ...).
+    """
+    group = p.add_mutually_exclusive_group(required=required)
+    group.add_argument("-o", "--output", type=Path, default=default, metavar=metavar, help=help)
+    for spelling in old:
+        group.add_argument(spelling, dest="output", type=Path, default=argparse.SUPPRESS, metavar=metavar,
+                           help=argparse.SUPPRESS)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="crossview", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
     parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    # The commands in the order a user meets them: a first run, the scenarios, a recording and its cameras'
+    # coverage, tracking and scoring it, looking at it, comparing and sweeping, then the dataset tools.
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
 
     def scenario_options(p):
         p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
@@ -135,8 +165,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", nargs="?", help="scenario file or shipped name (default store_layout1)")
     scenario_options(p)
     tracker_options(p)
-    p.add_argument("--out", type=Path, default=Path("recordings"), help="output folder (default recordings/)")
-    p.add_argument("--json", type=Path, help="score JSON path (default OUT/NAME.score.json)")
+    add_output(p, "folder for NAME.mcap, NAME.tracks.mcap, NAME.score.json (default recordings/)",
+               required=False, default=Path("recordings"), old=("--out",), metavar="DIR")
+    p.add_argument("--json", type=Path, help="score JSON path (default OUTPUT/NAME.score.json)")
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios, print one resolved, or the key reference")
     show = p.add_mutually_exclusive_group()
@@ -146,43 +177,138 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("generate", help="simulate a scenario into a recording")
     p.add_argument("scenario", help="scenario file or shipped name")
-    p.add_argument("-o", "--output", type=Path, required=True, help="recording to write (.mcap)")
+    add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
     scenario_options(p)
     p.add_argument("--images", type=_positive_float, metavar="RATE", help="store RATE rendered JPEG pictures per "
                    "second per camera (at most the frame rate; needs the render extra; docs/rendering.md)")
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend for --images (default: "
                    "$MUJOCO_GL when it names one, else EGL, then OSMesa)")
 
+    p = sub.add_parser("coverage", help="how many cameras see each floor cell: the shares of the walkable floor "
+                       "seen by 1, 2, 3 or more cameras, and a top-down map")
+    p.add_argument("scenario", help="scenario file or shipped name")
+    add_output(p, "the map to write (.png; default: the shares only)", required=False, metavar="MAP.png")
+    p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
+    p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
+                   "scenario's)")
+
     p = sub.add_parser("track", help="run a tracker over a recording")
-    p.add_argument("recording", type=Path)
-    p.add_argument("-o", "--output", type=Path, required=True, help="tracks file to write (.mcap)")
+    p.add_argument("recording", type=Path, help="recording (.mcap) made by generate or convert")
+    add_output(p, "tracks file to write (.mcap)", metavar="TRACKS.mcap")
     tracker_options(p)
 
     p = sub.add_parser("score", help="score a tracks file or a result file against its recording")
-    p.add_argument("recording", type=Path)
+    p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
     p.add_argument("tracks", type=Path, help="tracks file (.mcap), result_3d.json or JSON lines "
                    "(docs/recording-format.md)")
-    p.add_argument("--json", type=Path, help="write the score JSON here")
+    add_output(p, "write the score JSON here (default: print the table only)", required=False, old=("--json",))
 
     p = sub.add_parser("info", help="describe a recording or tracks file")
-    p.add_argument("file", type=Path)
+    p.add_argument("file", type=Path, help="a recording or tracks file (.mcap)")
     p.add_argument("--allow-truncated", action="store_true", help="report the readable prefix of a cut file")
     p.add_argument("--summary-only", action="store_true",
                    help="describe a complete file from its summary alone, without reading every chunk and "
                         "checking its CRC")
 
+    p = sub.add_parser("render", help="pictures of what the cameras saw, with the detections and tracks drawn on")
+    p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--camera", metavar="NAME", help="one camera's view")
+    what.add_argument("--contact-sheet", action="store_true", help="every camera's view in a labelled grid")
+    what.add_argument("--top-down", action="store_true", help="the plan: shelves, each camera's field of view on "
+                      "the floor, true and tracked paths (from --from to --to, or 0 to --time), id switches")
+    p.add_argument("--time", type=float, metavar="T", help="the instant, seconds since the recording's start")
+    p.add_argument("--from", dest="from_s", type=float, metavar="T0", help="start of a clip or a top-down range, s")
+    p.add_argument("--to", dest="to_s", type=float, metavar="T1", help="end of a clip or a top-down range, s")
+    p.add_argument("--tracks", type=Path, help="tracks file of the recording: draw the tracked skeletons")
+    add_output(p, "picture (.png, .jpg) or, with --from/--to, clip (.gif, .mp4)")
+    p.add_argument("--fps", type=_positive_float, default=10.0, help="images per second of a clip (default 10)")
+    p.add_argument("--tile-width", type=_positive_int, default=320, help="width of a contact sheet's tiles, pixels "
+                   "(default 320)")
+    p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend (default: $MUJOCO_GL when it "
+                   "names one, else EGL, then OSMesa)")
+
+    p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
+    p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")
+    p.add_argument("--tracker", action="append", required=True, metavar="LABEL=SPEC",
+                   help="repeat for each tracker; SPEC is a --method (crossview, baseline, pkg.module:Class, a "
+                   "registered name) with an optional @PRESET, or file:PATH of a result file ({recording} in PATH "
+                   "is the recording's name without .mcap)")
+    add_output(p, "folder for compare.md, compare.csv, the charts and tracks", old=("--out",), metavar="DIR")
+
+    p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
+    p.add_argument("scenario", help="base scenario file or shipped name")
+    p.add_argument("--set", dest="axes", action="append", type=_sweep_axis, default=[], metavar="KEY=V1,V2,...",
+                   help="an axis: any scenario key by its dotted name (crowd.people, clock.fps, ...); repeatable, "
+                   "the first is the x of the plots, the second the lines")
+    p.add_argument("--people", dest="axes", action="append", type=lambda t: ("crowd.people", t), metavar="N1,N2",
+                   help="axis of crowd sizes (--set crowd.people=...)")
+    p.add_argument("--cameras", dest="axes", action="append", type=lambda t: ("cameras", t), metavar="N1,N2",
+                   help="axis of camera counts, each a grid fitted to the floor")
+    p.add_argument("--seeds", help="comma-separated seeds (default: the scenario's seed)")
+    p.add_argument("--method", default="crossview", metavar="[LABEL=]METHOD,...",
+                   help="comma-separated tracker methods, each a --method of track (a plug-in as pkg.module:Class), "
+                   "optionally LABEL=METHOD to name it in the results (default crossview)")
+    p.add_argument("--preset", default="store", help="comma-separated tracker presets (default store)")
+    p.add_argument("--duration", type=_positive_float, help="simulated seconds per cell (default: the scenario's)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int, help="local worker processes (default: the cores; 1 runs "
+                       "the cells one after another in this process)")
+    where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS", help="run the cells as Ray tasks: alone, "
+                       "on a local instance; with ADDRESS, on that cluster (pip install '.[ray]')")
+    add_output(p, "output folder (a rerun into it resumes)", old=("--out",), metavar="DIR")
+    p.add_argument("--keep-recordings", action="store_true", help="keep each cell's recording and write "
+                   "manifest.json (for crossview verify)")
+
+    p = sub.add_parser("verify", help="regenerate a kept sweep's recordings and check their bytes")
+    p.add_argument("folder", type=Path, help="a sweep folder with manifest.json (sweep --keep-recordings)")
+    p.add_argument("--cells", type=_positive_int, help="check a fixed sample of this many (default: all)")
+
+    p = sub.add_parser("ablate", help="the paper's ablations (Tables S1, 4, 5, Figures 5, 6) into one report")
+    p.add_argument("experiments", nargs="*", metavar="EXPERIMENT",
+                   help="affinity, reconstruction, frame-rate, speed, single-view (default: all)")
+    p.add_argument("--quick", action="store_true", help="one seed, short runs, fewer points (about 2 minutes)")
+    p.add_argument("--workers", type=_positive_int, help="local worker processes of the sweeps (default: the "
+                   "cores; 1 runs them in this process)")
+    add_output(p, "output folder (a rerun into it resumes)", old=("--out",), metavar="DIR")
+
+    p = sub.add_parser("export", help="write tracks or a whole recording in the paper's dataset layout")
+    p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl) or recording (dataset, openpose)")
+    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "jsonl", "dataset", "openpose"),
+                   help="crossview-json: tracks as result_3d.json (default); jsonl: tracks as JSON lines; dataset: "
+                   "a recording as a folder of calibration.json, detection.json, annotation_2d.json, "
+                   "annotation_3d.json, scene.json; openpose: the same with OpenPose JSON folders for detection.json")
+    add_output(p, "the file, or a new folder (dataset, openpose)")
+
+    p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
+    p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
+                   "one folder of OpenPose *_keypoints.json per camera")
+    add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
+    p.add_argument("--fps", type=_positive_float, help="OpenPose folders: frame rate for the stamps that "
+                   "timestamps.json does not give (stamp = frame number / fps)")
+
+    p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
+    p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
+    p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
+
+    p = sub.add_parser("per-camera", help="per-camera MOTA and IDF1: single-view baseline against cross-view "
+                       "(the paper's Table 5)")
+    p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
+    p.add_argument("tracks", type=Path, help="cross-view tracks file made from the recording")
+    add_output(p, "write the table as JSON here (default: print it only)", required=False, old=("--json",))
+
     p = sub.add_parser("detector-stats", help="measure a recording's 2D detections against its projected 3D truth, "
                        "beside real OpenPose on Shelf")
     p.add_argument("recording", type=Path, help="a recording with 3D truth: `crossview generate`, or `crossview "
                    "convert` of a dataset folder with annotation_3d.json")
-    p.add_argument("--json", "-o", "--output", dest="json", type=Path, metavar="FILE",
-                   help="write the figures as JSON here")
+    add_output(p, "write the figures as JSON here (default: print the table only)", required=False, old=("--json",),
+               metavar="FILE")
 
     p = sub.add_parser("fit-detector", help="fit a detector profile to a recording's detector statistics (or to "
                        "real OpenPose on Shelf), by simulating the rig with candidate profiles")
     p.add_argument("recording", type=Path, nargs="?", help="a recording whose detections to fit (synthetic, or "
                    "converted from a dataset with 3D truth); leave out with --target")
-    p.add_argument("-o", "--output", type=Path, required=True, help="the profile file to write (TOML)")
+    add_output(p, "the profile file to write (TOML)", metavar="PROFILE.toml")
     p.add_argument("--target", choices=["shelf-openpose"], help="fit to a published table instead of a recording: "
                    "real OpenPose on the Shelf dataset")
     p.add_argument("--scenario", help="the rig to simulate (default: the recording's own scenario; with --target: "
@@ -197,111 +323,28 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
-    p.add_argument("--minutes", type=_minutes, default=10.0, help=f"simulated minutes (default 10, at most "
-                   f"{MAX_MINUTES:g})")
-
-    p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
-    p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
-    p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
-
-    p = sub.add_parser("export", help="write tracks or a whole recording in the paper's dataset layout")
-    p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl) or recording (dataset)")
-    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "jsonl", "dataset", "openpose"),
-                   help="crossview-json: tracks as result_3d.json (default); jsonl: tracks as JSON lines; dataset: "
-                   "a recording as a folder of calibration.json, detection.json, annotation_2d.json, "
-                   "annotation_3d.json, scene.json; openpose: the same with OpenPose JSON folders for detection.json")
-    p.add_argument("-o", "--output", type=Path, required=True, help="the file, or a new folder (dataset)")
-
-    p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
-    p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
-                   "one folder of OpenPose *_keypoints.json per camera")
-    p.add_argument("-o", "--output", type=Path, required=True)
-    p.add_argument("--fps", type=_positive_float, help="OpenPose folders: frame rate for the stamps that "
-                   "timestamps.json does not give (stamp = frame number / fps)")
-
-    p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
-    p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")
-    p.add_argument("--tracker", action="append", required=True, metavar="LABEL=SPEC",
-                   help="repeat for each tracker; SPEC is a --method (crossview, baseline, pkg.module:Class, a "
-                   "registered name) with an optional @PRESET, or file:PATH of a result file ({recording} in PATH "
-                   "is the recording's name without .mcap)")
-    p.add_argument("--out", type=Path, required=True, help="folder for compare.md, compare.csv, the charts and tracks")
-
-    p = sub.add_parser("per-camera", help="per-camera MOTA and IDF1: single-view baseline against cross-view "
-                       "(the paper's Table 5)")
-    p.add_argument("recording", type=Path)
-    p.add_argument("tracks", type=Path, help="cross-view tracks file made from the recording")
-    p.add_argument("--json", type=Path, help="write the table as JSON here")
-
-    p = sub.add_parser("render", help="pictures of what the cameras saw, with the detections and tracks drawn on")
-    p.add_argument("recording", type=Path)
-    what = p.add_mutually_exclusive_group(required=True)
-    what.add_argument("--camera", metavar="NAME", help="one camera's view")
-    what.add_argument("--contact-sheet", action="store_true", help="every camera's view in a labelled grid")
-    what.add_argument("--top-down", action="store_true", help="the plan: shelves, each camera's field of view on "
-                      "the floor, true and tracked paths (from --from to --to, or 0 to --time), id switches")
-    p.add_argument("--time", type=float, metavar="T", help="the instant, seconds since the recording's start")
-    p.add_argument("--from", dest="from_s", type=float, metavar="T0", help="start of a clip or a top-down range, s")
-    p.add_argument("--to", dest="to_s", type=float, metavar="T1", help="end of a clip or a top-down range, s")
-    p.add_argument("--tracks", type=Path, help="tracks file of the recording: draw the tracked skeletons")
-    p.add_argument("-o", "--output", type=Path, required=True,
-                   help="picture (.png, .jpg) or, with --from/--to, clip (.gif, .mp4)")
-    p.add_argument("--fps", type=_positive_float, default=10.0, help="images per second of a clip (default 10)")
-    p.add_argument("--tile-width", type=_positive_int, default=320, help="width of a contact sheet's tiles, pixels "
-                   "(default 320)")
-    p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend (default: $MUJOCO_GL when it "
-                   "names one, else EGL, then OSMesa)")
+    duration = p.add_mutually_exclusive_group()
+    duration.add_argument("--duration", type=_world_stats_s, default=600.0, help="simulated seconds (default 600, "
+                          f"at most {MAX_WORLD_STATS_S:g})")
+    duration.add_argument("--minutes", dest="duration", type=_minutes_as_s, default=argparse.SUPPRESS,
+                          help=argparse.SUPPRESS)  # (the old spelling, for one version)
 
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
-    p.add_argument("--json", type=Path, help="write the figures here")
+    add_output(p, "write the figures as JSON here", required=False, old=("--json",))
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
     p.add_argument("--duration", type=_positive_float, help="simulated seconds per case (default 20; 10 with --scale)")
     p.add_argument("--scale", action="store_true", help="the tracker at crowd scale instead (28/16 to 240/200 "
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
     p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
                    "timed per case (the rest of a slower case's stream is left unscored; default 300)")
-
-    p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
-    p.add_argument("scenario", help="base scenario file or shipped name")
-    p.add_argument("--set", dest="axes", action="append", type=_sweep_axis, default=[], metavar="KEY=V1,V2,...",
-                   help="an axis: any scenario key by its dotted name (crowd.people, clock.fps, ...); repeatable, "
-                   "the first is the x of the plots, the second the lines")
-    p.add_argument("--people", dest="axes", action="append", type=lambda t: ("crowd.people", t), metavar="N1,N2",
-                   help="axis of crowd sizes (--set crowd.people=...)")
-    p.add_argument("--cameras", dest="axes", action="append", type=lambda t: ("cameras", t), metavar="N1,N2",
-                   help="axis of camera counts, each a grid fitted to the floor")
-    p.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
-    p.add_argument("--method", default="crossview", help="comma-separated tracker methods (default crossview)")
-    p.add_argument("--preset", default="store", help="comma-separated tracker presets (default store)")
-    p.add_argument("--duration", type=_positive_float, help="simulated seconds per cell (default: the scenario's)")
-    where = p.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=_positive_int, help="local worker processes (default: the cores; 1 runs "
-                       "the cells one after another in this process)")
-    where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS", help="run the cells as Ray tasks: alone, "
-                       "on a local instance; with ADDRESS, on that cluster (pip install '.[ray]')")
-    p.add_argument("--out", type=Path, required=True, help="output folder (a rerun into it resumes)")
-    p.add_argument("--keep-recordings", action="store_true", help="keep each cell's recording and write "
-                   "manifest.json (for crossview verify)")
-
-    p = sub.add_parser("ablate", help="the paper's ablations (Tables S1, 4, 5, Figures 5, 6) into one report")
-    p.add_argument("experiments", nargs="*", metavar="EXPERIMENT",
-                   help="affinity, reconstruction, frame-rate, speed, single-view (default: all)")
-    p.add_argument("--quick", action="store_true", help="one seed, short runs, fewer points (about 2 minutes)")
-    p.add_argument("--workers", type=_positive_int, help="local worker processes of the sweeps (default: the "
-                   "cores; 1 runs them in this process)")
-    p.add_argument("--out", type=Path, required=True, help="output folder (a rerun into it resumes)")
-
-    p = sub.add_parser("verify", help="regenerate a kept sweep's recordings and check their bytes")
-    p.add_argument("folder", type=Path, help="a sweep folder with manifest.json (sweep --keep-recordings)")
-    p.add_argument("--cells", type=_positive_int, help="check a fixed sample of this many (default: all)")
     return parser
 
 
 def _cmd_ablate(args) -> None:
     from crossview import ablate
 
-    command = " ".join(["crossview ablate", *args.experiments, *(["--quick"] if args.quick else []), "--out DIR"])
-    summary = ablate.run(args.out, args.experiments, quick=args.quick, workers=args.workers,
+    command = " ".join(["crossview ablate", *args.experiments, *(["--quick"] if args.quick else []), "-o DIR"])
+    summary = ablate.run(args.output, args.experiments, quick=args.quick, workers=args.workers,
                          progress=not args.no_progress, command=command)
     print(f"ablate: {len(summary.experiments)} experiments in {summary.wall_s / 60:.1f} min; report: {summary.report}")
 
@@ -314,7 +357,7 @@ def _sweep_axis(text: str) -> tuple[str, str]:
 
 
 def _cmd_sweep(args) -> None:
-    from crossview import plugins, sweep
+    from crossview import pipeline, plugins, sweep
     from tracker.config import PRESETS
 
     axes = tuple(sweep.parse_axis(key, text) for key, text in args.axes)
@@ -325,10 +368,15 @@ def _cmd_sweep(args) -> None:
     if args.duration is not None and "duration_s" in keys:
         raise CrossviewError("--duration: duration_s is also an axis (--set duration_s=...); give one")
     methods = sweep.parse_names("--method", args.method)
+    labels = [sweep.split_method(m)[0] for m in methods]
+    repeated = next((label for label in labels if labels.count(label) > 1), None)
+    if repeated:
+        raise CrossviewError(f"--method: the label {repeated!r} is given twice; give each method its own")
     for method in methods:  # each a tracker `crossview track` can run (a bad one is named before any cell runs)
-        plugins.resolve(method)
+        plugins.resolve(sweep.split_method(method)[1])
+    seeds = sweep.parse_seeds(args.seeds) if args.seeds is not None else (pipeline.load_scenario(args.scenario).seed,)
     spec = sweep.SweepSpec(
-        scenario=args.scenario, axes=axes, seeds=sweep.parse_seeds(args.seeds),
+        scenario=args.scenario, axes=axes, seeds=seeds,
         methods=methods,
         presets=sweep.parse_names("--preset", args.preset, PRESETS), duration_s=args.duration,
     )
@@ -336,7 +384,7 @@ def _cmd_sweep(args) -> None:
         executor = sweep.Executor.RAY
     else:
         executor = sweep.Executor.SERIAL if args.workers == 1 else sweep.Executor.POOL
-    summary = sweep.run_sweep(spec, args.out, executor=executor, workers=args.workers, ray_address=args.ray or None,
+    summary = sweep.run_sweep(spec, args.output, executor=executor, workers=args.workers, ray_address=args.ray or None,
                               keep_recordings=args.keep_recordings, progress=not args.no_progress)
     print(f"sweep: {summary.cells} cells, {summary.skipped} already finished (skipped), {summary.ran} run, "
           f"{summary.failed} failed, in {summary.wall_s:.1f} s")
@@ -363,7 +411,7 @@ def _cmd_run(args) -> None:
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
-    out = args.out
+    out = args.output
     rec_path = out / f"{scenario.name}.mcap"
     tracks_path = out / f"{scenario.name}.tracks.mcap"
     json_path = args.json or out / f"{scenario.name}.score.json"
@@ -371,6 +419,7 @@ def _cmd_run(args) -> None:
     pipeline.check_writable(tracks_path, inputs=(rec_path,))
     pipeline.check_writable(json_path, inputs=(rec_path, tracks_path))
     pipeline.tracker_config(args.preset, args.config)  # (a bad tracker config is found before generating)
+    _warn_coverage(scenario)
     progress = not args.no_progress
     gen = pipeline.generate(scenario, rec_path, progress=progress)
     print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
@@ -400,12 +449,37 @@ def _cmd_scenarios(args) -> None:
         print(f"(in {scenario_mod.SCENARIO_DIR}; `crossview scenarios --show NAME` prints one in full)")
 
 
+def _warn_coverage(scenario) -> None:
+    """One line on stderr when the rig sees too little of the floor with two cameras (`crossview.coverage`)."""
+    from crossview.coverage import coverage
+
+    warning = coverage(scenario).warning()
+    if warning:
+        print(warning, file=sys.stderr)
+
+
+def _cmd_coverage(args) -> None:
+    from crossview import coverage, pipeline
+
+    scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
+    if args.output:
+        pipeline.check_writable(args.output)
+    cov = coverage.coverage(scenario)
+    print("\n".join(cov.lines()))
+    if args.output:
+        print(f"map: {coverage.write_map(cov, args.output)}")
+    warning = cov.warning()
+    if warning:
+        print(warning, file=sys.stderr)
+
+
 def _cmd_generate(args) -> None:
     from crossview import pipeline
 
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
+    _warn_coverage(scenario)
     gen = pipeline.generate(scenario, args.output, progress=not args.no_progress, images_per_s=args.images,
                             gl=args.gl)
     print(f"{gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
@@ -434,12 +508,12 @@ def _cmd_track(args) -> None:
 def _cmd_score(args) -> None:
     from crossview import pipeline
 
-    if args.json:
-        pipeline.check_writable(args.json, inputs=(args.recording, args.tracks))
+    if args.output:
+        pipeline.check_writable(args.output, inputs=(args.recording, args.tracks))
     report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress)
     print(report.table())
-    if args.json:
-        pipeline.write_json(result, args.json, inputs=(args.recording, args.tracks))
+    if args.output:
+        pipeline.write_json(result, args.output, inputs=(args.recording, args.tracks))
 
 
 def _cmd_info(args) -> None:
@@ -453,12 +527,12 @@ def _cmd_detector_stats(args) -> None:
     from crossview import pipeline
     from crossview.detector_stats import format_detector_stats, recording_detector_stats
 
-    if args.json:
-        pipeline.check_writable(args.json, inputs=(args.recording,))
+    if args.output:
+        pipeline.check_writable(args.output, inputs=(args.recording,))
     stats = recording_detector_stats(args.recording)
     print(format_detector_stats(stats))
-    if args.json:
-        pipeline.write_json(stats, args.json, inputs=(args.recording,))
+    if args.output:
+        pipeline.write_json(stats, args.output, inputs=(args.recording,))
 
 
 def _cmd_fit_detector(args) -> None:
@@ -514,7 +588,7 @@ def _cmd_world_stats(args) -> None:
     from sim.world import measure
 
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed)
-    print(json.dumps(measure(scenario, minutes=args.minutes), indent=1))
+    print(json.dumps(measure(scenario, duration_s=args.duration), indent=1))
 
 
 def _cmd_evaluate(args) -> None:
@@ -557,14 +631,14 @@ def _cmd_per_camera(args) -> None:
     from crossview import pipeline
     from crossview.table5 import paper_means_line, per_camera_table
 
-    if args.json:
-        pipeline.check_writable(args.json, inputs=(args.recording, args.tracks))
+    if args.output:
+        pipeline.check_writable(args.output, inputs=(args.recording, args.tracks))
     table = per_camera_table(args.recording, args.tracks)
     print(table.markdown())
     print()
     print(paper_means_line())
-    if args.json:
-        pipeline.write_json(table.to_json(), args.json)
+    if args.output:
+        pipeline.write_json(table.to_json(), args.output)
 
 
 def _cmd_compare(args) -> None:
@@ -573,9 +647,9 @@ def _cmd_compare(args) -> None:
     contenders = [compare.Contender.parse(text) for text in args.tracker]
     compare.check(contenders, args.recordings)
     for name in ("compare.md", "compare.csv"):
-        pipeline.check_writable(args.out / name, inputs=tuple(args.recordings))
-    rows = compare.compare_rows(contenders, args.recordings, args.out / "tracks", progress=not args.no_progress)
-    written = compare.write_report(rows, args.out)
+        pipeline.check_writable(args.output / name, inputs=tuple(args.recordings))
+    rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks", progress=not args.no_progress)
+    written = compare.write_report(rows, args.output)
     print(compare.markdown(rows), end="")
     print(f"written: {', '.join(str(p) for p in written)}")
 
@@ -584,12 +658,12 @@ def _cmd_bench(args) -> None:
     if args.scale:
         from crossview import bench_scale
 
-        bench_scale.main(json_path=args.json, duration_s=args.duration or 10.0, progress=not args.no_progress,
+        bench_scale.main(json_path=args.output, duration_s=args.duration or 10.0, progress=not args.no_progress,
                          markdown_path=args.markdown, budget_s=args.budget)
         return
     from crossview import bench
 
-    bench.main(json_path=args.json, duration_s=args.duration or 20.0, progress=not args.no_progress,
+    bench.main(json_path=args.output, duration_s=args.duration or 20.0, progress=not args.no_progress,
                markdown_path=args.markdown)
 
 
@@ -610,6 +684,7 @@ def _cmd_render(args) -> None:
 COMMANDS = {
     "run": _cmd_run,
     "generate": _cmd_generate,
+    "coverage": _cmd_coverage,
     "track": _cmd_track,
     "score": _cmd_score,
     "info": _cmd_info,

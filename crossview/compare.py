@@ -160,8 +160,10 @@ def best_values(rows: Sequence[dict]) -> dict[tuple[str, str], float]:
 
 
 def _is_best(row: dict, metric: Metric, best: dict) -> bool:
-    value = row.get(metric.key)
-    return value is not None and best.get((row["recording"], metric.key)) == value
+    """Whether the row's value reads as the best of its recording: a tie as printed (0.98612 and 0.98608 are
+    both 0.986) is marked for every tracker in it."""
+    value, top = row.get(metric.key), best.get((row["recording"], metric.key))
+    return value is not None and top is not None and metric.fmt.format(value) == metric.fmt.format(top)
 
 
 def markdown(rows: Sequence[dict]) -> str:

@@ -27,6 +27,9 @@ _MARGIN_PX = 30
 _FOV_ALPHA = 0.06
 _FOV_BGR = (200, 140, 60)
 _LEGEND_PX = 40
+# BGR colour of a floor cell seen by 0, 1, 2, 3 or more cameras (`draw_layout(seen_by=...)`): red where
+# nobody can be tracked, amber where one view cannot triangulate, greens where two or more can.
+_SEEN_BY_BGR = ((120, 120, 235), (110, 200, 250), (170, 225, 170), (100, 180, 90))
 
 
 # BGR colour of a false positive detection (no true person behind it).
@@ -49,6 +52,7 @@ def draw_layout(
     fields_of_view: bool = False,
     tracked: dict[int, np.ndarray] | None = None,
     switches: list[tuple[float, int, int, float, float]] | None = None,
+    seen_by: tuple[np.ndarray, np.ndarray, float] | None = None,
 ) -> np.ndarray:
     """Draws a store seen from above (x to the right, y up).
 
@@ -61,6 +65,8 @@ def draw_layout(
         fields_of_view: shade where each camera's image meets the floor (darker where more cameras see).
         tracked: target id -> (N, 2) tracked body roots over time, metres (dotted, in the id's colour, labelled).
         switches: identity switches (time s, person id, new target id, x m, y m): a red ring, labelled.
+        seen_by: (cells (N, 2) centres in metres, counts (N,), cell side in metres): paint each cell by how many
+            cameras see it (0, 1, 2, 3 or more; `crossview.coverage`), with a legend.
 
     Returns:
         (H, W, 3) uint8 BGR image.
@@ -91,6 +97,8 @@ def draw_layout(
     for kind in (BoxKind.FLOOR, BoxKind.ENTRANCE, BoxKind.EXIT, None, BoxKind.WALL, BoxKind.SHELF, BoxKind.CHECKOUT):
         if kind is None and fields_of_view:
             image = _tint_fields_of_view(image, cameras or [], px, footprint(floor))
+        if kind is None and seen_by is not None:
+            _paint_seen_by(image, px, *seen_by)
         for box in boxes:
             if box.kind == kind:
                 cv2.fillPoly(image, [px(footprint(box))], _BOX_BGR[kind], lineType=cv2.LINE_AA)
@@ -140,7 +148,22 @@ def draw_layout(
     cv2.line(image, tuple(int(v) for v in bar[0]), tuple(int(v) for v in bar[1]), (0, 0, 0), 2)
     cv2.putText(image, "1 m", (int(bar[1, 0]) + 4, int(bar[1, 1]) + 4), cv2.FONT_HERSHEY_SIMPLEX, 0.35,
                 (0, 0, 0), 1, lineType=cv2.LINE_AA)
+    if seen_by is not None:
+        for n, colour in enumerate(_SEEN_BY_BGR):  # the legend, right of the scale bar
+            u = int(bar[1, 0]) + 40 + 52 * n
+            cv2.rectangle(image, (u, int(bar[1, 1]) - 6), (u + 10, int(bar[1, 1]) + 4), colour, -1)
+            cv2.putText(image, f"{n}{'+' if n == len(_SEEN_BY_BGR) - 1 else ''}", (u + 14, int(bar[1, 1]) + 4),
+                        cv2.FONT_HERSHEY_SIMPLEX, 0.35, (0, 0, 0), 1, lineType=cv2.LINE_AA)
     return image
+
+
+def _paint_seen_by(image: np.ndarray, px, cells_xy: np.ndarray, counts: np.ndarray, cell_m: float) -> None:
+    """Fills each cell's square with the colour of its camera count (`_SEEN_BY_BGR`), in place."""
+    half = cell_m / 2
+    for xy, count in zip(np.asarray(cells_xy, float), np.asarray(counts)):
+        corners = px(np.array([xy - half, xy + half]))
+        colour = _SEEN_BY_BGR[min(int(count), len(_SEEN_BY_BGR) - 1)]
+        cv2.rectangle(image, tuple(int(v) for v in corners[0]), tuple(int(v) for v in corners[1]), colour, -1)
 
 
 def _tint_fields_of_view(image: np.ndarray, cameras: list[Camera], px, floor_xy: np.ndarray) -> np.ndarray:
@@ -283,12 +306,21 @@ def write_layout_pictures(out_dir: str | Path, names: tuple[str, ...] = ("store_
     written = []
     for name in names:
         scenario = sc.load(name)
-        scale = 60.0 if scenario.store.width_m <= 6 else 40.0 if scenario.store.width_m <= 10 else 30.0
-        image = layout_picture(scenario, seconds, px_per_m=scale)
-        path = out / f"{name}.png"
-        encoded, png = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
-        if not encoded:
-            raise OSError(f"{path}: cannot encode PNG")
-        write_bytes(png.tobytes(), path)
-        written.append(path)
+        image = layout_picture(scenario, seconds, px_per_m=layout_scale(scenario.store.width_m))
+        written.append(write_png(image, out / f"{name}.png"))
     return written
+
+
+def layout_scale(width_m: float) -> float:
+    """Pixels per metre of a store's top-down picture: larger for a small store (docs/layouts)."""
+    return 60.0 if width_m <= 6 else 40.0 if width_m <= 10 else 30.0
+
+
+def write_png(image: np.ndarray, path: str | Path) -> Path:
+    """Writes a (H, W, 3) BGR picture as PNG, atomically; returns the path."""
+    path = Path(path)
+    encoded, png = cv2.imencode(".png", image, [cv2.IMWRITE_PNG_COMPRESSION, 9])
+    if not encoded:
+        raise OSError(f"{path}: cannot encode PNG")
+    write_bytes(png.tobytes(), path)
+    return path

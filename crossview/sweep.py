@@ -23,6 +23,7 @@ import os
 import random
 import resource
 import socket
+import sys
 import tempfile
 import threading
 import time
@@ -55,6 +56,11 @@ SWEEP_FORMAT = 1
 # Environment of Ray workers on a cluster (local workers inherit the driver's, which the CLI sets): one BLAS
 # thread per process, and no MuJoCo rendering back-end to look for.
 RAY_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
+
+# Ray's authentication mode (its environment variable) for a local instance the sweep starts: token, Ray's own
+# default for a new local instance (`connect_ray`).
+RAY_AUTH_MODE_ENV = "RAY_AUTH_MODE"
+RAY_LOCAL_AUTH_MODE = "token"
 
 # Modules a pool's fork server imports once, so that each worker it forks starts with them loaded.
 _PRELOAD = ["crossview.sweep", "crossview.recording", "crossview.scoring", "sim.simulate", "tracker.tracker"]
@@ -90,7 +96,8 @@ class SweepSpec:
         scenario: the base scenario (a file or a shipped name).
         axes: the axes in the order given; the first is the x of the plots, the second the lines.
         seeds: seeds of the scenario's random generator.
-        methods: tracker methods, each a `--method` of `crossview track` (built in, registered or a plug-in).
+        methods: tracker methods, each a `--method` of `crossview track` (built in, registered or a plug-in),
+            or `LABEL=METHOD` to name it LABEL in the results and the report (`split_method`).
         presets: tracker presets (`tracker.config.PRESETS`).
         duration_s: simulated seconds per cell; None keeps the scenario's.
     """
@@ -112,7 +119,7 @@ class Cell:
         key: sha256 (hex, 16 digits) of the resolved scenario, seed, method, preset and package version.
         label: the cell in words, for the progress bar and the logs.
         values: (axis key, value) pairs.
-        seed, method, preset: the rest of the cell.
+        seed, method, preset: the rest of the cell (`method` is what runs: `LABEL=` taken off).
         scenario_name: the base scenario's name (its file's stem).
         scenario_text: the base scenario file's text (shipped, so that a worker on another machine needs no
             copy of the file).
@@ -122,6 +129,7 @@ class Cell:
             the camera grid's rows and columns).
         version: the package version the cell was planned with (workers must have the same).
         tracker_overrides: fields of the tracker's configuration set over its preset (the `tracker.*` axes).
+        method_label: the LABEL of `--method LABEL=METHOD`, the method's name in the results and the report.
         error: why the cell's scenario is invalid (a failed cell that needs no worker); None if it is valid.
         keep_recording: return the recording's bytes.
         worker_process: simulate, and compute the per-camera 2D scores, in a second process
@@ -145,6 +153,7 @@ class Cell:
     keep_recording: bool = False
     worker_process: bool = False
     tracker_overrides: dict = field(default_factory=dict)
+    method_label: str | None = None  # the method's name in the results (`--method LABEL=METHOD`); None: `method`
 
     def load_scenario(self, folder: Path) -> scenario_mod.Scenario:
         """The cell's resolved scenario, loaded from a copy of its file and the files it refers to in `folder`
@@ -296,6 +305,17 @@ def parse_seeds(text: str) -> tuple[int, ...]:
     return seeds
 
 
+def split_method(text: str) -> tuple[str, str]:
+    """(label, method) of a sweep's method: `LABEL=METHOD` names METHOD (say a plug-in's long
+    `pkg.module:Class`) LABEL in the results; a method alone is its own label."""
+    label, sep, method = text.partition("=")
+    if not sep:
+        return text, text
+    if not label.strip() or not method.strip():
+        raise CrossviewError(f"--method: {text!r} is not LABEL=METHOD (for example greedy=pkg.module:Class)")
+    return label.strip(), method.strip()
+
+
 def parse_names(option: str, text: str, valid=None) -> tuple[str, ...]:
     """A comma-separated list of names, each one of `valid` (when given)."""
     names = tuple(part.strip() for part in text.split(","))
@@ -348,7 +368,8 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
     cells = []
     grid = itertools.product(*(a.values for a in spec.axes), spec.seeds, spec.methods, spec.presets)
     for index, combo in enumerate(grid):
-        *axis_values, seed, method, preset = combo
+        *axis_values, seed, method_text, preset = combo
+        label, method = split_method(method_text)
         values = tuple((a.key, v) for a, v in zip(spec.axes, axis_values))
         tracker = {k[len(TRACKER_PREFIX):]: v for k, v in values if k.startswith(TRACKER_PREFIX)}
         overrides = {k: v for k, v in values if k != CAMERAS_AXIS and not k.startswith(TRACKER_PREFIX)}
@@ -373,12 +394,14 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
             except CrossviewError as e:
                 error = portable(_one_line(e), folder)
         # (A cell without tracker axes keeps the key it had before they existed: finished cells stay found.)
-        identity_parts = (identity, seed, method, preset, version) + ((tracker,) if tracker else ())
+        # (The method as given, label included: a method without a label keeps its key.)
+        identity_parts = (identity, seed, method_text, preset, version) + ((tracker,) if tracker else ())
         cells.append(Cell(
-            index=index, key=_key(*identity_parts), label=_label(values, seed, method, preset),
+            index=index, key=_key(*identity_parts), label=_label(values, seed, label, preset),
             values=values, seed=seed, method=method, preset=preset, scenario_name=base.name, scenario_text=text,
             files=files, overrides=resolved, version=version, error=error, keep_recording=keep_recordings,
             worker_process=worker_process, tracker_overrides=tracker,
+            method_label=label if label != method else None,
         ))
     return cells
 
@@ -540,6 +563,11 @@ def connect_ray(address: str | None) -> bool:
     Raises:
         CrossviewError: Ray is not installed, or the address cannot be reached.
     """
+    if not address and not os.environ.get("RAY_ADDRESS") and "ray" not in sys.modules:
+        # The local instance this starts keeps Ray's default, token authentication, said explicitly: Ray warns
+        # on every start where the mode is left unset (and only there). Ray reads the mode when it is first
+        # imported, so only before that. A mode the user set is kept; a cluster joined decides its own.
+        os.environ.setdefault(RAY_AUTH_MODE_ENV, RAY_LOCAL_AUTH_MODE)
     try:
         import ray
     except ImportError:
@@ -663,22 +691,22 @@ def check_output(out: Path, wanted: dict) -> None:
     out = Path(out)
     found = out / "sweep.json"
     if out.exists() and not out.is_dir():
-        raise CrossviewError(f"--out {out}: is not a folder; choose a folder for the sweep's results")
+        raise CrossviewError(f"--output {out}: is not a folder; choose a folder for the sweep's results")
     if found.is_file():
         try:
             held = json.loads(found.read_text(encoding="utf-8"))
             held_identity = _identity(held)
         except (OSError, ValueError, UnicodeDecodeError, AttributeError) as e:
-            raise CrossviewError(f"{found}: unreadable ({_one_line(e)}); choose another --out") from None
+            raise CrossviewError(f"{found}: unreadable ({_one_line(e)}); choose another --output") from None
         identity = _identity(wanted)
         differing = [k for k in IDENTITY if held_identity[k] != identity[k]]
         if differing:
             name = differing[0]
             raise CrossviewError(
-                f"--out {out}: holds another sweep's results (its {name} {json.dumps(held_identity[name])}, "
-                f"this sweep's {json.dumps(identity[name])}); choose another --out or remove that folder")
+                f"--output {out}: holds another sweep's results (its {name} {json.dumps(held_identity[name])}, "
+                f"this sweep's {json.dumps(identity[name])}); choose another --output or remove that folder")
     elif (out / "results.json").exists() or (out / "cells").exists():
-        raise CrossviewError(f"--out {out}: holds results without a sweep.json; choose another --out")
+        raise CrossviewError(f"--output {out}: holds results without a sweep.json; choose another --output")
 
 
 def _cell_path(out: Path, key: str) -> Path:
@@ -712,7 +740,8 @@ def _write_bytes(data: bytes, path: Path) -> str:
 def _record(out: Path, cell: Cell, outcome: dict) -> dict:
     """Stores one cell's outcome (its recording first, then its cell file, which marks it finished)."""
     stored = {"key": cell.key, "label": cell.label, "index": cell.index, "values": [list(v) for v in cell.values],
-              "seed": cell.seed, "method": cell.method, "preset": cell.preset, "status": outcome["status"],
+              "seed": cell.seed, "method": cell.method_label or cell.method, "preset": cell.preset,
+              "status": outcome["status"],
               "overrides": cell.overrides, "score": outcome["score"], "timings": outcome["timings"]}
     if outcome.get("crashed"):
         return stored  # not stored: a rerun runs it again
@@ -746,17 +775,19 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
     cells = plan(spec, keep_recordings=keep_recordings, worker_process=in_process and processes.can_fork_worker())
     wanted = definition(spec, cells)
     check_output(out, wanted)
-    disconnect = connect_ray(ray_address) if executor is Executor.RAY else False
+    stored: dict[str, dict] = {}
+    for cell in cells:
+        found = _finished(out, cell, keep_recordings)
+        if found is not None:
+            stored[cell.key] = found
+    pending = [c for c in cells if c.key not in stored]
+    if stored:  # (a resume, as asked: progress, not a problem)
+        log.info("%d of %d cells already finished in %s: skipped", len(stored), len(cells), out)
+    # Nothing to run starts nothing: no Ray, no pool. (Ray is joined before anything is written: a bad
+    # address leaves no folder.)
+    disconnect = connect_ray(ray_address) if executor is Executor.RAY and pending else False
     try:
         pipeline.write_json(wanted, out / "sweep.json")  # (checks that the folder can be written)
-        stored: dict[str, dict] = {}
-        for cell in cells:
-            found = _finished(out, cell, keep_recordings)
-            if found is not None:
-                stored[cell.key] = found
-        pending = [c for c in cells if c.key not in stored]
-        if stored:
-            log.warning("%d of %d cells already finished in %s: skipped", len(stored), len(cells), out)
         with tqdm(total=len(cells), initial=len(stored), unit="cell", desc="sweep", disable=not progress) as bar:
             def started(cell: Cell) -> None:
                 bar.set_postfix_str(cell.label)
@@ -764,7 +795,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
             runner = {Executor.SERIAL: lambda: _serial(pending, started),
                       Executor.POOL: lambda: _pool(pending, workers),
                       Executor.RAY: lambda: _ray(pending)}[executor]
-            with runner() as outcomes:
+            with runner() if pending else contextlib.nullcontext(iter(())) as outcomes:
                 for cell, outcome in outcomes:
                     stored[cell.key] = _record(out, cell, outcome)
                     if outcome["status"] != "ok":

@@ -77,15 +77,17 @@ def breaking_points(wanted: dict, rows: list[dict]) -> list[str]:
     sentences = []
     for label, by_x in lines.items():
         verdict = None
-        for x in xs:
+        for n, x in enumerate(xs):
             here = by_x.get(_x_key(x), [])
             pcp, idf1 = point(here, "pcp"), point(here, "idf1")
+            # (Below the bar at the first value tried is no breaking point: where it breaks is not in the grid.)
+            where = f"breaks at {first} = {x}" if n else f"already below the bar at the first value, {first} = {x}"
             if here and pcp.ok == 0:
-                verdict = f"breaks at {first} = {x}: every cell failed ({pcp.error})"
+                verdict = f"{where}: every cell failed ({pcp.error})"
             elif pcp.mean < PCP_LIMIT:
-                verdict = f"breaks at {first} = {x} (PCP {pcp.mean:.3f} < {PCP_LIMIT})"
+                verdict = f"{where} (PCP {pcp.mean:.3f} < {PCP_LIMIT})"
             elif idf1.mean < IDF1_LIMIT:
-                verdict = f"breaks at {first} = {x} (IDF1 {idf1.mean:.3f} < {IDF1_LIMIT})"
+                verdict = f"{where} (IDF1 {idf1.mean:.3f} < {IDF1_LIMIT})"
             if verdict:
                 break
         verdict = verdict or (f"holds up to {first} = {xs[-1]} (mean PCP >= {PCP_LIMIT} and IDF1 >= {IDF1_LIMIT} "

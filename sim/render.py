@@ -131,6 +131,7 @@ def choose_backend(requested: str | None = None) -> GLBackend:
             backend = GLBackend(requested.strip().lower())
         except ValueError:
             raise RenderingUnavailable(f"--gl {requested}: unknown OpenGL backend (valid: {names})") from None
+        _refuse_after_import(backend)  # (before the probe: a fresh process is needed whatever the machine has)
         problem = backend_problem(backend)
         if problem is not None:
             named = f"MUJOCO_GL={backend.value}" if from_env else f"--gl {backend.value}"
@@ -141,12 +142,18 @@ def choose_backend(requested: str | None = None) -> GLBackend:
         if backend is None:
             raise RenderingUnavailable(f"MuJoCo cannot open an offscreen OpenGL context (tried {names}): "
                                        f"{_INSTALL_HINT}")
-    if "mujoco" in sys.modules and os.environ.get("MUJOCO_GL") != backend.value:
-        raise RenderingUnavailable(f"mujoco was imported with MUJOCO_GL={os.environ.get('MUJOCO_GL')!r} before "
-                                   f"the renderer chose {backend.value!r}; render in a fresh process")
+        _refuse_after_import(backend)
     os.environ["MUJOCO_GL"] = backend.value
     os.environ["PYOPENGL_PLATFORM"] = backend.value
     return backend
+
+
+def _refuse_after_import(backend: GLBackend) -> None:
+    """Raises RenderingUnavailable when mujoco was imported with another MUJOCO_GL than `backend` (it cannot
+    change backend once imported)."""
+    if "mujoco" in sys.modules and os.environ.get("MUJOCO_GL") != backend.value:
+        raise RenderingUnavailable(f"mujoco was imported with MUJOCO_GL={os.environ.get('MUJOCO_GL')!r} before "
+                                   f"the renderer chose {backend.value!r}; render in a fresh process")
 
 
 @dataclass(frozen=True, eq=False)

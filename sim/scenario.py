@@ -489,9 +489,11 @@ def _toml_value(value) -> str:
 
 def resolved_toml(scenario: Scenario) -> str:
     """`scenario` as a TOML file with every key written out (the profile's detector parameters as comments,
-    since a key set in the file overrides the profile); loading it gives the same scenario. The name is left
-    to the new file's name, and a relative calibration path is made absolute so that the file can move."""
+    since a key set in the file overrides the profile); loading it gives the same scenario. A name the file
+    took from its file name is left to the new file's name; one set explicitly (`name = ...`, another than
+    the file's) is kept. A relative calibration path is made absolute so that the file can move."""
     lines = [f"# {scenario.name}, every key resolved ({scenario.where}).", ""]
+    explicit_name = bool(scenario.source_path) and scenario.name != Path(scenario.source_path).stem
     calibration = scenario.cameras.calibration
     if calibration and scenario.source_path and not Path(calibration).is_absolute():
         calibration = str((Path(scenario.source_path).parent / calibration).resolve())
@@ -510,7 +512,7 @@ def resolved_toml(scenario: Scenario) -> str:
             elif value is None and cls is DetectorConfig:
                 effective = getattr(obj.params(), f.name)
                 lines.append(f"# {f.name} = {_toml_value(effective)}  # the {obj.profile.value} profile's")
-            elif value is not None and (obj is not scenario or f.name != "name"):
+            elif value is not None and (obj is not scenario or f.name != "name" or explicit_name):
                 lines.append(f"{f.name} = {_toml_value(value)}")
         for f, value in nested:
             if isinstance(value, tuple):

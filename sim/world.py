@@ -583,8 +583,8 @@ def simulation_speed(scenario, seconds: float = 60.0, rate_hz: float = 10.0, see
             "realtime_factor": n / rate_hz / wall, "realtime_factor_cpu": n / rate_hz / cpu}
 
 
-def measure(scenario, seed: int | None = None, minutes: float = 10.0, rate_hz: float = 50.0) -> dict:
-    """The issue's figures for one scenario, from `minutes` of simulation posed at `rate_hz`.
+def measure(scenario, seed: int | None = None, duration_s: float = 600.0, rate_hz: float = 50.0) -> dict:
+    """The issue's figures for one scenario, from `duration_s` seconds of simulation posed at `rate_hz`.
 
     Returns a flat dict: the minimum pelvis-pelvis and pelvis-shelf distances (hip midpoints of the
     keypoints), the mean horizontal speed of ankles in stance (ankle within 1 cm of its standing
@@ -599,7 +599,7 @@ def measure(scenario, seed: int | None = None, minutes: float = 10.0, rate_hz: f
 
     seed = scenario.seed if seed is None else seed
     world = World(scenario, child_rng(seed, "crowd"))
-    n = int(round(minutes * 60 * rate_hz))
+    n = int(round(duration_s * rate_hz))
     obstacles = world.store.obstacles
     min_pair = math.inf
     min_shelf = math.inf

@@ -62,23 +62,47 @@ def campus_dir(request) -> Path:
     return request.getfixturevalue("campus_full")
 
 
-REQUIRE_RENDERING_ENV = "CROSSVIEW_REQUIRE_RENDERING"  # set in CI: a missing backend fails instead of skipping
+# What CI expects of offscreen rendering (.ci/run): "required" (a missing backend fails instead of skipping) or
+# "absent" (a backend that opens fails: the step that hid EGL and OSMesa did not hide them). Unset: skip.
+RENDERING_ENV = "CROSSVIEW_RENDERING"
+_RENDERING_EXPECTATIONS = ("required", "absent")
+
+
+def pytest_configure(config):
+    config.addinivalue_line("markers", "rendering: renders through MuJoCo offscreen, or depends on what OpenGL "
+                            "libraries the machine has (`pytest -m rendering`)")
+    expected = os.environ.get(RENDERING_ENV)
+    if expected and expected not in _RENDERING_EXPECTATIONS:
+        raise pytest.UsageError(f"{RENDERING_ENV}={expected}: expected one of {', '.join(_RENDERING_EXPECTATIONS)} "
+                                "or unset")
+
+
+def pytest_collection_modifyitems(items):
+    for item in items:  # every test that renders is a rendering test, whatever its file
+        if "offscreen_backend" in getattr(item, "fixturenames", ()):
+            item.add_marker(pytest.mark.rendering)
 
 
 @pytest.fixture(scope="session")
 def offscreen_backend() -> str:
     """The MuJoCo offscreen backend that works here ("egl" or "osmesa", probed by `sim.render.probe_backend`,
-    each in a fresh interpreter); the test skips without one, or fails where CI requires rendering.
-    Renders run in a fresh interpreter with MUJOCO_GL set to it (MuJoCo picks its backend at import)."""
-    from sim.render import probe_backend
+    each in a fresh interpreter); the test skips without one, or fails where CI expects otherwise
+    (`RENDERING_ENV`). Renders run in a fresh interpreter with MUJOCO_GL set to it (MuJoCo picks its backend
+    at import)."""
+    from sim.render import GLBackend, backend_problem, probe_backend
 
     backend = probe_backend()
+    expected = os.environ.get(RENDERING_ENV)
     if backend is None:
-        reason = ("MuJoCo cannot open an offscreen OpenGL context (install Debian's libosmesa6 for OSMesa, "
-                  "or run where EGL works)")
-        if os.environ.get(REQUIRE_RENDERING_ENV):
-            pytest.fail(f"{reason}; {REQUIRE_RENDERING_ENV} is set, so this may not skip", pytrace=False)
+        problems = "; ".join(f"{b.value}: {backend_problem(b)}" for b in GLBackend)
+        reason = (f"MuJoCo cannot open an offscreen OpenGL context here ({problems}); install Debian's libosmesa6 "
+                  "for OSMesa, or run where EGL works")
+        if expected == "required":
+            pytest.fail(f"{reason}; {RENDERING_ENV}=required, so this may not skip", pytrace=False)
         pytest.skip(reason)
+    if expected == "absent":
+        pytest.fail(f"{RENDERING_ENV}=absent, but MuJoCo opens an offscreen {backend.value} context here",
+                    pytrace=False)
     return backend.value
 
 

@@ -66,7 +66,7 @@ def test_a_pool_gives_the_same_numbers_and_a_rerun_resumes(tiny, tmp_path, caplo
         # A rerun (an interrupted run's too) finds every finished cell and runs none again.
         before = (other / "results.json").read_bytes()
         (other / "results.json").unlink()
-        with caplog.at_level(logging.WARNING, logger="crossview.sweep"):
+        with caplog.at_level(logging.INFO, logger="crossview.sweep"):  # (a resume is progress: INFO)
             ablate.run(other, ["reconstruction", "affinity"], quick=True, workers=2, progress=False)
     assert "4 of 4 cells already finished" in caplog.text and "1 of 1 cells already finished" in caplog.text
     assert (other / "results.json").read_bytes() == before
@@ -135,7 +135,7 @@ def _run_bad(capsys, argv):
 
 
 def test_an_unknown_experiment_lists_the_valid_ones(tmp_path, capsys):
-    err = _run_bad(capsys, ["ablate", "affinity", "table9", "--out", str(tmp_path / "out")])
+    err = _run_bad(capsys, ["ablate", "affinity", "table9", "-o", str(tmp_path / "out")])
     assert "experiment 'table9' is unknown; valid: affinity, reconstruction, frame-rate, speed, single-view" in err
     assert not (tmp_path / "out").exists()
 
@@ -143,13 +143,13 @@ def test_an_unknown_experiment_lists_the_valid_ones(tmp_path, capsys):
 def test_an_output_that_is_a_file_or_holds_something_else_is_refused(tmp_path, capsys):
     target = tmp_path / "report"
     target.write_text("mine")
-    assert "is a file" in _run_bad(capsys, ["ablate", "--quick", "--out", str(target)])
+    assert "is a file" in _run_bad(capsys, ["ablate", "--quick", "-o", str(target)])
     assert target.read_text() == "mine"
     other = tmp_path / "other"
     other.mkdir()
     (other / "notes.txt").write_text("mine")
-    assert "holds no ablate.json" in _run_bad(capsys, ["ablate", "--quick", "--out", str(other)])
+    assert "holds no ablate.json" in _run_bad(capsys, ["ablate", "--quick", "-o", str(other)])
     pipeline.write_json({"format": ablate.ABLATE_FORMAT, "quick": False, "version": "0"}, tmp_path / "full" /
                         "ablate.json")
-    assert "holds ablations with quick false" in _run_bad(capsys, ["ablate", "--quick", "--out",
+    assert "holds ablations with quick false" in _run_bad(capsys, ["ablate", "--quick", "-o",
                                                                    str(tmp_path / "full")])

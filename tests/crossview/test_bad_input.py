@@ -71,11 +71,18 @@ def test_a_bad_scenario_is_refused_in_one_line(text, options, expected, tmp_path
 
 # Command-line values outside their type or bound.
 OPTION_CASES = [
-    ("minutes-infinite", ["world-stats", "store_layout1", "--minutes", "inf"], "inf must be at most 1440 minutes"),
+    ("world-stats-infinite", ["world-stats", "store_layout1", "--duration", "inf"], "inf must be at most 86400 s"),
+    ("world-stats-huge", ["world-stats", "store_layout1", "--duration", "1e12"], "1e12 must be at most 86400 s"),
     ("minutes-huge", ["world-stats", "store_layout1", "--minutes", "1e12"], "1e12 must be at most 1440 minutes"),
+    ("minutes-and-duration", ["world-stats", "store_layout1", "--minutes", "1", "--duration", "60"],
+     "argument --duration: not allowed with argument --minutes"),
+    ("output-old-and-new", ["sweep", "store_layout1", "-o", "OUT/a", "--out", "OUT/b"],
+     "argument --out: not allowed with argument -o/--output"),
+    ("output-json-and-o", ["score", "OUT/r.mcap", "OUT/t.mcap", "--json", "OUT/a.json", "-o", "OUT/b.json"],
+     "argument -o/--output: not allowed with argument --json"),
     ("duration-nan", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--duration", "nan"], "nan must be > 0"),
-    ("duration-not-a-number", ["run", "--duration", "ten", "--out", "OUT"], "'ten' is not a number"),
-    ("bench-duration-huge", ["bench", "--duration", "1e9", "--json", "OUT/b.json"],
+    ("duration-not-a-number", ["run", "--duration", "ten", "-o", "OUT"], "'ten' is not a number"),
+    ("bench-duration-huge", ["bench", "--duration", "1e9", "-o", "OUT/b.json"],
      "duration_s: 1000000000.0 must be in (0, 86400] s"),
 ]
 

@@ -44,14 +44,14 @@ def test_negative_duration_is_refused(tmp_path, capsys):
 def test_negative_duration_in_the_file_is_refused(tmp_path, capsys):
     bad = tmp_path / "neg.toml"
     bad.write_text("duration_s = -1.0\n")
-    err = _run_bad(capsys, ["run", str(bad), "--out", str(tmp_path)])
+    err = _run_bad(capsys, ["run", str(bad), "-o", str(tmp_path)])
     assert "neg.toml: duration_s: -1.0 must be in (0, 86400] s" in err
 
 
 def test_unwritable_output_folder_is_named(tmp_path, capsys):
     blocker = tmp_path / "file"
     blocker.write_text("not a folder")
-    err = _run_bad(capsys, ["run", "--duration", "1", "--out", str(blocker / "sub")])
+    err = _run_bad(capsys, ["run", "--duration", "1", "-o", str(blocker / "sub")])
     assert str(blocker / "sub") in err
     assert list(tmp_path.iterdir()) == [blocker]
 
@@ -91,6 +91,11 @@ def test_scenarios_show_prints_a_file_that_loads_and_reference_is_the_docs(tmp_p
     assert main(["scenarios", "--show", "store_layout2"]) == 0
     (tmp_path / "mine.toml").write_text(capsys.readouterr().out)
     assert scenario.load(tmp_path / "mine.toml").store == scenario.load("store_layout2").store
+    # An explicit name is kept, so the printed file saved under another name is still that scenario.
+    (tmp_path / "named.toml").write_text('name = "pharmacy"\n[crowd]\npeople = 2\n')
+    assert main(["scenarios", "--show", str(tmp_path / "named.toml")]) == 0
+    (tmp_path / "copy.toml").write_text(capsys.readouterr().out)
+    assert scenario.load(tmp_path / "copy.toml").name == "pharmacy"
     assert main(["scenarios", "--reference"]) == 0
     assert capsys.readouterr().out == scenario.reference_markdown()
     err = _run_bad(capsys, ["scenarios", "--show", "nowhere"])
@@ -107,7 +112,7 @@ def test_an_output_that_is_an_input_is_refused_and_the_input_kept(tmp_path, caps
     # The same file under its own name, another spelling of it, and as the score JSON of its own run.
     for argv in (["track", str(rec), "-o", str(rec)],
                  ["track", str(rec), "-o", str(tmp_path / "." / "rec.mcap")],
-                 ["score", str(rec), str(tracks), "--json", str(tracks)],
+                 ["score", str(rec), str(tracks), "-o", str(tracks)],
                  ["export", str(tracks), "-o", str(tracks)]):
         err = _run_bad(capsys, ["--no-progress", *argv])
         assert ": is also an input (" in err, err
@@ -122,3 +127,68 @@ def test_an_output_that_is_not_a_regular_file_is_refused(tmp_path, capsys):
     rec = tmp_path / "rec.mcap"
     err = _run_bad(capsys, ["generate", "store_layout1", "-o", "/dev/null", "--duration", "1"])
     assert "/dev/null: is not a regular file" in err and not rec.exists()
+
+
+def _help(capsys, argv) -> str:
+    assert main([*argv, "--help"]) == 0
+    return capsys.readouterr().out
+
+
+def _entries(text: str) -> list[tuple[str, str]]:
+    """(invocation, help) of each entry of an argparse --help's argument sections; help "" when it has none."""
+    entries, section = [], False
+    for line in text.splitlines():
+        if line.endswith(":") and not line.startswith(" "):
+            section = line in ("positional arguments:", "options:")
+            continue
+        if not section or not line.strip():
+            continue
+        if line.startswith("  ") and not line.startswith("   "):  # an entry: invocation, then its help (if any)
+            invocation, _, help_text = line.strip().partition("  ")
+            entries.append((invocation, help_text.strip()))
+        elif entries and not entries[-1][1]:  # the help of an invocation too long to share its line
+            entries[-1] = (entries[-1][0], line.strip())
+    return entries
+
+
+def test_every_command_option_and_positional_has_help_and_the_output_is_o_output(capsys):
+    from crossview.cli import COMMANDS
+
+    listed = [line.split()[0] for line in _help(capsys, []).splitlines()  # (the commands: indented 4 spaces)
+              if line.startswith("    ") and not line.startswith("     ")]
+    commands = [name for name in listed if name in COMMANDS]
+    assert sorted(commands) == sorted(COMMANDS)
+    assert commands[:4] == ["run", "scenarios", "generate", "coverage"]  # in the order a user meets them
+    for command in COMMANDS:
+        text = _help(capsys, [command])
+        entries = _entries(text)
+        assert entries, command
+        missing = [invocation for invocation, help_text in entries if not help_text]
+        assert missing == [], f"{command}: {missing} have no help"
+        # The one spelling of the main output; the old ones are hidden.
+        assert "--out " not in text and "--minutes" not in text, command
+        outputs = [invocation for invocation, _ in entries if "--output" in invocation]
+        assert all(invocation.startswith("-o ") for invocation in outputs), (command, outputs)
+        assert "--json" not in text or command == "run", command  # (run: the score JSON beside its folder)
+
+
+@pytest.mark.parametrize("old, argv", [
+    ("--out", ["sweep", "store_layout1"]), ("--out", ["compare", "r.mcap", "--tracker", "a=crossview"]),
+    ("--out", ["ablate"]), ("--out", ["run"]), ("--json", ["score", "r.mcap", "t.mcap"]),
+    ("--json", ["per-camera", "r.mcap", "t.mcap"]), ("--json", ["bench"]),
+])
+def test_the_old_output_spellings_still_work_for_one_version(old, argv):
+    from pathlib import Path
+
+    from crossview.cli import build_parser
+
+    assert build_parser().parse_args([*argv, old, "x"]).output == Path("x")
+    assert build_parser().parse_args([*argv, "-o", "x"]).output == Path("x")
+
+
+def test_world_stats_takes_seconds_and_its_old_minutes_as_seconds():
+    from crossview.cli import build_parser
+
+    assert build_parser().parse_args(["world-stats", "store_layout1"]).duration == 600.0
+    assert build_parser().parse_args(["world-stats", "store_layout1", "--duration", "90"]).duration == 90.0
+    assert build_parser().parse_args(["world-stats", "store_layout1", "--minutes", "2"]).duration == 120.0

@@ -43,6 +43,13 @@ def test_the_best_of_each_metric_is_taken_per_recording_in_its_direction():
     assert parsed[0]["pcp"] == "0.9" and parsed[3]["mpjpe_mm"] == ""
 
 
+def test_a_tie_as_printed_is_bold_for_every_tracker_in_it():
+    rows = [_row("a", "x", pcp=0.98612), _row("a", "y", pcp=0.98608), _row("a", "z", pcp=0.9849)]
+    table = markdown(rows).splitlines()
+    assert [line.split(" | ")[2] for line in table[2:]] == ["**0.986**", "**0.986**", "0.985"]
+    assert [r["best"].split()[:1] for r in csv.DictReader(io.StringIO(csv_text(rows)))] == [["pcp"], ["pcp"], []]
+
+
 def test_trackers_methods_and_result_files_are_scored_alike(store_recording, store_tracks, tmp_path):
     # A result file written from the built-in tracker's outputs scores as the built-in tracker (but for the
     # association accuracy and speed, which a result file does not hold).
@@ -71,7 +78,7 @@ def test_trackers_methods_and_result_files_are_scored_alike(store_recording, sto
     (["=crossview"], "expected LABEL=METHOD[@PRESET] or LABEL=file:PATH"),
 ])
 def test_a_bad_tracker_is_refused_before_any_work(store_recording, tmp_path, capsys, trackers, message):
-    argv = ["--no-progress", "compare", str(store_recording), "--out", str(tmp_path / "out")]
+    argv = ["--no-progress", "compare", str(store_recording), "-o", str(tmp_path / "out")]
     status = main(argv + [f"--tracker={t}" for t in trackers])
     err = capsys.readouterr().err.strip()
     assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1 and message in err, err

@@ -86,7 +86,7 @@ def test_a_command_that_fails_before_writing_makes_no_folder(tmp_path, capsys):
     bad_config = tmp_path / "bad.toml"
     bad_config.write_text("[nonsense\n")
     status = main(["--no-progress", "run", "--duration", "1", "--config", str(bad_config),
-                   "--out", str(tmp_path / "new" / "out")])
+                   "-o", str(tmp_path / "new" / "out")])
     assert status == EXIT_BAD_INPUT
     assert "bad.toml" in _one_line(capsys.readouterr().err)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.toml"]
@@ -116,7 +116,7 @@ def test_every_command_on_a_full_disk_says_so_in_one_line_and_leaves_nothing(sma
     for argv, out in (
         (["generate", "store_layout1", "--duration", "1", "-o"], small_disk / "g" / "rec.mcap"),
         (["track", str(rec), "-o"], small_disk / "t.mcap"),
-        (["score", str(rec), str(tracks), "--json"], small_disk / "s.json"),
+        (["score", str(rec), str(tracks), "-o"], small_disk / "s.json"),
         (["export", str(tracks), "-o"], small_disk / "e.json"),
         (["convert", "tests/data/campus", "-o"], small_disk / "c.mcap"),
     ):

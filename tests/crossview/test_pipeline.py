@@ -23,7 +23,7 @@ FRACTIONS = ["pcp", "pck_100mm", "idf1", "hota", "association_accuracy"]
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("run")
-    status = main(["--no-progress", "run", "--duration", "4", "--seed", "3", "--out", str(out)])
+    status = main(["--no-progress", "run", "--duration", "4", "--seed", "3", "-o", str(out)])
     assert status == 0
     return out
 
@@ -46,7 +46,7 @@ def test_run_writes_recording_tracks_and_a_complete_score(short_run):
 def test_the_campus_rig_scenario_runs_end_to_end(tmp_path):
     """The shipped scenario on Campus's calibrated cameras (standing around the square, outside its kerb):
     generated, tracked with the campus preset and scored in a 3 s smoke run."""
-    status = main(["--no-progress", "run", "campus", "--duration", "3", "--preset", "campus", "--out", str(tmp_path)])
+    status = main(["--no-progress", "run", "campus", "--duration", "3", "--preset", "campus", "-o", str(tmp_path)])
     assert status == 0
     score = json.loads((tmp_path / "campus.score.json").read_text())
     assert (score["scenario"], score["num_cameras"], score["num_people"], score["duration_s"]) == ("campus", 3, 3, 3)

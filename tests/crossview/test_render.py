@@ -365,6 +365,7 @@ def test_generate_images_without_pyopengl_names_the_extra(tmp_path, capsys, monk
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.rendering
 def test_generate_images_with_an_egl_that_does_not_open(tmp_path):
     # No EGL vendor library for glvnd's libEGL: EGL cannot open, as on a machine without a GPU or Mesa's EGL.
     no_egl = {"__EGL_VENDOR_LIBRARY_FILENAMES": str(tmp_path / "none.json")}

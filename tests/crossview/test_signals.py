@@ -83,10 +83,10 @@ def test_a_signal_ends_every_command_cleanly(command, signum, tmp_path, recordin
         "generate": ["generate", "store_layout2", "--duration", "600", "-o", str(out / "g.mcap")],
         "track": ["track", str(recording_5s), "-o", str(out / "t.mcap")],
         "convert": ["convert", "tests/data/campus", "-o", str(out / "c.mcap")],
-        "run": ["run", "store_layout2", "--duration", "600", "--out", str(out)],
-        "bench": ["bench", "--duration", "600", "--json", str(out / "b.json")],
+        "run": ["run", "store_layout2", "--duration", "600", "-o", str(out)],
+        "bench": ["bench", "--duration", "600", "-o", str(out / "b.json")],
         # (the bench's own `crossview generate` process is writing)
-        "bench-cold": ["bench", "--duration", "5", "--json", str(out / "b.json")],
+        "bench-cold": ["bench", "--duration", "5", "-o", str(out / "b.json")],
     }[command]
     if command.startswith("bench"):  # its temporary folder goes where it can be watched
         (tmp_path / "tmp").mkdir()
@@ -108,7 +108,7 @@ def test_a_signal_ends_every_command_cleanly(command, signum, tmp_path, recordin
 def test_a_signal_while_score_has_its_2d_worker_ends_both(signum, tmp_path, recording_5s):
     tracks = tmp_path / "t.mcap"
     assert main(["--no-progress", "track", str(recording_5s), "-o", str(tracks)]) == 0
-    argv = ["score", str(recording_5s), str(tracks), "--json", str(tmp_path / "s.json")]
+    argv = ["score", str(recording_5s), str(tracks), "-o", str(tmp_path / "s.json")]
 
     def has_worker(process):
         return bool(Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split())

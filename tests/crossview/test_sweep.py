@@ -18,6 +18,7 @@ import pytest
 import scenarios
 from crossview import sweep, sweep_report
 from crossview.cli import EXIT_BAD_INPUT, main
+from sim import scenario as scenario_mod
 
 SCENARIOS = Path(scenarios.__file__).parent
 
@@ -26,7 +27,7 @@ GRID = ["store_layout1", "--people", "2,3", "--cameras", "6,12", "--seeds", "0,1
 
 
 def _sweep(out, *extra) -> int:
-    return main(["--no-progress", "sweep", *GRID, "--out", str(out), *extra])
+    return main(["--no-progress", "sweep", *GRID, "-o", str(out), *extra])
 
 
 def _sha256(path) -> str:
@@ -95,18 +96,44 @@ def test_a_rerun_skips_finished_cells_and_gives_the_same_results(serial, tmp_pat
         lost.unlink()
     for written in ("results.json", "results.csv", "timings.json", "report.md"):
         (out / written).unlink()
-    # The rerun runs only the three missing cells.
-    with caplog.at_level("WARNING", logger="crossview.sweep"):
+    # The rerun runs only the three missing cells, and says so as progress (INFO), not as a problem.
+    with caplog.at_level("INFO", logger="crossview.sweep"):
         assert _sweep(out, "--workers", "1") == 0
+    resumed = [r for r in caplog.records if "cells already finished" in r.getMessage()]
+    assert [r.levelname for r in resumed] == ["INFO"]
     assert f"5 of {len(cells)} cells already finished" in caplog.text
     assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_rerun_with_nothing_left_starts_nothing(serial, tmp_path, capsys):
+    # Every cell finished: Ray is not started nor joined (the address, where nothing listens, would be refused
+    # in one line if it were tried), and the results are written again from the cells' files.
+    out = tmp_path / "done"
+    shutil.copytree(serial, out)
+    (out / "results.json").unlink()
+    assert _sweep(out, "--ray", "127.0.0.1:1") == 0
+    assert "8 already finished (skipped), 0 run" in capsys.readouterr().out
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_method_label_names_the_method_in_the_results(tmp_path, capsys):
+    out = tmp_path / "labelled"
+    assert main(["--no-progress", "sweep", "store_layout1", "--people", "2", "--duration", "1", "--workers", "1",
+                 "--method", "mine=crossview", "-o", str(out)]) == 0
+    cells = json.loads((out / "results.json").read_text())["cells"]
+    assert [c["method"] for c in cells] == ["mine"] and cells[0]["status"] == "ok"
+    assert cells[0]["seed"] == scenario_mod.load("store_layout1").seed  # no --seeds: the scenario's
+    # One label for two methods is refused before any cell runs.
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--method", "a=crossview,a=baseline", "-o", str(tmp_path / "x")])
+    assert "--method: the label 'a' is given twice" in err
+    assert not (tmp_path / "x").exists()
 
 
 def test_a_cell_too_crowded_for_the_floor_fails_alone_and_kept_recordings_verify(tmp_path, capsys):
     # store_layout1 holds at most a dozen people: the 200-people cell fails with its one-line error.
     out = tmp_path / "kept"
     assert main(["--no-progress", "sweep", "store_layout1", "--people", "2,200", "--duration", "1", "--workers", "1",
-                 "--keep-recordings", "--out", str(out)]) == 0
+                 "--keep-recordings", "-o", str(out)]) == 0
     cells = json.loads((out / "results.json").read_text())["cells"]
     assert cells[0]["status"] == "ok"
     # The one-line error names the scenario file as the user knows it, not where it lies on this machine.
@@ -160,7 +187,7 @@ def _run_bad(capsys, argv):
 ])
 def test_bad_input_is_one_line_exit_2_before_any_cell(tmp_path, capsys, args, named):
     out = tmp_path / "out"
-    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", *args, "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", *args, "-o", str(out)])
     assert named in err
     assert not out.exists()
 
@@ -168,7 +195,7 @@ def test_bad_input_is_one_line_exit_2_before_any_cell(tmp_path, capsys, args, na
 def test_ray_asked_for_but_not_installed_names_the_extra(tmp_path, capsys, monkeypatch):
     monkeypatch.setitem(sys.modules, "ray", None)  # what `import ray` meets where it is not installed
     out = tmp_path / "out"
-    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", "--ray", "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", "--ray", "-o", str(out)])
     assert "Ray is not installed" in err and "crossview-testbed[ray]" in err
     assert not out.exists()
 
@@ -177,7 +204,7 @@ def test_a_folder_holding_another_sweep_is_refused(serial, tmp_path, capsys):
     out = tmp_path / "other"
     shutil.copytree(serial, out)
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    err = _run_bad(capsys, ["sweep", "store_layout1", "--people", "2,4", "--duration", "1", "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--people", "2,4", "--duration", "1", "-o", str(out)])
     assert "holds another sweep's results" in err
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
 
@@ -231,7 +258,7 @@ def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, cap
     shutil.copytree(serial, out)
     with caplog.at_level("WARNING", logger="crossview.sweep"):
         assert main(["--no-progress", "sweep", "store_layout1", "--people", "3", "--cameras", "12,6", "--seeds", "1",
-                     "--duration", "1", "--workers", "1", "--out", str(out)]) == 0
+                     "--duration", "1", "--workers", "1", "-o", str(out)]) == 0
     assert "2 of 2 cells already finished" in caplog.text
     rows = json.loads((out / "results.json").read_text())["cells"]
     full = {r["key"]: r for r in json.loads((serial / "results.json").read_text())["cells"]}
@@ -256,7 +283,7 @@ def test_a_folder_holding_a_different_sweep_is_refused(serial, tmp_path, capsys,
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
     if "--duration" not in args:
         args = [*args, "--duration", "1"]
-    err = _run_bad(capsys, ["sweep", *args, "--out", str(out)])
+    err = _run_bad(capsys, ["sweep", *args, "-o", str(out)])
     assert "holds another sweep's results" in err and named in err
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
 
@@ -265,7 +292,7 @@ def test_a_kept_sweep_of_a_scenario_with_a_relative_calibration_verifies_from_an
     # panoptic_dome names its calibration relative to its own file: the manifest carries the file itself.
     out = tmp_path / "dome"
     assert main(["--no-progress", "sweep", "panoptic_dome", "--people", "1", "--duration", "0.2", "--workers", "1",
-                 "--keep-recordings", "--out", str(out)]) == 0
+                 "--keep-recordings", "-o", str(out)]) == 0
     assert json.loads((out / "results.json").read_text())["cells"][0]["status"] == "ok"
     text = (out / "manifest.json").read_text()
     assert str(SCENARIOS) not in text and str(tmp_path) not in text
@@ -286,7 +313,7 @@ def test_a_kept_sweep_of_a_scenario_with_a_relative_calibration_verifies_from_an
 
 def _command(out, duration_s: str) -> list[str]:
     return [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
-            "--seeds", "0,1", "--duration", duration_s, "--workers", "2", "--out", str(out)]
+            "--seeds", "0,1", "--duration", duration_s, "--workers", "2", "-o", str(out)]
 
 
 @pytest.mark.parametrize("ending", ["SIGTERM to the sweep", "Ctrl-C to its process group"])
@@ -339,3 +366,17 @@ def test_tracker_axes_valid_only_together_are_planned_not_refused():
                                                    r"alpha_3d_m 0.9"):
         sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, seeds=(0,), methods=("crossview",),
                                    presets=("shelf",), duration_s=1.0))
+
+
+def _report_row(people: int, pcp: float, idf1: float = 1.0) -> dict:
+    return {"values": [["crowd.people", people]], "status": "ok", "score": {"pcp": pcp, "idf1": idf1},
+            "method": "crossview", "preset": "store"}
+
+
+def test_a_line_below_the_bar_at_its_first_value_is_not_said_to_break_there():
+    wanted = {"axes": [{"key": "crowd.people", "values": [4, 8, 12]}], "methods": ["crossview"], "presets": ["store"]}
+    breaks_later = [_report_row(4, 0.99), _report_row(8, 0.95), _report_row(12, 0.5)]
+    below_first = [_report_row(4, 0.5), _report_row(8, 0.4), _report_row(12, 0.3)]
+    assert sweep_report.breaking_points(wanted, breaks_later)[0].startswith("all: breaks at crowd.people = 12 (PCP")
+    assert sweep_report.breaking_points(wanted, below_first)[0].startswith(
+        "all: already below the bar at the first value, crowd.people = 4 (PCP 0.500")

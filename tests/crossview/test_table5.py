@@ -45,7 +45,7 @@ def test_every_camera_has_a_row_of_both_trackers_over_all_its_frames(short_run):
 
 def test_the_command_prints_the_table_and_writes_the_same_numbers(short_run, capsys):
     path = short_run / "table5.json"
-    assert main(["per-camera", str(short_run / "rec.mcap"), str(short_run / "tracks.mcap"), "--json", str(path)]) == 0
+    assert main(["per-camera", str(short_run / "rec.mcap"), str(short_run / "tracks.mcap"), "-o", str(path)]) == 0
     printed = capsys.readouterr().out
     result = json.loads(path.read_text())
     assert (result["scenario"], result["seed"]) == ("store_layout1", 5)

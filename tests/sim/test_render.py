@@ -9,6 +9,8 @@ from sim.cameras import build_rig, in_image
 from sim.render import RenderingUnavailable, choose_backend, lens_map
 from tests.sim.test_cameras import _scenario
 
+pytestmark = pytest.mark.rendering  # the backend choice depends on the machine's OpenGL libraries
+
 
 def test_lens_map_reads_each_picture_pixel_from_the_pinhole_pixel_of_its_ray():
     rng = np.random.default_rng(7)
@@ -40,6 +42,7 @@ def test_no_backend_is_one_line_naming_the_package(monkeypatch):
 
 
 def test_a_backend_after_mujoco_was_imported_without_it_is_refused(monkeypatch):
+    # Whatever this machine has (EGL, OSMesa, neither): a backend cannot be chosen once mujoco is imported.
     import mujoco  # noqa: F401  (the test session has imported it already, without an offscreen backend)
 
     monkeypatch.setenv("MUJOCO_GL", "disable")
