@@ -13,8 +13,9 @@ a real one (`crossview convert` of a dataset folder with 3D truth) give comparab
   at a 400 px person (`SIZE_AT_PX`).
 - **Matching**: per camera frame, detections are assigned to the true people by the Hungarian algorithm on
   the mean distance of their common joints divided by the person's size; a pair further apart than
-  `MATCH_GATE` is no match. An unmatched detection is a false-positive person; a person-view (at least half
-  of the 12 joints inside the image) without a matched detection is a missed person-view.
+  `MATCH_GATE` is no match. An unmatched detection with any of the 12 joints is a false-positive person (one
+  with none, a face alone, is not counted); a person-view (at least half of the 12 joints inside the image)
+  without a matched detection is a missed person-view.
 - **Joint miss**: a matched detection lacks a joint that is inside the image. Persistence and the lag-1
   correlation pair the same person, joint and camera in consecutive frames of that camera.
 - **Cross-view agreement**: the matched detections of one person in the frames of different cameras
@@ -189,6 +190,8 @@ class DetectorStatsAccumulator:
         counts["person_views"] += int(view.sum())
         counts["missed_person_views"] += int(np.count_nonzero(view & ~np.isin(np.arange(len(view)), matched_truth)))
         unmatched = np.setdiff1d(np.arange(len(detections)), matched_det)
+        # A detection with none of the 12 measured joints (a face alone) cannot be told from a person: not counted.
+        unmatched = unmatched[np.isfinite(detections[unmatched, :, 0]).any(axis=1)]
         counts["false_positive_people"] += len(unmatched)
         counts["false_positive_people_ge6"] += int(
             np.count_nonzero(np.isfinite(detections[unmatched, :, 0]).sum(axis=1) >= PERSON_LIKE_JOINTS))
