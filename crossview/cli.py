@@ -506,7 +506,7 @@ def _cmd_compare(args) -> None:
 
     contenders = [compare.Contender.parse(text) for text in args.tracker]
     compare.check(contenders, args.recordings)
-    for name in ("compare.md", "compare.csv"):
+    for name in ("compare.md", "compare.csv", *(f"{m.key}.png" for m in compare.METRICS)):
         pipeline.check_writable(args.out / name, inputs=tuple(args.recordings))
     rows = compare.compare_rows(contenders, args.recordings, args.out / "tracks", progress=not args.no_progress)
     written = compare.write_report(rows, args.out)
@@ -539,6 +539,51 @@ def _cmd_render(args) -> None:
     rendered = (f"; {timing.renders} camera views rendered in {timing.render_s:.2f} s "
                 f"({1000 * timing.per_image_s:.0f} ms each)") if timing.renders else ""
     print(f"{done.path}: {done.images} image{'s' if done.images != 1 else ''}{rendered}")
+
+
+_OUTPUT_DESTS = frozenset({"output", "out", "json", "markdown"})
+"""The options that name what a command writes; every other path it is given is something it reads."""
+
+
+def _command_inputs(args) -> tuple[Path, ...]:
+    """Every file the command reads, known before it runs: each path it is given that is not an output (a
+    folder given as input stands for the files in it and its sub-folders, as a dataset's), its scenario and
+    the calibration that names, its tracker config and the module files of its plug-in trackers. Each must be
+    a regular file or folder (a FIFO would hang its reader; a device is no input). Declared for the command's
+    run (`crossview.outputs.command_inputs`), so that no output of it can be one of them.
+
+    Raises:
+        CrossviewError: an input that is neither a regular file nor a folder, or a plug-in that does not load.
+    """
+    from crossview import pipeline, plugins
+    from crossview.json_input import check_input_file
+
+    found: list[Path] = []
+    for dest, value in vars(args).items():
+        if dest in _OUTPUT_DESTS:
+            continue
+        for item in value if isinstance(value, list) else [value]:
+            if isinstance(item, Path):
+                found.append(item)
+                if item.is_dir():
+                    found.extend(p for p in (*item.glob("*"), *item.glob("*/*")) if p.is_file())
+    if isinstance(getattr(args, "scenario", None), str) or args.command == "run":
+        found.extend(pipeline.scenario_files(args.scenario))
+    methods = [m.strip() for m in getattr(args, "method", "").split(",")]
+    for text in getattr(args, "tracker", None) or []:
+        from crossview.compare import Contender
+
+        contender = Contender.parse(text)
+        if contender.method is not None:
+            methods.append(contender.method)
+        else:
+            found.extend(contender.result_path(r) for r in args.recordings)
+    for method in methods:
+        if method and method not in plugins.BUILTIN_METHODS:
+            found.extend(Path(f) for f in plugins.resolve(method).source_files)
+    for path in found:
+        check_input_file(path)
+    return tuple(found)
 
 
 COMMANDS = {
@@ -587,7 +632,10 @@ def main(argv: list[str] | None = None) -> int:
     previous = {s: signal.signal(s, h) for s, h in handlers.items()} if on_main_thread else {}
     _HELD.clear()
     try:
-        COMMANDS[args.command](args)
+        from crossview.outputs import command_inputs
+
+        with command_inputs(_command_inputs(args)):
+            COMMANDS[args.command](args)
     except _Ended as e:
         print(f"crossview: ended by {signal.Signals(e.signum).name}; no partial output was kept", file=sys.stderr)
         return 128 + e.signum

@@ -17,16 +17,53 @@ from core.errors import CrossviewError
 
 class OutputError(CrossviewError):
     """An output that cannot be written: refused before any work, or failed while writing (e.g. a full
-    disk); the message names the path."""
+    disk); the message names the path.
+
+    Attributes:
+        errno: the file system's error number where writing failed (a full disk, the file-size limit, a
+            permission): a failure of the environment, not of the input, that a rerun may not meet; None
+            where the output was refused.
+    """
+
+    errno: int | None = None
+
+
+_COMMAND_INPUTS: list[tuple] = [()]  # the running command's inputs (`command_inputs`), innermost last
+
+
+@contextlib.contextmanager
+def command_inputs(paths):
+    """Declares every input file of the running command (its scenario and the files that names, its config,
+    plug-in module, recordings, result and dataset files) for its duration: every output checked or written
+    meanwhile (`check_output`, `AtomicOutput`) is refused when it is one of them, whichever part of the
+    command writes it. The command line declares them once per command (`crossview.cli`)."""
+    _COMMAND_INPUTS.append(tuple(paths))
+    try:
+        yield
+    finally:
+        _COMMAND_INPUTS.pop()
+
+
+def same_file(a, b) -> bool:
+    """Whether paths `a` and `b` name one file: the same path once every symlink is resolved, or, both
+    existing, the same inode on the same device (a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        sa, sb = os.stat(a), os.stat(b)
+    except (OSError, ValueError):
+        return False
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
 
 
 def check_output(path, inputs: tuple = ()) -> None:
     """Fails early, before any work, when `path` cannot be written.
 
-    That is when writing it would replace one of `inputs` (the same file under any name), something that is
-    not a regular file (a device, a pipe) or a folder, or when its folder neither exists nor can be made
-    (a file stands in the way, or the nearest existing folder is not writable). Nothing is created here:
-    the folders are made when the output is written (`AtomicOutput`).
+    That is when writing it would replace one of `inputs` or of the running command's declared inputs
+    (`command_inputs`): the same file under any name, through a symlink or a hard link (`same_file`);
+    something that is not a regular file (a device, a pipe) or a folder; or when its folder neither exists
+    nor can be made (a file stands in the way, or the nearest existing folder is not writable). Nothing is
+    created here: the folders are made when the output is written (`AtomicOutput`).
 
     Args:
         path: the output file.
@@ -36,8 +73,8 @@ def check_output(path, inputs: tuple = ()) -> None:
         OutputError: naming the path and what would be valid.
     """
     path = Path(path)
-    for given in inputs:
-        if given is not None and os.path.realpath(given) == os.path.realpath(path):
+    for given in (*inputs, *_COMMAND_INPUTS[-1]):
+        if given is not None and same_file(given, path):
             raise OutputError(f"{path}: is also an input ({given}); writing it would destroy the input, "
                               "so choose another output")
     if path.is_dir():
@@ -93,7 +130,9 @@ class AtomicOutput:
             yield
         except OSError as e:
             self.abort()
-            raise OutputError(f"{self.path}: cannot be written ({e.strerror or e}); nothing was kept") from None
+            error = OutputError(f"{self.path}: cannot be written ({e.strerror or e}); nothing was kept")
+            error.errno = e.errno
+            raise error from None
         except BaseException:
             self.abort()
             raise

@@ -64,6 +64,27 @@ def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None
     return scenario
 
 
+def scenario_files(name_or_path) -> tuple[Path, ...]:
+    """The files a scenario's command reads: its file (a shipped name resolved as `sim.scenario.load` does)
+    and the calibration file it names (relative to its folder), read from the TOML without validating it (the
+    command does that, and names what is wrong); an unreadable file names none beyond itself."""
+    import tomllib
+
+    from crossview.json_input import check_input_file
+
+    path = scenario_mod.resolve_path(name_or_path)
+    check_input_file(path, scenario_mod.ScenarioError)
+    try:
+        with open(path, "rb") as f:
+            cameras = tomllib.load(f).get("cameras")
+    except (OSError, ValueError):
+        return (path,)
+    calibration = cameras.get("calibration") if isinstance(cameras, dict) else None
+    if not isinstance(calibration, str) or not calibration:
+        return (path,)
+    return (path, path.parent / calibration)
+
+
 def check_writable(path: Path, inputs: tuple = ()) -> None:
     """Fails early, before any work, when `path` cannot be written: it is one of `inputs` (under any name),
     not a regular file, a folder, or its folder cannot be made (`crossview.outputs.check_output`). No

@@ -53,6 +53,16 @@ class Method:
     factory: type
     builtin: bool
 
+    @property
+    def source_files(self) -> tuple[str, ...]:
+        """The files of the module the method names and of the module that defines its class, absolute (none
+        for a built-in tracker, which the project's version covers, or a module with no file)."""
+        if self.builtin:
+            return ()
+        names = (self.target.partition(":")[0], self.factory.__module__)
+        files = (getattr(sys.modules.get(name), "__file__", None) for name in names)
+        return tuple(dict.fromkeys(os.path.abspath(f) for f in files if f))
+
     def make(self, cameras, config, skeleton: Skeleton):
         """The tracker, made as ``factory(cameras, config, skeleton)``."""
         if self.builtin:
