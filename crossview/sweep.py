@@ -190,6 +190,33 @@ def referenced_files(scenario: scenario_mod.Scenario) -> tuple[tuple[str, str], 
     return ((calibration, text),)
 
 
+def absolute_files(scenario: scenario_mod.Scenario) -> list[list[str]]:
+    """[path, sha256 of its bytes] of each file `scenario` names by an absolute path (its calibration), which
+    `referenced_files` does not ship: a cell's key covers its content (none where it cannot be read: the cell
+    fails as it runs, naming it)."""
+    calibration = scenario.cameras.calibration
+    if not calibration or not Path(calibration).is_absolute():
+        return []
+    try:
+        return [[calibration, hashlib.sha256(Path(calibration).read_bytes()).hexdigest()]]
+    except OSError:
+        return []
+
+
+def plugin_sources(method: str) -> list[str]:
+    """The sha256 of the bytes of each module file of a plug-in tracker (`crossview.plugins.Method.source_files`):
+    a cell's key covers the plug-in's code, which the package version does not; none for a built-in tracker."""
+    from crossview.plugins import resolve
+
+    found = []
+    for path in resolve(method).source_files:  # (by content alone: the same plug-in anywhere, the same key)
+        try:
+            found.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+        except OSError:
+            found.append("")
+    return found
+
+
 def portable(message: str, folder) -> str:
     """`message` with paths under the scenario file's `folder` (the driver's, or a worker's copy) written
     relative to it (`supermarket.toml: crowd.people: ...`): the same on every machine and from every folder."""
@@ -319,6 +346,13 @@ def resolved_digest(scenario: scenario_mod.Scenario) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def content_digest(scenario: scenario_mod.Scenario) -> str:
+    """sha256 of a scenario's resolved values (`resolved_digest`) and of the content of every file it names,
+    by a relative path (`referenced_files`) or an absolute one (`absolute_files`)."""
+    files = [[p, hashlib.sha256(t.encode()).hexdigest()] for p, t in referenced_files(scenario)]
+    return _key(resolved_digest(scenario), files, absolute_files(scenario))
+
+
 def _key(*parts) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -345,6 +379,7 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
     path = str(Path(base.source_path).resolve())
     text = Path(path).read_text(encoding="utf-8")  # (the file's, without the overrides' notes)
     folder = Path(path).parent
+    sources = {method: plugin_sources(method) for method in spec.methods}
     cells = []
     grid = itertools.product(*(a.values for a in spec.axes), spec.seeds, spec.methods, spec.presets)
     for index, combo in enumerate(grid):
@@ -367,13 +402,17 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
             identity = _key(base.name, resolved, spec.duration_s, cameras)
         if files:  # (a calibration's content is part of the cell: the resolved values name only its path)
             identity = _key(identity, [[p, hashlib.sha256(t.encode()).hexdigest()] for p, t in files])
+        elif error is None and absolute_files(scenario):  # (one named by an absolute path: its content too)
+            identity = _key(identity, absolute_files(scenario))
         if tracker and error is None:
             try:
                 pipeline.tracker_config(preset, None, tracker)
             except CrossviewError as e:
                 error = portable(_one_line(e), folder)
-        # (A cell without tracker axes keeps the key it had before they existed: finished cells stay found.)
-        identity_parts = (identity, seed, method, preset, version) + ((tracker,) if tracker else ())
+        # (A cell without tracker axes or a plug-in keeps the key it had before they were keyed: finished cells
+        # stay found.)
+        identity_parts = (identity, seed, method, preset, version) + ((tracker,) if tracker else ()) + (
+            (sources[method],) if sources[method] else ())
         cells.append(Cell(
             index=index, key=_key(*identity_parts), label=_label(values, seed, method, preset),
             values=values, seed=seed, method=method, preset=preset, scenario_name=base.name, scenario_text=text,
@@ -427,7 +466,9 @@ def run_cell(cell: Cell) -> dict:
         {"key", "status": "ok" or the cell's one-line error, "score": the score JSON or None, "timings":
         {"wall_s", "generate_s", "generate_realtime_factor", "track_s", "score_s", "tracker_fps",
         "camera_frames_per_s", "peak_memory_mb", "host"}, "recording": the recording's bytes or None}.
-        Errors of bad input (`CrossviewError`) are the cell's status; anything else is raised.
+        "transient": whether it failed for a reason of its environment (an OSError: a full disk, the
+        file-size limit, a permission), which the next run retries. Errors of bad input (`CrossviewError`)
+        and of the environment are the cell's status; anything else is raised.
     """
     from crossview.recording import software_version
 
@@ -459,8 +500,15 @@ def run_cell(cell: Cell) -> dict:
         status = "ok"
     except CrossviewError as e:
         status = _one_line(e) if home is None else portable(_one_line(e), home)
+        transient = getattr(e, "errno", None) is not None  # (an output that failed to be written: a full disk)
+    except OSError as e:  # the environment's (a full disk, the file-size limit, a permission), not the cell's
+        status = f"{type(e).__name__}: {e.strerror or e}"
+        transient = True
+    else:
+        transient = False
     timings.update(wall_s=time.perf_counter() - start, peak_memory_mb=_peak_memory_mb())
-    return {"key": cell.key, "status": status, "score": score, "timings": timings, "recording": recording}
+    return {"key": cell.key, "status": status, "score": score, "timings": timings, "recording": recording,
+            "transient": transient}
 
 
 def _crashed(cell: Cell, error: BaseException) -> dict:
@@ -679,6 +727,15 @@ def check_output(out: Path, wanted: dict) -> None:
                 f"this sweep's {json.dumps(identity[name])}); choose another --out or remove that folder")
     elif (out / "results.json").exists() or (out / "cells").exists():
         raise CrossviewError(f"--out {out}: holds results without a sweep.json; choose another --out")
+    for name in RESULT_FILES:  # (none of them one of the sweep's inputs, under any name)
+        outputs.check_output(out / name)
+
+
+RETRY_KEY = "retry"
+"""Key of a cell file whose cell failed for a reason of its environment (`run_cell`'s "transient"): not final."""
+
+RESULT_FILES = ("sweep.json", "results.json", "timings.json", "results.csv", "report.md", "manifest.json")
+"""The files a sweep writes at the top of its folder."""
 
 
 def _cell_path(out: Path, key: str) -> Path:
@@ -698,6 +755,10 @@ def _finished(out: Path, cell: Cell, keep_recordings: bool) -> dict | None:
         return None
     if stored.get("key") != cell.key:
         return None
+    if stored.get(RETRY_KEY):
+        log.warning("cell %s failed in an earlier run for a reason of its environment (%s): running it again",
+                    cell.label, stored.get("status"))
+        return None
     if keep_recordings and stored["status"] == "ok" and not _recording_path(out, cell.key).is_file():
         return None  # finished before recordings were kept
     return {**stored, "index": cell.index, "label": cell.label}  # (its place in this grid, which may be another)
@@ -716,6 +777,10 @@ def _record(out: Path, cell: Cell, outcome: dict) -> dict:
               "overrides": cell.overrides, "score": outcome["score"], "timings": outcome["timings"]}
     if outcome.get("crashed"):
         return stored  # not stored: a rerun runs it again
+    if outcome.get("transient"):  # stored as such: a rerun runs it again, and says why
+        stored[RETRY_KEY] = True
+        log.warning("cell %s failed for a reason of its environment (%s); not final: the next run retries it",
+                    cell.label, outcome["status"])
     if outcome.get("recording") is not None:
         stored["recording_sha256"] = _write_bytes(outcome["recording"], _recording_path(out, cell.key))
     pipeline.write_json(stored, _cell_path(out, cell.key))

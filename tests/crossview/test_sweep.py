@@ -339,3 +339,55 @@ def test_tracker_axes_valid_only_together_are_planned_not_refused():
                                                    r"alpha_3d_m 0.9"):
         sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, seeds=(0,), methods=("crossview",),
                                    presets=("shelf",), duration_s=1.0))
+
+
+def test_a_cells_key_covers_an_absolute_calibrations_content_and_a_plugins_code(tmp_path, monkeypatch):
+    """Change the calibration a scenario names by an absolute path, or the code of a plug-in tracker, and a
+    finished cell is no longer found: the old scores would be stale."""
+    calibration = tmp_path / "campus_calibration.json"
+    shutil.copy(SCENARIOS / "calibrations" / "campus_calibration.json", calibration)
+    scenario = tmp_path / "campus.toml"
+    scenario.write_text((SCENARIOS / "campus.toml").read_text().replace(
+        'calibration = "calibrations/campus_calibration.json"', f'calibration = "{calibration}"'))
+    plugin = tmp_path / "keyedplugin.py"
+    plugin.write_text("from examples.greedy_triangulation import GreedyTriangulationTracker as T\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spec = sweep.SweepSpec(scenario=str(scenario), methods=("crossview", "keyedplugin:T"), duration_s=1.0)
+    try:
+        first = [c.key for c in sweep.plan(spec)]
+        assert len(set(first)) == 2
+        assert [c.key for c in sweep.plan(spec)] == first  # (the same inputs: the same keys)
+        data = json.loads(calibration.read_text())
+        data["cameras"].pop(sorted(data["cameras"])[0])  # a camera fewer
+        calibration.write_text(json.dumps(data))
+        second = [c.key for c in sweep.plan(spec)]
+        assert not set(second) & set(first)
+        plugin.write_text(plugin.read_text() + "# a change to the tracker\n")
+        third = [c.key for c in sweep.plan(spec)]
+        assert third[0] == second[0] and third[1] != second[1]  # (only the plug-in's cell)
+    finally:
+        sys.modules.pop("keyedplugin", None)
+
+
+def test_a_cell_failed_by_its_environment_is_not_final_and_the_next_run_says_so(tmp_path):
+    """A cell whose recording hit the file-size limit (EFBIG, as a full disk gives ENOSPC) is stored as not
+    final: the next run, without the limit, runs it again, says why, and it succeeds."""
+    import resource
+
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2",
+               "--duration", "1", "--workers", "1", "--out", str(out)]
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))
+
+    subprocess.run(command, capture_output=True, text=True, preexec_fn=limit, timeout=600)
+    (cell,) = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    assert "File too large" in cell["status"] and cell[sweep.RETRY_KEY] is True, cell
+    again = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert "failed in an earlier run for a reason of its environment" in again.stderr
+    assert "File too large" in again.stderr and "1 run, 0 failed" in again.stdout
+    (cell,) = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    assert cell["status"] == "ok" and sweep.RETRY_KEY not in cell
