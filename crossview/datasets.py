@@ -486,18 +486,26 @@ def _write_folder(out_dir, files: dict) -> None:
     `out_dir` (an empty folder of that name is replaced); nothing is left behind on an error or a signal."""
     import os
     import shutil
-    import tempfile
+
+    from crossview.outputs import OutputError, remove_dead_temporaries, temporary_name
 
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    remove_dead_temporaries(out_dir)  # (those of an earlier export killed with SIGKILL)
+    tmp = temporary_name(out_dir)
     try:
+        tmp.mkdir()
         for name, doc in files.items():
             (tmp / name).parent.mkdir(parents=True, exist_ok=True)
             with open(tmp / name, "w", encoding="utf-8") as f:
                 json.dump(doc, f, separators=(",", ":"), allow_nan=False)
         os.chmod(tmp, 0o755)
         os.replace(tmp, out_dir)
+    except OSError as e:  # (a full disk: named by the output, not by the temporary folder)
+        shutil.rmtree(tmp, ignore_errors=True)
+        error = OutputError(f"{out_dir}: cannot be written ({e.strerror or e}); nothing was kept")
+        error.errno = e.errno
+        raise error from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

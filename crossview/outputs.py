@@ -108,7 +108,8 @@ class AtomicOutput:
     def __init__(self, path, inputs: tuple = ()):
         self.path = Path(path)
         check_output(self.path, inputs)
-        self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self.tmp = temporary_name(self.path)
+        remove_dead_temporaries(self.path)
         self._made: list[Path] = []  # folders made for this output, outermost first
         self._file = None
         self._done = False
@@ -190,6 +191,52 @@ class AtomicOutput:
             self.commit()
         else:
             self.abort()
+
+
+def temporary_name(path) -> Path:
+    """Where this process writes `path` until it is complete: `.NAME.PID.tmp` beside it."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+def remove_dead_temporaries(path) -> list[Path]:
+    """Removes the temporary files (or folders) of `path` (`temporary_name`) that an earlier run left, one
+    killed with SIGKILL that could remove nothing: only those of this pattern whose process no longer exists
+    (a live writer's, another user's included, are left alone). Returns those removed."""
+    import shutil
+
+    path = Path(path)
+    prefix = f".{path.name}."
+    try:
+        entries = os.listdir(path.parent)
+    except OSError:
+        return []
+    removed = []
+    for entry in entries:
+        pid = entry[len(prefix):-len(".tmp")] if entry.startswith(prefix) and entry.endswith(".tmp") else ""
+        if not pid.isdigit() or int(pid) == os.getpid() or process_alive(int(pid)):
+            continue
+        stale = path.parent / entry
+        try:
+            if stale.is_dir() and not stale.is_symlink():
+                shutil.rmtree(stale)
+            else:
+                stale.unlink()
+        except OSError:
+            continue
+        removed.append(stale)
+    return removed
+
+
+def process_alive(pid: int) -> bool:
+    """Whether a process `pid` exists (one of another user's included)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
 
 
 def _fsync_folder(folder: Path) -> None:

@@ -482,7 +482,8 @@ def run_cell(cell: Cell) -> dict:
         if software_version() != cell.version:
             raise CrossviewError(f"this worker has crossview-testbed {software_version()}, the sweep {cell.version}; "
                                  "install the same version on every machine")
-        with tempfile.TemporaryDirectory(prefix="crossview-cell-") as tmp:
+        _remove_dead_cell_folders()
+        with tempfile.TemporaryDirectory(prefix=f"{_CELL_FOLDER}{os.getpid()}-") as tmp:
             home = copy_home(Path(tmp), cell.files)
             scenario = cell.load_scenario(Path(tmp))
             rec, tracks = Path(tmp) / f"{scenario.name}.mcap", Path(tmp) / f"{scenario.name}.tracks.mcap"
@@ -509,6 +510,21 @@ def run_cell(cell: Cell) -> dict:
     timings.update(wall_s=time.perf_counter() - start, peak_memory_mb=_peak_memory_mb())
     return {"key": cell.key, "status": status, "score": score, "timings": timings, "recording": recording,
             "transient": transient}
+
+
+_CELL_FOLDER = "crossview-cell-"
+"""A cell's temporary folder: `crossview-cell-PID-XXXXXXXX` in the system's temporary folder."""
+
+
+def _remove_dead_cell_folders() -> None:
+    """Removes the cell folders of processes that no longer exist (a sweep killed with SIGKILL, whose workers
+    could remove nothing); a live process's are left alone."""
+    import shutil
+
+    for folder in Path(tempfile.gettempdir()).glob(f"{_CELL_FOLDER}*-*"):
+        pid = folder.name[len(_CELL_FOLDER):].partition("-")[0]
+        if pid.isdigit() and not outputs.process_alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def _crashed(cell: Cell, error: BaseException) -> dict:
@@ -544,7 +560,8 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
     queued cells are dropped and the running workers terminated."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(_PRELOAD)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_pool_worker_started)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_pool_worker_started,
+                               initargs=(os.getpid(),))
     finished = False
     try:
         futures = {pool.submit(run_cell, cell): cell for cell in cells}
@@ -567,12 +584,18 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
         pool.shutdown(wait=True)  # (the workers gone, the pool's own thread and queues end and are released)
 
 
-def _pool_worker_started() -> None:
+def _pool_worker_started(driver_pid: int) -> None:
     """Gives tqdm a thread lock in a pool worker. Its progress bars (disabled in a cell) otherwise share a
     named semaphore, registered with multiprocessing's resource tracker, that a worker terminated on Ctrl-C or
     SIGTERM never releases: the tracker then warns of leaked semaphores. A worker runs one cell at a time, in
-    one thread, and shows no bar, so a thread lock is enough."""
+    one thread, and shows no bar, so a thread lock is enough.
+
+    The worker also ends when the sweep does, even one killed with SIGKILL (`processes.exit_with`): it
+    would otherwise wait for cells forever, and the fork server (which ends when the last holder of the
+    sweep's end of its pipe does, a worker among them) and the resource tracker with it."""
     from tqdm import tqdm
+
+    processes.exit_with(driver_pid)
 
     tqdm.set_lock(threading.RLock())
 

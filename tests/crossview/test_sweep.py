@@ -391,3 +391,43 @@ def test_a_cell_failed_by_its_environment_is_not_final_and_the_next_run_says_so(
     assert "File too large" in again.stderr and "1 run, 0 failed" in again.stdout
     (cell,) = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
     assert cell["status"] == "ok" and sweep.RETRY_KEY not in cell
+
+
+def _session_processes(sid: int) -> list[str]:
+    """The live processes of session `sid` (zombies, ended and waiting to be reaped, left out)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(") ", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[3]) == sid and fields[0] != "Z":
+            found.append(stat.parent.name)
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the processes from /proc (Linux)")
+def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_temporary_file(tmp_path):
+    """kill -9 of the sweep stops nothing itself: its pool workers (waiting on the sweep), the fork server and
+    the resource tracker must still end on their own; the rerun finishes and leaves no temporary file."""
+    out = tmp_path / "killed"
+    process = subprocess.Popen(_command(out, "4"), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+    try:
+        while not list((out / "cells").glob("*.json")) and process.poll() is None:
+            time.sleep(0.2)
+        assert process.poll() is None
+        process.kill()
+        process.wait()
+        for _ in range(300):  # (up to 30 s)
+            if not _session_processes(process.pid):
+                break
+            time.sleep(0.1)
+        left = _session_processes(process.pid)
+    finally:
+        for pid in _session_processes(process.pid):
+            os.kill(int(pid), signal.SIGKILL)
+    assert left == []
+    again = subprocess.run(_command(out, "4"), capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
