@@ -224,6 +224,26 @@ def load_truth_3d(dataset_dir, num_joints: int = 14) -> list[tuple[float, np.nda
     return out
 
 
+def read_scene(path: Path) -> dict:
+    """scene.json (`export_dataset`): an object whose `scenario_name` is text, `seed` an integer in [0, 2^63),
+    `duration_s` a timestamp (`stamp_s`) and `boxes` an array of objects, each where given.
+
+    Raises:
+        DatasetError: naming the file and the key.
+    """
+    scene = _table(read_json(path), path, "the file")
+    if not isinstance(scene.get("scenario_name", ""), str):
+        raise DatasetError(f"{path}: scenario_name {scene['scenario_name']!r} must be text")
+    seed = scene.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < _INT64:
+        raise DatasetError(f"{path}: seed {seed!r} must be an integer in [0, 2^63)")
+    if "duration_s" in scene:
+        stamp_s(scene["duration_s"], path, "duration_s")
+    for k, box in enumerate(_table(scene.get("boxes", []), path, "key 'boxes'", list)):
+        _table(box, path, f"boxes[{k}]")
+    return scene
+
+
 def campus14_to_coco17(poses: np.ndarray) -> np.ndarray:
     """Writes 14-joint Campus poses (..., 14, 3) as COCO-17 (..., 17, 3) so that the published evaluate.py
     mapping (crossview.scoring.pose.coco17_to_campus14) gives the same limbs back and a head on the
@@ -321,11 +341,14 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
         try:
             truth = load_truth_3d(dataset_dir, skeleton.num_joints)
         except DatasetError:
-            if skeleton.num_joints == 14:
+            if skeleton.num_joints == CAMPUS14.num_joints:
                 raise
-            truth = []  # the published 14-joint truth cannot be stored with COCO-17 frames in one recording
+            # The published 14-joint truth cannot be stored with COCO-17 frames in one recording: left out
+            # when it is that (valid), else the file is malformed and named (the recording would have no truth).
+            load_truth_3d(dataset_dir, CAMPUS14.num_joints)
+            truth = []
     truth.sort(key=lambda entry: entry[0])
-    scene = read_json(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
+    scene = read_scene(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
     digest = hashlib.sha256()
     for path in (dataset_dir / "calibration.json", *sources, dataset_dir / "annotation_3d.json",
                  dataset_dir / SCENE_FILE):
@@ -337,7 +360,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
                                  scenario_text="", scenario_digest=digest.hexdigest(), seed=int(scene.get("seed", 0)),
                                  duration_s=float(scene.get("duration_s", end_s)), skeleton_name=skeleton.name)
         boxes = [box_from_json(b) for b in scene.get("boxes", [])]
-    except (TypeError, ValueError, KeyError) as exc:
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
         raise DatasetError(f"{dataset_dir / SCENE_FILE}: malformed ({exc}); expected scenario_name, seed, "
                            "duration_s and boxes as a recording's header holds them") from None
     J = skeleton.num_joints

@@ -33,6 +33,11 @@ def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
     """
     if count < 1:
         raise CrossviewError(f"--cameras: {count} must be >= 1")
+    from sim.cameras import MAX_GRID
+
+    if count > MAX_GRID * MAX_GRID:  # (before the divisor search, which would take as long as the count is large)
+        raise CrossviewError(f"--cameras: {count} is more than the {MAX_GRID * MAX_GRID} cameras a grid may hold "
+                             f"(cameras.rows and cameras.cols at most {MAX_GRID} each)")
     aspect = width_m / depth_m
     rows = min(
         (r for r in range(1, count + 1) if count % r == 0),

@@ -772,9 +772,15 @@ def _recording_path(out: Path, key: str) -> Path:
 def _finished(out: Path, cell: Cell, keep_recordings: bool) -> dict | None:
     """The stored outcome of a cell that an earlier run finished (None: run it)."""
     path = _cell_path(out, cell.key)
+    if not path.exists():
+        return None
     try:
         stored = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, UnicodeDecodeError):
+        malformed = _malformed_cell(stored)
+    except (OSError, ValueError, UnicodeDecodeError) as e:
+        malformed = _one_line(e)
+    if malformed:
+        log.warning("%s: not a cell file of this sweep (%s): running the cell again", path, malformed)
         return None
     if stored.get("key") != cell.key:
         return None
@@ -785,6 +791,23 @@ def _finished(out: Path, cell: Cell, keep_recordings: bool) -> dict | None:
     if keep_recordings and stored["status"] == "ok" and not _recording_path(out, cell.key).is_file():
         return None  # finished before recordings were kept
     return {**stored, "index": cell.index, "label": cell.label}  # (its place in this grid, which may be another)
+
+
+_CELL_FIELDS = {"key": str, "label": str, "values": list, "seed": int, "method": str, "preset": str, "status": str,
+                "overrides": dict, "score": (dict, type(None)), "timings": dict}
+"""The fields of a cell file (`_record`) and their JSON types."""
+
+
+def _malformed_cell(stored) -> str | None:
+    """What is wrong with a cell file's document (None: nothing): an object with `_CELL_FIELDS` of their types."""
+    if not isinstance(stored, dict):
+        return f"an object expected, got {type(stored).__name__}"
+    for name, kind in _CELL_FIELDS.items():
+        if not isinstance(stored.get(name), kind):
+            return f"key {name!r} missing or not of its type"
+    if not all(isinstance(v, list) and len(v) == 2 and isinstance(v[0], str) for v in stored["values"]):
+        return "key 'values' must hold [axis, value] pairs"
+    return None
 
 
 def _write_bytes(data: bytes, path: Path) -> str:
@@ -945,6 +968,11 @@ def write_manifest(out: Path, cells: list[Cell], rows: list[dict]) -> None:
                         Path(out) / "manifest.json")
 
 
+_MANIFEST_FIELDS = {"file": str, "sha256": str, "version": str, "scenario_name": str, "scenario_text": str,
+                    "overrides": dict, "files": dict}
+"""The fields of a manifest's recording that `verify` uses, and their JSON types."""
+
+
 @dataclass(frozen=True)
 class VerifiedRecording:
     """One checked recording: its file, the sha256 the manifest holds, that of the file in the folder (None
@@ -976,14 +1004,23 @@ def verify(folder: Path, *, cells: int | None = None, progress: bool = True) -> 
         manifest = json.loads(path.read_text(encoding="utf-8"))
         entries = manifest["recordings"]
         texts = manifest.get("files", {})
-        for entry in entries:
+        if not isinstance(entries, list) or not isinstance(texts, dict):
+            raise TypeError("'recordings' must be an array and 'files' an object")
+        for k, entry in enumerate(entries):
+            for name, kind in _MANIFEST_FIELDS.items():
+                if not isinstance(entry.get(name), kind):
+                    raise TypeError(f"recordings[{k}]: key {name!r} missing or not of its type")
+            if PurePosixPath(entry["file"]).is_absolute() or ".." in PurePosixPath(entry["file"]).parts:
+                raise ValueError(f"recordings[{k}]: file {entry['file']!r} must lie inside the folder")
+            if any(PurePosixPath(p).is_absolute() for p in entry["files"]):
+                raise ValueError(f"recordings[{k}]: the files it names must be relative to the scenario")
             entry["file_texts"] = tuple((p, texts[d]) for p, d in entry.get("files", {}).items())
     except FileNotFoundError:
         raise CrossviewError(f"{path}: no manifest; verify needs a sweep run with --keep-recordings") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as e:
         raise CrossviewError(f"{path}: not a sweep manifest ({_one_line(e)})") from None
     for digest, text in texts.items():
-        if hashlib.sha256(text.encode()).hexdigest() != digest:
+        if not isinstance(text, str) or hashlib.sha256(text.encode()).hexdigest() != digest:
             raise CrossviewError(f"{path}: a file it carries does not match its sha256 {digest[:16]}")
     if cells is not None:
         if cells < 1:

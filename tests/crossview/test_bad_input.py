@@ -75,6 +75,14 @@ OPTION_CASES = [
     ("duration-not-a-number", ["run", "--duration", "ten", "--out", "OUT"], "'ten' is not a number"),
     ("bench-duration-huge", ["bench", "--duration", "1e9", "--json", "OUT/b.json"],
      "duration_s: 1000000000.0 must be in (0, 86400] s"),
+    ("cameras-huge", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--cameras", "1000000000"],
+     "--cameras: 1000000000 is more than the 10000 cameras a grid may hold"),
+    ("tile-width-huge", ["render", "OUT/r.mcap", "--contact-sheet", "--time", "1", "--tile-width", "100000", "-o",
+                         "OUT/x.png"], "--tile-width: 100000 must be in [1, 4096] pixels"),
+    ("clip-too-long", ["render", "OUT/r.mcap", "--camera", "cam00", "--from", "0", "--to", "1e6", "-o", "OUT/x.gif"],
+     "is more than the 100,000 images a clip may hold"),
+    ("time-nan", ["render", "OUT/r.mcap", "--camera", "cam00", "--time", "nan", "-o", "OUT/x.png"],
+     "--time: nan is not a finite number of seconds"),
 ]
 
 

@@ -431,3 +431,34 @@ def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_tem
     again = subprocess.run(_command(out, "4"), capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
+
+
+def test_a_damaged_cell_file_is_named_and_its_cell_run_again(serial, tmp_path, caplog):
+    out = tmp_path / "damaged"
+    shutil.copytree(serial, out)
+    damaged = sorted((out / "cells").glob("*.json"))[0]
+    damaged.write_text('[{"key": "a list, not a cell"}]')
+    with caplog.at_level("WARNING", logger="crossview.sweep"):
+        assert _sweep(out, "--workers", "1") == 0
+    assert f"{damaged}: not a cell file of this sweep (an object expected, got list): running the cell again" \
+        in caplog.text
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+_ENTRY = {"file": "recordings/a.mcap", "sha256": "0" * 64, "version": "1", "scenario_name": "s",
+          "scenario_text": "", "overrides": {}, "files": {}}
+
+
+@pytest.mark.parametrize("manifest, message", [
+    ({"recordings": [{k: v for k, v in _ENTRY.items() if k != "version"}]}, "recordings[0]: key 'version' missing"),
+    ({"recordings": [{**_ENTRY, "file": "/etc/passwd"}]}, "file '/etc/passwd' must lie inside the folder"),
+    ({"recordings": [{**_ENTRY, "files": {"/etc/x.json": "d"}}], "files": {"d": "{}"}},
+     "the files it names must be relative to the scenario"),
+    ({"recordings": [], "files": {"d": 5}}, "a file it carries does not match its sha256"),
+    ({"recordings": {"a": 1}}, "'recordings' must be an array"),
+], ids=["entry-without-version", "file-outside", "named-file-absolute", "carried-file-not-text", "not-a-list"])
+def test_a_damaged_manifest_is_one_line_before_any_regeneration(tmp_path, capsys, manifest, message):
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    assert main(["--no-progress", "verify", str(tmp_path)]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "manifest.json" in err and message in err, err
