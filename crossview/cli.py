@@ -13,7 +13,7 @@ import sys
 import threading
 from pathlib import Path
 
-from core.errors import CrossviewError
+from core.errors import CrossviewError, Interrupted
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
@@ -36,9 +36,9 @@ _COMPILER = ("numba", "llvmlite")
 
 
 def _end(signum, frame):
-    """SIGINT, SIGTERM or SIGHUP: KeyboardInterrupt or `_Ended` raised where the command is, unless numba is
-    compiling there (a cold cache: a first run, a new version). An exception raised inside its compiler is
-    lost where llvmlite calls back through ctypes (which prints "Exception ignored" and goes on: the command
+    """SIGINT, SIGTERM or SIGHUP: KeyboardInterrupt (`Interrupted`) or `_Ended` raised where the command is,
+    unless numba is compiling there (a cold cache: a first run, a new version). An exception raised inside its
+    compiler is lost where llvmlite calls back through ctypes (which prints "Exception ignored" and goes on: the command
     then ran to its end) or leaves numba half-built (a later call fails with a traceback). The signal is then
     held, and raised once the compiler has returned (SIGALRM looks again every `_RETRY_S`)."""
     if _in_compiler(frame):
@@ -47,7 +47,7 @@ def _end(signum, frame):
         return
     _HELD.clear()
     if signum == signal.SIGINT:
-        raise KeyboardInterrupt
+        raise Interrupted
     raise _Ended(signum)
 
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import CrossviewError
+from core.errors import CrossviewError, Interrupted
 from core.types import Frame, Skeleton
 from tracker.types import Target, TargetState, TrackerOutput
 
@@ -69,7 +69,8 @@ class Method:
             return self.factory(cameras, config, skeleton)
         try:
             return self.factory(cameras, config, skeleton)
-        except Exception as exc:
+        except PLUGIN_FAILURES as exc:
+            _reraise_interrupt(exc)
             raise PluginError(f"--method {self.spec}: {self.target}(cameras, config, skeleton) failed: "
                               f"{_exception_line(exc)}") from exc
 
@@ -79,7 +80,8 @@ class Method:
             return tracker.update(frame)
         try:
             return tracker.update(frame)
-        except Exception as exc:
+        except PLUGIN_FAILURES as exc:
+            _reraise_interrupt(exc)
             raise PluginError(f"--method {self.spec}: {_frame_name(frame, index)}: update raised "
                               f"{_exception_line(exc)}") from exc
 
@@ -104,6 +106,18 @@ class Method:
     def reports_assignments(self, tracker) -> bool:
         """Whether the tracker says where each detection went (its `last_output`): association accuracy."""
         return self.builtin or hasattr(tracker, "last_output")
+
+
+PLUGIN_FAILURES = (Exception, SystemExit, KeyboardInterrupt)
+"""What a plug-in's code may raise that is its failure: an error, and also `sys.exit` or a KeyboardInterrupt
+it raises itself, which would otherwise end the command with the plug-in's status and no word."""
+
+
+def _reraise_interrupt(exc: BaseException) -> None:
+    """Lets the user's Ctrl-C (`core.errors.Interrupted`, raised by the command line wherever the command is,
+    a plug-in's code included) end the command as Ctrl-C does."""
+    if isinstance(exc, Interrupted):
+        raise exc
 
 
 def _frame_name(frame: Frame, index: int) -> str:
@@ -218,7 +232,8 @@ def _import(spec: str, module_name: str):
         return importlib.import_module(module_name)
     except PluginError:
         raise
-    except Exception as exc:
+    except PLUGIN_FAILURES as exc:
+        _reraise_interrupt(exc)
         raise PluginError(f"--method {spec}: module {module_name} does not import ({_exception_line(exc)})") from exc
 
 

@@ -62,6 +62,16 @@ class Raises(_Broken):
         raise RuntimeError("the model file is missing")
 
 
+class Exits(_Broken):
+    def bad(self, frame):
+        sys.exit(3)
+
+
+class Interrupts(_Broken):
+    def bad(self, frame):
+        raise KeyboardInterrupt  # (its own, not the user's Ctrl-C)
+
+
 class NoAssignments:
     """The example without its `last_output`: a tracker that does not say where each detection went."""
 
@@ -180,7 +190,9 @@ def test_a_missing_joint_nan_in_all_three_coordinates_is_allowed():
     ("WrongJoints", "target 0 (id 0): pose has shape (14, 3), expected (17, 3)"),
     ("StringIds", "target 0 has id 'person-1' of type str; ids must be ints"),
     ("Raises", "update raised RuntimeError: the model file is missing"),
-])
+    ("Exits", "update raised SystemExit: 3"),
+    ("Interrupts", "update raised KeyboardInterrupt"),
+], ids=["NaNPose", "WrongJoints", "StringIds", "Raises", "Exits", "Interrupts"])
 def test_a_plugin_going_wrong_stops_the_run_naming_the_frame_and_leaves_nothing(
         plugin, message, short_recording, tmp_path, capsys):
     out = tmp_path / "t.mcap"
