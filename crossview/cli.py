@@ -73,6 +73,44 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
+class _ReaderGoneStdout:
+    """The command's stdout, which a reader that closed it (`crossview run ... | head -1`) cannot end the command
+    through: once a write finds the pipe closed (BrokenPipeError), the rest of what it prints goes nowhere
+    (stdout is pointed at the null device) and the command runs on to write its outputs, ending with its own
+    status. Everything else is stdout's."""
+
+    def __init__(self, inner):
+        self._inner = inner
+        self.reader_gone = False
+
+    def write(self, text: str) -> int:
+        if not self.reader_gone:
+            try:
+                return self._inner.write(text)
+            except BrokenPipeError:
+                self._drop()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self._inner.flush()
+            except BrokenPipeError:
+                self._drop()
+
+    def _drop(self) -> None:
+        self.reader_gone = True
+        try:  # (what stdout still holds is flushed at exit: into the null device, not a closed pipe)
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._inner.fileno())
+            os.close(null)
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)
+
+
 def _positive_float(text: str) -> float:
     try:
         value = float(text)
@@ -631,11 +669,14 @@ def main(argv: list[str] | None = None) -> int:
     handlers = {signal.SIGINT: _end, signal.SIGALRM: _retry_held, **{s: _end for s in _ENDING_SIGNALS}}
     previous = {s: signal.signal(s, h) for s, h in handlers.items()} if on_main_thread else {}
     _HELD.clear()
+    stdout = sys.stdout
+    sys.stdout = _ReaderGoneStdout(stdout)
     try:
         from crossview.outputs import command_inputs
 
         with command_inputs(_command_inputs(args)):
             COMMANDS[args.command](args)
+        sys.stdout.flush()
     except _Ended as e:
         print(f"crossview: ended by {signal.Signals(e.signum).name}; no partial output was kept", file=sys.stderr)
         return 128 + e.signum
@@ -653,6 +694,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"crossview {args.command}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
     finally:
+        sys.stdout = stdout
         if on_main_thread:
             signal.setitimer(signal.ITIMER_REAL, 0)
         _HELD.clear()

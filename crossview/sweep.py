@@ -22,6 +22,7 @@ import multiprocessing
 import os
 import random
 import resource
+import signal
 import socket
 import tempfile
 import threading
@@ -620,6 +621,11 @@ def connect_ray(address: str | None) -> bool:
         _check_reachable(address)
     if ray.is_initialized():  # (a program that calls `run_sweep` connected already)
         return False
+    # ray.init sets its own SIGTERM handler (sys.exit: exit 1 and a dump of the task loop); the command's
+    # (one line, 128 + the signal, the cells stopped) is put back.
+    ending = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    handlers = {s: signal.getsignal(s) for s in ending} if threading.current_thread() is threading.main_thread() \
+        else {}
     try:
         if address:
             ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
@@ -629,6 +635,10 @@ def connect_ray(address: str | None) -> bool:
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
         raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({_one_line(e)})".replace("  ", " ")
                              ) from None
+    finally:
+        for signum, handler in handlers.items():
+            if handler is not None:
+                signal.signal(signum, handler)
     return True
 
 

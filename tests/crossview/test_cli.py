@@ -198,3 +198,18 @@ def test_an_input_that_is_a_fifo_is_refused_by_name_without_waiting_on_it(tmp_pa
         err = _run_bad(capsys, ["--no-progress", *argv])
         assert f"{named}: is a FIFO (named pipe), not a regular file" in err, (argv, err)
     assert not out.exists() and not (tmp_path / "o").exists()
+
+
+def test_a_closed_stdout_ends_quietly_with_every_output_written(tmp_path):
+    """`crossview run ... | head -1`: the reader of stdout is gone before the command has printed its table; the
+    command runs on, writes its files and ends with its own status, without a word about the pipe."""
+    import subprocess
+
+    process = subprocess.Popen([sys.executable, "-m", "crossview.cli", "--no-progress", "run", "store_layout1",
+                                "--duration", "1", "--out", str(tmp_path)], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    process.stdout.close()  # (as `head -1` does once it has its line)
+    err = process.stderr.read()
+    assert process.wait(timeout=600) == 0, err
+    assert err == ""
+    assert (tmp_path / "store_layout1.score.json").is_file()

@@ -462,3 +462,26 @@ def test_a_damaged_manifest_is_one_line_before_any_regeneration(tmp_path, capsys
     assert main(["--no-progress", "verify", str(tmp_path)]) == EXIT_BAD_INPUT
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "manifest.json" in err and message in err, err
+
+
+def test_sigterm_during_a_ray_sweep_ends_it_like_everywhere_else(tmp_path):
+    """ray.init sets its own SIGTERM handler (exit 1, a dump of the task loop); the sweep puts the command's
+    back: one line, exit 143, the finished cells kept."""
+    pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
+    out = tmp_path / "ray"
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
+               "--duration", "4", "--ray", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    try:
+        while not (out / "sweep.json").exists() and process.poll() is None:  # (written once Ray is up)
+            time.sleep(0.2)
+        assert process.poll() is None, process.communicate()
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "crossview: ended by SIGTERM; no partial output was kept", err
+    assert "Traceback" not in err and not (out / "results.json").exists()
