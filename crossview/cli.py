@@ -38,9 +38,9 @@ _COMPILER = ("numba", "llvmlite")
 def _end(signum, frame):
     """SIGINT, SIGTERM or SIGHUP: KeyboardInterrupt (`Interrupted`) or `_Ended` raised where the command is,
     unless numba is compiling there (a cold cache: a first run, a new version). An exception raised inside its
-    compiler is lost where llvmlite calls back through ctypes (which prints "Exception ignored" and goes on: the command
-    then ran to its end) or leaves numba half-built (a later call fails with a traceback). The signal is then
-    held, and raised once the compiler has returned (SIGALRM looks again every `_RETRY_S`)."""
+    compiler is lost where llvmlite calls back through ctypes (which prints "Exception ignored" and goes on:
+    the command then ran to its end) or leaves numba half-built (a later call fails with a traceback). The
+    signal is then held, and raised once the compiler has returned (SIGALRM looks again every `_RETRY_S`)."""
     if _in_compiler(frame):
         _HELD[:] = [signum]
         signal.setitimer(signal.ITIMER_REAL, _RETRY_S)

@@ -659,6 +659,18 @@ def _check_reachable(address: str) -> None:
                              "there, and the port open?") from None
 
 
+def _ray_wait(ray, waiting: list) -> tuple[list, list]:
+    """`ray.wait` for one task. A signal's exception (Ctrl-C, the command line's SIGTERM) raised while Ray's
+    compiled core waits comes out of it as a SystemError ("returned a result with an exception set") caused by
+    it: it is raised as itself, so that the sweep ends as on a signal anywhere else (one line, 128 + signal)."""
+    try:
+        return ray.wait(waiting, num_returns=1)
+    except SystemError as e:
+        if isinstance(e.__cause__, BaseException) and not isinstance(e.__cause__, Exception):
+            raise e.__cause__ from None
+        raise
+
+
 @contextlib.contextmanager
 def _ray(cells: list[Cell]) -> Iterator[Iterator[tuple[Cell, dict]]]:
     """Ray tasks, one CPU each, never retried (a cell that fails is recorded as failed). On Ctrl-C or
@@ -674,7 +686,7 @@ def _ray(cells: list[Cell]) -> Iterator[Iterator[tuple[Cell, dict]]]:
         def outcomes():
             waiting = list(refs)
             while waiting:
-                ready, waiting = ray.wait(waiting, num_returns=1)
+                ready, waiting = _ray_wait(ray, waiting)
                 for ref in ready:
                     cell = refs[ref]
                     try:
