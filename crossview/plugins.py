@@ -154,6 +154,8 @@ def check_targets(targets, stamp_s: float, skeleton: Skeleton, where: str) -> li
         if isinstance(raw_id, (bool, np.bool_)) or not isinstance(raw_id, numbers.Integral):
             raise PluginError(f"{where}: {name} has id {raw_id!r} of type {type(raw_id).__name__}; ids must be ints")
         target_id = int(raw_id)
+        if not -2**63 <= target_id < 2**63:  # (tracks files store ids as int64)
+            raise PluginError(f"{where}: {name} has id {target_id}; ids must fit int64 ([-2^63, 2^63))")
         name = f"target {k} (id {target_id})"
         if target_id in seen:
             raise PluginError(f"{where}: {name}: the id is reported twice in one output")

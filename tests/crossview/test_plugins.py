@@ -158,6 +158,7 @@ def _t(id, pose=None, **optional):
     ([object()], "target 0 is a object without `id` and `pose`"),
     ([_t(1.0)], "target 0 has id 1.0 of type float; ids must be ints"),
     ([_t(True)], "target 0 has id True of type bool"),
+    ([_t(2**70)], f"target 0 has id {2**70}; ids must fit int64"),
     ([_t(np.int32(4)), _t(4)], "target 1 (id 4): the id is reported twice"),
     ([_t(0, np.zeros((17, 2)))], "pose has shape (17, 2), expected (17, 3) for the coco17 skeleton"),
     ([_t(0, "head")], "pose is not numeric (str)"),
