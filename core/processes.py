@@ -118,7 +118,8 @@ def die_with_parent(parent_pid: int | None = None) -> None:
     """Makes this (forked) process end when its parent does: on Linux the kernel sends it SIGKILL then
     (prctl PR_SET_PDEATHSIG); a parent that ended before the request (this process adopted: its parent pid is
     no longer `parent_pid`, or is 1) ends it at once. Elsewhere nothing is asked (the pipes' ends, closed
-    when the parent dies, end its workers there).
+    when the parent dies, end its workers there). The kernel watches the parent's thread that forked: a
+    worker is started from a thread that outlives it (the commands start theirs from the main thread).
 
     Args:
         parent_pid: the parent's pid as the parent knew it; None: whatever parent this process has now.
