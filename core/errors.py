@@ -15,3 +15,8 @@ class ConfigError(CrossviewError):
 
 class ScenarioError(CrossviewError):
     """A scenario file that cannot be used; the message names the file and the key."""
+
+
+class Interrupted(KeyboardInterrupt):
+    """Ctrl-C (SIGINT) as the command line's signal handler raises it: told apart from a KeyboardInterrupt that
+    code raises itself (a plug-in's, which is the plug-in's failure, not the user's Ctrl-C)."""

@@ -58,8 +58,8 @@ class Worker:
         self._receiver, self._sender = context.Pipe(duplex=False)
         if pipe_bytes:
             _widen_pipe(self._sender, pipe_bytes)
-        self.process = context.Process(target=_serve, args=(target, args, self._sender, what), name=name,
-                                       daemon=True)
+        self.process = context.Process(target=_serve, args=(target, args, self._sender, what, self._receiver,
+                                                            os.getpid()), name=name, daemon=True)
 
     def start(self) -> None:
         """Forks the worker. It is born with the ending signals blocked, until `_worker_signals` has set its
@@ -91,9 +91,15 @@ class Worker:
             stop_worker(self.process, self.what)
 
 
-def _serve(target, args: tuple, sender, what: str) -> None:
+def _serve(target, args: tuple, sender, what: str, receiver, parent_pid: int) -> None:
     """The worker process: its signal handling, then target(*args, sender); target's error is handed over to
-    be raised in the command, and a command that is gone (a broken pipe) ends the worker quietly."""
+    be raised in the command, and a command that is gone (a broken pipe) ends the worker quietly.
+
+    The worker keeps only its end of the pipe (the command's end, copied by the fork, is closed: held here, a
+    full pipe whose reader died would block the worker's send forever), and dies with the command
+    (`die_with_parent`), even one killed with SIGKILL that could stop nothing."""
+    receiver.close()
+    die_with_parent(parent_pid)
     _worker_signals()
     try:
         target(*args, sender)
@@ -103,6 +109,68 @@ def _serve(target, args: tuple, sender, what: str) -> None:
         _send_error(sender, e, what)
     finally:
         sender.close()
+
+
+_PR_SET_PDEATHSIG = 1  # prctl(2)'s option: the signal this process gets when its parent ends
+
+
+def die_with_parent(parent_pid: int | None = None) -> None:
+    """Makes this (forked) process end when its parent does: on Linux the kernel sends it SIGKILL then
+    (prctl PR_SET_PDEATHSIG); a parent that ended before the request (this process adopted: its parent pid is
+    no longer `parent_pid`, or is 1) ends it at once. Elsewhere nothing is asked (the pipes' ends, closed
+    when the parent dies, end its workers there). The kernel watches the parent's thread that forked: a
+    worker is started from a thread that outlives it (the commands start theirs from the main thread).
+
+    Args:
+        parent_pid: the parent's pid as the parent knew it; None: whatever parent this process has now.
+    """
+    import ctypes
+    import ctypes.util
+    import sys
+
+    if not sys.platform.startswith("linux"):  # pragma: no cover - not Linux
+        return
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):  # pragma: no cover - no libc to ask
+        return
+    if os.getppid() == 1 or (parent_pid is not None and os.getppid() != parent_pid):
+        os._exit(1)
+
+
+WATCH_INTERVAL_S = 1.0
+"""How often `exit_with` looks whether the process it watches is gone where the system cannot tell it, s."""
+
+
+def exit_with(pid: int) -> None:
+    """Ends this process as soon as process `pid` (not its parent: a pool's worker is the fork server's child)
+    is gone, even killed with SIGKILL: a daemon thread waits on a pidfd of it (Linux), or looks every
+    `WATCH_INTERVAL_S`. A process already gone ends this one at once."""
+    import select
+    import threading
+
+    try:
+        fd = os.pidfd_open(pid)
+    except ProcessLookupError:
+        os._exit(1)
+    except (AttributeError, OSError):  # pragma: no cover - no pidfd (before Linux 5.3, elsewhere)
+        fd = None
+
+    def watch() -> None:
+        if fd is not None:
+            select.select([fd], [], [])  # (readable once the process has ended)
+            os._exit(1)
+        while True:  # pragma: no cover - no pidfd
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                os._exit(1)
+            except PermissionError:
+                pass
+            threading.Event().wait(WATCH_INTERVAL_S)
+
+    threading.Thread(target=watch, name=f"exit-with-{pid}", daemon=True).start()
 
 
 def _worker_signals() -> None:

@@ -306,11 +306,11 @@ EXPERIMENTS = {e.name: e for e in (
 
 
 def _cached_recording(folder: Path, scenario, progress: bool) -> Path:
-    """The recording of a resolved scenario under `folder`, named by a key of the scenario and the package
-    version: generated once, found by a rerun."""
+    """The recording of a resolved scenario under `folder`, named by a key of the scenario, the content of
+    the files it names (`sweep.content_digest`) and the package version: generated once, found by a rerun."""
     from crossview.recording import software_version
 
-    key = hashlib.sha256(f"{sweep.resolved_digest(scenario)} {software_version()}".encode()).hexdigest()[:16]
+    key = hashlib.sha256(f"{sweep.content_digest(scenario)} {software_version()}".encode()).hexdigest()[:16]
     path = folder / f"{scenario.name}-{key}.mcap"
     if not path.is_file():
         pipeline.generate(scenario, path, progress=progress)

@@ -13,7 +13,7 @@ import sys
 import threading
 from pathlib import Path
 
-from core.errors import CrossviewError
+from core.errors import CrossviewError, Interrupted
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
@@ -36,18 +36,18 @@ _COMPILER = ("numba", "llvmlite")
 
 
 def _end(signum, frame):
-    """SIGINT, SIGTERM or SIGHUP: KeyboardInterrupt or `_Ended` raised where the command is, unless numba is
-    compiling there (a cold cache: a first run, a new version). An exception raised inside its compiler is
-    lost where llvmlite calls back through ctypes (which prints "Exception ignored" and goes on: the command
-    then ran to its end) or leaves numba half-built (a later call fails with a traceback). The signal is then
-    held, and raised once the compiler has returned (SIGALRM looks again every `_RETRY_S`)."""
+    """SIGINT, SIGTERM or SIGHUP: KeyboardInterrupt (`Interrupted`) or `_Ended` raised where the command is,
+    unless numba is compiling there (a cold cache: a first run, a new version). An exception raised inside its
+    compiler is lost where llvmlite calls back through ctypes (which prints "Exception ignored" and goes on:
+    the command then ran to its end) or leaves numba half-built (a later call fails with a traceback). The
+    signal is then held, and raised once the compiler has returned (SIGALRM looks again every `_RETRY_S`)."""
     if _in_compiler(frame):
         _HELD[:] = [signum]
         signal.setitimer(signal.ITIMER_REAL, _RETRY_S)
         return
     _HELD.clear()
     if signum == signal.SIGINT:
-        raise KeyboardInterrupt
+        raise Interrupted
     raise _Ended(signum)
 
 
@@ -71,6 +71,44 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
+
+
+class _ReaderGoneStdout:
+    """The command's stdout, which a reader that closed it (`crossview run ... | head -1`) cannot end the command
+    through: once a write finds the pipe closed (BrokenPipeError), the rest of what it prints goes nowhere
+    (stdout is pointed at the null device) and the command runs on to write its outputs, ending with its own
+    status. Everything else is stdout's."""
+
+    def __init__(self, inner):
+        self._inner = inner
+        self.reader_gone = False
+
+    def write(self, text: str) -> int:
+        if not self.reader_gone:
+            try:
+                return self._inner.write(text)
+            except BrokenPipeError:
+                self._drop()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self._inner.flush()
+            except BrokenPipeError:
+                self._drop()
+
+    def _drop(self) -> None:
+        self.reader_gone = True
+        try:  # (what stdout still holds is flushed at exit: into the null device, not a closed pipe)
+            null = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(null, self._inner.fileno())
+            os.close(null)
+        except (OSError, ValueError, AttributeError):
+            pass
+
+    def __getattr__(self, name):
+        return getattr(self._inner, name)
 
 
 def _positive_float(text: str) -> float:
@@ -646,7 +684,7 @@ def _cmd_compare(args) -> None:
 
     contenders = [compare.Contender.parse(text) for text in args.tracker]
     compare.check(contenders, args.recordings)
-    for name in ("compare.md", "compare.csv"):
+    for name in ("compare.md", "compare.csv", *(f"{m.key}.png" for m in compare.METRICS)):
         pipeline.check_writable(args.output / name, inputs=tuple(args.recordings))
     rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks", progress=not args.no_progress)
     written = compare.write_report(rows, args.output)
@@ -679,6 +717,52 @@ def _cmd_render(args) -> None:
     rendered = (f"; {timing.renders} camera views rendered in {timing.render_s:.2f} s "
                 f"({1000 * timing.per_image_s:.0f} ms each)") if timing.renders else ""
     print(f"{done.path}: {done.images} image{'s' if done.images != 1 else ''}{rendered}")
+
+
+_OUTPUT_DESTS = frozenset({"output", "out", "json", "markdown"})
+"""The options that name what a command writes; every other path it is given is something it reads."""
+
+
+def _command_inputs(args) -> tuple[Path, ...]:
+    """Every file the command reads, known before it runs: each path it is given that is not an output (a
+    folder given as input stands for the files in it and its sub-folders, as a dataset's), its scenario and
+    the calibration that names, its tracker config and the module files of its plug-in trackers. Each must be
+    a regular file or folder (a FIFO would hang its reader; a device is no input). Declared for the command's
+    run (`crossview.outputs.command_inputs`), so that no output of it can be one of them.
+
+    Raises:
+        CrossviewError: an input that is neither a regular file nor a folder, or a plug-in that does not load.
+    """
+    from crossview import pipeline, plugins
+    from crossview.json_input import check_input_file
+
+    found: list[Path] = []
+    for dest, value in vars(args).items():
+        if dest in _OUTPUT_DESTS:
+            continue
+        for item in value if isinstance(value, list) else [value]:
+            if isinstance(item, Path):
+                found.append(item)
+                if item.is_dir():
+                    found.extend(p for p in (*item.glob("*"), *item.glob("*/*")) if p.is_file())
+    if isinstance(getattr(args, "scenario", None), str) or args.command == "run":
+        found.extend(pipeline.scenario_files(args.scenario))
+    methods = [m.strip() for m in getattr(args, "method", "").split(",")]
+    for text in getattr(args, "tracker", None) or []:
+        from crossview.compare import Contender
+
+        contender = Contender.parse(text)
+        if contender.method is not None:
+            methods.append(contender.method)
+        else:
+            found.extend(contender.result_path(r) for r in args.recordings)
+    for method in methods:
+        method = method.partition("=")[2].strip() or method  # (a sweep's LABEL=METHOD)
+        if method and method not in plugins.BUILTIN_METHODS:
+            found.extend(Path(f) for f in plugins.resolve(method).source_files)
+    for path in found:
+        check_input_file(path)
+    return tuple(found)
 
 
 COMMANDS = {
@@ -728,8 +812,14 @@ def main(argv: list[str] | None = None) -> int:
     handlers = {signal.SIGINT: _end, signal.SIGALRM: _retry_held, **{s: _end for s in _ENDING_SIGNALS}}
     previous = {s: signal.signal(s, h) for s, h in handlers.items()} if on_main_thread else {}
     _HELD.clear()
+    stdout = sys.stdout
+    sys.stdout = _ReaderGoneStdout(stdout)
     try:
-        COMMANDS[args.command](args)
+        from crossview.outputs import command_inputs
+
+        with command_inputs(_command_inputs(args)):
+            COMMANDS[args.command](args)
+        sys.stdout.flush()
     except _Ended as e:
         print(f"crossview: ended by {signal.Signals(e.signum).name}; no partial output was kept", file=sys.stderr)
         return 128 + e.signum
@@ -747,6 +837,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"crossview {args.command}: error: {message}", file=sys.stderr)
         return EXIT_BAD_INPUT
     finally:
+        sys.stdout = stdout
         if on_main_thread:
             signal.setitimer(signal.ITIMER_REAL, 0)
         _HELD.clear()

@@ -224,6 +224,26 @@ def load_truth_3d(dataset_dir, num_joints: int = 14) -> list[tuple[float, np.nda
     return out
 
 
+def read_scene(path: Path) -> dict:
+    """scene.json (`export_dataset`): an object whose `scenario_name` is text, `seed` an integer in [0, 2^63),
+    `duration_s` a timestamp (`stamp_s`) and `boxes` an array of objects, each where given.
+
+    Raises:
+        DatasetError: naming the file and the key.
+    """
+    scene = _table(read_json(path), path, "the file")
+    if not isinstance(scene.get("scenario_name", ""), str):
+        raise DatasetError(f"{path}: scenario_name {scene['scenario_name']!r} must be text")
+    seed = scene.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < _INT64:
+        raise DatasetError(f"{path}: seed {seed!r} must be an integer in [0, 2^63)")
+    if "duration_s" in scene:
+        stamp_s(scene["duration_s"], path, "duration_s")
+    for k, box in enumerate(_table(scene.get("boxes", []), path, "key 'boxes'", list)):
+        _table(box, path, f"boxes[{k}]")
+    return scene
+
+
 def campus14_to_coco17(poses: np.ndarray) -> np.ndarray:
     """Writes 14-joint Campus poses (..., 14, 3) as COCO-17 (..., 17, 3) so that the published evaluate.py
     mapping (crossview.scoring.pose.coco17_to_campus14) gives the same limbs back and a head on the
@@ -325,14 +345,12 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
             if skeleton.num_joints == CAMPUS14.num_joints:
                 raise
             # COCO-17 detections beside the published 14-joint truth (Shelf, Campus): the truth is stored as
-            # COCO-17, its twelve limb joints exactly (`campus14_to_coco17`); a file in neither layout is left out.
-            try:
-                truth = [(t, ids, campus14_to_coco17(poses))
-                         for t, ids, poses in load_truth_3d(dataset_dir, CAMPUS14.num_joints)]
-            except DatasetError:
-                truth = []
+            # COCO-17, its twelve limb joints exactly (`campus14_to_coco17`); a file in neither layout is
+            # malformed and named (the recording would have no truth).
+            truth = [(t, ids, campus14_to_coco17(poses))
+                     for t, ids, poses in load_truth_3d(dataset_dir, CAMPUS14.num_joints)]
     truth.sort(key=lambda entry: entry[0])
-    scene = read_json(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
+    scene = read_scene(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
     digest = hashlib.sha256()
     for path in (dataset_dir / "calibration.json", *sources, dataset_dir / "annotation_3d.json",
                  dataset_dir / SCENE_FILE):
@@ -344,7 +362,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
                                  scenario_text="", scenario_digest=digest.hexdigest(), seed=int(scene.get("seed", 0)),
                                  duration_s=float(scene.get("duration_s", end_s)), skeleton_name=skeleton.name)
         boxes = [box_from_json(b) for b in scene.get("boxes", [])]
-    except (TypeError, ValueError, KeyError) as exc:
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
         raise DatasetError(f"{dataset_dir / SCENE_FILE}: malformed ({exc}); expected scenario_name, seed, "
                            "duration_s and boxes as a recording's header holds them") from None
     J = skeleton.num_joints
@@ -493,18 +511,26 @@ def _write_folder(out_dir, files: dict) -> None:
     `out_dir` (an empty folder of that name is replaced); nothing is left behind on an error or a signal."""
     import os
     import shutil
-    import tempfile
+
+    from crossview.outputs import OutputError, remove_dead_temporaries, temporary_name
 
     out_dir = Path(out_dir)
     out_dir.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    remove_dead_temporaries(out_dir)  # (those of an earlier export killed with SIGKILL)
+    tmp = temporary_name(out_dir)
     try:
+        tmp.mkdir()
         for name, doc in files.items():
             (tmp / name).parent.mkdir(parents=True, exist_ok=True)
             with open(tmp / name, "w", encoding="utf-8") as f:
                 json.dump(doc, f, separators=(",", ":"), allow_nan=False)
         os.chmod(tmp, 0o755)
         os.replace(tmp, out_dir)
+    except OSError as e:  # (a full disk: named by the output, not by the temporary folder)
+        shutil.rmtree(tmp, ignore_errors=True)
+        error = OutputError(f"{out_dir}: cannot be written ({e.strerror or e}); nothing was kept")
+        error.errno = e.errno
+        raise error from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise

@@ -4,6 +4,8 @@ any problem."""
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 from core.errors import CrossviewError
@@ -13,6 +15,24 @@ class DatasetError(CrossviewError):
     """A dataset directory does not follow the published layout; the message names the file and the key."""
 
 
+def check_input_file(path, error: type[CrossviewError] = CrossviewError) -> None:
+    """Refuses an input that exists but is neither a regular file nor a folder (a FIFO, whose reader would wait
+    for a writer forever; a device; a socket), naming it; a missing one is left to its reader to name.
+
+    Raises:
+        `error`: naming the path and what it is.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return
+    kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode)
+            else "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+    raise error(f"{path}: is {kind}, not a regular file; give the file itself")
+
+
 def read_json(path: Path, what: str = "") -> object:
     """A dataset or result JSON file, strictly: UTF-8, standard JSON (no NaN or Infinity).
 
@@ -20,6 +40,7 @@ def read_json(path: Path, what: str = "") -> object:
         DatasetError: missing, unreadable, not UTF-8 or not valid JSON; the message names the file.
     """
     path = Path(path)
+    check_input_file(path, DatasetError)
     if not path.is_file():
         raise DatasetError(f"{path}: {what or 'file'} not found (expected the crossview dataset layout: "
                            "calibration.json, detection.json or annotation_2d.json, optional annotation_3d.json)")

@@ -29,6 +29,10 @@ COCO_18_FROM_COCO17 = (0, 15, 14, 17, 16, 5, 2, 6, 3, 7, 4, 11, 8, 12, 9, 13, 10
 LAYOUTS = {25: BODY_25_FROM_COCO17, 18: COCO_18_FROM_COCO17}
 BODY_25_NECK, BODY_25_MID_HIP = 1, 8
 TIMESTAMPS_FILE = "timestamps.json"
+MAX_FRAME_NUMBER = 10 ** 12
+"""Frame numbers are below this (OpenPose writes 12 digits)."""
+MAX_PIXEL = 1e6
+"""Largest magnitude of an OpenPose value (pixels; confidences are in [0, 1]), as for the tracker's pixels."""
 _FRAME_NUMBER = re.compile(r"(\d+)_keypoints\.json$")
 
 
@@ -57,45 +61,91 @@ def read_frames(dataset_dir, fps: float | None) -> list[tuple[str, Frame, float]
     if not folders:
         raise OpenPoseError(f"{dataset_dir}: no sub-folder holds *_keypoints.json files (expected one folder of "
                             "OpenPose output per camera)")
-    times = read_json(dataset_dir / TIMESTAMPS_FILE) if (dataset_dir / TIMESTAMPS_FILE).is_file() else {}
+    from crossview.datasets import stamp_s
+
+    times = read_timestamps(dataset_dir / TIMESTAMPS_FILE) if (dataset_dir / TIMESTAMPS_FILE).exists() else {}
     frames = []
     for folder in folders:
         camera = folder.name
-        listed = times.get(camera, {}) if isinstance(times, dict) else {}
+        listed = times.get(camera, {})
         stamps, deliveries = listed.get("stamp_s"), listed.get("delivery_s")
         for path in sorted(folder.glob("*_keypoints.json")):
             match = _FRAME_NUMBER.search(path.name)
             if match is None:
                 raise OpenPoseError(f"{path}: no frame number before _keypoints.json")
             number = int(match.group(1))
+            if number >= MAX_FRAME_NUMBER:
+                raise OpenPoseError(f"{path}: frame number {number} must be below {MAX_FRAME_NUMBER:,}")
             if stamps is not None and number < len(stamps):
-                stamp = float(stamps[number])
+                stamp = stamps[number]
             elif fps:
-                stamp = number / fps
+                stamp = stamp_s(number / fps, path, f"frame {number} at --fps {fps:g}")
             else:
                 raise OpenPoseError(f"{path}: frame {number} has no stamp: list it in {TIMESTAMPS_FILE} or give "
                                     "the frame rate (--fps)")
-            delivery = float(deliveries[number]) if deliveries is not None and number < len(deliveries) else stamp
+            delivery = deliveries[number] if deliveries is not None and number < len(deliveries) else stamp
             frames.append((delivery, stamp, f"{camera}/{path.name}", _frame(path, camera, stamp)))
     frames.sort(key=lambda f: (f[0], f[1], f[2]))
     return [(key, frame, delivery) for delivery, _, key, frame in frames]
 
 
+def read_timestamps(path: Path) -> dict:
+    """timestamps.json: {CAMERA: {"stamp_s": [...], "delivery_s": [...]}}, each list optional, each stamp a
+    timestamp of the dataset layout (`crossview.datasets.stamp_s`: finite, in [0, 4e9] s).
+
+    Raises:
+        OpenPoseError: naming the file, the camera and the key.
+    """
+    from crossview.datasets import stamp_s
+
+    times = read_json(path)
+    if not isinstance(times, dict):
+        raise OpenPoseError(f"{path}: must be an object of camera name -> {{stamp_s, delivery_s}}, got "
+                            f"{type(times).__name__}")
+    for camera, listed in times.items():
+        if not isinstance(listed, dict):
+            raise OpenPoseError(f"{path}: camera {camera!r} must be an object with stamp_s and delivery_s arrays")
+        for key in ("stamp_s", "delivery_s"):
+            if key in listed:
+                values = listed[key]
+                if not isinstance(values, list):
+                    raise OpenPoseError(f"{path}: camera {camera!r}: {key} must be an array of seconds")
+                listed[key] = [stamp_s(v, path, f"camera {camera!r}: {key}[{i}]") for i, v in enumerate(values)]
+    return times
+
+
 def _frame(path: Path, camera: str, stamp_s: float) -> Frame:
-    """One OpenPose file as a COCO-17 frame: (D, 17, 2) pixels, NaN where OpenPose gave 0, 0, 0."""
+    """One OpenPose file as a COCO-17 frame: (D, 17, 2) pixels, NaN where OpenPose gave 0, 0, 0.
+
+    Raises:
+        OpenPoseError: not OpenPose's output, a person that is not an object, or values that are not finite
+            numbers (pixels within 1e6 of the image, confidences in [0, 1]); naming the file and the person.
+    """
     data = read_json(path)
     people = data.get("people") if isinstance(data, dict) else None
     if not isinstance(people, list):
         raise OpenPoseError(f"{path}: key 'people' missing (expected OpenPose's JSON output)")
     keypoints, scores = [], []
     for k, person in enumerate(people):
-        flat = np.asarray(person.get("pose_keypoints_2d", []) if isinstance(person, dict) else [], dtype=np.float64)
+        if not isinstance(person, dict):
+            raise OpenPoseError(f"{path}: person {k} must be an object with pose_keypoints_2d, got "
+                                f"{type(person).__name__}")
+        values = person.get("pose_keypoints_2d", [])
+        if not isinstance(values, list) or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in values):
+            raise OpenPoseError(f"{path}: person {k}: pose_keypoints_2d must be a flat array of numbers")
+        flat = np.asarray(values, dtype=np.float64)
         if flat.size == 0:
             continue
+        if not np.all(np.abs(flat) <= MAX_PIXEL):
+            raise OpenPoseError(f"{path}: person {k}: pose_keypoints_2d holds {flat[np.abs(flat) > MAX_PIXEL][0]!r}; "
+                                f"pixels and confidences must be finite and within {MAX_PIXEL:g}")
         if flat.size % 3 or flat.size // 3 not in LAYOUTS:
             raise OpenPoseError(f"{path}: person {k}: {flat.size} values in pose_keypoints_2d; expected BODY_25 "
                                 "(75) or COCO-18 (54)")
         joints = flat.reshape(-1, 3)[list(LAYOUTS[flat.size // 3])]
+        if not np.all((joints[:, 2] >= 0) & (joints[:, 2] <= 1)):
+            raise OpenPoseError(f"{path}: person {k}: a confidence outside [0, 1]")
         found = joints[:, 2] > 0
         keypoints.append(np.where(found[:, None], joints[:, :2], np.nan))
         scores.append(np.where(found, joints[:, 2], 0.0))

@@ -17,16 +17,53 @@ from core.errors import CrossviewError
 
 class OutputError(CrossviewError):
     """An output that cannot be written: refused before any work, or failed while writing (e.g. a full
-    disk); the message names the path."""
+    disk); the message names the path.
+
+    Attributes:
+        errno: the file system's error number where writing failed (a full disk, the file-size limit, a
+            permission): a failure of the environment, not of the input, that a rerun may not meet; None
+            where the output was refused.
+    """
+
+    errno: int | None = None
+
+
+_COMMAND_INPUTS: list[tuple] = [()]  # the running command's inputs (`command_inputs`), innermost last
+
+
+@contextlib.contextmanager
+def command_inputs(paths):
+    """Declares every input file of the running command (its scenario and the files that names, its config,
+    plug-in module, recordings, result and dataset files) for its duration: every output checked or written
+    meanwhile (`check_output`, `AtomicOutput`) is refused when it is one of them, whichever part of the
+    command writes it. The command line declares them once per command (`crossview.cli`)."""
+    _COMMAND_INPUTS.append(tuple(paths))
+    try:
+        yield
+    finally:
+        _COMMAND_INPUTS.pop()
+
+
+def same_file(a, b) -> bool:
+    """Whether paths `a` and `b` name one file: the same path once every symlink is resolved, or, both
+    existing, the same inode on the same device (a hard link)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        sa, sb = os.stat(a), os.stat(b)
+    except (OSError, ValueError):
+        return False
+    return (sa.st_dev, sa.st_ino) == (sb.st_dev, sb.st_ino)
 
 
 def check_output(path, inputs: tuple = ()) -> None:
     """Fails early, before any work, when `path` cannot be written.
 
-    That is when writing it would replace one of `inputs` (the same file under any name), something that is
-    not a regular file (a device, a pipe) or a folder, or when its folder neither exists nor can be made
-    (a file stands in the way, or the nearest existing folder is not writable). Nothing is created here:
-    the folders are made when the output is written (`AtomicOutput`).
+    That is when writing it would replace one of `inputs` or of the running command's declared inputs
+    (`command_inputs`): the same file under any name, through a symlink or a hard link (`same_file`);
+    something that is not a regular file (a device, a pipe) or a folder; or when its folder neither exists
+    nor can be made (a file stands in the way, or the nearest existing folder is not writable). Nothing is
+    created here: the folders are made when the output is written (`AtomicOutput`).
 
     Args:
         path: the output file.
@@ -36,8 +73,8 @@ def check_output(path, inputs: tuple = ()) -> None:
         OutputError: naming the path and what would be valid.
     """
     path = Path(path)
-    for given in inputs:
-        if given is not None and os.path.realpath(given) == os.path.realpath(path):
+    for given in (*inputs, *_COMMAND_INPUTS[-1]):
+        if given is not None and same_file(given, path):
             raise OutputError(f"{path}: is also an input ({given}); writing it would destroy the input, "
                               "so choose another output")
     if path.is_dir():
@@ -71,7 +108,8 @@ class AtomicOutput:
     def __init__(self, path, inputs: tuple = ()):
         self.path = Path(path)
         check_output(self.path, inputs)
-        self.tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        self.tmp = temporary_name(self.path)
+        remove_dead_temporaries(self.path)
         self._made: list[Path] = []  # folders made for this output, outermost first
         self._file = None
         self._done = False
@@ -93,7 +131,9 @@ class AtomicOutput:
             yield
         except OSError as e:
             self.abort()
-            raise OutputError(f"{self.path}: cannot be written ({e.strerror or e}); nothing was kept") from None
+            error = OutputError(f"{self.path}: cannot be written ({e.strerror or e}); nothing was kept")
+            error.errno = e.errno
+            raise error from None
         except BaseException:
             self.abort()
             raise
@@ -151,6 +191,52 @@ class AtomicOutput:
             self.commit()
         else:
             self.abort()
+
+
+def temporary_name(path) -> Path:
+    """Where this process writes `path` until it is complete: `.NAME.PID.tmp` beside it."""
+    path = Path(path)
+    return path.with_name(f".{path.name}.{os.getpid()}.tmp")
+
+
+def remove_dead_temporaries(path) -> list[Path]:
+    """Removes the temporary files (or folders) of `path` (`temporary_name`) that an earlier run left, one
+    killed with SIGKILL that could remove nothing: only those of this pattern whose process no longer exists
+    (a live writer's, another user's included, are left alone). Returns those removed."""
+    import shutil
+
+    path = Path(path)
+    prefix = f".{path.name}."
+    try:
+        entries = os.listdir(path.parent)
+    except OSError:
+        return []
+    removed = []
+    for entry in entries:
+        pid = entry[len(prefix):-len(".tmp")] if entry.startswith(prefix) and entry.endswith(".tmp") else ""
+        if not pid.isdigit() or int(pid) == os.getpid() or process_alive(int(pid)):
+            continue
+        stale = path.parent / entry
+        try:
+            if stale.is_dir() and not stale.is_symlink():
+                shutil.rmtree(stale)
+            else:
+                stale.unlink()
+        except OSError:
+            continue
+        removed.append(stale)
+    return removed
+
+
+def process_alive(pid: int) -> bool:
+    """Whether a process `pid` exists (one of another user's included)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
 
 
 def _fsync_folder(folder: Path) -> None:

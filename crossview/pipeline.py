@@ -35,6 +35,11 @@ def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
     """
     if count < 1:
         raise CrossviewError(f"--cameras: {count} must be >= 1")
+    from sim.cameras import MAX_GRID
+
+    if count > MAX_GRID * MAX_GRID:  # (before the divisor search, which would take as long as the count is large)
+        raise CrossviewError(f"--cameras: {count} is more than the {MAX_GRID * MAX_GRID} cameras a grid may hold "
+                             f"(cameras.rows and cameras.cols at most {MAX_GRID} each)")
     aspect = width_m / depth_m
     rows = min(
         (r for r in range(1, count + 1) if count % r == 0),
@@ -64,6 +69,27 @@ def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None
         rows, cols = camera_grid(cameras, scenario.store.width_m, scenario.store.depth_m)
         scenario = scenario_mod.load(path, {**overrides, "cameras.rows": rows, "cameras.cols": cols})
     return scenario
+
+
+def scenario_files(name_or_path) -> tuple[Path, ...]:
+    """The files a scenario's command reads: its file (a shipped name resolved as `sim.scenario.load` does)
+    and the calibration file it names (relative to its folder), read from the TOML without validating it (the
+    command does that, and names what is wrong); an unreadable file names none beyond itself."""
+    import tomllib
+
+    from crossview.json_input import check_input_file
+
+    path = scenario_mod.resolve_path(name_or_path)
+    check_input_file(path, scenario_mod.ScenarioError)
+    try:
+        with open(path, "rb") as f:
+            cameras = tomllib.load(f).get("cameras")
+    except (OSError, ValueError):
+        return (path,)
+    calibration = cameras.get("calibration") if isinstance(cameras, dict) else None
+    if not isinstance(calibration, str) or not calibration:
+        return (path,)
+    return (path, path.parent / calibration)
 
 
 def check_writable(path: Path, inputs: tuple = ()) -> None:

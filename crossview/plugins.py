@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.errors import CrossviewError
+from core.errors import CrossviewError, Interrupted
 from core.types import Frame, Skeleton
 from tracker.types import Target, TargetState, TrackerOutput
 
@@ -53,13 +53,24 @@ class Method:
     factory: type
     builtin: bool
 
+    @property
+    def source_files(self) -> tuple[str, ...]:
+        """The files of the module the method names and of the module that defines its class, absolute (none
+        for a built-in tracker, which the project's version covers, or a module with no file)."""
+        if self.builtin:
+            return ()
+        names = (self.target.partition(":")[0], self.factory.__module__)
+        files = (getattr(sys.modules.get(name), "__file__", None) for name in names)
+        return tuple(dict.fromkeys(os.path.abspath(f) for f in files if f))
+
     def make(self, cameras, config, skeleton: Skeleton):
         """The tracker, made as ``factory(cameras, config, skeleton)``."""
         if self.builtin:
             return self.factory(cameras, config, skeleton)
         try:
             return self.factory(cameras, config, skeleton)
-        except Exception as exc:
+        except PLUGIN_FAILURES as exc:
+            _reraise_interrupt(exc)
             raise PluginError(f"--method {self.spec}: {self.target}(cameras, config, skeleton) failed: "
                               f"{_exception_line(exc)}") from exc
 
@@ -69,7 +80,8 @@ class Method:
             return tracker.update(frame)
         try:
             return tracker.update(frame)
-        except Exception as exc:
+        except PLUGIN_FAILURES as exc:
+            _reraise_interrupt(exc)
             raise PluginError(f"--method {self.spec}: {_frame_name(frame, index)}: update raised "
                               f"{_exception_line(exc)}") from exc
 
@@ -94,6 +106,18 @@ class Method:
     def reports_assignments(self, tracker) -> bool:
         """Whether the tracker says where each detection went (its `last_output`): association accuracy."""
         return self.builtin or hasattr(tracker, "last_output")
+
+
+PLUGIN_FAILURES = (Exception, SystemExit, KeyboardInterrupt)
+"""What a plug-in's code may raise that is its failure: an error, and also `sys.exit` or a KeyboardInterrupt
+it raises itself, which would otherwise end the command with the plug-in's status and no word."""
+
+
+def _reraise_interrupt(exc: BaseException) -> None:
+    """Lets the user's Ctrl-C (`core.errors.Interrupted`, raised by the command line wherever the command is,
+    a plug-in's code included) end the command as Ctrl-C does."""
+    if isinstance(exc, Interrupted):
+        raise exc
 
 
 def _frame_name(frame: Frame, index: int) -> str:
@@ -130,6 +154,8 @@ def check_targets(targets, stamp_s: float, skeleton: Skeleton, where: str) -> li
         if isinstance(raw_id, (bool, np.bool_)) or not isinstance(raw_id, numbers.Integral):
             raise PluginError(f"{where}: {name} has id {raw_id!r} of type {type(raw_id).__name__}; ids must be ints")
         target_id = int(raw_id)
+        if not -2**63 <= target_id < 2**63:  # (tracks files store ids as int64)
+            raise PluginError(f"{where}: {name} has id {target_id}; ids must fit int64 ([-2^63, 2^63))")
         name = f"target {k} (id {target_id})"
         if target_id in seen:
             raise PluginError(f"{where}: {name}: the id is reported twice in one output")
@@ -208,7 +234,8 @@ def _import(spec: str, module_name: str):
         return importlib.import_module(module_name)
     except PluginError:
         raise
-    except Exception as exc:
+    except PLUGIN_FAILURES as exc:
+        _reraise_interrupt(exc)
         raise PluginError(f"--method {spec}: module {module_name} does not import ({_exception_line(exc)})") from exc
 
 

@@ -338,6 +338,12 @@ class RenderResult:
     timing: RenderTiming
 
 
+MAX_TILE_WIDTH_PX = 4096
+"""Widest tile of a contact sheet, pixels (a sheet of the hypermarket's 240 at this width is about 2 GB)."""
+MAX_CLIP_IMAGES = 100_000
+"""Most images one clip may hold (an hour at 25 images per second is 90,000)."""
+
+
 def render(request: Request) -> RenderResult:
     """Does what `request` asks and writes its output atomically; every check comes before any rendering.
 
@@ -351,6 +357,15 @@ def render(request: Request) -> RenderResult:
         raise RenderError("--time: give either --time (one instant) or --from/--to (a range)")
     if not clip and request.time_s is None:
         raise RenderError("--time: give the instant to render (or --from/--to for a clip)")
+    for option, value in (("--time", request.time_s), ("--from", request.from_s), ("--to", request.to_s)):
+        if value is not None and not math.isfinite(value):
+            raise RenderError(f"{option}: {value} is not a finite number of seconds")
+    if not 1 <= request.tile_width_px <= MAX_TILE_WIDTH_PX:
+        raise RenderError(f"--tile-width: {request.tile_width_px} must be in [1, {MAX_TILE_WIDTH_PX}] pixels")
+    if clip and not request.top_down and (request.to_s - request.from_s) * request.fps + 1 > MAX_CLIP_IMAGES:
+        raise RenderError(f"--from/--to/--fps: {request.from_s:g} to {request.to_s:g} s at {request.fps:g} images per "
+                          f"second is more than the {MAX_CLIP_IMAGES:,} images a clip may hold; give a shorter range "
+                          "or a lower --fps")
     if request.top_down:
         kind = output_kind(request.output, clip=False)
     else:

@@ -22,6 +22,7 @@ import multiprocessing
 import os
 import random
 import resource
+import signal
 import socket
 import sys
 import tempfile
@@ -199,6 +200,33 @@ def referenced_files(scenario: scenario_mod.Scenario) -> tuple[tuple[str, str], 
     return ((calibration, text),)
 
 
+def absolute_files(scenario: scenario_mod.Scenario) -> list[list[str]]:
+    """[path, sha256 of its bytes] of each file `scenario` names by an absolute path (its calibration), which
+    `referenced_files` does not ship: a cell's key covers its content (none where it cannot be read: the cell
+    fails as it runs, naming it)."""
+    calibration = scenario.cameras.calibration
+    if not calibration or not Path(calibration).is_absolute():
+        return []
+    try:
+        return [[calibration, hashlib.sha256(Path(calibration).read_bytes()).hexdigest()]]
+    except OSError:
+        return []
+
+
+def plugin_sources(method: str) -> list[str]:
+    """The sha256 of the bytes of each module file of a plug-in tracker (`crossview.plugins.Method.source_files`):
+    a cell's key covers the plug-in's code, which the package version does not; none for a built-in tracker."""
+    from crossview.plugins import resolve
+
+    found = []
+    for path in resolve(method).source_files:  # (by content alone: the same plug-in anywhere, the same key)
+        try:
+            found.append(hashlib.sha256(Path(path).read_bytes()).hexdigest())
+        except OSError:
+            found.append("")
+    return found
+
+
 def portable(message: str, folder) -> str:
     """`message` with paths under the scenario file's `folder` (the driver's, or a worker's copy) written
     relative to it (`supermarket.toml: crowd.people: ...`): the same on every machine and from every folder."""
@@ -339,6 +367,13 @@ def resolved_digest(scenario: scenario_mod.Scenario) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def content_digest(scenario: scenario_mod.Scenario) -> str:
+    """sha256 of a scenario's resolved values (`resolved_digest`) and of the content of every file it names,
+    by a relative path (`referenced_files`) or an absolute one (`absolute_files`)."""
+    files = [[p, hashlib.sha256(t.encode()).hexdigest()] for p, t in referenced_files(scenario)]
+    return _key(resolved_digest(scenario), files, absolute_files(scenario))
+
+
 def _key(*parts) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True).encode()).hexdigest()[:16]
 
@@ -365,6 +400,7 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
     path = str(Path(base.source_path).resolve())
     text = Path(path).read_text(encoding="utf-8")  # (the file's, without the overrides' notes)
     folder = Path(path).parent
+    sources = {text: plugin_sources(split_method(text)[1]) for text in spec.methods}  # (by the method as given)
     cells = []
     grid = itertools.product(*(a.values for a in spec.axes), spec.seeds, spec.methods, spec.presets)
     for index, combo in enumerate(grid):
@@ -388,14 +424,17 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
             identity = _key(base.name, resolved, spec.duration_s, cameras)
         if files:  # (a calibration's content is part of the cell: the resolved values name only its path)
             identity = _key(identity, [[p, hashlib.sha256(t.encode()).hexdigest()] for p, t in files])
+        elif error is None and absolute_files(scenario):  # (one named by an absolute path: its content too)
+            identity = _key(identity, absolute_files(scenario))
         if tracker and error is None:
             try:
                 pipeline.tracker_config(preset, None, tracker)
             except CrossviewError as e:
                 error = portable(_one_line(e), folder)
-        # (A cell without tracker axes keeps the key it had before they existed: finished cells stay found.)
-        # (The method as given, label included: a method without a label keeps its key.)
-        identity_parts = (identity, seed, method_text, preset, version) + ((tracker,) if tracker else ())
+        # (A cell without tracker axes or a plug-in keeps the key it had before they were keyed: finished cells
+        # stay found. The method as given, label included: a method without a label keeps its key.)
+        identity_parts = (identity, seed, method_text, preset, version) + ((tracker,) if tracker else ()) + (
+            (sources[method_text],) if sources[method_text] else ())
         cells.append(Cell(
             index=index, key=_key(*identity_parts), label=_label(values, seed, label, preset),
             values=values, seed=seed, method=method, preset=preset, scenario_name=base.name, scenario_text=text,
@@ -450,7 +489,9 @@ def run_cell(cell: Cell) -> dict:
         {"key", "status": "ok" or the cell's one-line error, "score": the score JSON or None, "timings":
         {"wall_s", "generate_s", "generate_realtime_factor", "track_s", "score_s", "tracker_fps",
         "camera_frames_per_s", "peak_memory_mb", "host"}, "recording": the recording's bytes or None}.
-        Errors of bad input (`CrossviewError`) are the cell's status; anything else is raised.
+        "transient": whether it failed for a reason of its environment (an OSError: a full disk, the
+        file-size limit, a permission), which the next run retries. Errors of bad input (`CrossviewError`)
+        and of the environment are the cell's status; anything else is raised.
     """
     from crossview.recording import software_version
 
@@ -464,7 +505,8 @@ def run_cell(cell: Cell) -> dict:
         if software_version() != cell.version:
             raise CrossviewError(f"this worker has crossview-testbed {software_version()}, the sweep {cell.version}; "
                                  "install the same version on every machine")
-        with tempfile.TemporaryDirectory(prefix="crossview-cell-") as tmp:
+        _remove_dead_cell_folders()
+        with tempfile.TemporaryDirectory(prefix=f"{_CELL_FOLDER}{os.getpid()}-") as tmp:
             home = copy_home(Path(tmp), cell.files)
             scenario = cell.load_scenario(Path(tmp))
             rec, tracks = Path(tmp) / f"{scenario.name}.mcap", Path(tmp) / f"{scenario.name}.tracks.mcap"
@@ -482,8 +524,30 @@ def run_cell(cell: Cell) -> dict:
         status = "ok"
     except CrossviewError as e:
         status = _one_line(e) if home is None else portable(_one_line(e), home)
+        transient = getattr(e, "errno", None) is not None  # (an output that failed to be written: a full disk)
+    except OSError as e:  # the environment's (a full disk, the file-size limit, a permission), not the cell's
+        status = f"{type(e).__name__}: {e.strerror or e}"
+        transient = True
+    else:
+        transient = False
     timings.update(wall_s=time.perf_counter() - start, peak_memory_mb=_peak_memory_mb())
-    return {"key": cell.key, "status": status, "score": score, "timings": timings, "recording": recording}
+    return {"key": cell.key, "status": status, "score": score, "timings": timings, "recording": recording,
+            "transient": transient}
+
+
+_CELL_FOLDER = "crossview-cell-"
+"""A cell's temporary folder: `crossview-cell-PID-XXXXXXXX` in the system's temporary folder."""
+
+
+def _remove_dead_cell_folders() -> None:
+    """Removes the cell folders of processes that no longer exist (a sweep killed with SIGKILL, whose workers
+    could remove nothing); a live process's are left alone."""
+    import shutil
+
+    for folder in Path(tempfile.gettempdir()).glob(f"{_CELL_FOLDER}*-*"):
+        pid = folder.name[len(_CELL_FOLDER):].partition("-")[0]
+        if pid.isdigit() and not outputs.process_alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
 
 
 def _crashed(cell: Cell, error: BaseException) -> dict:
@@ -519,7 +583,8 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
     queued cells are dropped and the running workers terminated."""
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(_PRELOAD)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_pool_worker_started)
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_pool_worker_started,
+                               initargs=(os.getpid(),))
     finished = False
     try:
         futures = {pool.submit(run_cell, cell): cell for cell in cells}
@@ -542,12 +607,18 @@ def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict
         pool.shutdown(wait=True)  # (the workers gone, the pool's own thread and queues end and are released)
 
 
-def _pool_worker_started() -> None:
+def _pool_worker_started(driver_pid: int) -> None:
     """Gives tqdm a thread lock in a pool worker. Its progress bars (disabled in a cell) otherwise share a
     named semaphore, registered with multiprocessing's resource tracker, that a worker terminated on Ctrl-C or
     SIGTERM never releases: the tracker then warns of leaked semaphores. A worker runs one cell at a time, in
-    one thread, and shows no bar, so a thread lock is enough."""
+    one thread, and shows no bar, so a thread lock is enough.
+
+    The worker also ends when the sweep does, even one killed with SIGKILL (`processes.exit_with`): it
+    would otherwise wait for cells forever, and the fork server (which ends when the last holder of the
+    sweep's end of its pipe does, a worker among them) and the resource tracker with it."""
     from tqdm import tqdm
+
+    processes.exit_with(driver_pid)
 
     tqdm.set_lock(threading.RLock())
 
@@ -577,6 +648,11 @@ def connect_ray(address: str | None) -> bool:
         _check_reachable(address)
     if ray.is_initialized():  # (a program that calls `run_sweep` connected already)
         return False
+    # ray.init sets its own SIGTERM handler (sys.exit: exit 1 and a dump of the task loop); the command's
+    # (one line, 128 + the signal, the cells stopped) is put back.
+    ending = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    handlers = {s: signal.getsignal(s) for s in ending} if threading.current_thread() is threading.main_thread() \
+        else {}
     try:
         if address:
             ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
@@ -586,6 +662,10 @@ def connect_ray(address: str | None) -> bool:
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
         raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({_one_line(e)})".replace("  ", " ")
                              ) from None
+    finally:
+        for signum, handler in handlers.items():
+            if handler is not None:
+                signal.signal(signum, handler)
     return True
 
 
@@ -606,6 +686,18 @@ def _check_reachable(address: str) -> None:
                              "there, and the port open?") from None
 
 
+def _ray_wait(ray, waiting: list) -> tuple[list, list]:
+    """`ray.wait` for one task. A signal's exception (Ctrl-C, the command line's SIGTERM) raised while Ray's
+    compiled core waits comes out of it as a SystemError ("returned a result with an exception set") caused by
+    it: it is raised as itself, so that the sweep ends as on a signal anywhere else (one line, 128 + signal)."""
+    try:
+        return ray.wait(waiting, num_returns=1)
+    except SystemError as e:
+        if isinstance(e.__cause__, BaseException) and not isinstance(e.__cause__, Exception):
+            raise e.__cause__ from None
+        raise
+
+
 @contextlib.contextmanager
 def _ray(cells: list[Cell]) -> Iterator[Iterator[tuple[Cell, dict]]]:
     """Ray tasks, one CPU each, never retried (a cell that fails is recorded as failed). On Ctrl-C or
@@ -621,7 +713,7 @@ def _ray(cells: list[Cell]) -> Iterator[Iterator[tuple[Cell, dict]]]:
         def outcomes():
             waiting = list(refs)
             while waiting:
-                ready, waiting = ray.wait(waiting, num_returns=1)
+                ready, waiting = _ray_wait(ray, waiting)
                 for ref in ready:
                     cell = refs[ref]
                     try:
@@ -707,6 +799,15 @@ def check_output(out: Path, wanted: dict) -> None:
                 f"this sweep's {json.dumps(identity[name])}); choose another --output or remove that folder")
     elif (out / "results.json").exists() or (out / "cells").exists():
         raise CrossviewError(f"--output {out}: holds results without a sweep.json; choose another --output")
+    for name in RESULT_FILES:  # (none of them one of the sweep's inputs, under any name)
+        outputs.check_output(out / name)
+
+
+RETRY_KEY = "retry"
+"""Key of a cell file whose cell failed for a reason of its environment (`run_cell`'s "transient"): not final."""
+
+RESULT_FILES = ("sweep.json", "results.json", "timings.json", "results.csv", "report.md", "manifest.json")
+"""The files a sweep writes at the top of its folder."""
 
 
 def _cell_path(out: Path, key: str) -> Path:
@@ -720,15 +821,42 @@ def _recording_path(out: Path, key: str) -> Path:
 def _finished(out: Path, cell: Cell, keep_recordings: bool) -> dict | None:
     """The stored outcome of a cell that an earlier run finished (None: run it)."""
     path = _cell_path(out, cell.key)
+    if not path.exists():
+        return None
     try:
         stored = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError, UnicodeDecodeError):
+        malformed = _malformed_cell(stored)
+    except (OSError, ValueError, UnicodeDecodeError) as e:
+        malformed = _one_line(e)
+    if malformed:
+        log.warning("%s: not a cell file of this sweep (%s): running the cell again", path, malformed)
         return None
     if stored.get("key") != cell.key:
+        return None
+    if stored.get(RETRY_KEY):
+        log.warning("cell %s failed in an earlier run for a reason of its environment (%s): running it again",
+                    cell.label, stored.get("status"))
         return None
     if keep_recordings and stored["status"] == "ok" and not _recording_path(out, cell.key).is_file():
         return None  # finished before recordings were kept
     return {**stored, "index": cell.index, "label": cell.label}  # (its place in this grid, which may be another)
+
+
+_CELL_FIELDS = {"key": str, "label": str, "values": list, "seed": int, "method": str, "preset": str, "status": str,
+                "overrides": dict, "score": (dict, type(None)), "timings": dict}
+"""The fields of a cell file (`_record`) and their JSON types."""
+
+
+def _malformed_cell(stored) -> str | None:
+    """What is wrong with a cell file's document (None: nothing): an object with `_CELL_FIELDS` of their types."""
+    if not isinstance(stored, dict):
+        return f"an object expected, got {type(stored).__name__}"
+    for name, kind in _CELL_FIELDS.items():
+        if not isinstance(stored.get(name), kind):
+            return f"key {name!r} missing or not of its type"
+    if not all(isinstance(v, list) and len(v) == 2 and isinstance(v[0], str) for v in stored["values"]):
+        return "key 'values' must hold [axis, value] pairs"
+    return None
 
 
 def _write_bytes(data: bytes, path: Path) -> str:
@@ -745,6 +873,10 @@ def _record(out: Path, cell: Cell, outcome: dict) -> dict:
               "overrides": cell.overrides, "score": outcome["score"], "timings": outcome["timings"]}
     if outcome.get("crashed"):
         return stored  # not stored: a rerun runs it again
+    if outcome.get("transient"):  # stored as such: a rerun runs it again, and says why
+        stored[RETRY_KEY] = True
+        log.warning("cell %s failed for a reason of its environment (%s); not final: the next run retries it",
+                    cell.label, outcome["status"])
     if outcome.get("recording") is not None:
         stored["recording_sha256"] = _write_bytes(outcome["recording"], _recording_path(out, cell.key))
     pipeline.write_json(stored, _cell_path(out, cell.key))
@@ -888,6 +1020,11 @@ def write_manifest(out: Path, cells: list[Cell], rows: list[dict]) -> None:
                         Path(out) / "manifest.json")
 
 
+_MANIFEST_FIELDS = {"file": str, "sha256": str, "version": str, "scenario_name": str, "scenario_text": str,
+                    "overrides": dict, "files": dict}
+"""The fields of a manifest's recording that `verify` uses, and their JSON types."""
+
+
 @dataclass(frozen=True)
 class VerifiedRecording:
     """One checked recording: its file, the sha256 the manifest holds, that of the file in the folder (None
@@ -919,14 +1056,23 @@ def verify(folder: Path, *, cells: int | None = None, progress: bool = True) -> 
         manifest = json.loads(path.read_text(encoding="utf-8"))
         entries = manifest["recordings"]
         texts = manifest.get("files", {})
-        for entry in entries:
+        if not isinstance(entries, list) or not isinstance(texts, dict):
+            raise TypeError("'recordings' must be an array and 'files' an object")
+        for k, entry in enumerate(entries):
+            for name, kind in _MANIFEST_FIELDS.items():
+                if not isinstance(entry.get(name), kind):
+                    raise TypeError(f"recordings[{k}]: key {name!r} missing or not of its type")
+            if PurePosixPath(entry["file"]).is_absolute() or ".." in PurePosixPath(entry["file"]).parts:
+                raise ValueError(f"recordings[{k}]: file {entry['file']!r} must lie inside the folder")
+            if any(PurePosixPath(p).is_absolute() for p in entry["files"]):
+                raise ValueError(f"recordings[{k}]: the files it names must be relative to the scenario")
             entry["file_texts"] = tuple((p, texts[d]) for p, d in entry.get("files", {}).items())
     except FileNotFoundError:
         raise CrossviewError(f"{path}: no manifest; verify needs a sweep run with --keep-recordings") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as e:
         raise CrossviewError(f"{path}: not a sweep manifest ({_one_line(e)})") from None
     for digest, text in texts.items():
-        if hashlib.sha256(text.encode()).hexdigest() != digest:
+        if not isinstance(text, str) or hashlib.sha256(text.encode()).hexdigest() != digest:
             raise CrossviewError(f"{path}: a file it carries does not match its sha256 {digest[:16]}")
     if cells is not None:
         if cells < 1:

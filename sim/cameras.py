@@ -577,7 +577,10 @@ def dataset_cameras(calibration, width_px: int, height_px: int, *, use_distortio
         if not (np.isfinite(K).all() and np.isfinite(Tw).all() and np.abs(Tw).max() <= _MAX_ABS_CM):
             raise ValueError(f"camera {name!r}: K and Tw must hold numbers (no null), Tw's within {_MAX_ABS_CM:g} cm")
         # Tw's rotation is orthonormal only to the precision the file was written with.
-        R = _orthonormalise(Tw[:3, :3].T)
+        try:
+            R = _orthonormalise(Tw[:3, :3].T)
+        except ValueError as exc:
+            raise ValueError(f"camera {name!r}: Tw: {exc}") from None
         center_m = Tw[:3, 3] * _CM + origin
         try:
             cameras.append(Camera(name=str(name), K=K, dist=dist, R_cam_from_world=R, t_cam_from_world=-R @ center_m,
@@ -605,7 +608,20 @@ def load_dataset_calibration(path, *, origin_m=(0.0, 0.0, 0.0)) -> list[Camera]:
     return dataset_cameras(calibration, width, height, use_distortion=True, origin_m=origin_m)
 
 
+ROTATION_TOLERANCE = 1e-3
+"""How far from a rotation (largest element of R^T R - I) a calibration's rotation may be; files store them to
+about 1e-9, so anything further is not a rotation (an all-zero pose, a scaled or mirrored matrix)."""
+
+
 def _orthonormalise(R: np.ndarray) -> np.ndarray:
-    """Nearest rotation matrix (calibration files store rotations to about 1e-9)."""
+    """Nearest rotation matrix (calibration files store rotations to about 1e-9).
+
+    Raises:
+        ValueError: `R` is not a rotation to `ROTATION_TOLERANCE` (orthonormal, determinant +1).
+    """
+    error = np.abs(R.T @ R - np.eye(3)).max()
+    if not (error <= ROTATION_TOLERANCE and np.linalg.det(R) > 0):
+        raise ValueError(f"the rotation {np.round(R, 6).tolist()} is not a rotation matrix (R^T R differs from "
+                         f"the identity by {error:.3g}, det {np.linalg.det(R):.3g}; expected orthonormal, det +1)")
     u, _, vt = np.linalg.svd(R)
     return u @ vt

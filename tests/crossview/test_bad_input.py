@@ -38,7 +38,8 @@ SCENARIO_CASES = [
     ("nan-duration", "duration_s = nan\n", [], "duration_s: nan must be in (0, 86400] s"),
     ("nan-door-position", "[store]\nentrance_m = [nan, 1.0]\n", [], "entrance_m[0]: nan must be"),
     ("not-utf8", b'description = "\xff"\n', [], "cannot read scenario: 'utf-8' codec can't decode byte 0xff"),
-    ("million-cameras", None, ["--cameras", "1000000"], "rows: 1000 must be in [1, 100] cameras"),
+    ("million-cameras", None, ["--cameras", "1000000"],
+     "--cameras: 1000000 is more than the 10000 cameras a grid may hold"),
     ("huge-seed", None, ["--seed", str(10**30)], f"seed: {10**30} must be in [0, 9223372036854775807]"),
     ("huge-crowd", None, ["--people", "100000000"], "people: 100000000 must be in [0, 500] people"),
     ("calibration-missing", '[cameras]\ncalibration = "nowhere.json"\ncalibration_format = "dataset"\n', [],
@@ -84,6 +85,14 @@ OPTION_CASES = [
     ("duration-not-a-number", ["run", "--duration", "ten", "-o", "OUT"], "'ten' is not a number"),
     ("bench-duration-huge", ["bench", "--duration", "1e9", "-o", "OUT/b.json"],
      "duration_s: 1000000000.0 must be in (0, 86400] s"),
+    ("cameras-huge", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--cameras", "1000000000"],
+     "--cameras: 1000000000 is more than the 10000 cameras a grid may hold"),
+    ("tile-width-huge", ["render", "OUT/r.mcap", "--contact-sheet", "--time", "1", "--tile-width", "100000", "-o",
+                         "OUT/x.png"], "--tile-width: 100000 must be in [1, 4096] pixels"),
+    ("clip-too-long", ["render", "OUT/r.mcap", "--camera", "cam00", "--from", "0", "--to", "1e6", "-o", "OUT/x.gif"],
+     "is more than the 100,000 images a clip may hold"),
+    ("time-nan", ["render", "OUT/r.mcap", "--camera", "cam00", "--time", "nan", "-o", "OUT/x.png"],
+     "--time: nan is not a finite number of seconds"),
 ]
 
 

@@ -1,5 +1,8 @@
 """The command line's contract for bad input: one line naming the problem, exit status 2, no output file."""
 
+import os
+import sys
+
 import pytest
 
 from crossview.cli import EXIT_BAD_INPUT, main
@@ -192,3 +195,92 @@ def test_world_stats_takes_seconds_and_its_old_minutes_as_seconds():
     assert build_parser().parse_args(["world-stats", "store_layout1"]).duration == 600.0
     assert build_parser().parse_args(["world-stats", "store_layout1", "--duration", "90"]).duration == 90.0
     assert build_parser().parse_args(["world-stats", "store_layout1", "--minutes", "2"]).duration == 120.0
+
+
+def _files_of(folder):
+    return {p: p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_no_output_of_any_command_can_be_one_of_its_inputs_under_any_name(tmp_path, capsys, monkeypatch):
+    """Every file a command reads (its scenario and the calibration it names, its tracker config, its plug-in's
+    module, its recordings, result and dataset files) is refused as its output, by path, through a symlink or
+    a hard link, before any work."""
+    import shutil
+
+    from sim.scenario import SCENARIO_DIR
+
+    shutil.copytree(SCENARIO_DIR / "calibrations", tmp_path / "calibrations")
+    scenario = tmp_path / "campus.toml"
+    scenario.write_text((SCENARIO_DIR / "campus.toml").read_text())
+    calibration = tmp_path / "calibrations" / "campus_calibration.json"
+    config = tmp_path / "c.toml"
+    config.write_text("min_views = 2\n")
+    plugin = tmp_path / "aliasplugin.py"
+    plugin.write_text("from examples.greedy_triangulation import GreedyTriangulationTracker as T\n")
+    rec, tracks = tmp_path / "rec.mcap", tmp_path / "t.mcap"
+    rec.write_bytes(b"not read: the refusal comes first")
+    tracks.write_bytes(b"not read either")
+    (tmp_path / "link.json").symlink_to(calibration)
+    (tmp_path / "hard.toml").hardlink_to(config)
+    (tmp_path / "tp.png").hardlink_to(tracks)
+    dataset = tmp_path / "ds"
+    dataset.mkdir()
+    (dataset / "calibration.json").write_text("{}")
+    monkeypatch.chdir(tmp_path)
+    before = _files_of(tmp_path)
+    cases = [
+        (["run", str(scenario), "--out", "o", "--json", str(scenario)], "campus.toml"),
+        (["run", str(scenario), "--out", "o", "--config", str(config), "--json", "hard.toml"], "hard.toml"),
+        (["generate", str(scenario), "-o", "calibrations/campus_calibration.json"], "campus_calibration.json"),
+        (["generate", str(scenario), "-o", "link.json"], "link.json"),
+        (["track", str(rec), "-o", str(plugin), "--method", "aliasplugin:T"], "aliasplugin.py"),
+        (["track", str(rec), "-o", "hard.toml", "--config", str(config)], "hard.toml"),
+        (["score", str(rec), str(tracks), "--json", str(tracks)], "t.mcap"),
+        (["convert", str(dataset), "-o", str(dataset / "calibration.json")], "calibration.json"),
+        (["per-camera", str(rec), str(tracks), "--json", str(rec)], "rec.mcap"),
+        (["render", str(rec), "--top-down", "--time", "1", "--tracks", str(tracks), "-o", "tp.png"], "tp.png"),
+    ]
+    for argv, named in cases:
+        err = _run_bad(capsys, ["--no-progress", *argv])
+        assert f"{named}: is also an input (" in err, (argv, err)
+    sys.modules.pop("aliasplugin", None)
+    assert _files_of(tmp_path) == before
+    assert not (tmp_path / "o").exists()
+
+
+def test_an_input_that_is_a_fifo_is_refused_by_name_without_waiting_on_it(tmp_path, capsys):
+    """A named pipe given as scenario, calibration, tracker config, recording or dataset file: its reader would
+    wait for a writer forever; it is named as what it is instead."""
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    scenario = tmp_path / "s.toml"
+    scenario.write_text(f'duration_s = 1.0\n[cameras]\ncalibration = "{fifo.name}"\ncalibration_format = "dataset"\n')
+    dataset = tmp_path / "ds"
+    dataset.mkdir()
+    os.mkfifo(dataset / "calibration.json")
+    out = tmp_path / "out.mcap"
+    for argv, named in ((["generate", str(fifo), "-o", str(out)], fifo),
+                        (["generate", str(scenario), "-o", str(out)], fifo),
+                        (["run", "--config", str(fifo), "--out", str(tmp_path / "o")], fifo),
+                        (["track", str(fifo), "-o", str(out)], fifo),
+                        (["info", str(fifo)], fifo),
+                        (["convert", str(dataset), "-o", str(out)], dataset / "calibration.json"),
+                        (["evaluate", str(dataset), str(fifo)], fifo)):
+        err = _run_bad(capsys, ["--no-progress", *argv])
+        assert f"{named}: is a FIFO (named pipe), not a regular file" in err, (argv, err)
+    assert not out.exists() and not (tmp_path / "o").exists()
+
+
+def test_a_closed_stdout_ends_quietly_with_every_output_written(tmp_path):
+    """`crossview run ... | head -1`: the reader of stdout is gone before the command has printed its table; the
+    command runs on, writes its files and ends with its own status, without a word about the pipe."""
+    import subprocess
+
+    process = subprocess.Popen([sys.executable, "-m", "crossview.cli", "--no-progress", "run", "store_layout1",
+                                "--duration", "1", "--out", str(tmp_path)], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+    process.stdout.close()  # (as `head -1` does once it has its line)
+    err = process.stderr.read()
+    assert process.wait(timeout=600) == 0, err
+    assert err == ""
+    assert (tmp_path / "store_layout1.score.json").is_file()

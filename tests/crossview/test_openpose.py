@@ -1,6 +1,7 @@
 """OpenPose JSON folders: the joint maps by name, stamps, errors, and a recording's round trip through them."""
 
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -94,3 +95,79 @@ def test_a_recording_through_openpose_folders_tracks_and_scores_the_same(store_r
         assert after[key] == before[key], key
     assert after["mpjpe_mm"] == pytest.approx(before["mpjpe_mm"], abs=1e-9)
     assert after["association_accuracy"] is None  # OpenPose's output says nothing of who each detection is
+
+
+@pytest.fixture(scope="module")
+def exported(store_recording, tmp_path_factory):
+    """`store_recording` exported as OpenPose folders (COCO-17 frames with 17-joint 3D truth and scene.json)."""
+    folder = tmp_path_factory.mktemp("exported") / "op"
+    assert main(["--no-progress", "export", str(store_recording), "--format", "openpose", "-o", str(folder)]) == 0
+    return folder
+
+
+def _first_keypoints(folder):
+    return sorted((folder / "cam00").iterdir())[0]
+
+
+def _set_people(people):
+    def change(folder):
+        _first_keypoints(folder).write_text(json.dumps({"version": 1.3, "people": people}))
+    return change
+
+
+def _set_json(name, change):
+    def apply(folder):
+        data = json.loads((folder / name).read_text())
+        changed = change(data)
+        (folder / name).write_text(json.dumps(data if changed is None else changed))
+    return apply
+
+
+def _rename_first(folder):
+    _first_keypoints(folder).rename(folder / "cam00" / f"cam00_{'9' * 40}_keypoints.json")
+
+
+# (id, change to the exported folder, the file the line names, what it must say; --fps where given)
+DAMAGED = [
+    ("timestamp-1e300", _set_json("timestamps.json", lambda d: d["cam00"]["stamp_s"].__setitem__(0, 1e300)),
+     "timestamps.json", "camera 'cam00': stamp_s[0]: timestamp 1e+300 must be in [0, 4e+09] s", None),
+    ("timestamps-a-list", _set_json("timestamps.json", lambda d: []), "timestamps.json",
+     "must be an object of camera name -> {stamp_s, delivery_s}, got list", None),
+    ("delivery-a-string", _set_json("timestamps.json", lambda d: d["cam01"].update(delivery_s="late")),
+     "timestamps.json", "camera 'cam01': delivery_s must be an array of seconds", None),
+    ("person-not-an-object", _set_people([1]), "_keypoints.json", "person 0 must be an object", None),
+    ("keypoints-not-numbers", _set_people([{"pose_keypoints_2d": ["a"] * 75}]), "_keypoints.json",
+     "person 0: pose_keypoints_2d must be a flat array of numbers", None),
+    ("keypoints-huge", _set_people([{"pose_keypoints_2d": [1e300] * 75}]), "_keypoints.json",
+     "must be finite and within 1e+06", None),
+    ("frame-number-huge", _rename_first, "_keypoints.json", "frame number 9999999999", None),
+    ("fps-tiny", lambda folder: (folder / "timestamps.json").unlink(), "_keypoints.json",
+     "must be in [0, 4e+09] s", "1e-300"),
+    ("camera-pose-all-zero", _set_json("calibration.json", lambda d: d["cameras"]["cam00"].update(
+        Tw=[[0.0] * 4] * 4)), "calibration.json", "camera 'cam00': Tw: the rotation", None),
+    ("camera-pose-mirrored", _set_json("calibration.json", lambda d: d["cameras"]["cam00"]["Tw"][0].__setitem__(
+        slice(0, 3), [-x for x in d["cameras"]["cam00"]["Tw"][0][:3]])), "calibration.json", "det -1", None),
+    ("truth-not-a-list", _set_json("annotation_3d.json", lambda d: {"poses": d}), "annotation_3d.json",
+     "the file (a list of {timestamp, poses} entries) must be an array, got dict", None),
+    ("scene-a-list", _set_json("scene.json", lambda d: [d]), "scene.json", "the file must be an object, got list",
+     None),
+    ("scene-huge-seed", _set_json("scene.json", lambda d: d.update(seed=2**70)), "scene.json",
+     f"seed {2**70} must be an integer in [0, 2^63)", None),
+]
+
+
+@pytest.mark.parametrize("change, named, message, fps", [c[1:] for c in DAMAGED], ids=[c[0] for c in DAMAGED])
+def test_a_damaged_openpose_or_dataset_file_is_one_line_naming_it(exported, tmp_path, capsys, change, named, message,
+                                                                  fps):
+    """Every file of an OpenPose folder (and the dataset layout's files beside it) is checked as it is read: a
+    stamp of 1e300, a pose that is no rotation, a truth file or scene.json of the wrong shape are named, not
+    dropped in silence or left to fail later with a traceback."""
+    folder = tmp_path / "op"
+    shutil.copytree(exported, folder)
+    change(folder)
+    out = tmp_path / "r.mcap"
+    status = main(["--no-progress", "convert", str(folder), "-o", str(out)] + (["--fps", fps] if fps else []))
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert f"{named}: " in err and message in err, err
+    assert not out.exists()

@@ -151,3 +151,25 @@ def test_writing_bytes_refuses_an_input(tmp_path):
     with pytest.raises(OutputError, match="is also an input"):
         outputs.write_bytes(b"x", tmp_path / "." / "in.json", inputs=(given,))
     assert given.read_text() == "{}"
+
+
+def test_a_rerun_removes_the_temporary_files_of_a_killed_run_and_only_those(tmp_path):
+    """kill -9 leaves `.NAME.PID.tmp` (nothing can remove it then); the next write of that output removes the
+    ones whose process is gone, and leaves a live writer's, another output's and any other file alone."""
+    dead = subprocess.Popen(["true"])
+    dead.wait()  # (a pid no process has now)
+    out = tmp_path / "rec.mcap"
+    left = tmp_path / f".rec.mcap.{dead.pid}.tmp"
+    left.write_bytes(b"half a recording")
+    live = tmp_path / f".rec.mcap.{os.getppid()}.tmp"  # (a live process's: a concurrent writer)
+    live.write_bytes(b"being written")
+    other = tmp_path / f".other.mcap.{dead.pid}.tmp"
+    other.write_bytes(b"another output's")
+    mine = tmp_path / f".rec.mcap.{dead.pid}.tmp.keep"
+    mine.write_bytes(b"not the pattern")
+    outputs.write_bytes(b"done", out)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([out.name, live.name, other.name, mine.name])
+    # A dataset export's temporary folder likewise.
+    folder = tmp_path / f".ds.{dead.pid}.tmp"
+    (folder / "cam").mkdir(parents=True)
+    assert outputs.remove_dead_temporaries(tmp_path / "ds") == [folder] and not folder.exists()

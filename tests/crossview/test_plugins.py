@@ -62,6 +62,16 @@ class Raises(_Broken):
         raise RuntimeError("the model file is missing")
 
 
+class Exits(_Broken):
+    def bad(self, frame):
+        sys.exit(3)
+
+
+class Interrupts(_Broken):
+    def bad(self, frame):
+        raise KeyboardInterrupt  # (its own, not the user's Ctrl-C)
+
+
 class NoAssignments:
     """The example without its `last_output`: a tracker that does not say where each detection went."""
 
@@ -148,6 +158,7 @@ def _t(id, pose=None, **optional):
     ([object()], "target 0 is a object without `id` and `pose`"),
     ([_t(1.0)], "target 0 has id 1.0 of type float; ids must be ints"),
     ([_t(True)], "target 0 has id True of type bool"),
+    ([_t(2**70)], f"target 0 has id {2**70}; ids must fit int64"),
     ([_t(np.int32(4)), _t(4)], "target 1 (id 4): the id is reported twice"),
     ([_t(0, np.zeros((17, 2)))], "pose has shape (17, 2), expected (17, 3) for the coco17 skeleton"),
     ([_t(0, "head")], "pose is not numeric (str)"),
@@ -180,7 +191,9 @@ def test_a_missing_joint_nan_in_all_three_coordinates_is_allowed():
     ("WrongJoints", "target 0 (id 0): pose has shape (14, 3), expected (17, 3)"),
     ("StringIds", "target 0 has id 'person-1' of type str; ids must be ints"),
     ("Raises", "update raised RuntimeError: the model file is missing"),
-])
+    ("Exits", "update raised SystemExit: 3"),
+    ("Interrupts", "update raised KeyboardInterrupt"),
+], ids=["NaNPose", "WrongJoints", "StringIds", "Raises", "Exits", "Interrupts"])
 def test_a_plugin_going_wrong_stops_the_run_naming_the_frame_and_leaves_nothing(
         plugin, message, short_recording, tmp_path, capsys):
     out = tmp_path / "t.mcap"

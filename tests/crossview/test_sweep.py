@@ -256,7 +256,7 @@ def test_failed_cells_name_paths_relative_to_the_scenario_file(tmp_path):
 def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, caplog):
     out = tmp_path / "subset"
     shutil.copytree(serial, out)
-    with caplog.at_level("WARNING", logger="crossview.sweep"):
+    with caplog.at_level("INFO", logger="crossview.sweep"):
         assert main(["--no-progress", "sweep", "store_layout1", "--people", "3", "--cameras", "12,6", "--seeds", "1",
                      "--duration", "1", "--workers", "1", "-o", str(out)]) == 0
     assert "2 of 2 cells already finished" in caplog.text
@@ -266,7 +266,7 @@ def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, cap
     assert rows == [full[r["key"]] for r in rows]
     # The folder keeps every finished cell: the full grid again runs nothing and gives the full results.
     caplog.clear()
-    with caplog.at_level("WARNING", logger="crossview.sweep"):
+    with caplog.at_level("INFO", logger="crossview.sweep"):
         assert _sweep(out, "--workers", "1") == 0
     assert "8 of 8 cells already finished" in caplog.text
     assert _sha256(out / "results.json") == _sha256(serial / "results.json")
@@ -380,3 +380,151 @@ def test_a_line_below_the_bar_at_its_first_value_is_not_said_to_break_there():
     assert sweep_report.breaking_points(wanted, breaks_later)[0].startswith("all: breaks at crowd.people = 12 (PCP")
     assert sweep_report.breaking_points(wanted, below_first)[0].startswith(
         "all: already below the bar at the first value, crowd.people = 4 (PCP 0.500")
+
+
+def test_a_cells_key_covers_an_absolute_calibrations_content_and_a_plugins_code(tmp_path, monkeypatch):
+    """Change the calibration a scenario names by an absolute path, or the code of a plug-in tracker, and a
+    finished cell is no longer found: the old scores would be stale."""
+    calibration = tmp_path / "campus_calibration.json"
+    shutil.copy(SCENARIOS / "calibrations" / "campus_calibration.json", calibration)
+    scenario = tmp_path / "campus.toml"
+    scenario.write_text((SCENARIOS / "campus.toml").read_text().replace(
+        'calibration = "calibrations/campus_calibration.json"', f'calibration = "{calibration}"'))
+    plugin = tmp_path / "keyedplugin.py"
+    plugin.write_text("from examples.greedy_triangulation import GreedyTriangulationTracker as T\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spec = sweep.SweepSpec(scenario=str(scenario), methods=("crossview", "keyedplugin:T"), duration_s=1.0)
+    try:
+        first = [c.key for c in sweep.plan(spec)]
+        assert len(set(first)) == 2
+        assert [c.key for c in sweep.plan(spec)] == first  # (the same inputs: the same keys)
+        data = json.loads(calibration.read_text())
+        data["cameras"].pop(sorted(data["cameras"])[0])  # a camera fewer
+        calibration.write_text(json.dumps(data))
+        second = [c.key for c in sweep.plan(spec)]
+        assert not set(second) & set(first)
+        plugin.write_text(plugin.read_text() + "# a change to the tracker\n")
+        third = [c.key for c in sweep.plan(spec)]
+        assert third[0] == second[0] and third[1] != second[1]  # (only the plug-in's cell)
+    finally:
+        sys.modules.pop("keyedplugin", None)
+
+
+def test_a_cell_failed_by_its_environment_is_not_final_and_the_next_run_says_so(tmp_path):
+    """A cell whose recording hit the file-size limit (EFBIG, as a full disk gives ENOSPC) is stored as not
+    final: the next run, without the limit, runs it again, says why, and it succeeds."""
+    import resource
+
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2",
+               "--duration", "1", "--workers", "1", "--out", str(out)]
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))
+
+    subprocess.run(command, capture_output=True, text=True, preexec_fn=limit, timeout=600)
+    (cell,) = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    assert "File too large" in cell["status"] and cell[sweep.RETRY_KEY] is True, cell
+    again = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert "failed in an earlier run for a reason of its environment" in again.stderr
+    assert "File too large" in again.stderr and "1 run, 0 failed" in again.stdout
+    (cell,) = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    assert cell["status"] == "ok" and sweep.RETRY_KEY not in cell
+
+
+def _session_processes(sid: int) -> list[str]:
+    """The live processes of session `sid` (zombies, ended and waiting to be reaped, left out)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(") ", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[3]) == sid and fields[0] != "Z":
+            found.append(stat.parent.name)
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the processes from /proc (Linux)")
+def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_temporary_file(tmp_path):
+    """kill -9 of the sweep stops nothing itself: its pool workers (waiting on the sweep), the fork server and
+    the resource tracker must still end on their own; the rerun finishes and leaves no temporary file."""
+    out = tmp_path / "killed"
+    process = subprocess.Popen(_command(out, "4"), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+    try:
+        while not list((out / "cells").glob("*.json")) and process.poll() is None:
+            time.sleep(0.2)
+        assert process.poll() is None
+        process.kill()
+        process.wait()
+        for _ in range(300):  # (up to 30 s)
+            if not _session_processes(process.pid):
+                break
+            time.sleep(0.1)
+        left = _session_processes(process.pid)
+    finally:
+        for pid in _session_processes(process.pid):
+            os.kill(int(pid), signal.SIGKILL)
+    assert left == []
+    again = subprocess.run(_command(out, "4"), capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
+
+
+def test_a_damaged_cell_file_is_named_and_its_cell_run_again(serial, tmp_path, caplog):
+    out = tmp_path / "damaged"
+    shutil.copytree(serial, out)
+    damaged = sorted((out / "cells").glob("*.json"))[0]
+    damaged.write_text('[{"key": "a list, not a cell"}]')
+    with caplog.at_level("WARNING", logger="crossview.sweep"):
+        assert _sweep(out, "--workers", "1") == 0
+    assert f"{damaged}: not a cell file of this sweep (an object expected, got list): running the cell again" \
+        in caplog.text
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+_ENTRY = {"file": "recordings/a.mcap", "sha256": "0" * 64, "version": "1", "scenario_name": "s",
+          "scenario_text": "", "overrides": {}, "files": {}}
+
+
+@pytest.mark.parametrize("manifest, message", [
+    ({"recordings": [{k: v for k, v in _ENTRY.items() if k != "version"}]}, "recordings[0]: key 'version' missing"),
+    ({"recordings": [{**_ENTRY, "file": "/etc/passwd"}]}, "file '/etc/passwd' must lie inside the folder"),
+    ({"recordings": [{**_ENTRY, "files": {"/etc/x.json": "d"}}], "files": {"d": "{}"}},
+     "the files it names must be relative to the scenario"),
+    ({"recordings": [], "files": {"d": 5}}, "a file it carries does not match its sha256"),
+    ({"recordings": {"a": 1}}, "'recordings' must be an array"),
+], ids=["entry-without-version", "file-outside", "named-file-absolute", "carried-file-not-text", "not-a-list"])
+def test_a_damaged_manifest_is_one_line_before_any_regeneration(tmp_path, capsys, manifest, message):
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    assert main(["--no-progress", "verify", str(tmp_path)]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "manifest.json" in err and message in err, err
+
+
+def test_sigterm_during_a_ray_sweep_ends_it_like_everywhere_else(tmp_path):
+    """ray.init sets its own SIGTERM handler (exit 1, a dump of the task loop); the sweep puts the command's
+    back, and a signal that comes while it waits inside Ray (where raising it gave a SystemError) is held until
+    Ray returns: one line, exit 143."""
+    pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
+    out = tmp_path / "ray"
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
+               "--duration", "4", "--ray", "--out", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    try:
+        while not (out / "sweep.json").exists() and process.poll() is None:  # (written once Ray is up)
+            time.sleep(0.2)
+        time.sleep(2.0)  # (the cells running: the sweep waits inside Ray's compiled core, where a signal is held)
+        assert process.poll() is None, process.communicate()
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "crossview: ended by SIGTERM; no partial output was kept", err
+    assert "Traceback" not in err and not (out / "results.json").exists()
