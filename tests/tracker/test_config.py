@@ -4,6 +4,7 @@ import dataclasses
 
 import pytest
 
+from core.errors import ConfigError
 from tracker.config import PRESETS, TABLE_S2, RowNorm, TrackerConfig, Triangulation
 from tracker.triangulation import PLANE_ROW, UNIT_ROWS, WHOLE_ROW
 
@@ -31,10 +32,11 @@ def test_unknown_preset_lists_the_valid_ones():
     ("alpha_3d_m", 0.0), ("score_threshold", 1.5), ("min_views", 1), ("velocity_history", 1.5),
     ("lambda_t_per_s", -1.0), ("triangulation", "sideways"), ("row_norm", "diagonal"), ("row_norm", 1),
     ("w_2d", float("nan")), ("reject_factor", -1.0), ("reject_floor_px", 0.0), ("ghost_cell_m", 0.1),
-    ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0),
+    ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0), ("alpha_2d_px_per_frame", 0.0),
+    ("alpha_2d_px_per_frame", -25.0), ("alpha_2d_px_per_frame", float("nan")), ("reject_factor", 0.5),
 ])
 def test_out_of_range_values_name_the_field(field, value):
-    with pytest.raises(ValueError, match=field):
+    with pytest.raises(ConfigError, match=field):
         TrackerConfig(**{field: value})
 
 
