@@ -273,9 +273,10 @@ class Tracker:
             return rows, np.zeros(0, dtype=np.int64)
         # Eq. (4)'s time penalty counts from the joint's last observation t', also for a joint carried with
         # the body since (its position is a guess, so it keeps losing weight as in the paper).
-        # Eq. (2)'s α2D is pixels per frame of this camera (Table S2): per second, divided by its frame period.
-        # (NaN before the camera's second frame, when no target can hold a point of this camera for eq. 2.)
-        alpha_2d_px_per_s = cfg.alpha_2d_px_per_frame / self._period_s[c]
+        # Eq. (2)'s α2D is pixels per frame of this camera (Table S2): per second, divided by its frame period,
+        # and at least alpha_2d_floor_px_per_s (beyond the paper; 0 in the -paper presets). (The period is NaN
+        # before the camera's second frame, when no target can hold a point of this camera for eq. 2.)
+        alpha_2d_px_per_s = max(cfg.alpha_2d_px_per_frame / self._period_s[c], cfg.alpha_2d_floor_px_per_s)
         matrix = np.empty((rows.size, det_px.shape[0]))
         aff.affinity_matrix(tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s, c, det_px,
                             self._world_from_pixel[c], self._centers[c], t, float(cfg.w_2d), alpha_2d_px_per_s,

@@ -420,3 +420,14 @@ def test_each_camera_has_its_own_frame_period_from_its_stamps():
         tracker.update(Frame(camera, stamp, *empty))
     assert tracker.frame_period_s(slow) == pytest.approx(0.1, abs=1e-9)  # s, the median of its intervals
     assert tracker.frame_period_s(fast) == pytest.approx(0.04, abs=1e-9)  # s
+
+
+def test_the_measured_preset_keeps_each_walker_one_identity_at_a_low_frame_rate():
+    # At 2.5 fps a walking joint moves about 100 px between two frames of a camera, past the `store` preset's
+    # α2D of 40 px per frame: the preset's least speed (400 px/s, its α2D when it was set per second) keeps
+    # eq. (2) from dropping the walkers (Figure 5's low rates).
+    cams, walkers, frames, _ = store_like("layout1", 6.0, seed=1, fps=2.5)
+    outputs = _run(Tracker(cams, CONFIG), frames)
+    ids = _identities_per_person(outputs, walkers, after_s=2.0)
+    assert sorted(ids) == [0, 1, 2, 3]
+    assert all(len(v) == 1 for v in ids.values()), ids
