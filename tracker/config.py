@@ -111,7 +111,7 @@ class TrackerConfig:
             point is judged against the estimate moved back to its own time with the joint's velocity (VELOCITY
             triangulation), so a stale point is dropped only when it lies beyond its prediction. 3 in the
             `store` preset, chosen on the project's own data and never per test frame (docs/tracker.md, "Robust
-            triangulation"): the stores and the Panoptic rig, MPJPE 0.7-0.8 mm lower, PCP equal or higher; off
+            triangulation"): MPJPE 0.7-0.8 mm lower on the stores, 1.7 mm on the Panoptic rig, PCP equal or higher; off
             in `campus` (three cameras leave it nothing to drop: no change on the Campus rig or the real Campus)
             and `shelf` (no Shelf data to measure it on), and in the `-paper` presets. Score-weighted views (w_i
             times the detector score) were tried too and were slightly worse (MPJPE +0.3-0.5 mm), so they are
@@ -230,7 +230,7 @@ class TrackerConfig:
             object.__setattr__(self, "triangulation", _enum_value("triangulation", Triangulation, self.triangulation))
         if not isinstance(self.triangulation, Triangulation):
             raise ConfigError(f"TrackerConfig.triangulation: {self.triangulation!r} is not one of "
-                             f"{[m.value for m in Triangulation]}")
+                              f"{[m.value for m in Triangulation]}")
         if isinstance(self.row_norm, str):
             object.__setattr__(self, "row_norm", _enum_value("row_norm", RowNorm, self.row_norm))
         if not isinstance(self.row_norm, RowNorm):
@@ -258,7 +258,7 @@ class TrackerConfig:
                 raise ConfigError(f"TrackerConfig.{name}: {value!r} is not a number")
         if 0.0 < self.ghost_cell_m < 0.5:
             raise ConfigError(f"TrackerConfig.ghost_cell_m: {self.ghost_cell_m} must be 0 (no sight map) or at "
-                             "least 0.5 m")
+                              "least 0.5 m")
         if not 0.0 <= self.ghost_min_seen_ratio <= 1.0:
             raise ConfigError(f"TrackerConfig.ghost_min_seen_ratio: {self.ghost_min_seen_ratio} must be in [0, 1]")
         if 0.0 < self.reject_factor < 1.0:
@@ -277,13 +277,13 @@ class TrackerConfig:
             raise ConfigError(f"TrackerConfig.normalize_affinity: {self.normalize_affinity!r} must be true or false")
         if self.init_min_top_m >= self.init_max_top_m:
             raise ConfigError(f"TrackerConfig.init_min_top_m: {self.init_min_top_m} must be below "
-                             f"init_max_top_m {self.init_max_top_m}")
+                              f"init_max_top_m {self.init_max_top_m}")
         if not self.view_margin_m >= self.alpha_3d_m:
             raise ConfigError(f"TrackerConfig.view_margin_m: {self.view_margin_m} must be >= alpha_3d_m "
-                             f"{self.alpha_3d_m}")
+                              f"{self.alpha_3d_m}")
         if self.lost_after_s > self.remove_after_s:
             raise ConfigError(f"TrackerConfig.lost_after_s: {self.lost_after_s} must not exceed "
-                             f"remove_after_s {self.remove_after_s}")
+                              f"remove_after_s {self.remove_after_s}")
 
     @classmethod
     def preset(cls, name: str) -> TrackerConfig:
