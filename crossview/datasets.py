@@ -45,12 +45,18 @@ def _table(value, path: Path, key: str, kind: type = dict):
     return value
 
 
-def stamp_s(value, path: Path, where: str) -> float:
-    """A timestamp, seconds: a finite number in [0, MAX_STAMP_S], else a DatasetError naming `where`."""
+def stamp_s(value, path: Path, where: str, camera_clock: bool = False) -> float:
+    """A timestamp, seconds: a finite number in [0, MAX_STAMP_S], else a DatasetError naming `where`.
+
+    With `camera_clock` (the stamp a camera put on its frame) [-MAX_STAMP_S, MAX_STAMP_S]: a camera's own clock
+    may read before the recording's start (the simulated cameras' offsets and jitter do), and the tracker only
+    takes differences of stamps.
+    """
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise DatasetError(f"{path}: {where}: timestamp {value!r} must be a number of seconds")
-    if not 0 <= value <= MAX_STAMP_S:  # (NaN fails too)
-        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be in [0, {MAX_STAMP_S:g}] s")
+    low = -MAX_STAMP_S if camera_clock else 0
+    if not low <= value <= MAX_STAMP_S:  # (NaN fails too)
+        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be in [{low:g}, {MAX_STAMP_S:g}] s")
     return float(value)
 
 
@@ -148,7 +154,7 @@ def _read_frames(dataset_dir: Path, source: str) -> list[_FrameItem]:
     parsed = []
     for key, item in items.items():
         item = _table(item, path, f"frame {key!r}")
-        stamp = stamp_s(item.get("timestamp"), path, f"frame {key!r}")
+        stamp = stamp_s(item.get("timestamp"), path, f"frame {key!r}", camera_clock=True)
         poses = [_table(p, path, f"frame {key!r}: a pose") for p in _table(item.get("poses"), path,
                                                                            f"frame {key!r}: poses", list)]
         ids = np.asarray([person_id(p.get("id", -1), path, f"frame {key!r}") for p in poses], dtype=np.int64)

@@ -24,15 +24,17 @@ def affinity_2d(
 
     A2D = w2D (1 - ||x_t - x_t''|| / max(α2D (t - t''), floor)) e^(-λa (t - t''))
 
-    With floor = 0 this is the paper's eq. (2). A positive floor (pixels, beyond the paper) keeps the
-    detector's own noise, which does not shrink with t - t'', from making the term negative between
-    close frames.
+    α2D here is per second: Table S2's pixels per frame divided by the camera's frame period (the tracker does
+    it per camera, `Tracker.frame_period_s`). With floor = 0 this is the paper's eq. (2). A positive floor
+    (pixels, beyond the paper) keeps the detector's own noise, which does not shrink with t - t'', from making
+    the term negative between close frames.
 
     Args:
         prev_px: (T, J, 2) each target's last matched joints in this camera, undistorted pixels (NaN: none).
         prev_stamp_s: (T, J) their stamps t'', s.
         det_px: (D, J, 2) the new detections' joints, undistorted pixels (NaN: missing or below threshold).
         stamp_s: the new frame's stamp t, s.
+        alpha_2d_px_per_s: α2D per frame of this camera divided by its frame period, pixels per second.
 
     Returns:
         (T, D, J) affinities, NaN where either joint is missing.
@@ -131,7 +133,8 @@ def affinity_matrix(
             (NaN none); only camera `camera` is read (eq. 2).
         det_px: (D, J, 2) the frame's undistorted joints (NaN missing).
         world_from_pixel: (3, 3) R^T K^-1 of the camera; center: (3,) its centre (eq. 3).
-        stamp_s: t, s. The weights and thresholds as in `affinity_2d`, `affinity_3d` and `predict_positions`.
+        stamp_s: t, s. The weights and thresholds as in `affinity_2d` (α2D converted to pixels per second with
+            the camera's frame period), `affinity_3d` and `predict_positions`.
         normalize: as `combine`.
         rows: (R,) the target rows to score (those in the camera's view, `visibility.targets_in_view`).
         out: (R, D) the affinity matrix of those rows, written.

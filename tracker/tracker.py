@@ -46,6 +46,10 @@ _DEFAULT_CONFIG = TrackerConfig()
 IMPLAUSIBLE_SHARE = 0.25
 """Share of a target's observed joints (or bones) out of the birth limits that makes its body implausible."""
 
+FRAME_PERIOD_INTERVALS = 9
+"""How many of a camera's latest stamp intervals give its frame period (their median: a dropped frame or a
+jittered stamp does not move it), which turns eq. (2)'s α2D from pixels per frame into pixels per second."""
+
 MAX_SIGHT_MAP_CELLS = 20_000_000
 """Most cells of all cameras' sight maps together (two float64 counts each: 320 MB)."""
 
@@ -108,9 +112,8 @@ class Tracker:
         self._dist = [np.ascontiguousarray(cam.dist, dtype=np.float64) for cam in self.cameras]
         cfg = config
         self._init_min_joints = int(cfg.init_min_joints)
-        self._affinity_params = (float(cfg.w_2d), float(cfg.alpha_2d_px_per_s), float(cfg.alpha_2d_floor_px),
-                                 float(cfg.w_3d), float(cfg.alpha_3d_m), float(cfg.lambda_a_per_s),
-                                 float(cfg.max_predict_s), bool(cfg.normalize_affinity))
+        self._affinity_params = (float(cfg.alpha_2d_floor_px), float(cfg.w_3d), float(cfg.alpha_3d_m),
+                                 float(cfg.lambda_a_per_s), float(cfg.max_predict_s), bool(cfg.normalize_affinity))
         mode = cfg.triangulation
         self._reconstruction_row_norm = row_norm_code(cfg, reconstruction=True)
         self._update_params = (float(cfg.max_observation_age_s),
@@ -140,6 +143,11 @@ class Tracker:
         self._targets = _Targets(C, J, config.velocity_history)
         self._next_id = 0
         self._camera_last_s = np.full(C, -np.inf)
+        # Each camera's latest stamp intervals (a ring, NaN unfilled) and their median, its frame period (NaN
+        # before its second frame).
+        self._intervals_s = np.full((C, FRAME_PERIOD_INTERVALS), np.nan)
+        self._num_intervals = np.zeros(C, dtype=np.int64)
+        self._period_s = np.full(C, np.nan)
         self._newest_s = -np.inf
         # Unmatched detections of the latest frame of each camera (Algorithm 1's D_u).
         self._pool_px: list[np.ndarray] = [np.zeros((0, J, 2)) for _ in range(C)]
@@ -179,6 +187,8 @@ class Tracker:
             out_t = t if np.isfinite(t) else max(self._newest_s, 0.0)
             return self._emit(out_t, frame.camera, np.full(D, -1, dtype=np.int64))
         c = self._index[frame.camera]
+        if np.isfinite(self._camera_last_s[c]):
+            self._note_interval(c, t - self._camera_last_s[c])
         self._camera_last_s[c] = t
         self._newest_s = max(self._newest_s, t)
         self._advance_lifecycle(t)
@@ -201,7 +211,18 @@ class Tracker:
                 assigned[frame_index] = new_id
         return self._emit(t, frame.camera, assigned)
 
+    def frame_period_s(self, camera: str) -> float:
+        """The camera's frame period as its stamps show it: the median of its latest `FRAME_PERIOD_INTERVALS`
+        intervals between processed frames, s; NaN before its second frame."""
+        return float(self._period_s[self._index[camera]])
+
     # ------------------------------------------------------------------ steps
+
+    def _note_interval(self, c: int, interval_s: float) -> None:
+        k = self._num_intervals[c]
+        self._intervals_s[c, k % FRAME_PERIOD_INTERVALS] = interval_s
+        self._num_intervals[c] = k + 1
+        self._period_s[c] = np.median(self._intervals_s[c, :min(k + 1, FRAME_PERIOD_INTERVALS)])
 
     def _reject_reason(self, frame: Frame, t: float) -> str | None:
         if frame.camera not in self._index:
@@ -252,9 +273,14 @@ class Tracker:
             return rows, np.zeros(0, dtype=np.int64)
         # Eq. (4)'s time penalty counts from the joint's last observation t', also for a joint carried with
         # the body since (its position is a guess, so it keeps losing weight as in the paper).
+        # Eq. (2)'s α2D is pixels per frame of this camera (Table S2): per second, divided by its frame period,
+        # and at least alpha_2d_floor_px_per_s (beyond the paper; 0 in the -paper presets). (The period is NaN
+        # before the camera's second frame, when no target can hold a point of this camera for eq. 2.)
+        alpha_2d_px_per_s = max(cfg.alpha_2d_px_per_frame / self._period_s[c], cfg.alpha_2d_floor_px_per_s)
         matrix = np.empty((rows.size, det_px.shape[0]))
         aff.affinity_matrix(tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s, c, det_px,
-                            self._world_from_pixel[c], self._centers[c], t, *self._affinity_params, rows, matrix)
+                            self._world_from_pixel[c], self._centers[c], t, float(cfg.w_2d), alpha_2d_px_per_s,
+                            *self._affinity_params, rows, matrix)
         matched, cols = associate(matrix)  # eq. (1), (T, D)
         return rows[matched], cols
 

@@ -3,7 +3,10 @@
 `score` compares tracker outputs with the simulator's ground truth on a regular evaluation grid:
 
 - grid: ticks t_k = t_0 + k / eval_rate_hz from the first to the last truth sample; ticks before the
-  tracker's first output (before any camera frame was delivered) are not scored;
+  tracker's first output (before any camera frame was delivered) are not scored, and neither are outputs
+  stamped before t_0 (a camera whose clock reads behind): the people of the first sample are created at
+  t_0, so no truth exists to compare those outputs with, and the first tick waits for an output stamped
+  at or after t_0;
 - scored area: with `scored_area` (the store's floor), the rest is an ignored region: only people whose
   body root lies on the floor are scored, targets off the floor are dropped, and so is a target nearest
   to a person off the floor (in a doorway, where no camera sees) within `root_threshold_m` of them;
@@ -209,7 +212,8 @@ def score(
             continue
         inside += t_start - OUTPUT_MAX_AGE_S <= out.stamp_s <= t_end + OUTPUT_MAX_AGE_S
         k = int(np.searchsorted(ticks, out.stamp_s, side="left"))
-        if k < num_ticks and (k not in latest or out.stamp_s >= latest[k].stamp_s):
+        # An output stamped before t_0 predates every person of the recording (see the module docstring).
+        if out.stamp_s >= t_start and k < num_ticks and (k not in latest or out.stamp_s >= latest[k].stamp_s):
             latest[k] = out
         if out.camera in projected_names:
             camera_2d.add(out)

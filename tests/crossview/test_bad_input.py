@@ -120,6 +120,11 @@ CONFIG_CASES = [
     ("not-utf8", b"w_2d = 0.5\n\xff\n", "cannot read tracker config: not UTF-8 text (byte 11)"),
     ("unknown-key", "w2d = 0.5\n", "unknown key 'w2d'"),
     ("malformed", "[tracker\n", "cannot read tracker config"),
+    ("alpha-2d-negative", "alpha_2d_px_per_frame = -25.0\n", "TrackerConfig.alpha_2d_px_per_frame: -25.0 must be > 0"),
+    ("alpha-2d-zero", "alpha_2d_px_per_frame = 0.0\n", "TrackerConfig.alpha_2d_px_per_frame: 0.0 must be > 0"),
+    ("alpha-2d-nan", "alpha_2d_px_per_frame = nan\n", "TrackerConfig.alpha_2d_px_per_frame: nan is not a number"),
+    ("alpha-2d-per-second", "alpha_2d_px_per_s = 625.0\n", "key 'alpha_2d_px_per_s' is now 'alpha_2d_px_per_frame'"),
+    ("reject-factor-below-1", "reject_factor = 0.5\n", "TrackerConfig.reject_factor: 0.5 must be 0 (no rejection) or"),
 ]
 
 
@@ -179,7 +184,7 @@ DATASET_CASES = [
     ("nan-in-calibration", "calibration.json", lambda d: json.dumps(d).replace("1.1945368357487924", "NaN"),
      "calibration.json: NaN is not a JSON number"),
     ("huge-timestamp", "annotation_2d.json", lambda d: next(iter(d["frames"].values())).update(timestamp=1e300),
-     "timestamp 1e+300 must be in [0, 4e+09] s"),
+     "timestamp 1e+300 must be in [-4e+09, 4e+09] s"),
     ("huge-id", "annotation_2d.json", lambda d: _first_frame_with_poses(d)["poses"][0].update(id=10**30),
      f"id {10**30} must be an integer in [-2^63, 2^63)"),
     ("huge-image", "annotation_2d.json", lambda d: {**d, "image_wh": [10**30, 5]},

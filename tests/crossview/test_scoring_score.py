@@ -196,6 +196,20 @@ def test_ticks_before_the_first_output_are_not_scored():
     assert r.false_negatives == 0 and r.mota == 1.0 and r.pcp == 1.0
 
 
+def test_outputs_stamped_before_the_people_were_created_are_not_scored():
+    # A camera whose clock reads behind stamps the first frame before t_0 = 0, when the people of the first
+    # truth sample are created; the tracker has no target yet. The first tick waits for an output stamped at or
+    # after t_0 (here 0.04 s, scored at tick 0.1 s) instead of counting both people missed.
+    early = TrackerOutput(-0.004, "cam0", [], np.zeros(0, dtype=np.int64))
+    r = score(_truth(), [early, *_outputs()[1:]])
+    assert r.eval_instants == 100 and r.truth_person_instants == 200
+    assert r.false_negatives == 0 and r.mota == 1.0 and r.pcp == 1.0
+    # The same output stamped at t_0 speaks of the people there: both missed at tick 0.
+    at_start = TrackerOutput(0.0, "cam0", [], np.zeros(0, dtype=np.int64))
+    r = score(_truth(), [at_start, *_outputs()[1:]])
+    assert r.eval_instants == 101 and r.false_negatives == 2
+
+
 def test_people_outside_the_scored_area_are_neither_missed_nor_matched():
     area = (-2.0, -1.0, 4.0, 10.0)
     roots = {pid: _pose(pid, 0.0)[[11, 12], :2].mean(axis=0) for pid in (1, 2)}

@@ -4,6 +4,7 @@ import dataclasses
 
 import pytest
 
+from core.errors import ConfigError
 from tracker.config import PRESETS, TABLE_S2, RowNorm, TrackerConfig, Triangulation
 from tracker.triangulation import PLANE_ROW, UNIT_ROWS, WHOLE_ROW
 
@@ -15,11 +16,20 @@ def test_presets_keep_table_s2_and_the_paper_variants_are_verbatim():
             assert getattr(paper, key) == value
         assert paper.triangulation is Triangulation.PAPER and paper.alpha_2d_floor_px == 0.0
         assert paper.row_norm is RowNorm.ROW and TrackerConfig.preset(name).row_norm is RowNorm.PLANE
-        assert paper.reid_max_m == 0.0
+        assert paper.reid_max_m == 0.0 and paper.reject_factor == 0.0  # the paper: every fresh view counts
+        # Eq. (S2)'s epipolar threshold is α2D's number in pixels (Table S2 read per frame), in both presets.
+        assert paper.alpha_epipolar_px == TrackerConfig.preset(name).alpha_epipolar_px == row["alpha_2d_px_per_frame"]
         tuned = TrackerConfig.preset(name)
         assert (tuned.alpha_3d_m, tuned.lambda_a_per_s, tuned.lambda_t_per_s) == (
             row["alpha_3d_m"], row["lambda_a_per_s"], row["lambda_t_per_s"])
         assert (tuned.w_2d, tuned.w_3d) == (0.4, 0.6)
+
+
+def test_the_robust_pass_is_on_where_it_was_measured_to_help():
+    # docs/tracker.md, "Robust triangulation": the stores and the Panoptic rig gain; three Campus cameras
+    # leave it nothing to drop; there is no Shelf data to measure it on.
+    assert TrackerConfig.preset("store").reject_factor == 3.0
+    assert TrackerConfig.preset("campus").reject_factor == TrackerConfig.preset("shelf").reject_factor == 0.0
 
 
 def test_unknown_preset_lists_the_valid_ones():
@@ -31,10 +41,11 @@ def test_unknown_preset_lists_the_valid_ones():
     ("alpha_3d_m", 0.0), ("score_threshold", 1.5), ("min_views", 1), ("velocity_history", 1.5),
     ("lambda_t_per_s", -1.0), ("triangulation", "sideways"), ("row_norm", "diagonal"), ("row_norm", 1),
     ("w_2d", float("nan")), ("reject_factor", -1.0), ("reject_floor_px", 0.0), ("ghost_cell_m", 0.1),
-    ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0),
+    ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0), ("alpha_2d_px_per_frame", 0.0),
+    ("alpha_2d_px_per_frame", -25.0), ("alpha_2d_px_per_frame", float("nan")), ("reject_factor", 0.5),
 ])
 def test_out_of_range_values_name_the_field(field, value):
-    with pytest.raises(ValueError, match=field):
+    with pytest.raises(ConfigError, match=field):
         TrackerConfig(**{field: value})
 
 

@@ -381,3 +381,53 @@ def test_time_weighting_beats_the_conventional_dlt_on_unsynchronised_cameras(lay
                                                 walkers, after_s=1.0)])
              for m in (Triangulation.PAPER, Triangulation.CONVENTIONAL)}
     assert error[Triangulation.CONVENTIONAL] > 1.5 * error[Triangulation.PAPER]
+
+
+def _identities_per_person(outputs, walkers, after_s):
+    """Per true person: the set of target ids that followed them (nearest person, after `after_s`)."""
+    ids: dict[int, set] = {}
+    for target_id, person, _ in _errors(outputs, walkers, after_s):
+        ids.setdefault(person, set()).add(target_id)
+    return ids
+
+
+@pytest.mark.parametrize("fps", [10.0, 25.0])
+def test_table_s2_alpha_2d_read_per_frame_keeps_each_walker_one_identity(fps):
+    # Table S2's store row verbatim (α2D = 70). Read per second, eq. (2) would allow 7 px between two 10 fps
+    # frames and 2.8 px between two 25 fps frames, less than a walking joint moves (and than the 2 px noise):
+    # people would be dropped and reborn. Read per frame of the camera, every walker keeps one identity.
+    cams, walkers, frames, _ = store_like("layout1", 3.0, seed=1, fps=fps)
+    tracker = Tracker(cams, TrackerConfig.preset("store-paper"))
+    outputs = _run(tracker, frames)
+    ids = _identities_per_person(outputs, walkers, after_s=1.0)
+    assert sorted(ids) == [0, 1, 2, 3]
+    assert all(len(v) == 1 for v in ids.values()), ids
+    # The conversion used each camera's own frame period, from its stamps (2 ms jitter).
+    for cam in cams:
+        assert tracker.frame_period_s(cam.name) == pytest.approx(1.0 / fps, abs=0.003)  # s
+
+
+def test_each_camera_has_its_own_frame_period_from_its_stamps():
+    # Two cameras, 10 fps and 25 fps; the 10 fps camera drops every fifth frame, and one stamp comes late.
+    cams, _, _, _ = store_like("layout1", 0.1, seed=0)
+    slow, fast = cams[0].name, cams[1].name
+    stamps = [(slow, 0.1 * k) for k in range(40) if k % 5 != 4] + [(fast, 0.04 * k + 0.013) for k in range(100)]
+    stamps[3] = (slow, stamps[3][1] + 0.03)
+    tracker = Tracker(cams[:2], CONFIG)
+    assert np.isnan(tracker.frame_period_s(slow))
+    empty = (np.zeros((0, 17, 2)), np.zeros((0, 17)))
+    for camera, stamp in sorted(stamps, key=lambda s: s[1]):
+        tracker.update(Frame(camera, stamp, *empty))
+    assert tracker.frame_period_s(slow) == pytest.approx(0.1, abs=1e-9)  # s, the median of its intervals
+    assert tracker.frame_period_s(fast) == pytest.approx(0.04, abs=1e-9)  # s
+
+
+def test_the_measured_preset_keeps_each_walker_one_identity_at_a_low_frame_rate():
+    # At 2.5 fps a walking joint moves about 100 px between two frames of a camera, past the `store` preset's
+    # α2D of 40 px per frame: the preset's least speed (400 px/s, its α2D when it was set per second) keeps
+    # eq. (2) from dropping the walkers (Figure 5's low rates).
+    cams, walkers, frames, _ = store_like("layout1", 6.0, seed=1, fps=2.5)
+    outputs = _run(Tracker(cams, CONFIG), frames)
+    ids = _identities_per_person(outputs, walkers, after_s=2.0)
+    assert sorted(ids) == [0, 1, 2, 3]
+    assert all(len(v) == 1 for v in ids.values()), ids

@@ -190,6 +190,40 @@ def test_robust_pass_is_the_dlt_of_the_views_within_the_rejection_rule(rig):
     np.testing.assert_allclose(off, first, atol=1e-8)  # m
 
 
+def test_a_stale_point_is_judged_against_its_prediction_not_against_the_present(rig):
+    # A joint walking at 1.5 m/s seen by six cameras, each at its own time up to 0.2 s before t: their points
+    # lie up to 0.3 m (tens of pixels) from the joint's place at t, but each where X(t) - V (t - t_i) projects.
+    rng = np.random.default_rng(9)
+    X = np.array([2.5, 2.0, 1.2])  # m, at t = 1
+    V = np.array([1.5, 0.0, 0.0])  # m/s
+    dts = np.array([0.0, 0.05, 0.1, 0.15, 0.2, 0.0])  # s
+    at_capture = X - V * dts[:, None]
+    x = np.stack([project(rig[c:c + 1], at_capture[c])[0, :2] for c in range(len(rig))])
+    x = x + rng.normal(0.0, 0.5, x.shape)
+    group, cam, stamps = np.zeros(len(rig), dtype=np.int64), np.arange(len(rig)), 1.0 - dts
+
+    def robust(points, factor):
+        return triangulate_observations_robust(rig, group, cam, points, stamps, 1, 1.0, 5.0, V[None], 2, factor,
+                                               10.0, PLANE_ROW)[1][0]
+
+    # Every point agrees with its prediction: the rejection drops none of them, stale or not.
+    np.testing.assert_array_equal(robust(x, 3.0), robust(x, 0.0))
+    np.testing.assert_allclose(robust(x, 3.0), X, atol=0.02)  # m
+    # The stalest point 100 px beyond its prediction is dropped: the estimate is the other five views'.
+    off = x.copy()
+    off[4] += [100.0, 0.0]
+    np.testing.assert_allclose(robust(off, 3.0), _without_view(rig, x, stamps, V, 4), atol=1e-9)  # m
+    assert np.linalg.norm(robust(off, 0.0) - X) > 2 * np.linalg.norm(robust(off, 3.0) - X)
+
+
+def _without_view(rig, x, stamps, V, dropped):
+    """The velocity-compensated estimate of one point from every view but `dropped`, without rejection."""
+    keep = np.arange(len(rig)) != dropped
+    return triangulate_observations_robust(rig, np.zeros(keep.sum(), dtype=np.int64), np.arange(len(rig))[keep],
+                                           x[keep], stamps[keep], 1, 1.0, 5.0, V[None], 2, 0.0, 10.0,
+                                           PLANE_ROW)[1][0]
+
+
 def test_compiled_smallest_eigenvector_matches_an_eigendecomposition_on_either_path():
     rng = np.random.default_rng(7)
     for _ in range(20):
