@@ -1,8 +1,8 @@
 """The plain data every part shares: skeletons (joint layouts), calibrated cameras and 2D frames.
 
-Shapes follow the project convention (see STYLE): C cameras, J joints, D detections, T targets,
-coordinates on the last axis, float64, NaN for a missing joint. World frame: z up, metres. Camera
-frame: OpenCV (x right, y down, z forward).
+Shapes follow the project convention (CONTRIBUTING.md, "Names, units and shapes"): C cameras, J joints,
+D detections, T targets, coordinates on the last axis, float64, NaN for a missing joint. World frame: z up,
+metres. Camera frame: OpenCV (x right, y down, z forward).
 """
 
 from __future__ import annotations

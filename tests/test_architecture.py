@@ -1,6 +1,7 @@
-"""The dependency rules of ARCHITECTURE.md and STYLE.md, read off the source: no import cycles, `core/`
-imports no other part, `tracker/` neither mujoco, mcap nor `sim/`, only the recording package imports mcap,
-only `sim/` imports mujoco, and no code reaches into a library's private (name-mangled) attributes."""
+"""The rules of docs/architecture.md, read off the source: no import cycles, `core/` imports no other part,
+`tracker/` neither mujoco, mcap nor `sim/`, only the recording package imports mcap, only `sim/` imports
+mujoco, no code reaches into a library's private (name-mangled) attributes, and every document the code and
+the docs cite is in the repository."""
 
 from __future__ import annotations
 
@@ -119,3 +120,70 @@ def test_no_private_attribute_of_a_library_is_touched():
     offenders = [f"{path.relative_to(ROOT)}:{i}" for path in _modules().values()
                  for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if mangled.search(line)]
     assert offenders == []
+
+
+# Every file that may cite a document: the packages, the tests, the docs, the examples and tools, and the
+# repository's own top-level files.
+TEXT_FOLDERS = (*PACKAGES, "tests", "docs", "examples", "tools")
+TEXT_SUFFIXES = (".py", ".md", ".toml")
+CITED_DOCUMENT = re.compile(r"[A-Za-z0-9_/.-]+\.md\b")
+OUTPUT_NAMES = {"report.md", "compare.md"}
+"""Documents the commands write into their output folder (`crossview ablate`, `sweep`, `compare`), named
+bare; a path to one in the repository (docs/sweeps/report.md) is still checked."""
+
+
+def _text_files() -> list[Path]:
+    files = [p for p in ROOT.iterdir() if p.is_file() and p.suffix in TEXT_SUFFIXES]
+    for folder in TEXT_FOLDERS:
+        files += [p for p in (ROOT / folder).rglob("*") if p.is_file() and p.suffix in TEXT_SUFFIXES]
+    return sorted(files)
+
+
+def _is_repository_document(name: str, citing: Path) -> bool:
+    """Whether a cited `*.md` name means a document of this repository (and must exist) rather than a file a
+    command writes or a path elsewhere (`out/report.md`, another project's `doc/02_output.md`).
+
+    Upper-case names (README.md, CONTRIBUTING.md) and anything that climbs out of its folder always do;
+    a bare lower-case name does unless a command writes it; a path does when it starts in a folder of the
+    repository (at the root, under docs/, or beside the citing file)."""
+    parts = name.split("/")
+    if Path(name).stem.isupper() or ".." in parts:
+        return True
+    if len(parts) == 1:
+        return name not in OUTPUT_NAMES
+    first = parts[0] if parts[0] != "." else parts[1]
+    return any((base / first).is_dir() for base in (ROOT, ROOT / "docs", citing.parent))
+
+
+def _resolves(name: str, citing: Path) -> bool:
+    """Whether `name` is a file of the repository, read from the root, from docs/ or from the citing file's
+    folder."""
+    for base in (ROOT, ROOT / "docs", citing.parent):
+        path = (base / name).resolve()
+        if path.is_file() and path.is_relative_to(ROOT):
+            return True
+    return False
+
+
+def _dangling(files: list[Path]) -> list[str]:
+    found = []
+    for path in files:
+        for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            for name in CITED_DOCUMENT.findall(line):
+                if _is_repository_document(name, path) and not _resolves(name, path):
+                    where = path.relative_to(ROOT) if path.is_relative_to(ROOT) else path
+                    found.append(f"{where}:{i}: {name}")
+    return found
+
+
+def test_every_cited_document_is_in_the_repository():
+    assert _dangling(_text_files()) == []
+
+
+def test_a_dangling_reference_is_found(tmp_path):
+    md = ".md"  # (spelt apart, so that this file cites none of the missing names it tests with)
+    citing = tmp_path / f"a{md}"
+    citing.write_text(f"See ARCHITECTURE{md}, ../shared/STYLE{md}, docs/nowhere{md} and docs/metrics{md};\n"
+                      f"the sweep writes report{md} into out/report{md}.\n", encoding="utf-8")
+    assert _dangling([citing]) == [f"{citing}:1: ARCHITECTURE{md}", f"{citing}:1: ../shared/STYLE{md}",
+                                   f"{citing}:1: docs/nowhere{md}"]

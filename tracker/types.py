@@ -1,7 +1,7 @@
 """What the tracker produces: targets with an identity and a 3D pose, and its output after each frame.
 
-Shapes follow the project convention (see STYLE): J joints, D detections, coordinates on the last axis,
-float64, NaN for a missing joint. World frame: z up, metres.
+Shapes follow the project convention (CONTRIBUTING.md, "Names, units and shapes"): J joints, D detections,
+coordinates on the last axis, float64, NaN for a missing joint. World frame: z up, metres.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The score report: every metric of one run, as a terminal table and as the flat JSON of ARCHITECTURE.md."""
+"""The score report: every metric of one run, as a terminal table and as the flat JSON of docs/metrics.md ("JSON")."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ JSON_KEYS = (
     "scenario", "seed", "num_cameras", "num_people", "duration_s", "pcp", "mpjpe_mm", "pck_100mm", "mota",
     "idf1", "id_switches", "hota", "association_accuracy", "tracker_fps", "camera_frames_per_s",
 )
-"""The keys every score JSON starts with, in this order (ARCHITECTURE.md)."""
+"""The keys every score JSON starts with, in this order (docs/metrics.md, "JSON")."""
 
 
 def _clean(value):
