@@ -22,17 +22,13 @@ import numpy as np
 
 from core.types import CAMPUS14, COCO17, Camera, Frame
 from crossview import openpose
-from crossview.json_input import DatasetError, read_json
+from crossview.json_input import DatasetError, read_json, stamp_s
 from crossview.outputs import write_bytes
 from sim.cameras import calibration_image_wh, dataset_cameras
 from tracker.types import TrackerOutput
 
 CM_TO_M = 0.01
 _SOURCES = ("detection.json", "annotation_2d.json")
-
-
-MAX_STAMP_S = 4e9
-"""Largest timestamp a dataset may hold, seconds (a Unix time until 2096; stamps are stored as int64 ns)."""
 _INT64 = 2 ** 63
 UINT64_END = 2 ** 64
 
@@ -43,21 +39,6 @@ def _table(value, path: Path, key: str, kind: type = dict):
         want = "an object" if kind is dict else "an array"
         raise DatasetError(f"{path}: {key} must be {want}, got {type(value).__name__}")
     return value
-
-
-def stamp_s(value, path: Path, where: str, camera_clock: bool = False) -> float:
-    """A timestamp, seconds: a finite number in [0, MAX_STAMP_S], else a DatasetError naming `where`.
-
-    With `camera_clock` (the stamp a camera put on its frame) [-MAX_STAMP_S, MAX_STAMP_S]: a camera's own clock
-    may read before the recording's start (the simulated cameras' offsets and jitter do), and the tracker only
-    takes differences of stamps.
-    """
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be a number of seconds")
-    low = -MAX_STAMP_S if camera_clock else 0
-    if not low <= value <= MAX_STAMP_S:  # (NaN fails too)
-        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be in [{low:g}, {MAX_STAMP_S:g}] s")
-    return float(value)
 
 
 def person_id(value, path: Path, where: str, high: int = _INT64) -> int:

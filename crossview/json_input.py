@@ -70,3 +70,22 @@ def parse_json(text: str, path: Path, where: str = "", error: type[CrossviewErro
         raise error(f"{path}: {where}not valid JSON ({exc.msg} at line {exc.lineno})") from None
     except RecursionError:
         raise error(f"{path}: {where}not valid JSON (nested too deeply)") from None
+
+
+MAX_STAMP_S = 4e9
+"""Largest timestamp a dataset may hold, seconds (a Unix time until 2096; stamps are stored as int64 ns)."""
+
+
+def stamp_s(value, path: Path, where: str, camera_clock: bool = False) -> float:
+    """A timestamp, seconds: a finite number in [0, MAX_STAMP_S], else a DatasetError naming `where`.
+
+    With `camera_clock` (the stamp a camera put on its frame) [-MAX_STAMP_S, MAX_STAMP_S]: a camera's own clock
+    may read before the recording's start (the simulated cameras' offsets and jitter do), and the tracker only
+    takes differences of stamps.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be a number of seconds")
+    low = -MAX_STAMP_S if camera_clock else 0
+    if not low <= value <= MAX_STAMP_S:  # (NaN fails too)
+        raise DatasetError(f"{path}: {where}: timestamp {value!r} must be in [{low:g}, {MAX_STAMP_S:g}] s")
+    return float(value)

@@ -21,7 +21,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.types import COCO17, Frame
-from crossview.json_input import read_json
+from crossview.json_input import read_json, stamp_s
 
 # OpenPose's index of each COCO-17 joint (nose, eyes, ears, shoulders, elbows, wrists, hips, knees, ankles).
 BODY_25_FROM_COCO17 = (0, 16, 15, 18, 17, 5, 2, 6, 3, 7, 4, 12, 9, 13, 10, 14, 11)
@@ -61,7 +61,6 @@ def read_frames(dataset_dir, fps: float | None) -> list[tuple[str, Frame, float]
     if not folders:
         raise OpenPoseError(f"{dataset_dir}: no sub-folder holds *_keypoints.json files (expected one folder of "
                             "OpenPose output per camera)")
-    from crossview.datasets import stamp_s
 
     times = read_timestamps(dataset_dir / TIMESTAMPS_FILE) if (dataset_dir / TIMESTAMPS_FILE).exists() else {}
     frames = []
@@ -91,12 +90,11 @@ def read_frames(dataset_dir, fps: float | None) -> list[tuple[str, Frame, float]
 
 def read_timestamps(path: Path) -> dict:
     """timestamps.json: {CAMERA: {"stamp_s": [...], "delivery_s": [...]}}, each list optional, each stamp a
-    timestamp of the dataset layout (`crossview.datasets.stamp_s`: finite, in [0, 4e9] s).
+    timestamp of the dataset layout (`crossview.json_input.stamp_s`: finite, in [0, 4e9] s).
 
     Raises:
         OpenPoseError: naming the file, the camera and the key.
     """
-    from crossview.datasets import stamp_s
 
     times = read_json(path)
     if not isinstance(times, dict):
