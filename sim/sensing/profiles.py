@@ -114,12 +114,13 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
     # `crossview fit-detector --target shelf-openpose -o typical.toml --duration 30 --rounds 7`, starting from
     # the values docs/sensor-model.md derives from the same table, rounded to 3 digits. Not fitted (no real
     # figure): the head's and the knees' and ankles' offsets and misses, the tails, occlusion drops, swaps,
-    # duplicates, scores. Shelf's people are all large: min_person_frac follows COCO instead
+    # duplicates, scores. The head's offset is the shoulders' scaled by COCO's per-keypoint sigmas (face points
+    # 0.025-0.035, shoulders 0.079: three times better defined). Shelf's people are all large: min_person_frac follows COCO instead
     # (docs/sensor-model.md, "People too small to detect").
     DetectorProfile.TYPICAL: DetectorParams(
         noise_frac=0.011, noise_tail_dof=5.0, noise_time_s=0.112, occluded_noise_scale=1.6,
         self_occluded_noise_scale=1.3,
-        offset_m=(0.025, 0.0147, 0.0141, 0.0236, 0.0307, 0.015, 0.014), offset_tail_dof=4.0, offset_time_s=2.0,
+        offset_m=(0.005, 0.0147, 0.0141, 0.0236, 0.0307, 0.015, 0.014), offset_tail_dof=4.0, offset_time_s=2.0,
         lift_m=(0.0, 0.0185, 0.011, 0.0257, 0.0357, 0.0, 0.0),
         gross_error_prob=0.0044, miss_prob=0.0313, miss_occlusion_gain=0.1, min_visible_joints=2,
         min_person_frac=0.1, occluded_drop_prob=0.2, self_occluded_drop_prob=0.05,
@@ -130,7 +131,7 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
     DetectorProfile.HARSH: DetectorParams(
         noise_frac=0.018, noise_tail_dof=3.0, noise_time_s=0.1, occluded_noise_scale=2.5,
         self_occluded_noise_scale=1.5,
-        offset_m=(0.04, 0.03, 0.03, 0.05, 0.05, 0.025, 0.025), offset_tail_dof=3.0, offset_time_s=2.0,
+        offset_m=(0.01, 0.03, 0.03, 0.05, 0.05, 0.025, 0.025), offset_tail_dof=3.0, offset_time_s=2.0,
         lift_m=(0.0, 0.035, 0.02, 0.035, 0.055, 0.0, 0.0),
         gross_error_prob=0.01, miss_prob=0.10, miss_occlusion_gain=0.4, min_visible_joints=4,
         min_person_frac=0.13, occluded_drop_prob=0.6, self_occluded_drop_prob=0.2,
