@@ -115,8 +115,8 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
     # the values docs/sensor-model.md derives from the same table, rounded to 3 digits. Not fitted (no real
     # figure): the head's and the knees' and ankles' offsets and misses, the tails, occlusion drops, swaps,
     # duplicates, scores. The head's offset is the shoulders' scaled by COCO's per-keypoint sigmas (face points
-    # 0.025-0.035, shoulders 0.079: three times better defined). Shelf's people are all large: min_person_frac follows COCO instead
-    # (docs/sensor-model.md, "People too small to detect").
+    # 0.025-0.035, shoulders 0.079: three times better defined). Shelf's people are all large: min_person_frac
+    # follows COCO instead (docs/sensor-model.md, "People too small to detect").
     DetectorProfile.TYPICAL: DetectorParams(
         noise_frac=0.011, noise_tail_dof=5.0, noise_time_s=0.112, occluded_noise_scale=1.6,
         self_occluded_noise_scale=1.3,
