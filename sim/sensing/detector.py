@@ -302,17 +302,19 @@ class Detector:
             count_views(cams, cast, occluded, self_occluded, self.visibility_counts)
         found = px
         if self.offsets.active:
-            # The detector's own joints, for the person-views it may detect (the others take no draw).
+            # The detector's own joints, for the person-views it may detect (the others take no draw: they keep
+            # the truth's pixels), each view projected as a capture of its own.
             r_idx, p_idx = np.nonzero(cast.reshape(n_req, most, J).any(axis=2))
-            shifted = np.full((n_req, most, J, 3), np.nan)
+            found = px.copy()
             if len(r_idx):
                 true = points.reshape(n_req, most, J, 3)[r_idx, p_idx]
                 capture_s = np.array([r.capture_s for r in requests])[r_idx]
-                shifted[r_idx, p_idx] = true + self.offsets.offsets(ids[r_idx, p_idx], capture_s, true)
-            found = np.empty((n_req, N, 2))
-            in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius,
-                                 shifted.reshape(n_req, N, 3), cams, tangential, skew, found,
-                                 np.empty((n_req, N), dtype=bool))
+                shifted = true + self.offsets.offsets(ids[r_idx, p_idx], capture_s, true)
+                views_px = np.empty((len(r_idx), J, 2))
+                in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, shifted,
+                                     cams[r_idx], tangential[r_idx], skew[r_idx], views_px,
+                                     np.empty((len(r_idx), J), dtype=bool))
+                found.reshape(n_req, most, J, 2)[r_idx, p_idx] = views_px
         px, found = px.reshape(n_req, most, J, 2), found.reshape(n_req, most, J, 2)
         in_img, occluded, self_occluded = (a.reshape(n_req, most, J) for a in (in_img, occluded, self_occluded))
         if min(counts) == most:
