@@ -20,10 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from core.errors import ScenarioError
 from core.types import CAMPUS14, COCO17, Camera, Frame
 from crossview import openpose
 from crossview.json_input import DatasetError, read_json, stamp_s
 from crossview.outputs import write_bytes
+from sim import scenario as scenario_mod
 from sim.cameras import calibration_image_wh, dataset_cameras
 from tracker.types import TrackerOutput
 
@@ -212,8 +214,10 @@ def load_truth_3d(dataset_dir, num_joints: int = 14) -> list[tuple[float, np.nda
 
 
 def read_scene(path: Path) -> dict:
-    """scene.json (`export_dataset`): an object whose `scenario_name` is text, `seed` an integer in [0, 2^63),
-    `duration_s` a timestamp (`stamp_s`) and `boxes` an array of objects, each where given.
+    """scene.json (`export_dataset`): an object whose `scenario_name` is text, `scenario_text` a scenario (the
+    TOML a synthetic recording was made from: how its truth is scored, what `fit-detector` simulates), `seed` an
+    integer in [0, 2^63), `duration_s` a timestamp (`stamp_s`) and `boxes` an array of objects, each where
+    given.
 
     Raises:
         DatasetError: naming the file and the key.
@@ -221,6 +225,14 @@ def read_scene(path: Path) -> dict:
     scene = _table(read_json(path), path, "the file")
     if not isinstance(scene.get("scenario_name", ""), str):
         raise DatasetError(f"{path}: scenario_name {scene['scenario_name']!r} must be text")
+    text = scene.get("scenario_text", "")
+    if not isinstance(text, str):
+        raise DatasetError(f"{path}: scenario_text must be text (the scenario TOML the recording was made from)")
+    if text:
+        try:
+            scenario_mod.from_source_text(text, str(scene.get("scenario_name", "")), f"{path}: scenario_text")
+        except ScenarioError as e:
+            raise DatasetError(str(e)) from None
     seed = scene.get("seed", 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < _INT64:
         raise DatasetError(f"{path}: seed {seed!r} must be an integer in [0, 2^63)")
@@ -346,7 +358,8 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
     end_s = max([f.delivery_s for f in frames] + [e[0] for e in truth] + [0.0])
     try:
         header = RecordingHeader(scenario_name=str(scene.get("scenario_name", dataset_dir.resolve().name)),
-                                 scenario_text="", scenario_digest=digest.hexdigest(), seed=int(scene.get("seed", 0)),
+                                 scenario_text=scene.get("scenario_text", ""), scenario_digest=digest.hexdigest(),
+                                 seed=int(scene.get("seed", 0)),
                                  duration_s=float(scene.get("duration_s", end_s)), skeleton_name=skeleton.name)
         boxes = [box_from_json(b) for b in scene.get("boxes", [])]
     except (TypeError, ValueError, KeyError, AttributeError) as exc:
@@ -487,7 +500,8 @@ def _open_export(rec_path, out_dir):
         "annotation_3d.json": [{"timestamp": p.t_s, "poses": [{"id": int(i), "points_3d": (pose / CM_TO_M).tolist()}
                                                               for i, pose in zip(p.person_ids, p.poses)]}
                                for p in rec.truth()],
-        SCENE_FILE: {"scenario_name": rec.header.scenario_name, "seed": rec.header.seed,
+        SCENE_FILE: {"scenario_name": rec.header.scenario_name, "scenario_text": rec.header.scenario_text,
+                     "seed": rec.header.seed,
                      "duration_s": rec.header.duration_s, "boxes": [box_json(b) for b in rec.boxes]},
     }
     return rec, files
