@@ -256,7 +256,7 @@ def test_failed_cells_name_paths_relative_to_the_scenario_file(tmp_path):
 def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, caplog):
     out = tmp_path / "subset"
     shutil.copytree(serial, out)
-    with caplog.at_level("WARNING", logger="crossview.sweep"):
+    with caplog.at_level("INFO", logger="crossview.sweep"):
         assert main(["--no-progress", "sweep", "store_layout1", "--people", "3", "--cameras", "12,6", "--seeds", "1",
                      "--duration", "1", "--workers", "1", "-o", str(out)]) == 0
     assert "2 of 2 cells already finished" in caplog.text
@@ -266,7 +266,7 @@ def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, cap
     assert rows == [full[r["key"]] for r in rows]
     # The folder keeps every finished cell: the full grid again runs nothing and gives the full results.
     caplog.clear()
-    with caplog.at_level("WARNING", logger="crossview.sweep"):
+    with caplog.at_level("INFO", logger="crossview.sweep"):
         assert _sweep(out, "--workers", "1") == 0
     assert "8 of 8 cells already finished" in caplog.text
     assert _sha256(out / "results.json") == _sha256(serial / "results.json")
