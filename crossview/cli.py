@@ -457,7 +457,6 @@ def _cmd_run(args) -> None:
     pipeline.check_writable(tracks_path, inputs=(rec_path,))
     pipeline.check_writable(json_path, inputs=(rec_path, tracks_path))
     pipeline.tracker_config(args.preset, args.config)  # (a bad tracker config is found before generating)
-    _warn_coverage(scenario)
     progress = not args.no_progress
     gen = pipeline.generate(scenario, rec_path, progress=progress)
     print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
@@ -470,6 +469,7 @@ def _cmd_run(args) -> None:
     pipeline.write_json(result, json_path, inputs=(rec_path, tracks_path))
     print(report.table())
     print(f"score JSON: {json_path}")
+    _warn_coverage(scenario)
 
 
 def _cmd_scenarios(args) -> None:
@@ -488,7 +488,8 @@ def _cmd_scenarios(args) -> None:
 
 
 def _warn_coverage(scenario) -> None:
-    """One line on stderr when the rig sees too little of the floor with two cameras (`crossview.coverage`)."""
+    """One line on stderr when the rig sees too little of the floor with two cameras (`crossview.coverage`);
+    said once the command has done its work, so that bad input stays the one line on stderr."""
     from crossview.coverage import coverage
 
     warning = coverage(scenario).warning()
@@ -517,7 +518,6 @@ def _cmd_generate(args) -> None:
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
-    _warn_coverage(scenario)
     gen = pipeline.generate(scenario, args.output, progress=not args.no_progress, images_per_s=args.images,
                             gl=args.gl)
     print(f"{gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
@@ -525,6 +525,7 @@ def _cmd_generate(args) -> None:
     if gen.images:
         print(f"{gen.images} pictures rendered in {gen.images_s:.1f} s ({1000 * gen.images_s / gen.images:.0f} ms "
               "each: render, lens, JPEG)")
+    _warn_coverage(scenario)
 
 
 def _speed(gen) -> str:
