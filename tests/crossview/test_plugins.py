@@ -253,6 +253,7 @@ def test_the_minimal_plugin_of_the_docs_runs_as_written(short_recording, tmp_pat
                  "--method", "hip_plane:HipPlaneTracker"]) == 0
     assert main(["--no-progress", "score", str(short_recording), str(tracks), "-o", str(score_json)]) == 0
     score = json.loads(score_json.read_text())
-    # Hips only: found on the ground plane by the identity metrics, not a pose.
-    assert score["mota"] > 0.5, score
+    # Hips only: found on the ground plane by the identity metrics (most of what it reports is somebody), not a
+    # pose. It reports only the people of the latest camera frame, so it misses most people at a scoring tick.
+    assert score["idp"] > 0.5 and score["idf1"] > 0.3, score
     assert score["pcp"] < 0.5, score
