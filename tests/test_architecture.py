@@ -183,7 +183,7 @@ def test_every_cited_document_is_in_the_repository():
 def test_a_dangling_reference_is_found(tmp_path):
     md = ".md"  # (spelt apart, so that this file cites none of the missing names it tests with)
     citing = tmp_path / f"a{md}"
-    citing.write_text(f"See ARCHITECTURE{md}, ../shared/STYLE{md}, docs/nowhere{md} and docs/metrics{md};\n"
+    citing.write_text(f"See ARCHITECTURE{md}, ../outside/STYLE{md}, docs/nowhere{md} and docs/metrics{md};\n"
                       f"the sweep writes report{md} into out/report{md}.\n", encoding="utf-8")
-    assert _dangling([citing]) == [f"{citing}:1: ARCHITECTURE{md}", f"{citing}:1: ../shared/STYLE{md}",
+    assert _dangling([citing]) == [f"{citing}:1: ARCHITECTURE{md}", f"{citing}:1: ../outside/STYLE{md}",
                                    f"{citing}:1: docs/nowhere{md}"]
