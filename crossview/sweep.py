@@ -648,25 +648,33 @@ def connect_ray(address: str | None) -> bool:
         _check_reachable(address)
     if ray.is_initialized():  # (a program that calls `run_sweep` connected already)
         return False
-    # ray.init sets its own SIGTERM handler (sys.exit: exit 1 and a dump of the task loop); the command's
-    # (one line, 128 + the signal, the cells stopped) is put back.
+    try:
+        with _command_signals_kept():
+            if address:
+                ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
+                         logging_level=logging.WARNING)
+            else:
+                ray.init(log_to_driver=False, logging_level=logging.WARNING)
+    except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
+        raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({_one_line(e)})".replace("  ", " ")
+                             ) from None
+    return True
+
+
+@contextlib.contextmanager
+def _command_signals_kept():
+    """Runs a Ray call that sets its own handlers of the ending signals (ray.init: SIGTERM by sys.exit, exit 1 and a
+    dump of the task loop; ray.shutdown) and puts the command's back after it (one line, 128 + the signal, the cells
+    stopped)."""
     ending = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
     handlers = {s: signal.getsignal(s) for s in ending} if threading.current_thread() is threading.main_thread() \
         else {}
     try:
-        if address:
-            ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
-                     logging_level=logging.WARNING)
-        else:
-            ray.init(log_to_driver=False, logging_level=logging.WARNING)
-    except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
-        raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({_one_line(e)})".replace("  ", " ")
-                             ) from None
+        yield
     finally:
         for signum, handler in handlers.items():
             if handler is not None:
                 signal.signal(signum, handler)
-    return True
 
 
 RAY_CONNECT_TIMEOUT_S = 5.0
@@ -938,7 +946,8 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
         if disconnect:
             import ray
 
-            ray.shutdown()
+            with _command_signals_kept():
+                ray.shutdown()
     rows = [stored[c.key] for c in cells]
     write_results(out, wanted, rows)
     sweep_report.write_report(out, wanted, rows)

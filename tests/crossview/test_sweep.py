@@ -512,7 +512,7 @@ def test_sigterm_during_a_ray_sweep_ends_it_like_everywhere_else(tmp_path):
     pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
     out = tmp_path / "ray"
     command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
-               "--duration", "4", "--ray", "--out", str(out)]
+               "--duration", "10", "--ray", "--out", str(out)]  # (cells long enough to be running at the signal)
     process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                                start_new_session=True)
     try:
