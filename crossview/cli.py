@@ -583,8 +583,7 @@ def _cmd_fit_detector(args) -> None:
 
     if (args.recording is None) == (args.target is None):
         raise CrossviewError("fit-detector: give a recording to fit, or --target shelf-openpose (not both)")
-    inputs = tuple(p for p in (args.recording, args.scenario, args.start) if p and str(p).endswith((".mcap", ".toml")))
-    pipeline.check_writable(args.output, inputs=tuple(Path(p) for p in inputs))
+    pipeline.check_writable(args.output)  # (not one of the command's inputs, `_command_inputs`)
     seed = args.seed
     if args.recording is not None:
         target = recording_detector_stats(args.recording)
@@ -615,8 +614,7 @@ def _cmd_fit_detector(args) -> None:
     comment = (f"Detector profile fitted by `crossview fit-detector` to {where}, on {scenario.name} (seed {seed}, "
                f"{args.duration:g} s a round, {args.rounds} rounds, from {args.start}).\nLargest deviation of a "
                f"row from the target: {100 * worst:+.1f} % ({key}{'' if group is None else ', ' + group}).")
-    pipeline.write_text(scenario_mod.profile_file_text(best.params, DetectorProfile.TYPICAL, comment), args.output,
-                        inputs=tuple(Path(p) for p in inputs))
+    pipeline.write_text(scenario_mod.profile_file_text(best.params, DetectorProfile.TYPICAL, comment), args.output)
     print(f"{args.output}: the fitted profile (largest deviation {100 * best.worst:.1f} %)")
 
 
@@ -736,6 +734,7 @@ def _command_inputs(args) -> tuple[Path, ...]:
     """
     from crossview import pipeline, plugins
     from crossview.json_input import check_input_file
+    from sim import scenario as scenario_mod
 
     found: list[Path] = []
     for dest, value in vars(args).items():
@@ -748,6 +747,8 @@ def _command_inputs(args) -> tuple[Path, ...]:
                     found.extend(p for p in (*item.glob("*"), *item.glob("*/*")) if p.is_file())
     if isinstance(getattr(args, "scenario", None), str) or args.command == "run":
         found.extend(pipeline.scenario_files(args.scenario))
+    if scenario_mod.is_profile_file(getattr(args, "start", None)):  # (fit-detector's starting profile)
+        found.append(Path(args.start))
     methods = [m.strip() for m in getattr(args, "method", "").split(",")]
     for text in getattr(args, "tracker", None) or []:
         from crossview.compare import Contender

@@ -73,8 +73,9 @@ def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None
 
 def scenario_files(name_or_path) -> tuple[Path, ...]:
     """The files a scenario's command reads: its file (a shipped name resolved as `sim.scenario.load` does)
-    and the calibration file it names (relative to its folder), read from the TOML without validating it (the
-    command does that, and names what is wrong); an unreadable file names none beyond itself."""
+    and the calibration file and detector profile file it names (relative to its folder), read from the TOML
+    without validating it (the command does that, and names what is wrong); an unreadable file names none beyond
+    itself."""
     import tomllib
 
     from crossview.json_input import check_input_file
@@ -83,13 +84,16 @@ def scenario_files(name_or_path) -> tuple[Path, ...]:
     check_input_file(path, scenario_mod.ScenarioError)
     try:
         with open(path, "rb") as f:
-            cameras = tomllib.load(f).get("cameras")
+            tree = tomllib.load(f)
     except (OSError, ValueError):
         return (path,)
-    calibration = cameras.get("calibration") if isinstance(cameras, dict) else None
-    if not isinstance(calibration, str) or not calibration:
-        return (path,)
-    return (path, path.parent / calibration)
+    named = []
+    for section, key in (("cameras", "calibration"), ("detector", "profile")):
+        table = tree.get(section)
+        value = table.get(key) if isinstance(table, dict) else None
+        if isinstance(value, str) and value and (key != "profile" or scenario_mod.is_profile_file(value)):
+            named.append(path.parent / value)
+    return (path, *named)
 
 
 def check_writable(path: Path, inputs: tuple = ()) -> None:

@@ -116,6 +116,19 @@ def test_a_bad_profile_file_names_the_file_and_the_key(tmp_path, text, message, 
     assert len(capsys.readouterr().err.strip().splitlines()) == 1 and not out.exists()
 
 
+def test_a_profile_file_a_command_reads_is_never_one_of_its_outputs(tmp_path, capsys):
+    profile = tmp_path / "p.toml"
+    profile.write_text('base = "ideal"\n')
+    (tmp_path / "s.toml").write_text('[detector]\nprofile = "p.toml"\n')
+    kept = profile.read_bytes()
+    # The scenario's profile as generate's output, and fit-detector's starting profile as its output.
+    assert main(["--no-progress", "generate", str(tmp_path / "s.toml"), "-o", str(profile), "--duration", "1"]) == 2
+    assert main(["fit-detector", "--target", "shelf-openpose", "--start", str(profile), "-o", str(profile)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and all("is also an input" in line for line in err), err
+    assert profile.read_bytes() == kept
+
+
 def test_a_recording_made_with_a_profile_file_replays_without_it(tmp_path):
     profile = tmp_path / "p.toml"
     profile.write_text('base = "ideal"\nnoise_frac = 0.02\nnoise_tail_dof = inf\n')
