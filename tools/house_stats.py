@@ -151,15 +151,21 @@ def main(argv: list[str] | None = None) -> int:
     stats = house_stats(Path(args.root))
     if args.json:
         Path(args.json).write_text(json.dumps(stats, indent=1) + "\n")
-    print(f"lines: {stats['lines_total']} in {stats['modules']} modules; " + ", ".join(
-        f"{k} {v}" for k, v in stats["lines_per_package"].items()))
+    print(
+        f"lines: {stats['lines_total']} in {stats['modules']} modules; "
+        + ", ".join(f"{k} {v}" for k, v in stats["lines_per_package"].items())
+    )
     print("largest modules:", "; ".join(f"{m['module']} {m['lines']}" for m in stats["largest_modules"]))
-    print("longest functions:", "; ".join(
-        f"{f['function']} {f['lines']} lines/{f['arguments']} args" for f in stats["longest_functions"]))
+    print(
+        "longest functions:",
+        "; ".join(f"{f['function']} {f['lines']} lines/{f['arguments']} args" for f in stats["longest_functions"]),
+    )
     print("most arguments:", "; ".join(f"{f['function']} {f['arguments']}" for f in stats["most_arguments"]))
-    print(f"kernels: {stats['kernels']} ({stats['kernel_lines']} lines); function-local imports: "
-          f"{stats['function_local_imports']}; private names crossing modules: "
-          f"{stats['private_names_crossing_modules']}")
+    print(
+        f"kernels: {stats['kernels']} ({stats['kernel_lines']} lines); function-local imports: "
+        f"{stats['function_local_imports']}; private names crossing modules: "
+        f"{stats['private_names_crossing_modules']}"
+    )
     return 0
 
 
