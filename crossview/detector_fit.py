@@ -44,6 +44,11 @@ SIZE_AT_PX = 400.0
 DEFAULT_ROUNDS = 8
 MAX_STEP = 2.0  # the most a multiplicative update may change a parameter in one round (either way)
 DAMPING = 0.7  # the share of an additive step taken (the statistics move with several parameters at once)
+FULL_STEP_ROUNDS = 3
+"""Rounds that take the whole `DAMPING` step; after them round k takes DAMPING x FULL_STEP_ROUNDS / (k + 1): a
+step shrinking like 1 / k (stochastic approximation), so that a fit whose statistics carry sampling noise settles
+instead of stepping across its target and back (a fit of a recording's own profile did that, round after
+round, on the rarer joints' miss rates)."""
 
 ROWS: tuple[tuple[str, str | None], ...] = (
     ("error_over_size_median", None), ("error_over_size_p90", None), ("error_over_size_p99", None),
@@ -91,42 +96,48 @@ class FitRound:
     worst: float
 
 
-def _ratio(got: float | None, want: float | None, power: float = 1.0) -> float:
-    """(want / got) ** power, bounded to one step; 1 when either is unknown or zero."""
+def gain(round_index: int) -> float:
+    """The share of a full step round `round_index` (from 0) takes (`FULL_STEP_ROUNDS`)."""
+    return DAMPING * min(1.0, FULL_STEP_ROUNDS / (round_index + 1))
+
+
+def _ratio(got: float | None, want: float | None, power: float, step: float) -> float:
+    """(want / got) ** (power x step), bounded to one step; 1 when either is unknown or zero."""
     if not got or not want:
         return 1.0
-    return float(np.clip((want / got) ** (power * DAMPING), 1.0 / MAX_STEP, MAX_STEP))
+    return float(np.clip((want / got) ** (power * step), 1.0 / MAX_STEP, MAX_STEP))
 
 
-def _log_ratio(got: float | None, want: float | None) -> float:
+def _log_ratio(got: float | None, want: float | None, step: float) -> float:
     """How much longer a correlation time must be for a correlation `got` to become `want` (the ratio of the
-    logarithms, exp(-dt / time) being the correlation), bounded to one step."""
+    logarithms, exp(-dt / time) being the correlation), to the power `step`, bounded to one step."""
     if got is None or want is None:
         return 1.0
     got, want = (float(np.clip(v, 0.01, 0.99)) for v in (got, want))
-    return float(np.clip((math.log(got) / math.log(want)) ** DAMPING, 1.0 / MAX_STEP, MAX_STEP))
+    return float(np.clip((math.log(got) / math.log(want)) ** step, 1.0 / MAX_STEP, MAX_STEP))
 
 
-def update(params: DetectorParams, stats: dict, target: dict) -> DetectorParams:
-    """The next round's parameters: each fitted parameter moved by the deviation of its statistic."""
+def update(params: DetectorParams, stats: dict, target: dict, step: float = DAMPING) -> DetectorParams:
+    """The next round's parameters: each fitted parameter moved by the deviation of its statistic, taking the
+    share `step` of the full move (`gain`)."""
     offset, lift, miss = list(params.offset_m), list(params.lift_m), list(params.joint_miss_prob)
     m_per_px = PERSON_SIZE_M / SIZE_AT_PX
     for group in GROUPS:
         g = JOINT_GROUPS.index(group)
         # The error grows more slowly than the offset (noise and lift add to it): a stronger step.
         offset[g] *= _ratio(value(stats, "error_over_size_median", group),
-                            value(target, "error_over_size_median", group), 1.2)
+                            value(target, "error_over_size_median", group), 1.2, step)
         got, want = value(stats, "vertical_offset_px_at_400", group), value(target, "vertical_offset_px_at_400", group)
         if got is not None and want is not None:
-            lift[g] += DAMPING * (got - want) * m_per_px  # + is below the truth: lift the joint by the excess
+            lift[g] += step * (got - want) * m_per_px  # + is below the truth: lift the joint by the excess
         got, want = value(stats, "miss_rate", group), value(target, "miss_rate", group)
         if got is not None and want is not None:
-            miss[g] = float(np.clip(miss[g] + DAMPING * (want - got), 0.0, 0.95))
+            miss[g] = float(np.clip(miss[g] + step * (want - got), 0.0, 0.95))
 
     def plus(name: str, key: str, low: float = 0.0, high: float = 1.0) -> float:
         got, want = value(stats, key), value(target, key)
         current = getattr(params, name)
-        return current if got is None or want is None else float(np.clip(current + DAMPING * (want - got), low, high))
+        return current if got is None or want is None else float(np.clip(current + step * (want - got), low, high))
 
     # Persistence of misses: P(missed | missed) = m + (1 - m) q with q = exp(-dt / miss_time_s).
     rate, want_rate = value(stats, "miss_rate"), value(target, "miss_rate")
@@ -141,17 +152,17 @@ def update(params: DetectorParams, stats: dict, target: dict) -> DetectorParams:
             and value(target, "false_positive_people_ge6_per_frame") is not None:
         share_got = value(stats, "false_positive_people_ge6_per_frame") / got_fp
         share_want = value(target, "false_positive_people_ge6_per_frame") / want_fp
-        keep = float(np.clip(keep + DAMPING * (share_want - share_got), 0.05, 1.0))
+        keep = float(np.clip(keep + step * (share_want - share_got), 0.05, 1.0))
     return params._replace(
         offset_m=tuple(offset), lift_m=tuple(lift), joint_miss_prob=tuple(miss),
         noise_frac=params.noise_frac * _ratio(value(stats, "cross_view_reprojection_px_at_400"),
-                                              value(target, "cross_view_reprojection_px_at_400")),
+                                              value(target, "cross_view_reprojection_px_at_400"), 1.0, step),
         noise_time_s=max(params.noise_time_s, 0.01) * _log_ratio(value(stats, "lag1_error_correlation"),
-                                                                 value(target, "lag1_error_correlation")),
-        miss_time_s=max(params.miss_time_s, 0.01) * _log_ratio(got_q, want_q),
+                                                                 value(target, "lag1_error_correlation"), step),
+        miss_time_s=max(params.miss_time_s, 0.01) * _log_ratio(got_q, want_q, step),
         miss_prob=plus("miss_prob", "missed_person_view_rate"),
         gross_error_prob=plus("gross_error_prob", "gross_error_rate"),
-        phantom_rate=float(np.clip(params.phantom_rate * _ratio(got_fp, want_fp), 0.0, 100.0)),
+        phantom_rate=float(np.clip(params.phantom_rate * _ratio(got_fp, want_fp, 1.0, step), 0.0, 100.0)),
         phantom_keep_prob=keep,
     )
 
@@ -192,5 +203,5 @@ def fit(target: dict, scenario, start: DetectorParams, *, seed: int, duration_s:
             on_round(k, result)
         if best is None or result.worst < best.worst:
             best = result
-        params = update(params, stats, target)
+        params = update(params, stats, target, gain(k))
     return best
