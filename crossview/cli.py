@@ -379,7 +379,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _cmd_ablate(args) -> None:
-    from crossview import ablate
+    from crossview.experiments import ablate
 
     command = " ".join(["crossview ablate", *args.experiments, *(["--quick"] if args.quick else []), "-o DIR"])
     summary = ablate.run(args.output, args.experiments, quick=args.quick, workers=args.workers,
@@ -395,7 +395,8 @@ def _sweep_axis(text: str) -> tuple[str, str]:
 
 
 def _cmd_sweep(args) -> None:
-    from crossview import pipeline, plugins, sweep
+    from crossview import pipeline, plugins
+    from crossview.experiments import sweep
     from tracker.config import PRESETS
 
     axes = tuple(sweep.parse_axis(key, text) for key, text in args.axes)
@@ -430,7 +431,7 @@ def _cmd_sweep(args) -> None:
 
 
 def _cmd_verify(args) -> None:
-    from crossview import sweep
+    from crossview.experiments import sweep
 
     results = sweep.verify(args.folder, cells=args.cells, progress=not args.no_progress)
     for r in results:
@@ -488,9 +489,9 @@ def _cmd_scenarios(args) -> None:
 
 
 def _warn_coverage(scenario) -> None:
-    """One line on stderr when the rig sees too little of the floor with two cameras (`crossview.coverage`);
+    """One line on stderr when the rig sees too little of the floor with two cameras (`crossview.measure.coverage`);
     said once the command has done its work, so that bad input stays the one line on stderr."""
-    from crossview.coverage import coverage
+    from crossview.measure.coverage import coverage
 
     warning = coverage(scenario).warning()
     if warning:
@@ -498,7 +499,8 @@ def _warn_coverage(scenario) -> None:
 
 
 def _cmd_coverage(args) -> None:
-    from crossview import coverage, pipeline
+    from crossview import pipeline
+    from crossview.measure import coverage
 
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
     if args.output:
@@ -564,7 +566,7 @@ def _cmd_info(args) -> None:
 
 def _cmd_detector_stats(args) -> None:
     from crossview import pipeline
-    from crossview.detector_stats import format_detector_stats, recording_detector_stats
+    from crossview.measure.detector_stats import format_detector_stats, recording_detector_stats
 
     if args.output:
         pipeline.check_writable(args.output, inputs=(args.recording,))
@@ -576,8 +578,8 @@ def _cmd_detector_stats(args) -> None:
 
 def _cmd_fit_detector(args) -> None:
     from crossview import pipeline, recording
-    from crossview.detector_fit import deviations, fit
-    from crossview.detector_stats import SHELF_OPENPOSE, format_detector_stats, recording_detector_stats
+    from crossview.measure.detector_fit import deviations, fit
+    from crossview.measure.detector_stats import SHELF_OPENPOSE, format_detector_stats, recording_detector_stats
     from sim import scenario as scenario_mod
     from sim.sensing.profiles import DetectorProfile
 
@@ -636,7 +638,7 @@ def _cmd_evaluate(args) -> None:
 
 def _cmd_export(args) -> None:
     from crossview import pipeline, recording
-    from crossview.datasets import export_dataset, export_openpose, write_result_3d
+    from crossview.formats.datasets import export_dataset, export_openpose, write_result_3d
 
     if args.format in ("dataset", "openpose"):
         write = export_dataset if args.format == "dataset" else export_openpose
@@ -646,7 +648,7 @@ def _cmd_export(args) -> None:
     pipeline.check_writable(args.output, inputs=(args.file,))
     tracks = recording.open_tracks(args.file)
     if args.format == "jsonl":
-        from crossview.results import json_lines
+        from crossview.formats.results import json_lines
 
         pipeline.write_text(json_lines(tracks.outputs()), args.output, inputs=(args.file,))
     else:
@@ -656,7 +658,7 @@ def _cmd_export(args) -> None:
 
 def _cmd_convert(args) -> None:
     from crossview import pipeline
-    from crossview.datasets import convert
+    from crossview.formats.datasets import convert
 
     inputs = (*Path(args.dataset).glob("*.json"), *Path(args.dataset).glob("*/*_keypoints.json"))
     pipeline.check_writable(args.output, inputs=inputs)
@@ -666,7 +668,7 @@ def _cmd_convert(args) -> None:
 
 def _cmd_per_camera(args) -> None:
     from crossview import pipeline
-    from crossview.table5 import paper_means_line, per_camera_table
+    from crossview.experiments.table5 import paper_means_line, per_camera_table
 
     if args.output:
         pipeline.check_writable(args.output, inputs=(args.recording, args.tracks))
@@ -679,7 +681,8 @@ def _cmd_per_camera(args) -> None:
 
 
 def _cmd_compare(args) -> None:
-    from crossview import compare, pipeline
+    from crossview import pipeline
+    from crossview.experiments import compare
 
     contenders = [compare.Contender.parse(text) for text in args.tracker]
     compare.check(contenders, args.recordings)
@@ -693,19 +696,19 @@ def _cmd_compare(args) -> None:
 
 def _cmd_bench(args) -> None:
     if args.scale:
-        from crossview import bench_scale
+        from crossview.experiments import bench_scale
 
         bench_scale.main(json_path=args.output, duration_s=args.duration or 10.0, progress=not args.no_progress,
                          markdown_path=args.markdown, budget_s=args.budget)
         return
-    from crossview import bench
+    from crossview.experiments import bench
 
     bench.main(json_path=args.output, duration_s=args.duration or 20.0, progress=not args.no_progress,
                markdown_path=args.markdown)
 
 
 def _cmd_render(args) -> None:
-    from crossview.render import Request, render
+    from crossview.pictures.render import Request, render
 
     done = render(Request(
         recording=args.recording, output=args.output, tracks=args.tracks, camera=args.camera,
@@ -733,7 +736,7 @@ def _command_inputs(args) -> tuple[Path, ...]:
         CrossviewError: an input that is neither a regular file nor a folder, or a plug-in that does not load.
     """
     from crossview import pipeline, plugins
-    from crossview.json_input import check_input_file
+    from crossview.formats.json_input import check_input_file
     from sim import scenario as scenario_mod
 
     found: list[Path] = []
@@ -751,7 +754,7 @@ def _command_inputs(args) -> tuple[Path, ...]:
         found.append(Path(args.start))
     methods = [m.strip() for m in getattr(args, "method", "").split(",")]
     for text in getattr(args, "tracker", None) or []:
-        from crossview.compare import Contender
+        from crossview.experiments.compare import Contender
 
         contender = Contender.parse(text)
         if contender.method is not None:

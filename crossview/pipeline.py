@@ -78,7 +78,7 @@ def scenario_files(name_or_path) -> tuple[Path, ...]:
     itself."""
     import tomllib
 
-    from crossview.json_input import check_input_file
+    from crossview.formats.json_input import check_input_file
 
     path = scenario_mod.resolve_path(name_or_path)
     check_input_file(path, scenario_mod.ScenarioError)
@@ -391,7 +391,7 @@ def open_run(rec_path: Path, tracks_path: Path):
 
 
 def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_process: bool | None = None):
-    """Scores a tracks file, or a result file (result_3d.json or JSON lines, `crossview.results`), against
+    """Scores a tracks file, or a result file (result_3d.json or JSON lines, `crossview.formats.results`), against
     the recording it was made from; returns (report, json dict).
 
     A result file holds no detection assignments, cameras or timings: association accuracy, the per-camera
@@ -406,7 +406,7 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
 
     from core import processes
     from crossview import recording
-    from crossview.results import is_result_file, read_results
+    from crossview.formats.results import is_result_file, read_results
     from crossview.scoring import TruthTimeline
     from crossview.scoring import score as score_outputs
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from core.types import COCO17
-from crossview.datasets import load_cameras, load_frames
+from crossview.formats.datasets import load_cameras, load_frames
 from examples.greedy_triangulation import GreedyTriangulationTracker
 from tracker.config import TrackerConfig
 

@@ -2,7 +2,7 @@
 
 Owns the camera side of the sensor model: building the rig a scenario asks for (a ceiling grid,
 explicit placements or a real calibration file: the CMU Panoptic dome's, or the dataset layout's
-calibration.json of Campus, Shelf and the Store datasets, which `crossview.datasets` reads with the same
+calibration.json of Campus, Shelf and the Store datasets, which `crossview.formats.datasets` reads with the same
 parser), projecting world points to distorted pixels with OpenCV's camera model, and the one conversion
 from the OpenCV camera frame (x right, y down, z forward) to MuJoCo's (looks down -z, y up).
 """

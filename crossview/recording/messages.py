@@ -1,5 +1,5 @@
 """Message bytes: the protobuf messages of truth ticks, camera frames and tracker outputs, encoded one at a
-time or many frames in one compiled call (`crossview.wire`), and decoded back."""
+time or many frames in one compiled call (`crossview.recording.wire`), and decoded back."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 
 from core.types import Frame, Skeleton
-from crossview import foxglove
+from crossview.recording import foxglove
 from crossview.recording.schemas import TrackerOutputMsg, to_ns
 from sim.types import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
@@ -19,7 +19,7 @@ from tracker.types import JointState, Target, TargetArrays, TargetState, Tracker
 
 def pose_truth_bytes(truth: PoseTruth) -> bytes:
     """`crossview.PoseTruth` wire bytes of `truth`, written by a compiled loop (the same bytes as protobuf's)."""
-    from crossview import wire  # (numba: loaded for writing only)
+    from crossview.recording import wire  # (numba: loaded for writing only)
 
     poses, ids = _checked_poses(truth)
     out = _scratch(wire.pose_truth_capacity(*poses.shape[:2]))
@@ -48,7 +48,7 @@ def _scratch(size: int) -> np.ndarray:
 def camera_frame_bytes(cf: CameraFrame) -> bytes:
     """`crossview.CameraFrame` wire bytes of one camera frame, written by a compiled loop (the same bytes as
     protobuf's serialisation of the message object, which the tests check)."""
-    from crossview import wire  # (numba: loaded for writing only)
+    from crossview.recording import wire  # (numba: loaded for writing only)
 
     frame, truth = cf.frame, cf.truth
     kp = np.ascontiguousarray(frame.keypoints_px, dtype=np.float64)
@@ -108,7 +108,7 @@ def encode_frames(cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray,
     A frame the batch does not take (a bad effects mask, a +0.0 coordinate, which protobuf leaves out) is
     encoded by the one-frame functions, which also raise their errors.
     """
-    from crossview import wire  # (numba: loaded for writing only)
+    from crossview.recording import wire  # (numba: loaded for writing only)
 
     times = np.ascontiguousarray(times, dtype=np.float64).reshape(-1, 3)
     bounds = np.ascontiguousarray(bounds, dtype=np.int64)
@@ -241,7 +241,7 @@ def tracker_output_bytes(output: TrackerOutput, num_joints: int) -> bytes:
     """`crossview.TrackerOutput` wire bytes of one tracker output, written by a compiled loop (the same bytes as
     protobuf's serialisation of `_tracker_output_to_msg`, which the tests check). A negative target id (which
     this encoder does not write) goes through protobuf."""
-    from crossview import wire  # (numba: loaded for writing only)
+    from crossview.recording import wire  # (numba: loaded for writing only)
 
     T, J = len(output.targets), num_joints
     arrays = _target_arrays(output.targets, J)
@@ -345,7 +345,7 @@ def tracker_output_from_bytes(data: bytes) -> TrackerOutput:
     all carry joint states (every output of the built-in tracker), else a list of `Target`. Bytes the scan
     does not read go through protobuf (`_tracker_output_from_msg`), which reads the same output from the
     same bytes and names what is wrong in a corrupt message (DecodeError or ValueError)."""
-    from crossview import wire
+    from crossview.recording import wire
 
     buf = np.frombuffer(data, dtype=np.uint8)
     status, head, stamps, poses, rows, detection_ids = wire.tracker_output_arrays(buf)

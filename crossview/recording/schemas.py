@@ -14,7 +14,7 @@ from mcap.writer import CompressionType
 
 from core.errors import CrossviewError
 from core.types import SKELETONS, Camera, Skeleton
-from crossview import foxglove
+from crossview.recording import foxglove
 from sim.types import Box, BoxKind
 
 FORMAT_VERSION = 2  # of recordings

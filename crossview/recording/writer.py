@@ -9,8 +9,8 @@ import numpy as np
 from mcap.writer import Writer
 
 from core.types import SKELETONS, Camera
-from crossview import foxglove
 from crossview.outputs import AtomicOutput
+from crossview.recording import foxglove
 from crossview.recording.messages import (
     EncodedFrame,
     encode_camera_frames,

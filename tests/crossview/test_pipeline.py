@@ -218,7 +218,8 @@ def test_the_truth_head_is_the_one_the_recorded_scenario_names(store_recording, 
     from a dataset keeps none, and its 14-joint truth already holds the annotated head joints."""
     from pathlib import Path
 
-    from crossview import datasets, recording
+    from crossview import recording
+    from crossview.formats import datasets
     from sim.humanoid import ANNOTATED_HEAD
 
     def head_of(scenario_name, **overrides):

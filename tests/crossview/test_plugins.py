@@ -11,7 +11,7 @@ import pytest
 from core.types import COCO17
 from crossview import pipeline, recording
 from crossview.cli import EXIT_BAD_INPUT, main
-from crossview.datasets import load_cameras
+from crossview.formats.datasets import load_cameras
 from crossview.plugins import ENTRY_POINT_GROUP, PluginError, check_targets, resolve
 from examples.greedy_triangulation import GreedyTriangulationTracker
 from tracker.config import TrackerConfig

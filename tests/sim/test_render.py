@@ -1,5 +1,5 @@
 """The lens remap of `sim.render` against our projection, and the backend choice's one-line errors (the renders
-themselves are checked in tests/sim/test_cameras.py and tests/crossview/test_render.py)."""
+themselves are checked in tests/sim/test_cameras.py and tests/crossview/pictures/test_render.py)."""
 
 import numpy as np
 import pytest

@@ -1,0 +1,620 @@
+"""Foxglove messages for people to look at: the store, camera frusta and calibrations, skeletons, 2D detections.
+
+Every function returns a message of one of the exact Foxglove protobuf schemas
+(`foxglove_schemas_protobuf`), so a recording opens in Foxglove with the store in the 3D panel. This
+module knows nothing of MCAP; `crossview.recording` writes what it builds. Times are integer
+nanoseconds (the recording converts seconds in one place); poses are metres in the world frame (z up).
+"""
+
+from __future__ import annotations
+
+import colorsys
+import functools
+import math
+import struct
+import zlib
+from collections.abc import Iterable, Sequence
+
+import numpy as np
+from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
+from foxglove_schemas_protobuf.Color_pb2 import Color
+from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
+from foxglove_schemas_protobuf.CubePrimitive_pb2 import CubePrimitive
+from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
+from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
+from foxglove_schemas_protobuf.Point2_pb2 import Point2
+from foxglove_schemas_protobuf.Point3_pb2 import Point3
+from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
+from foxglove_schemas_protobuf.Pose_pb2 import Pose
+from foxglove_schemas_protobuf.Quaternion_pb2 import Quaternion
+from foxglove_schemas_protobuf.SceneEntity_pb2 import SceneEntity
+from foxglove_schemas_protobuf.SceneEntityDeletion_pb2 import SceneEntityDeletion
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+from foxglove_schemas_protobuf.SpherePrimitive_pb2 import SpherePrimitive
+from foxglove_schemas_protobuf.TextPrimitive_pb2 import TextPrimitive
+from foxglove_schemas_protobuf.Vector3_pb2 import Vector3
+from google.protobuf import descriptor_pb2
+from google.protobuf.descriptor import Descriptor
+from google.protobuf.timestamp_pb2 import Timestamp
+
+from core.types import Camera, Skeleton
+from sim.types import Box, BoxKind, CameraFrame, PoseTruth
+from tracker.types import TargetArrays, TrackerOutput
+
+WORLD_FRAME = "world"
+FRUSTUM_DEPTH_M = 0.6  # how far the drawn frustum reaches along the optical axis
+TRUTH_LINE_M = 0.02  # bone thickness of ground-truth skeletons
+TRACK_LINE_M = 0.04  # bone thickness of tracker skeletons, thicker so that both stay visible
+JOINT_SPHERE_M = 0.05
+DETECTION_LINE_PX = 2.0
+
+BOX_COLORS = {
+    BoxKind.FLOOR: (0.55, 0.55, 0.55, 1.0),
+    BoxKind.WALL: (0.80, 0.80, 0.78, 0.25),
+    BoxKind.SHELF: (0.62, 0.45, 0.30, 0.85),
+    BoxKind.CHECKOUT: (0.25, 0.45, 0.75, 0.85),
+    BoxKind.ENTRANCE: (0.20, 0.75, 0.30, 0.40),
+    BoxKind.EXIT: (0.85, 0.25, 0.25, 0.40),
+}
+CAMERA_COLOR = (1.0, 0.85, 0.1, 1.0)
+BACKDROP_GREY = 40  # 8-bit grey of the blank image the 2D detections are drawn over
+FALSE_POSITIVE_COLOR = (0.6, 0.6, 0.6, 1.0)
+
+
+def camera_frame_id(camera_name: str) -> str:
+    """The Foxglove frame id of a camera's optical frame (OpenCV axes: x right, y down, z forward)."""
+    return f"camera_{camera_name}"
+
+
+def _timestamp_bytes(t_ns: int) -> bytes:
+    """Wire bytes of `timestamp(t_ns)` (seconds and nanos as varints, each left out when 0)."""
+    seconds, nanos = divmod(int(t_ns), 1_000_000_000)
+    return wire_uint(1, seconds) + wire_uint(2, nanos)
+
+
+def timestamp(t_ns: int) -> Timestamp:
+    """A protobuf Timestamp of `t_ns` nanoseconds since the scenario start."""
+    seconds, nanos = divmod(int(t_ns), 1_000_000_000)
+    return Timestamp(seconds=seconds, nanos=nanos)
+
+
+def color(rgba: Sequence[float]) -> Color:
+    r, g, b, a = rgba
+    return Color(r=r, g=g, b=b, a=a)
+
+
+def id_color(identity: int, *, saturation: float, value: float, alpha: float = 1.0, offset: float = 0.0) -> Color:
+    """A stable colour per integer identity: hues spaced by the golden ratio so neighbours differ."""
+    hue = (offset + 0.618033988749895 * int(identity)) % 1.0
+    r, g, b = colorsys.hsv_to_rgb(hue, saturation, value)
+    return Color(r=r, g=g, b=b, a=alpha)
+
+
+def truth_color(person_id: int) -> Color:
+    """Ground truth: pale, half transparent."""
+    return id_color(person_id, saturation=0.35, value=1.0, alpha=0.6)
+
+
+def track_color(target_id: int) -> Color:
+    """Tracker output: saturated and opaque, on a shifted hue wheel so it does not mimic the truth."""
+    return id_color(target_id, saturation=0.95, value=0.9, offset=0.31)
+
+
+def _quaternion_from_matrix(R: np.ndarray) -> Quaternion:
+    """Unit quaternion (x, y, z, w) of the (3, 3) rotation R."""
+    m = np.asarray(R, dtype=np.float64)
+    trace = m[0, 0] + m[1, 1] + m[2, 2]
+    if trace > 0:
+        s = 2.0 * math.sqrt(trace + 1.0)
+        w, x, y, z = 0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s
+    elif m[0, 0] > m[1, 1] and m[0, 0] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        w, x, y, z = (m[2, 1] - m[1, 2]) / s, 0.25 * s, (m[0, 1] + m[1, 0]) / s, (m[0, 2] + m[2, 0]) / s
+    elif m[1, 1] > m[2, 2]:
+        s = 2.0 * math.sqrt(1.0 + m[1, 1] - m[0, 0] - m[2, 2])
+        w, x, y, z = (m[0, 2] - m[2, 0]) / s, (m[0, 1] + m[1, 0]) / s, 0.25 * s, (m[1, 2] + m[2, 1]) / s
+    else:
+        s = 2.0 * math.sqrt(1.0 + m[2, 2] - m[0, 0] - m[1, 1])
+        w, x, y, z = (m[1, 0] - m[0, 1]) / s, (m[0, 2] + m[2, 0]) / s, (m[1, 2] + m[2, 1]) / s, 0.25 * s
+    return Quaternion(x=float(x), y=float(y), z=float(z), w=float(w))
+
+
+def _point(p) -> Point3:
+    return Point3(x=float(p[0]), y=float(p[1]), z=float(p[2]))
+
+
+def _box_entity(index: int, box: Box, t_ns: int) -> SceneEntity:
+    half = 0.5 * box.yaw_rad
+    cube = CubePrimitive(
+        pose=Pose(
+            position=Vector3(x=box.center_m[0], y=box.center_m[1], z=box.center_m[2]),
+            orientation=Quaternion(x=0.0, y=0.0, z=math.sin(half), w=math.cos(half)),
+        ),
+        size=Vector3(x=box.size_m[0], y=box.size_m[1], z=box.size_m[2]),
+        color=color(BOX_COLORS[box.kind]),
+    )
+    return SceneEntity(
+        timestamp=timestamp(t_ns), frame_id=WORLD_FRAME, id=f"box/{index:03d}/{box.kind.value}", cubes=[cube]
+    )
+
+
+def _frustum_entity(camera: Camera, t_ns: int) -> SceneEntity:
+    """Lines from the optical centre to the image corners at FRUSTUM_DEPTH_M, in the camera's own frame."""
+    K_inv = np.linalg.inv(camera.K)
+    w, h = camera.width_px, camera.height_px
+    corners = [K_inv @ np.array([u, v, 1.0]) * FRUSTUM_DEPTH_M for u, v in ((0, 0), (w, 0), (w, h), (0, h))]
+    origin = Point3(x=0.0, y=0.0, z=0.0)
+    points = []
+    for i, c in enumerate(corners):
+        points += [origin, _point(c), _point(c), _point(corners[(i + 1) % 4])]
+    line = LinePrimitive(
+        type=LinePrimitive.LINE_LIST,
+        pose=Pose(orientation=Quaternion(w=1.0)),
+        thickness=2.0,
+        scale_invariant=True,
+        points=points,
+        color=color(CAMERA_COLOR),
+    )
+    label = TextPrimitive(
+        pose=Pose(orientation=Quaternion(w=1.0)),
+        billboard=True,
+        font_size=14.0,
+        scale_invariant=True,
+        color=color(CAMERA_COLOR),
+        text=camera.name,
+    )
+    return SceneEntity(
+        timestamp=timestamp(t_ns),
+        frame_id=camera_frame_id(camera.name),
+        id=f"camera/{camera.name}",
+        lines=[line],
+        texts=[label],
+    )
+
+
+def store_scene(boxes: Iterable[Box], cameras: Sequence[Camera], t_ns: int = 0) -> SceneUpdate:
+    """The static store: one cube per box (floor, walls, shelves, ...) and one frustum per camera."""
+    entities = [_box_entity(i, box, t_ns) for i, box in enumerate(boxes)]
+    entities += [_frustum_entity(camera, t_ns) for camera in cameras]
+    return SceneUpdate(entities=entities)
+
+
+def frame_transforms(cameras: Sequence[Camera], t_ns: int = 0) -> FrameTransforms:
+    """world -> camera optical frame for every camera: the camera centre and R_world_from_cam = Rᵀ."""
+    transforms = []
+    for camera in cameras:
+        center = camera.center_world
+        transforms.append(
+            FrameTransform(
+                timestamp=timestamp(t_ns),
+                parent_frame_id=WORLD_FRAME,
+                child_frame_id=camera_frame_id(camera.name),
+                translation=Vector3(x=float(center[0]), y=float(center[1]), z=float(center[2])),
+                rotation=_quaternion_from_matrix(camera.R_cam_from_world.T),
+            )
+        )
+    return FrameTransforms(transforms=transforms)
+
+
+def camera_calibration(camera: Camera, t_ns: int = 0) -> CameraCalibration:
+    """The camera's intrinsics in ROS/Foxglove form: plumb_bob D = (k1, k2, p1, p2, k3), P = [K | 0]."""
+    P = np.hstack([camera.K, np.zeros((3, 1))])
+    return CameraCalibration(
+        timestamp=timestamp(t_ns),
+        frame_id=camera_frame_id(camera.name),
+        width=int(camera.width_px),
+        height=int(camera.height_px),
+        distortion_model="plumb_bob",
+        D=camera.dist.tolist(),
+        K=camera.K.ravel().tolist(),
+        R=np.eye(3).ravel().tolist(),
+        P=P.ravel().tolist(),
+    )
+
+
+@functools.lru_cache(maxsize=16)
+def _png_grey(width: int, height: int, value: int) -> bytes:
+    """A uniform 8-bit greyscale PNG, built with zlib alone so the bytes depend on nothing else."""
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
+
+    rows = (b"\x00" + bytes([value]) * width) * height  # filter byte 0 (None) before each row
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0))
+        + chunk(b"IDAT", zlib.compress(rows, 9))
+        + chunk(b"IEND", b"")
+    )
+
+
+def camera_backdrop(camera: Camera, t_ns: int = 0) -> CompressedImage:
+    """A blank image of the camera's size: recordings hold no pixels, but an Image panel needs an image
+    (or at least its size) to draw the 2D detections and the projected 3D scene over."""
+    return CompressedImage(
+        timestamp=timestamp(t_ns),
+        frame_id=camera_frame_id(camera.name),
+        data=_png_grey(int(camera.width_px), int(camera.height_px), BACKDROP_GREY),
+        format="png",
+    )
+
+
+def camera_image(camera: Camera, t_ns: int, jpeg: bytes) -> CompressedImage:
+    """A rendered picture of what the camera sees (`crossview generate --images`), in its optical frame, stamped
+    `t_ns` like the frame's detections so that an Image panel pairs the two."""
+    return CompressedImage(timestamp=timestamp(t_ns), frame_id=camera_frame_id(camera.name), data=jpeg, format="jpeg")
+
+
+# Repeated Point2/Point3 fields are written straight in protobuf wire format with numpy: building one
+# Python message per point was most of the cost of writing a recording. Each element is the field's tag
+# (wire type 2), the length, then x, y (, z) as fixed64 fields 1, 2 (, 3).
+_POINT2_WIRE = np.dtype([("tag", "u1"), ("len", "u1"), ("kx", "u1"), ("x", "<f8"), ("ky", "u1"), ("y", "<f8")])
+_POINT3_WIRE = np.dtype([("tag", "u1"), ("len", "u1"), ("kx", "u1"), ("x", "<f8"), ("ky", "u1"), ("y", "<f8"),
+                         ("kz", "u1"), ("z", "<f8")])
+
+
+def encode_points(field_number: int, points: np.ndarray) -> bytes:
+    """Wire bytes of `repeated foxglove.Point2/Point3 <field_number>` holding `points`, (N, 2) or (N, 3)."""
+    points = np.asarray(points, dtype=np.float64)
+    dims = points.shape[1]
+    out = np.empty(len(points), _POINT2_WIRE if dims == 2 else _POINT3_WIRE)
+    out["tag"] = (field_number << 3) | 2
+    out["len"] = 9 * dims
+    for number, axis in enumerate("xyz"[:dims], start=1):
+        out[f"k{axis}"] = (number << 3) | 1
+        out[axis] = points[:, number - 1]
+    return out.tobytes()
+
+
+def _bone_points(points: np.ndarray, skeleton: Skeleton) -> np.ndarray:
+    """LINE_LIST endpoints of the bones whose both ends are known: (J, K) -> (2 * bones kept, K)."""
+    bones = np.asarray(skeleton.bones, dtype=np.intp).reshape(-1, 2)
+    known = np.isfinite(points).all(axis=1)
+    kept = bones[known[bones[:, 0]] & known[bones[:, 1]]]
+    return points[kept.ravel()]
+
+
+def _varint_uncached(value: int) -> bytes:
+    out = bytearray()
+    while True:
+        byte, value = value & 0x7F, value >> 7
+        if value:
+            out.append(byte | 0x80)
+        else:
+            out.append(byte)
+            return bytes(out)
+
+
+_SMALL_VARINTS = tuple(_varint_uncached(v) for v in range(1 << 14))
+
+
+def _varint(value: int) -> bytes:
+    """Wire bytes of a non-negative varint (the small ones, every length and tag here, from a table)."""
+    return _SMALL_VARINTS[value] if value < 16384 else _varint_uncached(value)
+
+
+def _length_delimited(field_number: int, payload: bytes) -> bytes:
+    """Wire bytes of one length-delimited field (an embedded message)."""
+    return _SMALL_VARINTS[(field_number << 3) | 2] + _varint(len(payload)) + payload
+
+
+# Protobuf wire format written straight from numpy (proto3: a scalar equal to its default is left out,
+# as protobuf itself does; packed repeated fields are one length-delimited run). The writer's tests
+# check these bytes against protobuf's own serialisation.
+_ZERO8 = bytes(8)
+
+
+def wire_double(field_number: int, value: float) -> bytes:
+    """A proto3 `double` field (left out when its bits are all zero, as protobuf does)."""
+    data = struct.pack("<d", value)
+    return b"" if data == _ZERO8 else _SMALL_VARINTS[(field_number << 3) | 1] + data
+
+
+def wire_uint(field_number: int, value: int) -> bytes:
+    """A proto3 unsigned varint field (uint32/uint64/bool), left out when 0."""
+    return _SMALL_VARINTS[field_number << 3] + _varint(int(value)) if value else b""
+
+
+def wire_string(field_number: int, value: str) -> bytes:
+    """A proto3 `string` field, left out when empty."""
+    data = value.encode()
+    return _length_delimited(field_number, data) if data else b""
+
+
+def _with_points(message, field_number: int, points: np.ndarray):
+    """`message` with its repeated point field `field_number` set to `points` (parsed from wire bytes)."""
+    return type(message).FromString(message.SerializeToString() + encode_points(field_number, points))
+
+
+def _skeleton_entity(
+    entity_id: str, pose: np.ndarray, skeleton: Skeleton, t_ns: int, rgba: Color, thickness_m: float, label: str
+) -> SceneEntity:
+    known = pose[np.all(np.isfinite(pose), axis=1)]
+    entity = SceneEntity(timestamp=timestamp(t_ns), frame_id=WORLD_FRAME, id=entity_id)
+    line = LinePrimitive(
+        type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)), thickness=thickness_m, color=rgba,
+    )
+    entity.lines.append(_with_points(line, LinePrimitive.DESCRIPTOR.fields_by_name["points"].number,
+                                     _bone_points(pose, skeleton)))
+    if len(known):
+        top = known[np.argmax(known[:, 2])]
+        entity.texts.append(
+            TextPrimitive(
+                pose=Pose(position=Vector3(x=float(top[0]), y=float(top[1]), z=float(top[2]) + 0.25),
+                          orientation=Quaternion(w=1.0)),
+                billboard=True,
+                font_size=12.0,
+                scale_invariant=True,
+                color=rgba,
+                text=label,
+            )
+        )
+        entity.spheres.append(  # a ball on the highest joint makes a person easy to pick out from above
+            SpherePrimitive(
+                pose=Pose(position=Vector3(x=float(top[0]), y=float(top[1]), z=float(top[2])),
+                          orientation=Quaternion(w=1.0)),
+                size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
+                color=rgba,
+            )
+        )
+    return entity
+
+
+def _replace_all(t_ns: int, entities: list[SceneEntity]) -> SceneUpdate:
+    """A SceneUpdate that first deletes everything older, so people who left disappear."""
+    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL)
+    return SceneUpdate(deletions=[deletion], entities=entities)
+
+
+def truth_skeletons(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
+    """Everybody's true skeleton at one instant, pale, labelled with the person id."""
+    entities = [
+        _skeleton_entity(f"person/{pid}", pose, skeleton, t_ns, truth_color(pid), TRUTH_LINE_M, f"p{pid}")
+        for pid, pose in zip(np.asarray(truth.person_ids).tolist(), truth.poses)
+    ]
+    return _replace_all(t_ns, entities)
+
+
+def _entity_parts(kind: str, identity: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
+    """Constant wire pieces of a skeleton entity (`kind` "truth": a person's, "track": a target's): the id
+    field, the bone line before and after its points, and what follows the pose in the label and in the top
+    sphere."""
+    prefix, rgba, thickness, label = (("person", truth_color(identity), TRUTH_LINE_M, f"p{identity}")
+                                      if kind == "truth" else
+                                      ("target", track_color(identity), TRACK_LINE_M, f"T{identity}"))
+    line_head = LinePrimitive(type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)),
+                              thickness=thickness).SerializeToString()
+    line_tail = LinePrimitive(color=rgba).SerializeToString()
+    text_tail = TextPrimitive(billboard=True, font_size=12.0, scale_invariant=True, color=rgba,
+                              text=label).SerializeToString()
+    sphere_tail = SpherePrimitive(size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
+                                  color=rgba).SerializeToString()
+    return wire_string(3, f"{prefix}/{identity}"), line_head, line_tail, text_tail, sphere_tail
+
+
+_ORIENTATION_IDENTITY = Pose(orientation=Quaternion(w=1.0)).SerializeToString()
+_ORIENTATION_IDENTITY_BYTES = np.frombuffer(_ORIENTATION_IDENTITY, dtype=np.uint8)
+_LINE_POINTS_FIELD = LinePrimitive.DESCRIPTOR.fields_by_name["points"].number
+_LINE_POINTS_KEY = (_LINE_POINTS_FIELD << 3) | 2
+
+
+def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
+    """`truth_skeletons(...)` as its wire bytes (what the recording writes): `_skeletons_bytes`."""
+    return _skeletons_bytes(truth.person_ids, truth.poses, _TRUTH_PIECES, skeleton, t_ns,
+                            lambda: truth_skeletons(truth, skeleton, t_ns))
+
+
+def tracker_skeletons_bytes(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> bytes:
+    """`tracker_skeletons(...)` as its wire bytes (what the tracks file writes): `_skeletons_bytes`."""
+    targets = output.targets
+    if isinstance(targets, TargetArrays):
+        ids, poses = targets.ids, targets.poses
+    else:
+        ids = np.array([t.id for t in targets], dtype=np.int64)
+        poses = np.array([t.pose for t in targets], dtype=np.float64).reshape(len(ids), skeleton.num_joints, 3)
+    if (np.asarray(ids) < 0).any():  # (a plug-in's negative id: the piece table keys ids >= -1)
+        return tracker_skeletons(output, skeleton, t_ns).SerializeToString()
+    return _skeletons_bytes(ids, poses, _TRACK_PIECES, skeleton, t_ns,
+                            lambda: tracker_skeletons(output, skeleton, t_ns))
+
+
+def _skeletons_bytes(ids, poses, pieces: _PieceTable, skeleton: Skeleton, t_ns: int, built) -> bytes:
+    """A skeleton scene's wire bytes, written by a compiled loop (`wire.skeletons`) from the cached pieces of
+    each id; `built()` makes the message the usual way where the loop cannot (a coordinate of exactly +0.0,
+    which protobuf leaves out: the rare instant goes through it)."""
+    from crossview.recording import wire  # (numba: loaded for writing only)
+
+    poses = np.ascontiguousarray(poses, dtype=np.float64)
+    ids = np.ascontiguousarray(ids, dtype=np.int64)
+    head = np.frombuffer(_length_delimited(1, _timestamp_bytes(t_ns)) + wire_string(2, WORLD_FRAME), dtype=np.uint8)
+    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
+    deletion = np.frombuffer(_length_delimited(1, deletion), dtype=np.uint8)
+    bones = _bone_table(tuple(skeleton.bones))[0]
+    while True:  # (an id seen for the first time gets a row of pieces, then the instant is encoded again)
+        capacity = deletion.size + len(ids) * (head.size + pieces.table.shape[1] + len(bones) * 60 + 160)
+        out = _annotation_buffer(capacity)
+        size = wire.skeletons(out, poses, ids, pieces.lut, pieces.table, pieces.sizes, bones, head, deletion,
+                              _ORIENTATION_IDENTITY_BYTES, _LINE_POINTS_KEY)
+        if size != wire.NEW_STYLE:
+            break
+        pieces.add(ids)
+    if size < 0:
+        return built().SerializeToString()
+    return out[:size].tobytes()
+
+
+def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
+    """The tracker's targets after one update, each in its own saturated colour, labelled with its id."""
+    entities = [
+        _skeleton_entity(
+            f"target/{target.id}", np.asarray(target.pose), skeleton, t_ns, track_color(target.id), TRACK_LINE_M,
+            f"T{target.id}",
+        )
+        for target in output.targets
+    ]
+    return _replace_all(t_ns, entities)
+
+
+@functools.lru_cache(maxsize=1024)
+def _detection_styles(person_id: int) -> tuple[bytes, bytes, bytes, bytes, int, int]:
+    """Serialized style of a detection's bones and joints (-1: false positive), each split around the
+    points field so that type, points, colours, thickness come in field-number order: bones before,
+    bones after, joints before, joints after; then the bones' and the joints' total style length."""
+    rgba = truth_color(person_id) if person_id >= 0 else color(FALSE_POSITIVE_COLOR)
+    rgba.a = 1.0
+    bones_type = PointsAnnotation(type=PointsAnnotation.LINE_LIST)
+    bones_rest = PointsAnnotation(outline_color=rgba, thickness=DETECTION_LINE_PX)
+    joints_type = PointsAnnotation(type=PointsAnnotation.POINTS)
+    joints_rest = PointsAnnotation(outline_color=rgba, fill_color=rgba, thickness=2 * DETECTION_LINE_PX)
+    pieces = tuple(m.SerializeToString() for m in (bones_type, bones_rest, joints_type, joints_rest))
+    return (*pieces, len(pieces[0]) + len(pieces[1]), len(pieces[2]) + len(pieces[3]))
+
+
+def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> ImageAnnotations:
+    """One camera frame's 2D detections: keypoints and bones in pixels, coloured by the true person
+    behind each detection (grey for false positives). Per detection, a line list of the bones whose two
+    ends were detected, then the detected joints as points."""
+    kp = np.asarray(camera_frame.frame.keypoints_px, dtype=np.float64)
+    person_ids = np.asarray(camera_frame.truth.person_ids).tolist()
+    stamp = timestamp(t_ns)
+    message = ImageAnnotations()
+    for d in range(kp.shape[0]):
+        pid = person_ids[d] if d < len(person_ids) else -1
+        rgba = truth_color(pid) if pid >= 0 else color(FALSE_POSITIVE_COLOR)
+        rgba.a = 1.0
+        known = np.isfinite(kp[d]).all(axis=1)
+        ends = [end for a, b in skeleton.bones if known[a] and known[b] for end in (a, b)]
+        if ends:
+            message.points.append(PointsAnnotation(
+                timestamp=stamp, type=PointsAnnotation.LINE_LIST, outline_color=rgba, thickness=DETECTION_LINE_PX,
+                points=[Point2(x=x, y=y) for x, y in kp[d, ends].tolist()]))
+        if known.any():
+            message.points.append(PointsAnnotation(
+                timestamp=stamp, type=PointsAnnotation.POINTS, outline_color=rgba, fill_color=rgba,
+                thickness=2 * DETECTION_LINE_PX, points=[Point2(x=x, y=y) for x, y in kp[d, known].tolist()]))
+    return message
+
+
+_POINTS_FIELD = PointsAnnotation.DESCRIPTOR.fields_by_name["points"].number
+_ANNOTATIONS_FIELD = ImageAnnotations.DESCRIPTOR.fields_by_name["points"].number
+_STAMP_FIELD = PointsAnnotation.DESCRIPTOR.fields_by_name["timestamp"].number
+
+
+@functools.lru_cache(maxsize=64)
+def _bone_table(bones: tuple) -> tuple[np.ndarray, np.ndarray]:
+    table = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
+    return table, table.ravel()
+
+
+def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> bytes:
+    """`image_annotations` as its wire bytes, written by a compiled loop (what the recording writes)."""
+    from crossview.recording import wire  # (numba: loaded for writing only)
+
+    frame, truth = camera_frame.frame, camera_frame.truth
+    kp = np.ascontiguousarray(frame.keypoints_px, dtype=np.float64)  # (D, J, 2)
+    D = kp.shape[0]
+    if D == 0:
+        return b""
+    person_ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
+    bones = _bone_table(tuple(skeleton.bones))[0]
+    styles = _DETECTION_STYLES
+    while True:  # (a person seen for the first time gets a style row, then the frame is encoded again)
+        out = _annotation_buffer(wire.image_annotations_capacity(D, kp.shape[1], len(bones), styles.table.shape[1]))
+        size = wire.image_annotations(out, kp, bones, person_ids, styles.lut, styles.table, styles.sizes, int(t_ns),
+                                      _STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)
+        if size != wire.NEW_STYLE:
+            break
+        styles.add(person_ids)
+    if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: such rare messages go through it
+        return image_annotations(camera_frame, skeleton, t_ns).SerializeToString()
+    return out[:size].tobytes()
+
+
+_ANNOTATIONS_KEY = np.frombuffer(_SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2], dtype=np.uint8)
+_POINTS_KEY = (_POINTS_FIELD << 3) | 2
+if _POINTS_KEY >= 128 or _STAMP_FIELD >= 16:
+    raise RuntimeError("PointsAnnotation: the compiled encoder expects one-byte field tags")
+ANNOTATION_FIELDS = (_STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)  # the field arguments of wire.image_annotations
+
+
+def detection_styles(person_ids: np.ndarray) -> _PieceTable:
+    """The style table of the detections' wire pieces, with a row for each of `person_ids` (for encoders
+    of many frames at once; `image_annotations_bytes` adds rows as it meets people)."""
+    styles = _DETECTION_STYLES
+    ids = np.maximum(np.asarray(person_ids, dtype=np.int64), -1) + 1
+    if ids.size and (ids.max() >= styles.lut.size or (styles.lut[ids] < 0).any()):
+        styles.add(person_ids)
+    return styles
+
+
+def bone_table(skeleton: Skeleton) -> np.ndarray:
+    """(B, 2) joint pairs of the skeleton's bones, as the encoders take them."""
+    return _bone_table(tuple(skeleton.bones))[0]
+
+
+class _PieceTable:
+    """Constant wire pieces per person id (-1: false positives) for a compiled encoder: the pieces of each
+    id back to back in a row of one uint8 `table`, their `sizes` (rows, pieces), and `lut`, which maps
+    id + 1 to the row (-1: none yet; `add` makes them)."""
+
+    def __init__(self, pieces, count: int):
+        self._pieces = pieces  # person id -> `count` byte strings
+        self._rows: dict[int, int] = {}
+        self.table = np.zeros((0, 0), dtype=np.uint8)
+        self.sizes = np.zeros((0, count), dtype=np.int64)
+        self.lut = np.full(0, -1, dtype=np.int64)
+
+    def add(self, person_ids: np.ndarray) -> None:
+        for pid in {-1, *np.maximum(person_ids, -1).tolist()}:
+            if pid in self._rows:
+                continue
+            pieces = self._pieces(pid)
+            blob = b"".join(pieces)
+            width = max(self.table.shape[1], len(blob))
+            grown = np.zeros((self.table.shape[0] + 1, width), dtype=np.uint8)
+            grown[:-1, :self.table.shape[1]] = self.table
+            grown[-1, :len(blob)] = np.frombuffer(blob, dtype=np.uint8)
+            self._rows[pid] = self.table.shape[0]
+            self.table = grown
+            self.sizes = np.vstack([self.sizes, [[len(p) for p in pieces]]]).astype(np.int64)
+        lut = np.full(max(self._rows) + 2, -1, dtype=np.int64)
+        for pid, row in self._rows.items():
+            lut[pid + 1] = row
+        self.lut = lut
+
+
+_DETECTION_STYLES = _PieceTable(lambda pid: _detection_styles(pid)[:4], 4)
+_TRUTH_PIECES = _PieceTable(functools.partial(_entity_parts, "truth"), 5)
+_TRACK_PIECES = _PieceTable(functools.partial(_entity_parts, "track"), 5)
+_ANNOTATION_BUFFER = [np.empty(1 << 16, dtype=np.uint8)]
+
+
+def _annotation_buffer(size: int) -> np.ndarray:
+    if _ANNOTATION_BUFFER[0].size < size:
+        _ANNOTATION_BUFFER[0] = np.empty(2 * size, dtype=np.uint8)
+    return _ANNOTATION_BUFFER[0]
+
+
+def file_descriptor_set(descriptor: Descriptor) -> bytes:
+    """The serialized FileDescriptorSet of a message type and its imports, dependencies first.
+
+    This is the MCAP `protobuf` schema encoding; the order is fixed (depth-first over imports) so the
+    same software writes the same bytes.
+    """
+    fds = descriptor_pb2.FileDescriptorSet()
+    seen: set[str] = set()
+
+    def add(file_descriptor) -> None:
+        if file_descriptor.name in seen:
+            return
+        seen.add(file_descriptor.name)
+        for dependency in file_descriptor.dependencies:
+            add(dependency)
+        proto = descriptor_pb2.FileDescriptorProto()
+        file_descriptor.CopyToProto(proto)
+        fds.file.append(proto)
+
+    add(descriptor.file)
+    return fds.SerializeToString(deterministic=True)

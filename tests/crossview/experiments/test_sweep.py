@@ -1,0 +1,530 @@
+"""`crossview sweep` and `crossview verify`: the same grid gives the same results.json serially, in a process
+pool and on Ray; a rerun resumes; bad input is refused before any cell runs; verify finds a changed recording."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import scenarios
+from crossview.cli import EXIT_BAD_INPUT, main
+from crossview.experiments import sweep, sweep_report
+from sim import scenario as scenario_mod
+
+SCENARIOS = Path(scenarios.__file__).parent
+
+# The small grid: 2 crowd sizes x 2 camera counts x 2 seeds of store_layout1, 1 simulated second each (CI time).
+GRID = ["store_layout1", "--people", "2,3", "--cameras", "6,12", "--seeds", "0,1", "--duration", "1"]
+
+
+def _sweep(out, *extra) -> int:
+    return main(["--no-progress", "sweep", *GRID, "-o", str(out), *extra])
+
+
+def _sha256(path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+@pytest.fixture(scope="module")
+def serial(tmp_path_factory):
+    """The grid run serially in this process: the reference of the other executors."""
+    out = tmp_path_factory.mktemp("serial")
+    assert _sweep(out, "--workers", "1") == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def ray_instance():
+    """One local Ray instance for the module (its start-up is slow)."""
+    ray = pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": sweep.RAY_WORKER_ENV})
+    yield ray
+    ray.shutdown()
+
+
+def test_serial_sweep_writes_one_row_per_cell_with_scores_and_timings(serial):
+    results = json.loads((serial / "results.json").read_text())
+    cells = results["cells"]
+    # Every cell of the product ran, in grid order (the seed varies fastest).
+    assert [(c["crowd.people"], c["cameras"], c["seed"]) for c in cells] == [
+        (p, k, s) for p in (2, 3) for k in (6, 12) for s in (0, 1)]
+    assert all(c["status"] == "ok" for c in cells)
+    # The scenario was resolved per cell: the camera count and crowd size are what was simulated.
+    assert [c["num_cameras"] for c in cells] == [6, 6, 12, 12] * 2
+    assert all(0 <= c["pcp"] <= 1 and 0 <= c["idf1"] <= 1 for c in cells)
+    # Speeds vary from run to run: they are in timings.json and results.csv, not in results.json.
+    assert "tracker_fps" not in cells[0]
+    timings = json.loads((serial / "timings.json").read_text())["cells"]
+    assert [t["key"] for t in timings] == [c["key"] for c in cells]
+    assert all(t["tracker_fps"] > 0 and t["wall_s"] > 0 and t["peak_memory_mb"] > 0 for t in timings)
+    header = (serial / "results.csv").read_text().splitlines()[0].split(",")
+    assert {"crowd.people", "cameras", "seed", "status", "pcp", "idf1", "tracker_fps", "peak_memory_mb"} <= set(header)
+    assert len((serial / "results.csv").read_text().splitlines()) == 1 + len(cells)
+    # One small score file per cell, the report and its plots.
+    assert len(list((serial / "cells").glob("*.json"))) == len(cells)
+    report = (serial / "report.md").read_text()
+    assert "## Breaking points" in report and "cameras=6:" in report
+    assert all((serial / "plots" / f"{m}.png").read_bytes()[:4] == b"\x89PNG" for m, _, _ in sweep_report.METRICS)
+    assert not list(serial.rglob("*.tmp"))
+
+
+def test_pool_gives_the_same_results_json_bytes_as_serial(serial, tmp_path):
+    assert _sweep(tmp_path, "--workers", "2") == 0
+    assert _sha256(tmp_path / "results.json") == _sha256(serial / "results.json")
+
+
+def test_ray_gives_the_same_results_json_bytes_as_serial(serial, tmp_path, ray_instance):
+    assert _sweep(tmp_path, "--ray") == 0
+    assert _sha256(tmp_path / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_rerun_skips_finished_cells_and_gives_the_same_results(serial, tmp_path, caplog):
+    # An interrupted sweep: three cells' files lost, the results not yet written.
+    out = tmp_path / "resumed"
+    shutil.copytree(serial, out)
+    cells = sorted((out / "cells").glob("*.json"))
+    for lost in cells[:3]:
+        lost.unlink()
+    for written in ("results.json", "results.csv", "timings.json", "report.md"):
+        (out / written).unlink()
+    # The rerun runs only the three missing cells, and says so as progress (INFO), not as a problem.
+    with caplog.at_level("INFO", logger="crossview.experiments.sweep"):
+        assert _sweep(out, "--workers", "1") == 0
+    resumed = [r for r in caplog.records if "cells already finished" in r.getMessage()]
+    assert [r.levelname for r in resumed] == ["INFO"]
+    assert f"5 of {len(cells)} cells already finished" in caplog.text
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_rerun_with_nothing_left_starts_nothing(serial, tmp_path, capsys):
+    # Every cell finished: Ray is not started nor joined (the address, where nothing listens, would be refused
+    # in one line if it were tried), and the results are written again from the cells' files.
+    out = tmp_path / "done"
+    shutil.copytree(serial, out)
+    (out / "results.json").unlink()
+    assert _sweep(out, "--ray", "127.0.0.1:1") == 0
+    assert "8 already finished (skipped), 0 run" in capsys.readouterr().out
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+def test_a_method_label_names_the_method_in_the_results(tmp_path, capsys):
+    out = tmp_path / "labelled"
+    assert main(["--no-progress", "sweep", "store_layout1", "--people", "2", "--duration", "1", "--workers", "1",
+                 "--method", "mine=crossview", "-o", str(out)]) == 0
+    cells = json.loads((out / "results.json").read_text())["cells"]
+    assert [c["method"] for c in cells] == ["mine"] and cells[0]["status"] == "ok"
+    assert cells[0]["seed"] == scenario_mod.load("store_layout1").seed  # no --seeds: the scenario's
+    # One label for two methods is refused before any cell runs.
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--method", "a=crossview,a=baseline", "-o", str(tmp_path / "x")])
+    assert "--method: the label 'a' is given twice" in err
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_cell_too_crowded_for_the_floor_fails_alone_and_kept_recordings_verify(tmp_path, capsys):
+    # store_layout1 holds at most a dozen people: the 200-people cell fails with its one-line error.
+    out = tmp_path / "kept"
+    assert main(["--no-progress", "sweep", "store_layout1", "--people", "2,200", "--duration", "1", "--workers", "1",
+                 "--keep-recordings", "-o", str(out)]) == 0
+    cells = json.loads((out / "results.json").read_text())["cells"]
+    assert cells[0]["status"] == "ok"
+    # The one-line error names the scenario file as the user knows it, not where it lies on this machine.
+    assert cells[1]["status"].startswith("store_layout1.toml: crowd.people: 200 people need")
+    assert cells[1]["pcp"] is None
+    results_text = (out / "results.json").read_text()
+    assert str(SCENARIOS) not in results_text and str(tmp_path) not in results_text
+    assert "## Failed cells" in (out / "report.md").read_text()
+    # The manifest lists the recording that was made, with its sha256.
+    manifest = json.loads((out / "manifest.json").read_text())["recordings"]
+    assert len(manifest) == 1
+    kept = out / manifest[0]["file"]
+    assert _sha256(kept) == manifest[0]["sha256"]
+    assert "people = 2" in manifest[0]["resolved_scenario"]
+    # verify regenerates it: the same bytes.
+    capsys.readouterr()
+    assert main(["--no-progress", "verify", str(out)]) == 0
+    assert "1 of 1 recordings match" in capsys.readouterr().out
+    # A changed byte in the kept recording is found.
+    data = bytearray(kept.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    kept.write_bytes(bytes(data))
+    assert main(["--no-progress", "verify", str(out), "--cells", "1"]) == EXIT_BAD_INPUT
+    captured = capsys.readouterr()
+    assert "MISMATCH" in captured.out and "1 of 1 recordings differ" in captured.err
+
+
+def _run_bad(capsys, argv):
+    status = main(["--no-progress", *argv])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT, err
+    assert len(err.splitlines()) == 1, err
+    assert "Traceback" not in err
+    return err
+
+
+@pytest.mark.parametrize(("args", "named"), [
+    (["--set", "crowd.peeple=1,2"], "unknown key 'crowd.peeple'"),
+    (["--set", "crowd.people=2,many"], "crowd.people = 'many' must be an integer"),
+    (["--set", "detector.profile=typical,rough"], "is not one of ['ideal', 'typical', 'harsh']"),
+    (["--set", "clock.fps="], "--set clock.fps: '' is an empty axis"),
+    (["--people", "2,,3"], "empty value"),
+    (["--seeds", "0,one"], "--seeds: '0,one' is not a comma-separated list"),
+    (["--cameras", "0"], "--cameras: 0 is not a camera count"),
+    (["--method", "crossview,magic"], "--method 'magic': not a known tracker"),
+    (["--set", "crowd.people=2", "--people", "3"], "--set crowd.people: given twice"),
+    (["--ray", "127.0.0.1:1"], "--ray 127.0.0.1:1: unreachable"),
+    (["--set", "tracker.w_2e=0.4"], "tracker.w_2e: unknown tracker setting"),
+    (["--set", "tracker.triangulation=paper,sideways"], "'sideways' is not one of"),
+    (["--set", "tracker.alpha_3d_m=0.1,-1"], "alpha_3d_m: -1 must be > 0"),
+])
+def test_bad_input_is_one_line_exit_2_before_any_cell(tmp_path, capsys, args, named):
+    out = tmp_path / "out"
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", *args, "-o", str(out)])
+    assert named in err
+    assert not out.exists()
+
+
+def test_ray_asked_for_but_not_installed_names_the_extra(tmp_path, capsys, monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # what `import ray` meets where it is not installed
+    out = tmp_path / "out"
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--duration", "1", "--ray", "-o", str(out)])
+    assert "Ray is not installed" in err and "crossview-testbed[ray]" in err
+    assert not out.exists()
+
+
+def test_a_folder_holding_another_sweep_is_refused(serial, tmp_path, capsys):
+    out = tmp_path / "other"
+    shutil.copytree(serial, out)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    err = _run_bad(capsys, ["sweep", "store_layout1", "--people", "2,4", "--duration", "1", "-o", str(out)])
+    assert "holds another sweep's results" in err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_verify_without_a_manifest_is_refused(tmp_path, capsys):
+    err = _run_bad(capsys, ["verify", str(tmp_path)])
+    assert "manifest.json: no manifest" in err
+
+
+def test_axis_values_are_read_as_toml_values_with_text_as_a_fallback():
+    assert sweep.parse_values("--set k", "10,2.5,true,typical,[1, 2]") == (10, 2.5, True, "typical", [1, 2])
+
+
+def test_tracker_axes_set_the_tracker_of_each_cell_and_only_its_key():
+    spec = sweep.SweepSpec("store_layout1", axes=(sweep.parse_axis("tracker.triangulation", "paper,conventional"),),
+                           duration_s=1.0)
+    paper, conventional = sweep.plan(spec)
+    assert paper.tracker_overrides == {"triangulation": "paper"}
+    assert conventional.tracker_overrides == {"triangulation": "conventional"}
+    assert paper.overrides == conventional.overrides  # the same recording
+    assert paper.key != conventional.key and paper.error is None and conventional.error is None
+    # Without tracker axes a cell keeps the key it had before they existed.
+    plain, = sweep.plan(sweep.SweepSpec("store_layout1", duration_s=1.0))
+    assert plain.tracker_overrides == {} and plain.key not in (paper.key, conventional.key)
+
+
+def test_a_tracker_value_invalid_with_the_cells_preset_fails_that_cell_alone():
+    # view_margin_m must be >= alpha_3d_m: 0.2 is fine for "campus" (alpha_3d_m 0.1), not for "store" (0.25).
+    spec = sweep.SweepSpec("store_layout1", axes=(sweep.parse_axis("tracker.view_margin_m", "0.2"),),
+                           presets=("campus", "store"), duration_s=1.0)
+    campus, store = sweep.plan(spec)
+    assert campus.error is None
+    assert "view_margin_m: 0.2 must be >= alpha_3d_m 0.25" in store.error
+
+
+def test_cameras_of_a_calibrated_rig_are_that_many_of_its_cameras():
+    spec = sweep.SweepSpec("panoptic_dome", axes=(sweep.parse_axis("cameras", "6,31"),), duration_s=1.0)
+    six, all_ = sweep.plan(spec)
+    assert six.overrides["cameras.calibration_count"] == 6 and all_.overrides["cameras.calibration_count"] == 31
+    assert six.error is None and all_.error is None
+def test_failed_cells_name_paths_relative_to_the_scenario_file(tmp_path):
+    # A worker's copy of the scenario and the driver's file are named alike: relative to the scenario's folder.
+    copy = tmp_path / "crossview-cell-x"
+    message = f"{copy}/calibrations/dome.json: cannot be read; {copy}/dome.toml: cameras.calibration"
+    assert sweep.portable(message, copy) == "calibrations/dome.json: cannot be read; dome.toml: cameras.calibration"
+    assert sweep.portable(f"{SCENARIOS}/supermarket.toml: x", SCENARIOS) == "supermarket.toml: x"
+
+
+def test_a_smaller_grid_of_the_same_sweep_reuses_its_cells(serial, tmp_path, caplog):
+    out = tmp_path / "subset"
+    shutil.copytree(serial, out)
+    with caplog.at_level("INFO", logger="crossview.experiments.sweep"):
+        assert main(["--no-progress", "sweep", "store_layout1", "--people", "3", "--cameras", "12,6", "--seeds", "1",
+                     "--duration", "1", "--workers", "1", "-o", str(out)]) == 0
+    assert "2 of 2 cells already finished" in caplog.text
+    rows = json.loads((out / "results.json").read_text())["cells"]
+    full = {r["key"]: r for r in json.loads((serial / "results.json").read_text())["cells"]}
+    assert [(r["crowd.people"], r["cameras"], r["seed"]) for r in rows] == [(3, 12, 1), (3, 6, 1)]
+    assert rows == [full[r["key"]] for r in rows]
+    # The folder keeps every finished cell: the full grid again runs nothing and gives the full results.
+    caplog.clear()
+    with caplog.at_level("INFO", logger="crossview.experiments.sweep"):
+        assert _sweep(out, "--workers", "1") == 0
+    assert "8 of 8 cells already finished" in caplog.text
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+@pytest.mark.parametrize(("args", "named"), [
+    (["store_layout2", "--people", "2,3", "--cameras", "6,12"], "its scenario \"store_layout1\""),
+    (["store_layout1", "--people", "2,3", "--set", "clock.fps=10"], "its axis_keys"),
+    (["store_layout1", "--people", "2,3", "--cameras", "6,12", "--duration", "2"], "its duration_s 1.0"),
+])
+def test_a_folder_holding_a_different_sweep_is_refused(serial, tmp_path, capsys, args, named):
+    out = tmp_path / "other"
+    shutil.copytree(serial, out)
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    if "--duration" not in args:
+        args = [*args, "--duration", "1"]
+    err = _run_bad(capsys, ["sweep", *args, "-o", str(out)])
+    assert "holds another sweep's results" in err and named in err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+
+
+def test_a_kept_sweep_of_a_scenario_with_a_relative_calibration_verifies_from_another_folder(tmp_path, capsys):
+    # panoptic_dome names its calibration relative to its own file: the manifest carries the file itself.
+    out = tmp_path / "dome"
+    assert main(["--no-progress", "sweep", "panoptic_dome", "--people", "1", "--duration", "0.2", "--workers", "1",
+                 "--keep-recordings", "-o", str(out)]) == 0
+    assert json.loads((out / "results.json").read_text())["cells"][0]["status"] == "ok"
+    text = (out / "manifest.json").read_text()
+    assert str(SCENARIOS) not in text and str(tmp_path) not in text
+    manifest = json.loads(text)
+    entry = manifest["recordings"][0]
+    calibration = (SCENARIOS / "calibrations" / "panoptic_160906_hd.json").read_text()
+    digest = hashlib.sha256(calibration.encode()).hexdigest()
+    assert entry["files"] == {"calibrations/panoptic_160906_hd.json": digest}
+    assert manifest["files"][digest] == calibration
+    assert 'calibration = "calibrations/panoptic_160906_hd.json"' in entry["resolved_scenario"]
+    # Moved elsewhere (as on another machine), the folder verifies: the same bytes regenerated.
+    moved = tmp_path / "elsewhere" / "dome"
+    shutil.move(out, moved)
+    capsys.readouterr()
+    assert main(["--no-progress", "verify", str(moved)]) == 0
+    assert "1 of 1 recordings match" in capsys.readouterr().out
+
+
+def _command(out, duration_s: str) -> list[str]:
+    return [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
+            "--seeds", "0,1", "--duration", duration_s, "--workers", "2", "-o", str(out)]
+
+
+@pytest.mark.parametrize("ending", ["SIGTERM to the sweep", "Ctrl-C to its process group"])
+def test_an_interrupted_pool_sweep_keeps_finished_cells_and_leaks_nothing(tmp_path, ending):
+    out = tmp_path / "interrupted"
+    # A new session (so that Ctrl-C can go to the whole group, as a terminal sends it), SIGINT not ignored.
+    process = subprocess.Popen(_command(out, "4"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        while not list((out / "cells").glob("*.json")) and process.poll() is None:
+            time.sleep(0.2)
+        assert process.poll() is None, process.communicate()
+        if ending.startswith("SIGTERM"):
+            process.send_signal(signal.SIGTERM)
+        else:
+            os.killpg(process.pid, signal.SIGINT)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+    assert process.returncode == (143 if ending.startswith("SIGTERM") else 130), err
+    assert "crossview: ended by" in err or "interrupted" in err, err
+    # The resource tracker found nothing left behind (it warns of leaked semaphores otherwise).
+    assert "leaked" not in err and "resource_tracker" not in err and "Traceback" not in err, err
+    assert 1 <= len(list((out / "cells").glob("*.json"))) < 4
+    assert not (out / "results.json").exists()
+    assert not [p for p in out.rglob("*") if p.name.endswith(".tmp") or p.name.startswith(".")]
+
+
+def test_tracker_settings_of_a_cell_are_checked_together_not_one_by_one():
+    from crossview import pipeline
+
+    # alpha_3d_m 0.6 alone breaks view_margin_m >= alpha_3d_m (0.5); with view_margin_m 0.7 the whole holds.
+    config = pipeline.tracker_config("shelf", None, {"alpha_3d_m": 0.6, "view_margin_m": 0.7})
+    assert (config.alpha_3d_m, config.view_margin_m) == (0.6, 0.7)
+    with pytest.raises(sweep.CrossviewError, match="view_margin_m: 0.5 must be >= alpha_3d_m 0.6"):
+        pipeline.tracker_config("shelf", None, {"alpha_3d_m": 0.6})
+
+
+def test_tracker_axes_valid_only_together_are_planned_not_refused():
+    """alpha_3d_m 0.6 is valid with view_margin_m 0.7, not with 0.5: the grid is planned and only that cell fails,
+    with its reason; a value that no cell can take (alpha_3d_m 0.9 with either margin) is refused up front."""
+    axes = (sweep.parse_axis("tracker.alpha_3d_m", "0.3,0.6"), sweep.parse_axis("tracker.view_margin_m", "0.5,0.7"))
+    cells = sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, seeds=(0,), methods=("crossview",),
+                                       presets=("shelf",), duration_s=1.0))
+    assert [c.error is None for c in cells] == [True, True, False, True]
+    assert "view_margin_m: 0.5 must be >= alpha_3d_m 0.6" in cells[2].error
+    axes = (sweep.parse_axis("tracker.alpha_3d_m", "0.6,0.9"), sweep.parse_axis("tracker.view_margin_m", "0.5,0.7"))
+    with pytest.raises(sweep.CrossviewError, match=r"--set tracker.alpha_3d_m: .*view_margin_m: 0.5 must be >= "
+                                                   r"alpha_3d_m 0.9"):
+        sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, seeds=(0,), methods=("crossview",),
+                                   presets=("shelf",), duration_s=1.0))
+
+
+def _report_row(people: int, pcp: float, idf1: float = 1.0) -> dict:
+    return {"values": [["crowd.people", people]], "status": "ok", "score": {"pcp": pcp, "idf1": idf1},
+            "method": "crossview", "preset": "store"}
+
+
+def test_a_line_below_the_bar_at_its_first_value_is_not_said_to_break_there():
+    wanted = {"axes": [{"key": "crowd.people", "values": [4, 8, 12]}], "methods": ["crossview"], "presets": ["store"]}
+    breaks_later = [_report_row(4, 0.99), _report_row(8, 0.95), _report_row(12, 0.5)]
+    below_first = [_report_row(4, 0.5), _report_row(8, 0.4), _report_row(12, 0.3)]
+    assert sweep_report.breaking_points(wanted, breaks_later)[0].startswith("all: breaks at crowd.people = 12 (PCP")
+    assert sweep_report.breaking_points(wanted, below_first)[0].startswith(
+        "all: already below the bar at the first value, crowd.people = 4 (PCP 0.500")
+
+
+def test_a_cells_key_covers_an_absolute_calibrations_content_and_a_plugins_code(tmp_path, monkeypatch):
+    """Change the calibration a scenario names by an absolute path, or the code of a plug-in tracker, and a
+    finished cell is no longer found: the old scores would be stale."""
+    calibration = tmp_path / "campus_calibration.json"
+    shutil.copy(SCENARIOS / "calibrations" / "campus_calibration.json", calibration)
+    scenario = tmp_path / "campus.toml"
+    scenario.write_text((SCENARIOS / "campus.toml").read_text().replace(
+        'calibration = "calibrations/campus_calibration.json"', f'calibration = "{calibration}"'))
+    plugin = tmp_path / "keyedplugin.py"
+    plugin.write_text("from examples.greedy_triangulation import GreedyTriangulationTracker as T\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    spec = sweep.SweepSpec(scenario=str(scenario), methods=("crossview", "keyedplugin:T"), duration_s=1.0)
+    try:
+        first = [c.key for c in sweep.plan(spec)]
+        assert len(set(first)) == 2
+        assert [c.key for c in sweep.plan(spec)] == first  # (the same inputs: the same keys)
+        data = json.loads(calibration.read_text())
+        data["cameras"].pop(sorted(data["cameras"])[0])  # a camera fewer
+        calibration.write_text(json.dumps(data))
+        second = [c.key for c in sweep.plan(spec)]
+        assert not set(second) & set(first)
+        plugin.write_text(plugin.read_text() + "# a change to the tracker\n")
+        third = [c.key for c in sweep.plan(spec)]
+        assert third[0] == second[0] and third[1] != second[1]  # (only the plug-in's cell)
+    finally:
+        sys.modules.pop("keyedplugin", None)
+
+
+def test_a_cell_failed_by_its_environment_is_not_final_and_the_next_run_says_so(tmp_path):
+    """A cell whose recording hit the file-size limit (EFBIG, as a full disk gives ENOSPC) is stored as not
+    final: the next run, without the limit, runs it again, says why, and it succeeds."""
+    import resource
+
+    out = tmp_path / "sweep"
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2",
+               "--duration", "1", "--workers", "1", "--out", str(out)]
+
+    def limit():
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG instead
+        resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))
+
+    subprocess.run(command, capture_output=True, text=True, preexec_fn=limit, timeout=600)
+    (cell,) = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    assert "File too large" in cell["status"] and cell[sweep.RETRY_KEY] is True, cell
+    again = subprocess.run(command, capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert "failed in an earlier run for a reason of its environment" in again.stderr
+    assert "File too large" in again.stderr and "1 run, 0 failed" in again.stdout
+    (cell,) = [json.loads(p.read_text()) for p in (out / "cells").glob("*.json")]
+    assert cell["status"] == "ok" and sweep.RETRY_KEY not in cell
+
+
+def _session_processes(sid: int) -> list[str]:
+    """The live processes of session `sid` (zombies, ended and waiting to be reaped, left out)."""
+    found = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(") ", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[3]) == sid and fields[0] != "Z":
+            found.append(stat.parent.name)
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the processes from /proc (Linux)")
+def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_temporary_file(tmp_path):
+    """kill -9 of the sweep stops nothing itself: its pool workers (waiting on the sweep), the fork server and
+    the resource tracker must still end on their own; the rerun finishes and leaves no temporary file."""
+    out = tmp_path / "killed"
+    process = subprocess.Popen(_command(out, "4"), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               start_new_session=True)
+    try:
+        while not list((out / "cells").glob("*.json")) and process.poll() is None:
+            time.sleep(0.2)
+        assert process.poll() is None
+        process.kill()
+        process.wait()
+        for _ in range(300):  # (up to 30 s)
+            if not _session_processes(process.pid):
+                break
+            time.sleep(0.1)
+        left = _session_processes(process.pid)
+    finally:
+        for pid in _session_processes(process.pid):
+            os.kill(int(pid), signal.SIGKILL)
+    assert left == []
+    again = subprocess.run(_command(out, "4"), capture_output=True, text=True, timeout=600)
+    assert again.returncode == 0, again.stderr
+    assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
+
+
+def test_a_damaged_cell_file_is_named_and_its_cell_run_again(serial, tmp_path, caplog):
+    out = tmp_path / "damaged"
+    shutil.copytree(serial, out)
+    damaged = sorted((out / "cells").glob("*.json"))[0]
+    damaged.write_text('[{"key": "a list, not a cell"}]')
+    with caplog.at_level("WARNING", logger="crossview.experiments.sweep"):
+        assert _sweep(out, "--workers", "1") == 0
+    assert f"{damaged}: not a cell file of this sweep (an object expected, got list): running the cell again" \
+        in caplog.text
+    assert _sha256(out / "results.json") == _sha256(serial / "results.json")
+
+
+_ENTRY = {"file": "recordings/a.mcap", "sha256": "0" * 64, "version": "1", "scenario_name": "s",
+          "scenario_text": "", "overrides": {}, "files": {}}
+
+
+@pytest.mark.parametrize("manifest, message", [
+    ({"recordings": [{k: v for k, v in _ENTRY.items() if k != "version"}]}, "recordings[0]: key 'version' missing"),
+    ({"recordings": [{**_ENTRY, "file": "/etc/passwd"}]}, "file '/etc/passwd' must lie inside the folder"),
+    ({"recordings": [{**_ENTRY, "files": {"/etc/x.json": "d"}}], "files": {"d": "{}"}},
+     "the files it names must be relative to the scenario"),
+    ({"recordings": [], "files": {"d": 5}}, "a file it carries does not match its sha256"),
+    ({"recordings": {"a": 1}}, "'recordings' must be an array"),
+], ids=["entry-without-version", "file-outside", "named-file-absolute", "carried-file-not-text", "not-a-list"])
+def test_a_damaged_manifest_is_one_line_before_any_regeneration(tmp_path, capsys, manifest, message):
+    (tmp_path / "manifest.json").write_text(json.dumps(manifest))
+    assert main(["--no-progress", "verify", str(tmp_path)]) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "manifest.json" in err and message in err, err
+
+
+def test_sigterm_during_a_ray_sweep_ends_it_like_everywhere_else(tmp_path):
+    """ray.init sets its own SIGTERM handler (exit 1, a dump of the task loop); the sweep puts the command's
+    back, and a signal that comes while it waits inside Ray (where raising it gave a SystemError) is held until
+    Ray returns: one line, exit 143."""
+    pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
+    out = tmp_path / "ray"
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
+               "--duration", "10", "--ray", "--out", str(out)]  # (cells long enough to be running at the signal)
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    try:
+        while not (out / "sweep.json").exists() and process.poll() is None:  # (written once Ray is up)
+            time.sleep(0.2)
+        time.sleep(2.0)  # (the cells running: the sweep waits inside Ray's compiled core, where a signal is held)
+        assert process.poll() is None, process.communicate()
+        process.send_signal(signal.SIGTERM)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 143, err
+    assert err.strip().splitlines()[-1] == "crossview: ended by SIGTERM; no partial output was kept", err
+    assert "Traceback" not in err and not (out / "results.json").exists()
