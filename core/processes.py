@@ -2,7 +2,8 @@
 how many cores there are, how a worker starts, how its failure reaches the command, how it is stopped.
 
 A worker ignores Ctrl-C (the whole process group gets it; the command decides), hands its error over to be
-raised in the command, and is stopped and reaped whenever the command stops using it.
+raised in the command, and is stopped and reaped whenever the command stops using it. A `Reaper` ends, once the
+command has ended (even killed with SIGKILL), the processes a library started for it (a local Ray instance's).
 """
 
 from __future__ import annotations
