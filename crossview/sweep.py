@@ -633,7 +633,9 @@ def connect_ray(address: str | None, reaper: processes.Reaper | None = None) -> 
         reaper: started just before a local instance is (never for a cluster given by an address or
             $RAY_ADDRESS, whose processes are not the sweep's): once this process has ended, even killed with
             SIGKILL, it ends the processes the instance started (its raylet and GCS end with this process, but
-            its agents and workers only ~90 s later, polling for their parent). The caller stops it.
+            its agents and workers only ~90 s later, polling for their parent). The caller stops it. (Where
+            `ray.init` joins an instance that `ray start` left running instead, the reaper ends none of it:
+            its processes neither descend from this one nor carry the reaper's mark.)
 
     Returns:
         whether this call connected (and the sweep should disconnect at its end).
@@ -661,7 +663,7 @@ def connect_ray(address: str | None, reaper: processes.Reaper | None = None) -> 
                 ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
                          logging_level=logging.WARNING)
             else:
-                if reaper is not None:
+                if reaper is not None and not os.environ.get("RAY_ADDRESS"):
                     reaper.start()
                 ray.init(log_to_driver=False, logging_level=logging.WARNING)
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
