@@ -624,10 +624,19 @@ def _pool_worker_started(driver_pid: int) -> None:
     tqdm.set_lock(threading.RLock())
 
 
-def connect_ray(address: str | None) -> bool:
+def connect_ray(address: str | None, reaper: processes.Reaper | None = None) -> bool:
     """Starts or joins Ray before any cell runs: `address` None starts a local instance (or joins the one
     $RAY_ADDRESS names); an address, once something answers there, joins that cluster. Where this process
     is already connected (a program that called `ray.init` itself), that connection is used.
+
+    Args:
+        address: the cluster to join, None for a local instance.
+        reaper: started just before a local instance is (never for a cluster given by an address or
+            $RAY_ADDRESS, whose processes are not the sweep's): once this process has ended, even killed with
+            SIGKILL, it ends the processes the instance started (its raylet and GCS end with this process, but
+            its agents and workers only ~90 s later, polling for their parent). The caller stops it. (Where
+            `ray.init` joins an instance that `ray start` left running instead, the reaper ends none of it:
+            its processes neither descend from this one nor carry the reaper's mark.)
 
     Returns:
         whether this call connected (and the sweep should disconnect at its end).
@@ -655,6 +664,8 @@ def connect_ray(address: str | None) -> bool:
                 ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
                          logging_level=logging.WARNING)
             else:
+                if reaper is not None and not os.environ.get("RAY_ADDRESS"):
+                    reaper.start()
                 ray.init(log_to_driver=False, logging_level=logging.WARNING)
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
         raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({_one_line(e)})".replace("  ", " ")
@@ -926,8 +937,9 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
         log.info("%d of %d cells already finished in %s: skipped", len(stored), len(cells), out)
     # Nothing to run starts nothing: no Ray, no pool. (Ray is joined before anything is written: a bad
     # address leaves no folder.)
-    disconnect = connect_ray(ray_address) if executor is Executor.RAY and pending else False
+    reaper, disconnect = processes.Reaper(), False
     try:
+        disconnect = connect_ray(ray_address, reaper) if executor is Executor.RAY and pending else False
         pipeline.write_json(wanted, out / "sweep.json")  # (checks that the folder can be written)
         with tqdm(total=len(cells), initial=len(stored), unit="cell", desc="sweep", disable=not progress) as bar:
             def started(cell: Cell) -> None:
@@ -949,6 +961,7 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
 
             with _command_signals_kept():
                 ray.shutdown()
+        reaper.stop()
     rows = [stored[c.key] for c in cells]
     write_results(out, wanted, rows)
     sweep_report.write_report(out, wanted, rows)

@@ -3,6 +3,7 @@ pool and on Ray; a rerun resumes; bad input is refused before any cell runs; ver
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -16,6 +17,7 @@ from pathlib import Path
 import pytest
 
 import scenarios
+from core import processes
 from crossview.cli import EXIT_BAD_INPUT, main
 from crossview.experiments import sweep, sweep_report
 from sim import scenario as scenario_mod
@@ -472,6 +474,54 @@ def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_tem
     again = subprocess.run(_command(out, "4"), capture_output=True, text=True, timeout=600)
     assert again.returncode == 0, again.stderr
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
+
+
+def _environ_marks(pids) -> set[str]:
+    """The marks (`processes.MARK_ENV`) the environments of processes `pids` carry."""
+    marks = set()
+    for pid in pids:
+        with contextlib.suppress(OSError):
+            for entry in Path(f"/proc/{pid}/environ").read_bytes().split(b"\0"):
+                name, _, value = entry.decode(errors="replace").partition("=")
+                if name == processes.MARK_ENV:
+                    marks.add(value)
+    return marks
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the processes from /proc (Linux)")
+def test_a_ray_sweep_killed_with_sigkill_leaves_no_process_of_its_instance(tmp_path):
+    """kill -9 of a sweep that started a local Ray instance: its raylet and GCS end with it (Ray asks the kernel),
+    but its agents and workers polled for their parent and lived ~90 s on. The sweep's reaper ends every process
+    of the instance (all in the sweep's session, or carrying its mark); a process with another mark lives on."""
+    pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
+    out = tmp_path / "killed"
+    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
+               "--duration", "4", "--ray", "-o", str(out)]
+    process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    bystander = subprocess.Popen(["sleep", "300"], env={processes.MARK_ENV: f"{process.pid}-{'0' * 16}"})
+    left = marked = []
+    try:
+        while not (out / "sweep.json").exists() and process.poll() is None:  # (written once Ray is up)
+            time.sleep(0.2)
+        time.sleep(2.0)  # (the cells running)
+        assert process.poll() is None
+        (mark,) = _environ_marks(_session_processes(process.pid))
+        assert mark.startswith(f"{process.pid}-")  # (the sweep's pid and a nonce: no other run's)
+        process.kill()
+        process.wait()
+        for _ in range(300):  # (up to 30 s)
+            left = _session_processes(process.pid)
+            marked = [p.name for p in Path("/proc").glob("[0-9]*") if mark in _environ_marks([p.name])]
+            if not left and not marked:
+                break
+            time.sleep(0.1)
+        assert bystander.poll() is None
+    finally:
+        for pid in _session_processes(process.pid):
+            os.kill(int(pid), signal.SIGKILL)
+        bystander.kill()
+        bystander.wait()
+    assert left == [] and marked == []
 
 
 def test_a_damaged_cell_file_is_named_and_its_cell_run_again(serial, tmp_path, caplog):
