@@ -11,9 +11,9 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from scipy.spatial.transform import Rotation
 
+from core.records import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
 from core.types import COCO17, Camera, Frame
 from crossview import foxglove, recording
-from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
 
 LAYOUT = Path(__file__).resolve().parents[2] / "crossview" / "foxglove" / "layout.json"

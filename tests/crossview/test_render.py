@@ -11,10 +11,10 @@ import sys
 import numpy as np
 import pytest
 
+from core.projection import in_image
 from crossview import pipeline, recording
 from crossview.cli import EXIT_BAD_INPUT, main
 from sim import scenario as scenario_mod
-from sim.cameras import in_image
 from sim.rng import child_rng
 from tests.conftest import render_env
 from tests.crossview.test_cli import _run_bad

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from core.head import HeadPoints
+from core.layouts import coco17_to_campus14
 from core.types import CAMPUS14, COCO17
 from crossview.scoring.pose import (
     PCP_BONE_GROUPS,
     PoseAccumulator,
-    coco17_to_campus14,
     match_nearest,
     pcp_bones,
 )
