@@ -17,6 +17,12 @@ class ScenarioError(CrossviewError):
     """A scenario file that cannot be used; the message names the file and the key."""
 
 
+class RecordingError(CrossviewError):
+    """A file that cannot be read as the recording or tracks file asked for; the message names the file. The
+    recording readers raise it where they find the damage (a corrupt record, message or header) and for the
+    mcap library's documented exceptions; any other exception out of a reader is a bug."""
+
+
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C (SIGINT) as the command line's signal handler raises it: told apart from a KeyboardInterrupt that
     code raises itself (a plug-in's, which is the plug-in's failure, not the user's Ctrl-C)."""

@@ -16,7 +16,7 @@ import numpy as np
 
 
 class Tick(Protocol):
-    """A truth tick (`sim.types.PoseTruth`): `t_s` seconds, `person_ids` (P,) int64, `poses` (P, J, 3) metres."""
+    """A truth tick (`core.records.PoseTruth`): `t_s` seconds, `person_ids` (P,) int64, `poses` (P, J, 3) metres."""
 
     t_s: float
     person_ids: np.ndarray

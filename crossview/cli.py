@@ -659,10 +659,11 @@ def _cmd_export(args) -> None:
 def _cmd_convert(args) -> None:
     from crossview import pipeline
     from crossview.formats.datasets import convert
+    from sim import scenario as scenario_mod
 
     inputs = (*Path(args.dataset).glob("*.json"), *Path(args.dataset).glob("*/*_keypoints.json"))
     pipeline.check_writable(args.output, inputs=inputs)
-    convert(args.dataset, args.output, fps=args.fps, inputs=inputs)
+    convert(args.dataset, args.output, fps=args.fps, inputs=inputs, check_scenario=scenario_mod.from_source_text)
     print(f"{args.output}: written")
 
 
@@ -708,7 +709,7 @@ def _cmd_bench(args) -> None:
 
 
 def _cmd_render(args) -> None:
-    from crossview.pictures.render import Request, render
+    from crossview.pictures.layout.render import Request, render
 
     done = render(Request(
         recording=args.recording, output=args.output, tracks=args.tracks, camera=args.camera,

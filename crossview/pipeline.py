@@ -19,10 +19,10 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.head import HeadConvention, HeadPoints
+from core.records import BoxKind
 from core.types import COCO17
 from crossview import outputs
 from sim import scenario as scenario_mod
-from sim.types import BoxKind
 
 log = logging.getLogger(__name__)
 
@@ -225,7 +225,7 @@ def tracker_config(preset: str, config_path: Path | None = None, overrides: dict
         # for a half-applied set.
         try:
             config = config.replace(**overrides)
-        except (ValueError, TypeError) as e:
+        except ConfigError as e:  # (TrackerConfig raises nothing else for a bad value)
             given = ", ".join(f"tracker.{k} = {v!r}" for k, v in overrides.items())
             raise ConfigError(f"{given}: {e}") from None
     return config

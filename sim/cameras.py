@@ -2,36 +2,31 @@
 
 Owns the camera side of the sensor model: building the rig a scenario asks for (a ceiling grid,
 explicit placements or a real calibration file: the CMU Panoptic dome's, or the dataset layout's
-calibration.json of Campus, Shelf and the Store datasets, which `crossview.formats.datasets` reads with the same
-parser), projecting world points to distorted pixels with OpenCV's camera model, and the one conversion
-from the OpenCV camera frame (x right, y down, z forward) to MuJoCo's (looks down -z, y up).
+calibration.json of Campus, Shelf and the Store datasets, parsed by `core.calibration` as
+`crossview.formats.datasets` reads it), and the one conversion from the OpenCV camera frame (x right, y down,
+z forward) to MuJoCo's (looks down -z, y up). Projecting world points to distorted pixels is
+`core.projection`'s, which the formats and scoring share.
 """
 
 from __future__ import annotations
 
 import enum
-import functools
 import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from llvmlite import ir as llvm_ir
-from numba import types
-from numba.extending import intrinsic
 
+from core.calibration import M_PER_CM, calibration_image_wh, dataset_cameras, dataset_entries, orthonormalise
 from core.errors import ScenarioError
-from core.jit import jit
-from core.types import MAX_IMAGE_PX as MAX_CALIBRATION_IMAGE_PX
+from core.projection import in_image
 from core.types import Camera
 from sim.config import bounded, check_ranges
 from sim.store import MAX_FLOOR_M
 
 MAX_GRID = 100  # cameras along one side of a grid
 MAX_IMAGE_PX = 16384
-# Points closer than this in front of the camera plane count as behind it (their projection blows up).
-MIN_DEPTH_M = 1e-6
 # When a camera looks (almost) straight down, "up" in its image points along world +y.
 _STRAIGHT_DOWN_COS = 0.999
 
@@ -291,123 +286,6 @@ def _grid(config: CameraRigConfig, store, K: np.ndarray, rng: np.random.Generato
     return cameras
 
 
-def monotonic_radius(dist: np.ndarray) -> float:
-    """Largest undistorted normalised radius up to which the radial distortion keeps growing.
-
-    Beyond it a strong barrel lens folds far-away points back into the image, so projections there
-    are not where a real lens would put them.
-    """
-    return _monotonic_radius(tuple(float(d) for d in dist))
-
-
-@functools.lru_cache(maxsize=256)
-def _monotonic_radius(dist: tuple[float, ...]) -> float:
-    k1, k2, _, _, k3 = dist
-    r = np.linspace(0.0, 10.0, 20001)
-    r2 = r * r
-    derivative = 1 + 3 * k1 * r2 + 5 * k2 * r2 * r2 + 7 * k3 * r2 * r2 * r2
-    bad = np.nonzero(derivative <= 0)[0]
-    return float(r[bad[0] - 1]) if bad.size else math.inf
-
-
-def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distorted pixels (OpenCV's camera model) and whether each point is in front of the camera, within the
-    lens's monotonic radius (`monotonic_radius`) and inside its image.
-
-    Args:
-        camera: the camera.
-        points_world: (..., 3) world points, metres.
-
-    Returns:
-        (..., 2) distorted pixels (NaN behind the camera) and (...,) bool visible-in-image mask.
-    """
-    points = np.asarray(points_world, dtype=np.float64)
-    if points.shape[-1:] != (3,):
-        raise ValueError(f"points_world: expected shape (..., 3), got {points.shape}")
-    px, inside = in_image_many(camera.R_cam_from_world[None], camera.t_cam_from_world[None], camera.K[None],
-                               camera.dist[None], np.array([[camera.width_px, camera.height_px]], dtype=float),
-                               np.array([monotonic_radius(camera.dist)]), points.reshape(1, -1, 3),
-                               np.zeros(1, dtype=np.int64))
-    return px.reshape(points.shape[:-1] + (2,)), inside.reshape(points.shape[:-1])
-
-
-def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray, size: np.ndarray,
-                  max_radius: np.ndarray, points_world: np.ndarray, cameras: np.ndarray):
-    """`in_image` of several point sets, each seen by its own camera of a rig, in one compiled pass.
-
-    Args:
-        R (C, 3, 3), t (C, 3), K (C, 3, 3), dist (C, 5): the rig's extrinsics, intrinsics and distortion.
-        size (C, 2): width and height in pixels; max_radius (C,): `monotonic_radius` of each camera.
-        points_world: (S, N, 3) world points, metres (NaN rows are never in the image).
-        cameras: (S,) index of the camera of each point set.
-
-    Returns:
-        (S, N, 2) distorted pixels (NaN behind the camera) and (S, N) bool visible-in-image mask.
-    """
-    points = np.ascontiguousarray(points_world, dtype=np.float64)
-    cameras = np.ascontiguousarray(cameras, dtype=np.int64)
-    px = np.empty(points.shape[:2] + (2,))
-    inside = np.empty(points.shape[:2], dtype=bool)
-    # The tangential and skew terms are added only when some camera of the batch has them (adding exact
-    # zeros could only turn a -0.0 into +0.0, but the results stay those of the vectorised formula).
-    tangential = np.full(len(cameras), dist[cameras][:, 2:4].any())
-    skew = np.full(len(cameras), K[cameras][:, 0, 1].any())
-    in_image_many_kernel(np.ascontiguousarray(R, dtype=np.float64), np.ascontiguousarray(t, dtype=np.float64),
-                     np.ascontiguousarray(K, dtype=np.float64), np.ascontiguousarray(dist, dtype=np.float64),
-                     np.ascontiguousarray(size, dtype=np.float64), np.ascontiguousarray(max_radius, dtype=np.float64),
-                     points, cameras, tangential, skew, px, inside)
-    return px, inside
-
-
-@intrinsic
-def _fma(typingctx, a, b, c):
-    """a * b + c rounded once (LLVM's fma intrinsic), as the BLAS kernels behind numpy's matmul compute."""
-    signature = types.float64(types.float64, types.float64, types.float64)
-
-    def codegen(context, builder, sig, args):
-        double = llvm_ir.DoubleType()
-        fma = builder.module.declare_intrinsic("llvm.fma", [double], llvm_ir.FunctionType(double, [double] * 3))
-        return builder.call(fma, args)
-
-    return signature, codegen
-
-
-@jit
-def in_image_many_kernel(R, t, K, dist, size, max_radius, points, cameras, tangential, skew, px, inside):
-    """The loops of `in_image_many` (its arguments, C-contiguous, then `tangential` and `skew` (S,): whether
-    a camera of each set's batch has those terms, and the outputs px (S, N, 2) and inside (S, N)), for
-    callers that keep the rig's arrays ready. Written out in the order of the vectorised numpy formula of
-    `tests/reference/cameras.py`, so that every pixel is the same bit for bit (which keeps the recordings'
-    bytes): numpy's matmul (OpenBLAS) rotates as fma(z, R2, fma(y, R1, x R0)), fused multiply-adds rounded
-    once, and so does this loop."""
-    for s in range(points.shape[0]):
-        c = cameras[s]
-        k1, k2, p1, p2, k3 = dist[c, 0], dist[c, 1], dist[c, 2], dist[c, 3], dist[c, 4]
-        r2_max = max_radius[c] * max_radius[c]
-        w, h = size[c, 0] - 0.5, size[c, 1] - 0.5
-        for n in range(points.shape[1]):
-            x, y, z = points[s, n, 0], points[s, n, 1], points[s, n, 2]
-            cx = _fma(z, R[c, 0, 2], _fma(y, R[c, 0, 1], x * R[c, 0, 0])) + t[c, 0]
-            cy = _fma(z, R[c, 1, 2], _fma(y, R[c, 1, 1], x * R[c, 1, 0])) + t[c, 1]
-            cz = _fma(z, R[c, 2, 2], _fma(y, R[c, 2, 1], x * R[c, 2, 0])) + t[c, 2]
-            in_front = cz > MIN_DEPTH_M
-            inv_z = 1.0 / cz if in_front else np.nan
-            xn, yn = cx * inv_z, cy * inv_z
-            r2 = xn * xn + yn * yn
-            radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-            xd, yd = xn * radial, yn * radial
-            if tangential[s]:
-                xd, yd = (xd + 2 * p1 * xn * yn + p2 * (r2 + 2 * xn * xn),
-                          yd + p1 * (r2 + 2 * yn * yn) + 2 * p2 * xn * yn)
-            u = K[c, 0, 0] * xd
-            if skew[s]:
-                u += K[c, 0, 1] * yd
-            u += K[c, 0, 2]
-            v = K[c, 1, 1] * yd + K[c, 1, 2]
-            px[s, n, 0], px[s, n, 1] = u, v
-            inside[s, n] = in_front and r2 <= r2_max and u >= -0.5 and u <= w and v >= -0.5 and v <= h
-
-
 def mujoco_camera_pose(camera: Camera) -> tuple[np.ndarray, np.ndarray, float]:
     """The MuJoCo camera that sees what `camera` sees (without distortion).
 
@@ -449,7 +327,6 @@ def _mat_to_quat(R: np.ndarray) -> np.ndarray:
 
 # Panoptic's world has y pointing down; ours has z up: (x, y, z)_ours = (x, z, -y)_panoptic.
 _Z_UP_FROM_PANOPTIC = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-_CM = 0.01
 
 
 def spread_subset(cameras: list, count: int, where: str) -> list:
@@ -495,10 +372,10 @@ def load_panoptic(path, kind: str = "hd", *, origin_m=(0.0, 0.0, 0.0), z_up: boo
             continue
         try:
             R_pan = np.asarray(entry["R"], dtype=np.float64)
-            t_m = np.asarray(entry["t"], dtype=np.float64).ravel() * _CM
+            t_m = np.asarray(entry["t"], dtype=np.float64).ravel() * M_PER_CM
             # X_pan = world_from_pan.T (X - origin)  =>  R_cam = R_pan world_from_pan.T, t = t - R_cam origin.
             R = R_pan @ world_from_pan.T
-            R = _orthonormalise(R)
+            R = orthonormalise(R)
             width, height = entry["resolution"]
             cameras.append(Camera(f"{kind}_{entry['name']}", np.asarray(entry["K"], dtype=np.float64),
                                   np.asarray(entry["distCoef"], dtype=np.float64), R, t_m - R @ origin, int(width),
@@ -514,82 +391,6 @@ def load_panoptic(path, kind: str = "hd", *, origin_m=(0.0, 0.0, 0.0), z_up: boo
     return cameras
 
 
-def calibration_image_wh(value) -> tuple[int, int]:
-    """(width, height) of an `image_wh` of the dataset layout: [width, height], integers in [1, MAX_IMAGE_PX].
-
-    Raises:
-        ValueError: naming the key and what is valid.
-    """
-    if not (isinstance(value, list) and len(value) == 2 and all(
-            isinstance(v, int) and not isinstance(v, bool) and 0 < v <= MAX_CALIBRATION_IMAGE_PX for v in value)):
-        raise ValueError(f"key 'image_wh' = {value!r} must be [width, height], integers in "
-                         f"[1, {MAX_CALIBRATION_IMAGE_PX}]")
-    return value[0], value[1]
-
-
-_MAX_ABS_CM = 1e9  # the largest number a dataset layout camera pose may hold, centimetres (10,000 km)
-
-
-def _dataset_entries(calibration) -> dict:
-    """The `cameras` object (camera name -> {K, Tw, dist_coeffs}) of a dataset layout calibration.json."""
-    if not isinstance(calibration, dict):
-        raise ValueError(f"the file must be an object, got {type(calibration).__name__}")
-    entries = calibration.get("cameras")
-    if not isinstance(entries, dict):
-        raise ValueError(f"key 'cameras' (camera name -> {{K, Tw}}) must be an object, got {type(entries).__name__}")
-    return entries
-
-
-def dataset_cameras(calibration, width_px: int, height_px: int, *, use_distortion: bool = True,
-                    origin_m=(0.0, 0.0, 0.0)) -> list[Camera]:
-    """The cameras of a calibration.json of the dataset layout of Chen et al. (Campus, Shelf, the Store
-    datasets), sorted by name: per camera `K` normalised by the image size (row 0 divided by the width, row 1
-    by the height), `Tw` the 4x4 camera-to-world pose in centimetres, and `dist_coeffs` (k1 k2 p1 p2 [k3]).
-    Its world has z up, as ours.
-
-    Args:
-        calibration: the file's parsed JSON.
-        width_px, height_px: the image size K was normalised by.
-        use_distortion: keep the listed `dist_coeffs` (else none).
-        origin_m: where the calibration's world origin lies in our world frame, metres.
-
-    Raises:
-        ValueError: the document is not of this shape; the message names the camera and the key.
-    """
-    entries = _dataset_entries(calibration)
-    origin = np.asarray(origin_m, dtype=np.float64)
-    cameras = []
-    for name in sorted(entries):
-        entry = entries[name]
-        if not isinstance(entry, dict):
-            raise ValueError(f"camera {name!r} must be an object, got {type(entry).__name__}")
-        try:
-            K = np.asarray(entry["K"], dtype=np.float64)
-            Tw = np.asarray(entry["Tw"], dtype=np.float64)
-            dist = np.asarray(entry.get("dist_coeffs", []), dtype=np.float64) if use_distortion else np.zeros(5)
-        except KeyError as exc:
-            raise ValueError(f"camera {name!r}: key {exc} missing or not numeric") from None
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"camera {name!r}: K, Tw and dist_coeffs must be arrays of numbers ({exc})") from None
-        if K.shape != (3, 3) or Tw.shape != (4, 4):
-            raise ValueError(f"camera {name!r}: K must be 3x3 and Tw 4x4, got {K.shape} and {Tw.shape}")
-        K = K * np.array([[width_px], [height_px], [1.0]])
-        if not (np.isfinite(K).all() and np.isfinite(Tw).all() and np.abs(Tw).max() <= _MAX_ABS_CM):
-            raise ValueError(f"camera {name!r}: K and Tw must hold numbers (no null), Tw's within {_MAX_ABS_CM:g} cm")
-        # Tw's rotation is orthonormal only to the precision the file was written with.
-        try:
-            R = _orthonormalise(Tw[:3, :3].T)
-        except ValueError as exc:
-            raise ValueError(f"camera {name!r}: Tw: {exc}") from None
-        center_m = Tw[:3, 3] * _CM + origin
-        try:
-            cameras.append(Camera(name=str(name), K=K, dist=dist, R_cam_from_world=R, t_cam_from_world=-R @ center_m,
-                                  width_px=width_px, height_px=height_px))
-        except ValueError as exc:
-            raise ValueError(f"camera {name!r}: {exc}") from None
-    return cameras
-
-
 def load_dataset_calibration(path, *, origin_m=(0.0, 0.0, 0.0)) -> list[Camera]:
     """The cameras of a dataset layout calibration.json that holds its image size as `image_wh` (as this
     project's exports write it), with their listed distortion (`dataset_cameras`).
@@ -600,28 +401,9 @@ def load_dataset_calibration(path, *, origin_m=(0.0, 0.0, 0.0)) -> list[Camera]:
     """
     with open(path, encoding="utf-8") as f:
         calibration = json.load(f)
-    _dataset_entries(calibration)
+    dataset_entries(calibration)
     if "image_wh" not in calibration:
         raise ValueError("key 'image_wh' missing: K is normalised by the image size, so the file must give it "
                          "as \"image_wh\": [width, height] (the published files keep it in detection.json)")
     width, height = calibration_image_wh(calibration["image_wh"])
     return dataset_cameras(calibration, width, height, use_distortion=True, origin_m=origin_m)
-
-
-ROTATION_TOLERANCE = 1e-3
-"""How far from a rotation (largest element of R^T R - I) a calibration's rotation may be; files store them to
-about 1e-9, so anything further is not a rotation (an all-zero pose, a scaled or mirrored matrix)."""
-
-
-def _orthonormalise(R: np.ndarray) -> np.ndarray:
-    """Nearest rotation matrix (calibration files store rotations to about 1e-9).
-
-    Raises:
-        ValueError: `R` is not a rotation to `ROTATION_TOLERANCE` (orthonormal, determinant +1).
-    """
-    error = np.abs(R.T @ R - np.eye(3)).max()
-    if not (error <= ROTATION_TOLERANCE and np.linalg.det(R) > 0):
-        raise ValueError(f"the rotation {np.round(R, 6).tolist()} is not a rotation matrix (R^T R differs from "
-                         f"the identity by {error:.3g}, det {np.linalg.det(R):.3g}; expected orthonormal, det +1)")
-    u, _, vt = np.linalg.svd(R)
-    return u @ vt

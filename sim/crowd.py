@@ -31,7 +31,7 @@ from core.jit import jit
 from sim.config import bounded, check_ranges
 from sim.gestures import Gestures
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
-from sim.store import StoreGeometry, _astar, _segment_free
+from sim.store import StoreGeometry, astar, segment_free
 from sim.types import Activity
 
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
@@ -835,6 +835,6 @@ def _warm_up():
     _turn_and_gait_kernel(pts, pts, one, flags, one, pts.copy(), one.copy(), one.copy(), np.zeros(2), np.zeros(2),
                           np.zeros((2, 2, 2)), np.zeros((2, 2, 2)), np.zeros((2, 2)))
     grid = np.ones((2, 2), dtype=bool)
-    _segment_free(grid, 0.05, 0.05, 0.15, 0.15, 0.1)
-    _astar(grid, 0, 3, 0.1)
+    segment_free(grid, 0.05, 0.05, 0.15, 0.15, 0.1)
+    astar(grid, 0, 3, 0.1)
     _WARM.append(True)

@@ -8,8 +8,8 @@ from collections import deque
 
 import numpy as np
 
+from core.records import PoseTruth
 from core.types import COCO17
-from sim.types import PoseTruth
 
 # The frame interval of the real figures (Shelf and Campus run at 25 fps), and the longer window, seconds.
 FRAME_S = 0.04

@@ -3,7 +3,7 @@
 `SceneRenderer` builds a scenario's world again and renders it at any true time (what `crossview render` draws
 on, and `FrameImages`, the JPEG pictures `crossview generate --images` stores).
 
-MuJoCo renders a pinhole. A camera of the rig has OpenCV's lens model (`sim.cameras.in_image`), so each
+MuJoCo renders a pinhole. A camera of the rig has OpenCV's lens model (`core.projection.in_image`), so each
 camera is rendered as a wider pinhole (square pixels, centred principal point, large enough to hold every
 pixel of the distorted image) and remapped with OpenCV: pixel (u, v) of the picture takes the render's
 pixel at the undistorted ray of (u, v) (`cv2.undistortPoints`). Rendered pixels, the detector's pixels and
@@ -321,7 +321,7 @@ class SceneRenderer:
     """A scenario's world, built again and posed at any true time, rendered through its cameras.
 
     Args:
-        scenario: the `sim.scenario.Scenario` simulated (a recording's: `crossview.pictures.render.scene_of`).
+        scenario: the `sim.scenario.Scenario` simulated (a recording's: `crossview.pictures.layout.render.scene_of`).
         seed: its seed (the crowd's random stream is `child_rng(seed, "crowd")`, as the simulation's).
         cameras: the rig.
         multisamples: the renders' samples per pixel (`CameraRenderer`); None: MuJoCo's 4.

@@ -1,5 +1,5 @@
 """The simulation driver: world, camera rig, clocks and detector, giving out blocks of truth ticks and
-detected captures (`sim.stream.Block`) in time order; `events` puts their contents in log-time order."""
+detected captures (`core.stream.Block`) in time order; `events` puts their contents in log-time order."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ import cv2
 import numpy as np
 
 from core import jit, processes
+from core.poses import interpolate_ticks
+from core.records import CameraFrame, Capture, DetectionRows, PoseTruth
+from core.stream import CAPTURE, DELIVERY, STAMP, Block, LogTimeOrder, frame_times
 from core.types import COCO17
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
-from sim.poses import interpolate_ticks
 from sim.rng import child_rng
 from sim.sensing.detector import Detector
 from sim.sensing.draws import large_enough
-from sim.stream import CAPTURE, DELIVERY, STAMP, Block, LogTimeOrder, frame_times
-from sim.types import CameraFrame, Capture, DetectionRows, PoseTruth
 
 TRUTH_RATE_HZ = 100.0
 # The captures of this many truth ticks (0.3 s) are projected, ray cast and given their detector errors
@@ -73,7 +73,7 @@ class Simulation:
         """One pass of the simulation, a block of `_DETECT_BLOCK_TICKS` truth ticks (0.3 s) at a time, in
         time order: each block's truth ticks (100 Hz) and the captures taken during them, with their
         detections (`Block`). A block's frames are delivered after its time, some after later blocks' ticks:
-        `sim.stream.LogTimeOrder` puts the contents of the blocks in log-time order.
+        `core.stream.LogTimeOrder` puts the contents of the blocks in log-time order.
 
         The world moves forward one truth tick at a time; the captures since the previous tick are projected
         and ray cast against the bodies interpolated to their capture time, and the detector's error draws
@@ -92,7 +92,7 @@ class Simulation:
         return Blocks(self, duration, with_poses)
 
     def events(self, duration_s: float | None = None, *, with_poses: bool = True) -> Iterator[PoseTruth | CameraFrame]:
-        """Everything a recording holds, in log-time order (`sim.stream.LogTimeOrder`): PoseTruth at 100 Hz
+        """Everything a recording holds, in log-time order (`core.stream.LogTimeOrder`): PoseTruth at 100 Hz
         (log time `t_s`) and CameraFrame (log time `truth.delivery_s`), from the blocks of one pass (`blocks`).
 
         Args:
@@ -178,7 +178,7 @@ class Simulation:
 
     def _blocks_from_worker(self, worker: processes.Worker, with_poses: bool) -> Iterator[Block]:
         """`_blocks` computed in the started `worker` process and received here, block by block. The captures'
-        poses do not travel: they are derived here again from the truth ticks (`sim.poses`, the same
+        poses do not travel: they are derived here again from the truth ticks (`core.poses`, the same
         arithmetic), and only when `with_poses` (else None). The worker's failures are raised here.
         """
         previous = None  # the last truth tick of the previous block

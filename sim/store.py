@@ -16,8 +16,8 @@ import numpy as np
 
 from core.errors import ScenarioError
 from core.jit import jit
+from core.records import Box, BoxKind
 from sim.config import bounded, check_ranges
-from sim.types import Box, BoxKind
 
 MAX_FLOOR_M = 500.0  # the largest floor side, and so any position or size on it
 # Navigation grid resolution; fine enough for 1 m aisles, coarse enough for fast path searches.
@@ -375,7 +375,7 @@ class StoreGeometry:
 
     def line_free(self, a, b) -> bool:
         """Whether the straight segment a-b stays on free cells (sampled every half cell)."""
-        return _segment_free(self.free, float(a[0]), float(a[1]), float(b[0]), float(b[1]), GRID_CELL_M)
+        return segment_free(self.free, float(a[0]), float(a[1]), float(b[0]), float(b[1]), GRID_CELL_M)
 
     def plan(self, start: np.ndarray, goal: np.ndarray) -> list[np.ndarray]:
         """A path from start to goal around the obstacles: grid shortest path, then string-pulled.
@@ -391,7 +391,7 @@ class StoreGeometry:
         if not self.free[i, j]:
             i, j = self.cell_of(self.nearest_free(start))
         gi, gj = self.cell_of(goal)
-        cells = _astar(self.free, i * self.ny + j, gi * self.ny + gj, GRID_CELL_M).tolist()
+        cells = astar(self.free, i * self.ny + j, gi * self.ny + gj, GRID_CELL_M).tolist()
         if not cells:
             return []
         # String pulling over every third cell: keep a waypoint only where the straight view from the
@@ -470,7 +470,7 @@ class StoreGeometry:
 
 
 @jit
-def _segment_free(free, ax, ay, bx, by, cell):
+def segment_free(free, ax, ay, bx, by, cell):
     """Whether the segment (ax, ay)-(bx, by) stays on the True cells of free (nx, ny), sampled every half cell."""
     dx, dy = bx - ax, by - ay
     n = max(2, int(math.sqrt(dx * dx + dy * dy) / (cell * 0.5)) + 1)
@@ -484,7 +484,7 @@ def _segment_free(free, ax, ay, bx, by, cell):
 
 
 @jit
-def _astar(free, start, goal, cell):
+def astar(free, start, goal, cell):
     """(L,) int64 flat cells (i * ny + j) of a shortest 8-connected path over the True cells of free (nx, ny)
     from start to goal, both included; empty if there is none. Edges cost cell or cell * sqrt(2); ties
     in the open list go to the earlier pushed cell, so the result is deterministic."""

@@ -24,13 +24,13 @@ import mujoco
 import numpy as np
 
 from core.jit import jit
+from core.records import Box, BoxKind, PoseTruth
 from core.types import COCO17, Skeleton
 from sim import gestures as gs
 from sim import humanoid as hm
 from sim.crowd import FULL_LIFT_STRIDE_M, STANCE_FRACTION, STEP_S, SWING_LIFT_M, Activity, Crowd
 from sim.crowd import validate as validate_crowd
 from sim.store import StoreGeometry
-from sim.types import Box, BoxKind, PoseTruth
 
 # Where the bodies of empty slots wait: far below the floor slab, where no camera ray can reach.
 PARK_Z_M = -50.0

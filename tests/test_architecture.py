@@ -1,7 +1,7 @@
 """The rules of docs/architecture.md, read off the source: no import cycles, `core/` imports no other part,
-`tracker/` neither mujoco, mcap nor `sim/`, only the recording package imports mcap, only `sim/` imports
-mujoco, no code reaches into a library's private (name-mangled) attributes, and every document the code and
-the docs cite is in the repository."""
+`tracker/` neither mujoco, mcap nor `sim/`, scoring and the file formats not `sim/`, only the recording package
+imports mcap, only `sim/` imports mujoco, no private name crosses a module, no code reaches into a library's
+private (name-mangled) attributes, and every document the code and the docs cite is in the repository."""
 
 from __future__ import annotations
 
@@ -113,6 +113,79 @@ def test_only_the_recording_imports_mcap_and_only_sim_imports_mujoco():
             assert name.startswith("crossview.recording"), name
         if "mujoco" in roots:
             assert name.split(".")[0] == "sim", name
+
+
+SIM_FREE = ("crossview.scoring", "crossview.formats", "crossview.recording")
+"""Scoring and the file formats (the dataset layout, OpenPose, result files, the JSON readers, the
+recordings): they read and write what `core/` defines and never import `sim/`, so that a real dataset is
+read and scored without the simulator."""
+
+
+def test_scoring_and_the_formats_import_nothing_of_sim():
+    offenders = {}
+    for name, path in _modules().items():
+        if any(name == m or name.startswith(m + ".") for m in SIM_FREE):
+            sim = sorted(i for i in _imports(path) if i.split(".")[0] == "sim")
+            if sim:
+                offenders[name] = sim
+    assert offenders == {}
+
+
+def _private(name: str) -> bool:
+    return name.startswith("_") and not (name.startswith("__") and name.endswith("__"))
+
+
+def private_crossings(modules: dict[str, Path]) -> list[str]:
+    """Every private name (a leading underscore, dunders aside) one module of `modules` takes from another:
+    `from a.b import _c`, and `m._c` where `m` is a module of the project bound by an import (`import a.b`,
+    `import a.b as m`, `from a import b`). Each as "importer: module._name"."""
+    found = []
+    for name, path in modules.items():
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        bound = {}  # local name -> the project module it stands for
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.asname and alias.name in modules:
+                        bound[alias.asname] = alias.name
+                    elif not alias.asname and alias.name.split(".")[0] in PACKAGES:
+                        bound[alias.name] = alias.name
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")[:len(package.split(".")) - node.level + 1]
+                    base = ".".join(parts + ([base] if base else []))
+                if base.split(".")[0] not in PACKAGES:
+                    continue
+                for alias in node.names:
+                    full = f"{base}.{alias.name}"
+                    if full in modules:
+                        bound[alias.asname or alias.name] = full
+                    elif _private(alias.name) and base != name:
+                        found.append(f"{name}: {base}.{alias.name}")
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Attribute) and _private(node.attr):
+                owner = ast.unparse(node.value)
+                if bound.get(owner, name) != name:
+                    found.append(f"{name}: {bound[owner]}.{node.attr}")
+    return sorted(set(found))
+
+
+def test_no_private_name_crosses_a_module():
+    assert private_crossings(_modules()) == []
+
+
+def test_a_private_name_crossing_a_module_is_found(tmp_path):
+    (tmp_path / "core").mkdir()
+    (tmp_path / "core" / "a.py").write_text("_hidden = 1\nshown = 2\n", encoding="utf-8")
+    (tmp_path / "core" / "b.py").write_text("from core.a import _hidden, shown\n", encoding="utf-8")
+    (tmp_path / "core" / "c.py").write_text("import core.a\nfrom core import a as m\n\n"
+                                            "x = core.a._hidden + m._hidden + m.shown\n", encoding="utf-8")
+    (tmp_path / "core" / "d.py").write_text("class D:\n    _own = 1\n\n    def f(self):\n"
+                                            "        return self._own + D._own\n", encoding="utf-8")
+    modules = {f"core.{p.stem}": p for p in sorted((tmp_path / "core").glob("*.py"))}
+    assert private_crossings(modules) == ["core.b: core.a._hidden", "core.c: core.a._hidden"]
 
 
 def test_no_private_attribute_of_a_library_is_touched():

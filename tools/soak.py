@@ -35,10 +35,10 @@ def rss_mib(pid: int | str = "self") -> float:
 
 
 def soak(scenario_name: str, minutes: float, seed: int | None = None) -> dict:
+    from core.records import CameraFrame
     from core.types import SKELETONS
     from crossview import pipeline
     from sim.simulate import Simulation
-    from sim.types import CameraFrame
 
     scenario = pipeline.load_scenario(scenario_name, seed=seed, duration_s=minutes * 60)
     sim = Simulation(scenario, scenario.seed)

@@ -252,7 +252,8 @@ class TrackerConfig:
                 raise ConfigError(f"TrackerConfig.{name}: {value} must be > 0")
             if name in nonneg and not value >= 0:
                 raise ConfigError(f"TrackerConfig.{name}: {value} must be >= 0")
-        for name in ("init_min_top_m", "init_max_top_m", "init_min_bottom_m", "init_min_separation_m"):
+        for name in ("init_min_top_m", "init_max_top_m", "init_min_bottom_m", "init_min_separation_m",
+                     "ghost_min_seen_ratio", "score_threshold"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)) or value != value:
                 raise ConfigError(f"TrackerConfig.{name}: {value!r} is not a number")
@@ -331,7 +332,7 @@ class TrackerConfig:
         values.update(data)
         try:
             return cls(**values)
-        except (ValueError, TypeError) as exc:
+        except ConfigError as exc:  # every bad value is one, raised where it is checked; anything else is a bug
             raise ConfigError(f"{path}: {exc}") from exc
 
     def check_fits(self, num_cameras: int, num_joints: int) -> None:

@@ -14,19 +14,19 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from core.calibration import calibration_image_wh, dataset_cameras
 from core.errors import ScenarioError
+from core.layouts import campus14_to_coco17
 from core.types import CAMPUS14, COCO17, Camera, Frame
 from crossview.formats import openpose
 from crossview.formats.json_input import DatasetError, read_json, stamp_s
 from crossview.outputs import write_bytes
-from sim import scenario as scenario_mod
-from sim.cameras import calibration_image_wh, dataset_cameras
 from tracker.types import TrackerOutput
 
 CM_TO_M = 0.01
@@ -80,7 +80,7 @@ def image_size(dataset_dir, source: str = "auto") -> tuple[int, int]:
 
 
 def load_cameras(dataset_dir, use_distortion: bool = False) -> list[Camera]:
-    """The cameras of `calibration.json` in metres, sorted by name (parsed by `sim.cameras.dataset_cameras`, which
+    """The cameras of `calibration.json` in metres, sorted by name (parsed by `core.calibration.dataset_cameras`, which
     scenarios use for the same files).
 
     K is de-normalised with the image size of the 2D file; `Tw` (camera-to-world, cm) is inverted into
@@ -213,11 +213,21 @@ def load_truth_3d(dataset_dir, num_joints: int = 14) -> list[tuple[float, np.nda
     return out
 
 
-def read_scene(path: Path) -> dict:
+ScenarioCheck = Callable[[str, str, str], object]
+"""Reads a scene's `scenario_text` as a scenario, `(text, name, where) -> scenario`, raising `ScenarioError`
+naming `where` when it is none (the simulator's `sim.scenario.from_source_text`; the formats do not import
+`sim/`, so their caller hands it in)."""
+
+
+def read_scene(path: Path, check_scenario: ScenarioCheck) -> dict:
     """scene.json (`export_dataset`): an object whose `scenario_name` is text, `scenario_text` a scenario (the
     TOML a synthetic recording was made from: how its truth is scored, what `fit-detector` simulates), `seed` an
     integer in [0, 2^63), `duration_s` a timestamp (`stamp_s`) and `boxes` an array of objects, each where
     given.
+
+    Args:
+        path: the scene.json.
+        check_scenario: reads `scenario_text` as a scenario (`ScenarioCheck`).
 
     Raises:
         DatasetError: naming the file and the key.
@@ -230,7 +240,7 @@ def read_scene(path: Path) -> dict:
         raise DatasetError(f"{path}: scenario_text must be text (the scenario TOML the recording was made from)")
     if text:
         try:
-            scenario_mod.from_source_text(text, str(scene.get("scenario_name", "")), f"{path}: scenario_text")
+            check_scenario(text, str(scene.get("scenario_name", "")), f"{path}: scenario_text")
         except ScenarioError as e:
             raise DatasetError(str(e)) from None
     seed = scene.get("seed", 0)
@@ -241,25 +251,6 @@ def read_scene(path: Path) -> dict:
     for k, box in enumerate(_table(scene.get("boxes", []), path, "key 'boxes'", list)):
         _table(box, path, f"boxes[{k}]")
     return scene
-
-
-def campus14_to_coco17(poses: np.ndarray) -> np.ndarray:
-    """Writes 14-joint Campus poses (..., 14, 3) as COCO-17 (..., 17, 3) so that the published evaluate.py
-    mapping (crossview.scoring.pose.coco17_to_campus14) gives the same limbs back and a head on the
-    mid-shoulder-to-head line: the nose is placed where that mapping puts the top of the head's direction.
-    Face joints other than the nose are NaN."""
-    from crossview.scoring.pose import _BOTTOM_HEAD_FACTORS, _COCO_TO_CAMPUS12, _TOP_HEAD_FACTORS
-
-    poses = np.asarray(poses, dtype=np.float64)
-    out = np.full(poses.shape[:-2] + (17, 3), np.nan)
-    out[..., _COCO_TO_CAMPUS12, :] = poses[..., :12, :]
-    mid_shoulder = (poses[..., 8, :] + poses[..., 9, :]) / 2
-    # evaluate.py: top = mid + (nose - mid) * f_top, bottom = mid + (nose - mid) * f_bottom, per axis.
-    # Least squares for the nose offset d from both head joints, per axis: d = Σ f h / Σ f².
-    top, bottom = poses[..., 13, :] - mid_shoulder, poses[..., 12, :] - mid_shoulder
-    d = (top * _TOP_HEAD_FACTORS + bottom * _BOTTOM_HEAD_FACTORS) / (_TOP_HEAD_FACTORS ** 2 + _BOTTOM_HEAD_FACTORS ** 2)
-    out[..., 0, :] = mid_shoulder + d
-    return out
 
 
 def write_result_3d(outputs: Iterable[TrackerOutput], path, inputs: tuple = ()) -> int:
@@ -294,7 +285,8 @@ def write_result_3d(outputs: Iterable[TrackerOutput], path, inputs: tuple = ()) 
     return len(entries)
 
 
-def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = None, inputs: tuple = ()) -> int:
+def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = None, inputs: tuple = (), *,
+            check_scenario: ScenarioCheck) -> int:
     """Writes a dataset of the published layout as a recording (crossview.recording), frames in delivery order.
 
     Each frame keeps its own camera and stamp, and its capture and delivery times where the file gives them
@@ -305,15 +297,16 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
     and as COCO-17 (`campus14_to_coco17`) when COCO-17 detections come with the published 14-joint truth.
     calibration.json's `points_2d_distorted` and scene.json are read when present (see `export_dataset`).
     A folder with no 2D file but one sub-folder of OpenPose output per camera is read with `crossview.formats.openpose`
-    (source "openpose"; `fps` gives the stamps that its timestamps.json does not).
+    (source "openpose"; `fps` gives the stamps that its timestamps.json does not). `check_scenario` reads
+    scene.json's `scenario_text` (`ScenarioCheck`).
 
     Returns:
         The number of camera frames written.
     """
     import hashlib
 
+    from core.records import CameraFrame, DetectionTruth, PoseTruth
     from crossview.recording import RecordingHeader, RecordingWriter, box_from_json
-    from sim.types import CameraFrame, DetectionTruth, PoseTruth
 
     dataset_dir = Path(dataset_dir)
     calibration = read_json(dataset_dir / "calibration.json")
@@ -349,7 +342,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
             truth = [(t, ids, campus14_to_coco17(poses))
                      for t, ids, poses in load_truth_3d(dataset_dir, CAMPUS14.num_joints)]
     truth.sort(key=lambda entry: entry[0])
-    scene = read_scene(dataset_dir / SCENE_FILE) if (dataset_dir / SCENE_FILE).is_file() else {}
+    scene = read_scene(dataset_dir / SCENE_FILE, check_scenario) if (dataset_dir / SCENE_FILE).is_file() else {}
     digest = hashlib.sha256()
     for path in (dataset_dir / "calibration.json", *sources, dataset_dir / "annotation_3d.json",
                  dataset_dir / SCENE_FILE):

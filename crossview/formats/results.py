@@ -108,7 +108,7 @@ def _result_3d_pose(path: Path, points):
         cm = _array(path, where, points, (COCO17.num_joints, skeleton.num_joints))
         pose = np.where((cm == 0).all(axis=-1, keepdims=True), np.nan, cm * CM_TO_M)  # 0, 0, 0: missing
         if skeleton.num_joints == CAMPUS14.num_joints and len(pose) == COCO17.num_joints:
-            from crossview.scoring.pose import coco17_to_campus14
+            from core.layouts import coco17_to_campus14
 
             pose = coco17_to_campus14(pose)
         elif len(pose) != skeleton.num_joints:

@@ -4,7 +4,7 @@ The tracker triangulates a joint from two views or more (`tracker.triangulation`
 only where at least two cameras see them. A cell of the walkable floor (`sim.store.StoreGeometry.free`: the
 navigation grid where a pelvis may be, the floor the crowd walks on) counts as seen by a camera when the
 point above its centre at hip height (`HIP_HEIGHT_M`) or at head height (`HEAD_HEIGHT_M`) projects into the
-camera's image through its own lens (`sim.cameras.in_image`, the detector's test). Shelves and people in
+camera's image through its own lens (`core.projection.in_image`, the detector's test). Shelves and people in
 between are not counted: this is the most a rig can see, before occlusion.
 """
 
@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from core.records import BoxKind
 from core.types import Camera
-from sim.types import BoxKind
 
 HIP_HEIGHT_M = 0.9
 """Height of an adult's hips above the floor, metres (the middle of the body: its torso and legs)."""
@@ -111,7 +111,8 @@ def coverage(scenario, cameras: list[Camera] | None = None) -> Coverage:
     Raises:
         ScenarioError: the store or the rig cannot be built (named by the scenario's file and key).
     """
-    from sim.cameras import build_rig, in_image
+    from core.projection import in_image
+    from sim.cameras import build_rig
     from sim.rng import child_rng
     from sim.store import GRID_CELL_M, StoreGeometry
 
@@ -131,8 +132,8 @@ def coverage(scenario, cameras: list[Camera] | None = None) -> Coverage:
 
 def write_map(cov: Coverage, path: Path, px_per_m: float | None = None) -> Path:
     """Writes the coverage map (PNG): the store from above at hip height and at head height side by side,
-    each walkable cell coloured by how many cameras see it (`crossview.pictures.layout.draw_layout`)."""
-    from crossview.pictures.layout import layout as pictures
+    each walkable cell coloured by how many cameras see it (`crossview.pictures.layout.layout.draw_layout`)."""
+    from crossview.pictures.layout.layout import layout as pictures
 
     floor = next(b for b in cov.boxes if b.kind == BoxKind.FLOOR)
     scale = px_per_m or pictures.layout_scale(floor.size_m[0])

@@ -169,8 +169,8 @@ def update(params: DetectorParams, stats: dict, target: dict, step: float = DAMP
 
 def measure(scenario, params: DetectorParams, *, seed: int, duration_s: float) -> dict:
     """`detector_stats` of `scenario` simulated for `duration_s` with the detector's parameters `params`."""
+    from core.records import CameraFrame
     from sim.simulate import Simulation
-    from sim.types import CameraFrame
 
     config = DetectorConfig(profile=scenario.detector.profile, self_hit_margin_m=scenario.detector.self_hit_margin_m,
                             occlusion=scenario.detector.occlusion, **params._asdict())

@@ -5,7 +5,7 @@ The measurement is the one made on the real detector, so that a synthetic record
 a real one (`crossview convert` of a dataset folder with 3D truth) give comparable figures:
 
 - **Truth**: the recording's 3D ground truth (what the scorer uses) at each frame's capture time, projected
-  through the camera's lens model (`sim.cameras.in_image`). The per-detection truth a synthetic recording
+  through the camera's lens model (`core.projection.in_image`). The per-detection truth a synthetic recording
   also stores is not used: real data has none, and the detector's joint need not be the scorer's.
 - **Joints**: the 12 joints both skeleton layouts name alike (`JOINTS_12`: shoulders, elbows, wrists, hips,
   knees, ankles; COCO-17 and the Campus/Shelf 14 joints). Person size: the larger side of the box of the
@@ -37,9 +37,9 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from core.errors import CrossviewError
+from core.projection import in_image
+from core.records import CameraFrame
 from core.types import JOINT_GROUPS, Camera, Skeleton
-from sim.cameras import in_image
-from sim.types import CameraFrame
 from tracker.geometry import undistort_points
 from tracker.triangulation import PLANE_ROW, reprojection_error_px, triangulate
 

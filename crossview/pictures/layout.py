@@ -9,9 +9,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from core.records import Box, BoxKind
 from core.types import Camera
 from crossview.outputs import write_bytes
-from sim.types import Box, BoxKind
 
 # BGR colours of the store's boxes.
 _BOX_BGR = {

@@ -23,12 +23,12 @@ import cv2
 import numpy as np
 
 from core.errors import CrossviewError
+from core.records import CameraFrame
 from core.types import Camera, Skeleton
 from crossview import pipeline
 from crossview.outputs import write_bytes
-from crossview.pictures.layout import FALSE_POSITIVE_BGR, person_bgr
+from crossview.pictures.layout.layout import FALSE_POSITIVE_BGR, person_bgr
 from sim.render import SceneRenderer
-from sim.types import CameraFrame
 from tracker.types import TrackerOutput
 
 log = logging.getLogger(__name__)
@@ -167,12 +167,12 @@ def draw_frame(image: np.ndarray, camera: Camera, frame: CameraFrame, skeleton: 
         camera: the frame's camera.
         frame: the delivered frame with its per-detection truth.
         skeleton: the joint layout (its bones are drawn).
-        output: the tracker's output after this frame; its targets are projected with `sim.cameras.in_image`.
+        output: the tracker's output after this frame; its targets are projected with `core.projection.in_image`.
 
     Returns:
         `image`.
     """
-    from sim.cameras import in_image
+    from core.projection import in_image
 
     kp, truth = frame.frame.keypoints_px, frame.truth
     # Tracks first, so the detections stay on top: white skeletons with their ids.
@@ -383,7 +383,7 @@ def render(request: Request) -> RenderResult:
     else:
         check_time(request.time_s, duration, "--time", rec.path)
     if request.top_down:
-        from crossview.pictures.layout import top_down_picture
+        from crossview.pictures.layout.layout import top_down_picture
 
         t0, t1 = (request.from_s, request.to_s) if clip else (0.0, request.time_s)
         image = top_down_picture(rec, data.tracks, t0, t1)

@@ -21,6 +21,7 @@ Modules: `schemas` (topics, schemas, headers, versions), `messages` (message byt
 `info`. The names below are the package's interface.
 """
 
+from core.errors import RecordingError
 from crossview.recording.info import format_info, info
 from crossview.recording.messages import (
     EncodedFrame,
@@ -31,7 +32,7 @@ from crossview.recording.messages import (
     warm_up,
 )
 from crossview.recording.reader import CameraImage, Recording, Tracks, open_recording, open_tracks
-from crossview.recording.schemas import (
+from crossview.recording.schemas import (  # a store box's JSON form, as the header's
     CHUNK_SIZE,
     FORMAT_VERSION,
     TOPIC_HEADER,
@@ -42,15 +43,14 @@ from crossview.recording.schemas import (
     TOPIC_TRUTH_SCENE,
     TRACKS_FORMAT_VERSION,
     PoseTruthMsg,
-    RecordingError,
     RecordingHeader,
     TracksHeader,
+    box_from_json,
+    box_json,
     camera_topic,
     software_version,
     to_ns,
 )
-from crossview.recording.schemas import _box_from_json as box_from_json  # a store box's JSON form, as the header's
-from crossview.recording.schemas import _box_json as box_json
 from crossview.recording.writer import RecordingWriter, TracksWriter
 
 __all__ = [

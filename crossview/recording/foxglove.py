@@ -39,8 +39,8 @@ from google.protobuf import descriptor_pb2
 from google.protobuf.descriptor import Descriptor
 from google.protobuf.timestamp_pb2 import Timestamp
 
+from core.records import Box, BoxKind, CameraFrame, PoseTruth
 from core.types import Camera, Skeleton
-from sim.types import Box, BoxKind, CameraFrame, PoseTruth
 from tracker.types import TargetArrays, TrackerOutput
 
 WORLD_FRAME = "world"

@@ -7,17 +7,19 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 from mcap.records import Channel, Chunk, Message, Metadata
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import StreamReader
 
+from core.errors import RecordingError
 from crossview.recording.reader import (
-    _READ_ERRORS,
+    READ_ERRORS,
+    Container,
     FileWithinSize,
+    McapStream,
     Recording,
     Tracks,
-    _Container,
-    _describe,
-    _McapStream,
-    _read_summary,
+    chunk_records,
+    describe_read_error,
+    read_summary,
 )
 from crossview.recording.schemas import (
     KIND_RECORDING,
@@ -26,7 +28,6 @@ from crossview.recording.schemas import (
     TOPIC_OUTPUTS,
     TOPIC_TRUTH,
     PoseTruthMsg,
-    RecordingError,
     TrackerOutputMsg,
 )
 
@@ -55,17 +56,17 @@ def check_chunks(path) -> int:
                 record = next(records)
             except StopIteration:
                 return chunks
-            except _READ_ERRORS as e:
+            except READ_ERRORS as e:
                 raise RecordingError(f"{path}: corrupt MCAP data in the record at byte {start:,} (after chunk "
-                                     f"{chunks}; {_describe(e)})") from None
+                                     f"{chunks}; {describe_read_error(e)})") from None
             end = f.tell()
             if isinstance(record, Chunk):
                 try:
-                    breakup_chunk(record, validate_crc=True)
-                except _READ_ERRORS as e:
+                    chunk_records(record)
+                except READ_ERRORS as e:
                     first_s, last_s = record.message_start_time / 1e9, record.message_end_time / 1e9
                     raise RecordingError(f"{path}: chunk {chunks} (bytes {start:,}..{end:,}, messages {first_s:.3f}"
-                                         f"..{last_s:.3f} s) is corrupt ({_describe(e)})") from None
+                                         f"..{last_s:.3f} s) is corrupt ({describe_read_error(e)})") from None
                 chunks += 1
             start = end
 
@@ -77,7 +78,7 @@ def info(path, allow_truncated: bool = False, check: bool = True) -> dict:
     `check` False), then described from its summary section; a truncated one (with `allow_truncated`)
     by streaming its readable prefix.
     """
-    stream = _McapStream(path, allow_truncated)
+    stream = McapStream(path, allow_truncated)
     kind = None
     for record in stream.records():
         if isinstance(record, Metadata) and record.name == METADATA_NAME:
@@ -86,7 +87,7 @@ def info(path, allow_truncated: bool = False, check: bool = True) -> dict:
     if kind not in (KIND_RECORDING, KIND_TRACKS):
         raise RecordingError(f"{stream.path}: an MCAP file, but not a crossview recording or tracks file")
     opener = Recording if kind == KIND_RECORDING else Tracks
-    container: _Container = opener(path, allow_truncated)
+    container: Container = opener(path, allow_truncated)
     doc = container.doc
     counts: dict[str, int] = {}
     start_ns = end_ns = None
@@ -98,15 +99,15 @@ def info(path, allow_truncated: bool = False, check: bool = True) -> dict:
         try:
             with open(stream.path, "rb") as f:
                 mcap_summary = make_reader(FileWithinSize(f, stream.size)).get_summary()
-        except _READ_ERRORS as e:
-            raise RecordingError(f"{stream.path}: unreadable summary section ({_describe(e)})") from None
+        except READ_ERRORS as e:
+            raise RecordingError(f"{stream.path}: unreadable summary section ({describe_read_error(e)})") from None
         if mcap_summary is None or mcap_summary.statistics is None:
             raise RecordingError(f"{stream.path}: MCAP file without a summary section")
         stats = mcap_summary.statistics
         for channel_id, channel in sorted(mcap_summary.channels.items()):
             counts[channel.topic] = stats.channel_message_counts.get(channel_id, 0)
         start_ns, end_ns = stats.message_start_time, stats.message_end_time
-        summary = _read_summary(stream.path)
+        summary = read_summary(stream.path)
         people = summary.get("num_people" if kind == KIND_RECORDING else "num_targets")
     else:
         topics: dict[int, str] = {}

@@ -10,10 +10,10 @@ from typing import NamedTuple
 
 import numpy as np
 
+from core.records import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from core.types import Frame, Skeleton
 from crossview.recording import foxglove
 from crossview.recording.schemas import TrackerOutputMsg, to_ns
-from sim.types import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
 
 
@@ -205,13 +205,15 @@ def _utf8(text: str) -> np.ndarray:
     return np.frombuffer(text.encode(), dtype=np.uint8)
 
 
-def _pose_truth_from_msg(msg) -> PoseTruth:
+def pose_truth_from_msg(msg) -> PoseTruth:
+    """The truth tick of a decoded `PoseTruthMsg` (poses (P, J, 3) metres)."""
     ids = np.array(msg.person_ids, dtype=np.int64)
     poses = np.array(msg.poses_m, dtype=np.float64).reshape(len(ids), msg.num_joints, 3)
     return PoseTruth(t_s=msg.t_s, person_ids=ids, poses=poses)
 
 
-def _camera_frame_from_msg(msg, poses_at_capture: PoseTruth | None = None) -> CameraFrame:
+def camera_frame_from_msg(msg, poses_at_capture: PoseTruth | None = None) -> CameraFrame:
+    """The camera frame of a decoded `CameraFrameMsg`, with `poses_at_capture` (None: not asked for)."""
     D, J = msg.num_detections, msg.num_joints
     frame = Frame(
         camera=msg.camera,

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import bisect
 import json
-import struct
-import zlib
 from collections.abc import Iterator
 from pathlib import Path
 from typing import NamedTuple
@@ -14,13 +12,16 @@ from typing import NamedTuple
 import numpy as np
 from foxglove_schemas_protobuf.CompressedImage_pb2 import CompressedImage
 from google.protobuf.message import DecodeError
-from mcap.exceptions import McapError
+from mcap.exceptions import EndOfFile, McapError
 from mcap.reader import make_reader
-from mcap.records import Channel, DataEnd, Message, Metadata, Schema
-from mcap.stream_reader import CRCValidationError, StreamReader
+from mcap.records import Channel, Chunk, DataEnd, Message, Metadata, Schema
+from mcap.stream_reader import CRCValidationError, StreamReader, breakup_chunk
 
+from core.errors import RecordingError
+from core.poses import interpolate_poses
+from core.records import CameraFrame, PoseTruth
 from core.types import SKELETONS
-from crossview.recording.messages import _camera_frame_from_msg, _pose_truth_from_msg, tracker_output_from_bytes
+from crossview.recording.messages import camera_frame_from_msg, pose_truth_from_msg, tracker_output_from_bytes
 from crossview.recording.schemas import (
     FORMAT_VERSION,
     KIND_RECORDING,
@@ -33,26 +34,29 @@ from crossview.recording.schemas import (
     TRACKS_FORMAT_VERSION,
     CameraFrameMsg,
     PoseTruthMsg,
-    RecordingError,
     RecordingHeader,
     TracksHeader,
-    _box_from_json,
-    _camera_from_json,
+    box_from_json,
+    camera_from_json,
     camera_topic,
     software_version,
 )
-from sim.poses import interpolate_poses
-from sim.types import CameraFrame, PoseTruth
 from tracker.types import TrackerOutput
 
-_READ_ERRORS = (McapError, CRCValidationError, struct.error, EOFError, UnicodeDecodeError, RuntimeError,
-                DecodeError, KeyError, ValueError, zlib.error, OSError)  # (OSError: a seek a corrupt offset asked for)
+READ_ERRORS = (McapError, CRCValidationError, UnicodeDecodeError, OSError)
+"""What reading a damaged MCAP file raises: the mcap library's documented exceptions (`McapError` and its classes
+in `mcap.exceptions`, `mcap.stream_reader.CRCValidationError`), the UnicodeDecodeError of a damaged text field
+of a record outside the chunks (which no CRC covers: mcap decodes each as UTF-8 as it reads it) and the
+operating system's read errors (a seek to where a corrupt offset points). The readers turn these into a
+`RecordingError`; any other exception is a bug and keeps its traceback."""
 
 
 class FileWithinSize:
     """A binary file whose reads never ask for more than the file holds: a corrupt length field inside a
-    record (which mcap's record size limit does not cover) then reads short and fails as a short read,
-    instead of allocating what the field says (a terabyte). Seeks and tells pass through."""
+    record (which mcap's record size limit does not cover) then fails as a short read, instead of allocating
+    what the field says (a terabyte). A read that comes back short, and a seek outside the file (a corrupt
+    offset), raise mcap's `EndOfFile` there, as mcap does for a read at the end (mcap reads exactly the bytes
+    a record needs: less means the file ended inside it). Tells pass through."""
 
     def __init__(self, f, size: int):
         self._f = f
@@ -60,10 +64,18 @@ class FileWithinSize:
 
     def read(self, n: int = -1) -> bytes:
         left = max(0, self._size - self._f.tell())
-        return self._f.read(left if n is None or n < 0 else min(n, left))
+        if n is None or n < 0:
+            return self._f.read(left)
+        data = self._f.read(min(n, left))
+        if len(data) < n:
+            raise EndOfFile()
+        return data
 
     def seek(self, offset: int, whence: int = 0) -> int:
-        return self._f.seek(offset, whence)
+        target = offset + (0 if whence == 0 else self._f.tell() if whence == 1 else self._size)
+        if not 0 <= target <= self._size:
+            raise EndOfFile()
+        return self._f.seek(target)
 
     def tell(self) -> int:
         return self._f.tell()
@@ -75,8 +87,9 @@ class FileWithinSize:
         return True
 
 
-class _McapStream:
-    """Streams one file's records in file order, turning every failure into a RecordingError."""
+class McapStream:
+    """Streams one file's records in file order, turning the mcap library's errors (`READ_ERRORS`) into a
+    RecordingError."""
 
     def __init__(self, path, allow_truncated: bool):
         self.path = Path(path)
@@ -103,45 +116,70 @@ class _McapStream:
     def records(self) -> Iterator:
         """Schema, Channel, Message, Metadata records of the data section, in file order."""
         with open(self.path, "rb") as f:
-            reader = StreamReader(FileWithinSize(f, self.size), validate_crcs=True,
+            reader = StreamReader(FileWithinSize(f, self.size), emit_chunks=True, validate_crcs=True,
                                   record_size_limit=max(self.size, 1))
             iterator = iter(reader.records)
             while True:
                 try:
                     record = next(iterator)
+                    records = chunk_records(record) if isinstance(record, Chunk) else (record,)
                 except StopIteration:
                     return
-                except _READ_ERRORS as e:
+                except READ_ERRORS as e:
                     if self.allow_truncated:
                         return
-                    raise RecordingError(f"{self.path}: corrupt MCAP data ({_describe(e)}); `crossview info "
+                    raise RecordingError(f"{self.path}: corrupt MCAP data ({describe_read_error(e)}); `crossview info "
                                          f"{self.path}` names the bad chunk") from None
                 if isinstance(record, DataEnd):
                     return
-                yield record
+                yield from records
 
 
-def _describe(e: BaseException) -> str:
+class ChunkDecompressionError(McapError):
+    """A chunk whose compressed bytes do not decompress (raised by `chunk_records`, where the decompressor
+    fails; an `McapError`, as the mcap library's own errors for a damaged file)."""
+
+
+DECOMPRESSION_ERRORS = (RuntimeError,)
+"""What the decompressor raises for damaged compressed bytes: the chunks are LZ4 frames (`schemas.COMPRESSION`),
+and `lz4.frame.decompress` fails with a RuntimeError. Caught only around one chunk's decompression."""
+
+
+def chunk_records(chunk: Chunk) -> list:
+    """The records of one chunk, decompressed and CRC-checked (`mcap.stream_reader.breakup_chunk`).
+
+    Raises:
+        ChunkDecompressionError: the compressed bytes do not decompress.
+        CRCValidationError: the decompressed bytes are not those written.
+    """
+    try:  # (only mcap's code runs in here: a RuntimeError is the decompressor's)
+        return breakup_chunk(chunk, validate_crc=True)
+    except DECOMPRESSION_ERRORS as e:
+        raise ChunkDecompressionError(f"the {chunk.compression} chunk does not decompress ({e})") from None
+
+
+def describe_read_error(e: BaseException) -> str:
+    """What one of `READ_ERRORS` says about the file, in a few words."""
     if isinstance(e, CRCValidationError):
         return "CRC mismatch"
-    if isinstance(e, McapError) and type(e).__name__ == "EndOfFile":
+    if isinstance(e, EndOfFile):
         return "unexpected end of file"
     return f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
 
 
-class _Container:
+class Container:
     """The common part of a recording and a tracks file: the header document and the channel table."""
 
     kind: str
 
     def __init__(self, path, allow_truncated: bool):
-        self._stream = _McapStream(path, allow_truncated)
+        self._stream = McapStream(path, allow_truncated)
         self.path = self._stream.path
         self.truncated = not self._stream.complete
         self.doc = self._read_header()
         try:
             self.skeleton = SKELETONS[self.doc["skeleton"]["name"]]
-            self.cameras = [_camera_from_json(c) for c in self.doc["cameras"]]
+            self.cameras = [camera_from_json(c) for c in self.doc["cameras"]]
         except (KeyError, TypeError, ValueError) as e:
             raise RecordingError(f"{self.path}: unreadable header ({e})") from None
 
@@ -164,22 +202,28 @@ class _Container:
 
     def _read_header(self) -> dict:
         channels: dict[int, Channel] = {}
-        try:
-            for record in self._stream.records():
-                if isinstance(record, Metadata) and record.name == METADATA_NAME:
-                    self._check(record.metadata.get("kind", "?"), int(record.metadata.get("format_version", "0")))
-                elif isinstance(record, Channel):
-                    channels[record.id] = record
-                elif isinstance(record, Message) and channels.get(record.channel_id, None) is not None \
-                        and channels[record.channel_id].topic == TOPIC_HEADER:
-                    doc = json.loads(record.data)
-                    self._check(doc["kind"], int(doc["format_version"]))
-                    return doc
-        except RecordingError:
-            raise
-        except (ValueError, KeyError, TypeError) as e:
-            raise RecordingError(f"{self.path}: unreadable crossview header ({e})") from None
+        for record in self._stream.records():
+            if isinstance(record, Metadata) and record.name == METADATA_NAME:
+                self._check(record.metadata.get("kind", "?"), self._version(record.metadata.get("format_version", 0)))
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Message) and channels.get(record.channel_id, None) is not None \
+                    and channels[record.channel_id].topic == TOPIC_HEADER:
+                doc = json_object(record.data, f"{self.path}: unreadable crossview header")
+                if "kind" not in doc or "format_version" not in doc:
+                    raise RecordingError(f"{self.path}: unreadable crossview header (it names no kind and "
+                                         "format_version)")
+                self._check(doc["kind"], self._version(doc["format_version"]))
+                return doc
         raise RecordingError(f"{self.path}: no {TOPIC_HEADER} message; not a crossview {self.kind} file")
+
+    def _version(self, value) -> int:
+        """A header's format_version (an integer, or its decimal text in the metadata record)."""
+        try:
+            return int(value)
+        except (TypeError, ValueError):
+            raise RecordingError(f"{self.path}: unreadable crossview header (format_version {value!r} is not an "
+                                 "integer)") from None
 
     def _messages(self, schema_names: set[str]) -> Iterator[tuple[str, Message]]:
         """(schema name, message) for the messages whose channel has one of `schema_names`, in file order."""
@@ -215,7 +259,7 @@ class CameraImage(NamedTuple):
     data: bytes
 
 
-class Recording(_Container):
+class Recording(Container):
     """A recording opened for reading. `header`, `cameras` and `boxes` are read on open; the events
     stream from disk one chunk at a time every time an iterator is asked for."""
 
@@ -231,7 +275,7 @@ class Recording(_Container):
                 skeleton_name=d["skeleton"]["name"], software_version=d["software_version"],
                 format_version=int(d["format_version"]),
             )
-            self.boxes = tuple(_box_from_json(b) for b in d["boxes"])
+            self.boxes = tuple(box_from_json(b) for b in d["boxes"])
         except (KeyError, TypeError, ValueError) as e:
             raise RecordingError(f"{self.path}: unreadable recording header ({e})") from None
 
@@ -239,11 +283,11 @@ class Recording(_Container):
         window = _TruthWindow(self.truth, self.skeleton.num_joints) if with_poses else None
         for name, record in self._messages(names):
             if name == "crossview.PoseTruth":
-                event = self._decode(lambda b: _pose_truth_from_msg(PoseTruthMsg.FromString(b)), record.data)
+                event = self._decode(lambda b: pose_truth_from_msg(PoseTruthMsg.FromString(b)), record.data)
             else:
                 event = self._decode(lambda b: CameraFrameMsg.FromString(b), record.data)
                 if event is not None:
-                    event = _camera_frame_from_msg(event, window.at(event.capture_s) if window else None)
+                    event = camera_frame_from_msg(event, window.at(event.capture_s) if window else None)
             if event is None:
                 return
             yield event
@@ -282,7 +326,7 @@ class Recording(_Container):
 
 class _TruthWindow:
     """Everybody's true pose at any capture time of a recording, derived from its truth ticks by
-    `sim.poses.interpolate_poses`: the rule and the arithmetic the simulator used for the frames'
+    `core.poses.interpolate_poses`: the rule and the arithmetic the simulator used for the frames'
     `poses_at_capture`, so the same bits.
 
     The ticks stream from a second pass over the file. Captures come nearly in time order (frames are in
@@ -327,7 +371,7 @@ class _TruthWindow:
         return poses
 
 
-class Tracks(_Container):
+class Tracks(Container):
     """A tracks file opened for reading; `outputs()` streams the tracker outputs in processing order."""
 
     kind = KIND_TRACKS
@@ -343,7 +387,7 @@ class Tracks(_Container):
             )
         except (KeyError, TypeError, ValueError) as e:
             raise RecordingError(f"{self.path}: unreadable tracks header ({e})") from None
-        self.summary: dict = _read_summary(self.path) if not self.truncated else {}
+        self.summary: dict = read_summary(self.path) if not self.truncated else {}
 
     def outputs(self) -> Iterator[TrackerOutput]:
         for _, record in self._messages({"crossview.TrackerOutput"}):
@@ -353,18 +397,26 @@ class Tracks(_Container):
             yield output
 
 
-def _read_summary(path: Path) -> dict:
+def json_object(data: bytes | str, where: str) -> dict:
+    """The JSON object a header or summary stores; a RecordingError starting with `where` when it is none."""
+    try:
+        doc = json.loads(data)
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise RecordingError(f"{where} (not JSON: {e})") from None
+    if not isinstance(doc, dict):
+        raise RecordingError(f"{where} (a {type(doc).__name__}, not an object)")
+    return doc
+
+
+def read_summary(path: Path) -> dict:
     """The summary metadata written at close, found through the file's summary section (one seek)."""
     try:
         with open(path, "rb") as f:
             for metadata in make_reader(FileWithinSize(f, path.stat().st_size)).iter_metadata():
                 if metadata.name == SUMMARY_METADATA_NAME:
-                    summary = json.loads(metadata.metadata["json"])
-                    if not isinstance(summary, dict):
-                        raise ValueError(f"the summary is a {type(summary).__name__}, not an object")
-                    return summary
-    except _READ_ERRORS as e:
-        raise RecordingError(f"{path}: unreadable summary section ({_describe(e)})") from None
+                    return json_object(metadata.metadata.get("json", ""), f"{path}: unreadable summary section")
+    except READ_ERRORS as e:
+        raise RecordingError(f"{path}: unreadable summary section ({describe_read_error(e)})") from None
     return {}
 
 

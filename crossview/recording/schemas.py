@@ -12,10 +12,9 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.writer import CompressionType
 
-from core.errors import CrossviewError
+from core.records import Box, BoxKind
 from core.types import SKELETONS, Camera, Skeleton
 from crossview.recording import foxglove
-from sim.types import Box, BoxKind
 
 FORMAT_VERSION = 2  # of recordings
 TRACKS_FORMAT_VERSION = 4  # of tracks files; 3: targets carry joint_state; 4: poses as float32 (1 to 3 are read too)
@@ -46,10 +45,6 @@ TOPIC_TRACK_SCENE = "/tracker/skeletons"
 def camera_topic(camera_name: str, what: str) -> str:
     """Per-camera topics: `frame` (crossview.CameraFrame); `detections`, `calibration`, `image` (Foxglove)."""
     return f"/cameras/{camera_name}/{what}"
-
-
-class RecordingError(CrossviewError):
-    """A file that cannot be read as the recording or tracks file asked for; the message names the file."""
 
 
 def software_version() -> str:
@@ -108,7 +103,7 @@ def _project_file() -> descriptor_pb2.FileDescriptorProto:
         ("in_image", _F.TYPE_BOOL, True),  # (D, J)
         ("occluded", _F.TYPE_BOOL, True),  # (D, J)
         ("self_occluded", _F.TYPE_BOOL, True),  # (D, J)
-        ("effects", _F.TYPE_UINT32, True),  # (D,) sim.types.DetectionEffect bit mask
+        ("effects", _F.TYPE_UINT32, True),  # (D,) core.records.DetectionEffect bit mask
     ])
     f.message_type[-1].reserved_range.add(start=15, end=16)  # format 1's poses_at_capture
     f.message_type[-1].reserved_name.append("poses_at_capture")
@@ -233,12 +228,13 @@ class TracksHeader:
         _check_skeleton_name(self.skeleton_name)
 
 
-def _json(value) -> bytes:
+def compact_json(value) -> bytes:
     """Compact JSON with fixed key order; Python writes floats with repr, so they round-trip exactly."""
     return json.dumps(value, separators=(",", ":"), ensure_ascii=False, allow_nan=False).encode()
 
 
-def _camera_json(camera: Camera) -> dict:
+def camera_json(camera: Camera) -> dict:
+    """A camera as the headers' JSON holds it (`camera_from_json` reads it back)."""
     return {
         "name": camera.name,
         "frame_id": foxglove.camera_frame_id(camera.name),
@@ -251,14 +247,16 @@ def _camera_json(camera: Camera) -> dict:
     }
 
 
-def _camera_from_json(d: dict) -> Camera:
+def camera_from_json(d: dict) -> Camera:
+    """The camera of a header's `camera_json` entry; a missing key is a KeyError, a bad value a ValueError."""
     return Camera(
         name=d["name"], K=np.array(d["K"]), dist=np.array(d["dist"]), R_cam_from_world=np.array(d["R_cam_from_world"]),
         t_cam_from_world=np.array(d["t_cam_from_world"]), width_px=int(d["width_px"]), height_px=int(d["height_px"]),
     )
 
 
-def _box_json(box: Box) -> dict:
+def box_json(box: Box) -> dict:
+    """A store box as the recording header (and a dataset's scene.json) holds it (`box_from_json` reads it)."""
     return {
         "kind": box.kind.value,
         "center_m": [float(v) for v in box.center_m],
@@ -267,11 +265,13 @@ def _box_json(box: Box) -> dict:
     }
 
 
-def _box_from_json(d: dict) -> Box:
+def box_from_json(d: dict) -> Box:
+    """The store box of a `box_json` entry; a missing key is a KeyError, a bad kind a ValueError."""
     return Box(BoxKind(d["kind"]), tuple(d["center_m"]), tuple(d["size_m"]), float(d["yaw_rad"]))
 
 
-def _skeleton_json(skeleton: Skeleton) -> dict:
+def skeleton_json(skeleton: Skeleton) -> dict:
+    """A skeleton as the headers' JSON holds it: its name, joint names and bones."""
     return {"name": skeleton.name, "joints": list(skeleton.joints), "bones": [list(b) for b in skeleton.bones]}
 
 

@@ -8,6 +8,8 @@ from collections.abc import Sequence
 import numpy as np
 from mcap.writer import Writer
 
+from core.records import Box, CameraFrame, DetectionRows, PoseTruth
+from core.stream import Block, LogTimeOrder, frame_times
 from core.types import SKELETONS, Camera
 from crossview.outputs import AtomicOutput
 from crossview.recording import foxglove
@@ -40,15 +42,13 @@ from crossview.recording.schemas import (
     RecordingHeader,
     TrackerOutputMsg,
     TracksHeader,
-    _box_json,
-    _camera_json,
-    _json,
-    _skeleton_json,
+    box_json,
+    camera_json,
     camera_topic,
+    compact_json,
+    skeleton_json,
     to_ns,
 )
-from sim.stream import Block, LogTimeOrder, frame_times
-from sim.types import Box, CameraFrame, DetectionRows, PoseTruth
 from tracker.types import TargetArrays, TrackerOutput
 
 
@@ -68,8 +68,8 @@ class _AtomicMcapWriter:
             self._writer.add_metadata(METADATA_NAME, metadata)
             self._schemas: dict[str, int] = {}
             header_channel = self.channel(TOPIC_HEADER, "json", f"crossview.{kind.capitalize()}Header",
-                                          "jsonschema", _json(HEADER_JSON_SCHEMAS[kind]))
-            self.add(header_channel, 0, _json(header_doc))
+                                          "jsonschema", compact_json(HEADER_JSON_SCHEMAS[kind]))
+            self.add(header_channel, 0, compact_json(header_doc))
         except BaseException:
             self.abort()
             raise
@@ -177,10 +177,10 @@ class RecordingWriter(_WriterContext):
             "scenario_digest": header.scenario_digest,
             "seed": int(header.seed),
             "duration_s": float(header.duration_s),
-            "skeleton": _skeleton_json(self.skeleton),
+            "skeleton": skeleton_json(self.skeleton),
             "scenario_text": header.scenario_text,
-            "cameras": [_camera_json(c) for c in self.cameras],
-            "boxes": [_box_json(b) for b in self.boxes],
+            "cameras": [camera_json(c) for c in self.cameras],
+            "boxes": [box_json(b) for b in self.boxes],
         }
         self._out = _AtomicMcapWriter(path, KIND_RECORDING, doc, _flat_metadata(KIND_RECORDING, header), chunk_size,
                                      inputs)
@@ -262,7 +262,7 @@ class RecordingWriter(_WriterContext):
     def write_block(self, block: Block, images: Sequence[bytes | None] | None = None) -> int:
         """Takes a simulation's next block (`sim.simulate.Simulation.blocks`): encodes its frames straight from
         the detector's rows (`encode_frames`, no CameraFrame objects in between) and writes whatever of the
-        recording is now due, in log-time order (`sim.stream.LogTimeOrder`); the rest waits for the next
+        recording is now due, in log-time order (`core.stream.LogTimeOrder`); the rest waits for the next
         blocks, or `close`. Returns the number of the block's frames.
 
         Args:
@@ -281,7 +281,7 @@ class RecordingWriter(_WriterContext):
     def encode_frames(self, cameras: Sequence[int], times: np.ndarray, bounds: np.ndarray,
                       rows: DetectionRows) -> list[EncodedFrame]:
         """`encode_frames` (the module's) of frames from this recording's cameras, given by index; `times` (n, 3)
-        in the columns of `sim.stream.frame_times`."""
+        in the columns of `core.stream.frame_times`."""
         names = [self.cameras[i].name for i in cameras]
         return encode_frames(names, times, bounds, rows, self.skeleton)
 
@@ -299,7 +299,7 @@ class RecordingWriter(_WriterContext):
         }
         if self._counts["images"]:  # (only then: a recording without pictures keeps its bytes)
             summary["num_images"] = self._counts["images"]
-        self._out.close({"json": _json(summary).decode()})
+        self._out.close({"json": compact_json(summary).decode()})
 
 
 
@@ -326,11 +326,11 @@ class TracksWriter(_WriterContext):
             "method": header.method,
             "preset": header.preset,
             "config": header.config,
-            "skeleton": _skeleton_json(self.skeleton),
-            "cameras": [_camera_json(c) for c in self.cameras],
+            "skeleton": skeleton_json(self.skeleton),
+            "cameras": [camera_json(c) for c in self.cameras],
         }
         try:
-            _json(header.config)
+            compact_json(header.config)
         except (TypeError, ValueError) as e:
             raise ValueError(f"TracksHeader.config: must be JSON-serialisable without NaN: {e}") from None
         self._out = _AtomicMcapWriter(path, KIND_TRACKS, doc, _flat_metadata(KIND_TRACKS, header), chunk_size, inputs)
@@ -361,14 +361,14 @@ class TracksWriter(_WriterContext):
     def finish(self, summary: dict) -> None:
         """Records the run's summary (e.g. tracker_s, updates, num_cameras); written when the file closes."""
         try:
-            _json(summary)
+            compact_json(summary)
         except (TypeError, ValueError) as e:
             raise ValueError(f"tracks summary: must be JSON-serialisable without NaN: {e}") from None
         self._summary = dict(summary)
 
     def close(self) -> None:
         summary = {"num_outputs": self._count, "num_targets": len(self._targets)} | self._summary
-        self._out.close({"json": _json(summary).decode()})
+        self._out.close({"json": compact_json(summary).decode()})
 
 
 

@@ -31,6 +31,7 @@ import numpy as np
 
 from core.errors import CrossviewError
 from core.head import HeadConvention, HeadPoints
+from core.records import CameraFrame, PoseTruth
 from core.truth import truth_between
 from core.types import COCO17, Camera, Skeleton
 from crossview.scoring.association import SCORED_STATES, AssociationAccumulator, scored_targets
@@ -39,7 +40,6 @@ from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulat
 from crossview.scoring.per_camera import Projected2DAccumulator
 from crossview.scoring.pose import PoseAccumulator
 from crossview.scoring.report import JSON_KEYS, ScoreReport
-from sim.types import CameraFrame, PoseTruth
 from tracker.types import TrackerOutput
 
 __all__ = ["JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TruthTimeline", "score"]

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.boxes import keypoint_boxes
+from core.projection import in_image
+from core.records import CameraFrame
 from core.types import Camera
-from sim.cameras import in_image
-from sim.types import CameraFrame
 from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
 from tracker.visibility import poses_in_volume, view_planes
 

@@ -20,9 +20,10 @@ from pathlib import Path
 import numpy as np
 
 from core.errors import CrossviewError
+from core.layouts import coco17_to_campus14
 from crossview.formats.datasets import UINT64_END, person_id
 from crossview.formats.json_input import DatasetError, read_json, stamp_s
-from crossview.scoring.pose import PCP_ALPHA, PCP_BONE_GROUPS, coco17_to_campus14, match_nearest, pcp_bones
+from crossview.scoring.pose import PCP_ALPHA, PCP_BONE_GROUPS, match_nearest, pcp_bones
 
 CAMPUS_TEST_FRAMES = tuple(range(350, 471)) + tuple(range(650, 751))
 SHELF_TEST_FRAMES = tuple(range(300, 600))

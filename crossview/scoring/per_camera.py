@@ -32,6 +32,7 @@ import numpy as np
 
 from core.boxes import box_iou, keypoint_boxes
 from core.errors import CrossviewError
+from core.records import CameraFrame
 from core.types import Camera, Frame
 from crossview.scoring.association import (
     may_project,
@@ -42,7 +43,6 @@ from crossview.scoring.association import (
     stamp_key,
 )
 from crossview.scoring.identity import identity_scores
-from sim.types import CameraFrame
 from tracker.types import TrackerOutput
 
 logger = logging.getLogger(__name__)

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from core.head import HeadPoints
+from core.layouts import coco17_to_campus14
 from core.types import CAMPUS14, COCO17, Skeleton
 
 PCP_ALPHA = 0.5
@@ -30,13 +31,6 @@ PCK_THRESHOLDS_M = (0.05, 0.10, 0.15)
 MPJPE_MATCH_MAX_M = 0.5
 """A true person enters MPJPE only when its nearest estimate lies within this mean joint error (metres),
 so that a missed person does not add the distance to somebody else (the VoxelPose convention)."""
-
-# COCO-17 joints that give the first 12 Campus-14 joints, in Campus order (evaluate.py's coco2shelf).
-_COCO_TO_CAMPUS12 = np.array([16, 14, 12, 11, 13, 15, 10, 8, 6, 5, 7, 9])
-# Per-axis factors that place bottom-head and top-head on the ray from the mid-shoulders to the nose
-# (evaluate.py's coco2shelf3D; they are the protocol, not a choice of ours).
-_BOTTOM_HEAD_FACTORS = np.array([0.3, 0.4, 0.6])
-_TOP_HEAD_FACTORS = np.array([0.78, 0.5, 1.5])
 
 # The ten checked bones of the 14-joint layout; the last one (torso) runs from the mid-hip (joints 2, 3)
 # to the bottom of the head (12) and is built in `pcp_bones`.
@@ -54,38 +48,6 @@ PCP_BONE_GROUPS: OrderedDict[str, tuple[int, ...]] = OrderedDict(
 )
 """Bone groups as indices into the (10,) result of `pcp_bones`, as in evaluate.py's table."""
 
-
-
-def coco17_to_campus14(poses: np.ndarray, head: HeadPoints | None = None) -> np.ndarray:
-    """Maps COCO-17 poses to the 14-joint Campus/Shelf layout exactly as the dataset's evaluate.py does, or
-    with the head joints on the head itself.
-
-    The head joints do not exist in COCO-17: evaluate.py places bottom-head and top-head on the line from the
-    mid-shoulders to the nose with fixed per-axis factors (z up in the Campus world frame). With `head`, they
-    are its points of the rigid head of the nose and ears instead. A NaN input joint gives NaN in every output
-    joint built from it.
-
-    Args:
-        poses: (..., 17, 3) joint positions.
-        head: None: evaluate.py's head joints (the protocol's, for estimates); else the bottom and the top of
-            the head in the nose-ear frame (a simulated truth scored as the datasets annotate theirs).
-
-    Returns:
-        (..., 14, 3) joint positions in the Campus order.
-    """
-    poses = np.asarray(poses, dtype=np.float64)
-    if poses.shape[-2:] != (17, 3):
-        raise ValueError(f"coco17_to_campus14: expected (..., 17, 3), got {poses.shape}")
-    out = np.empty(poses.shape[:-2] + (14, 3))
-    out[..., :12, :] = poses[..., _COCO_TO_CAMPUS12, :]
-    if head is not None:
-        out[..., 12:, :] = head.locate(poses)
-        return out
-    mid_shoulder = (out[..., 8, :] + out[..., 9, :]) / 2
-    to_nose = poses[..., 0, :] - mid_shoulder
-    out[..., 13, :] = mid_shoulder + to_nose * _TOP_HEAD_FACTORS
-    out[..., 12, :] = mid_shoulder + to_nose * _BOTTOM_HEAD_FACTORS
-    return out
 
 
 def pcp_bones(estimate14: np.ndarray, truth14: np.ndarray, alpha: float = PCP_ALPHA) -> np.ndarray:

@@ -23,8 +23,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from core.projection import in_image_many_kernel, monotonic_radius
+from core.records import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
 from core.types import COCO17, Camera, Skeleton
-from sim.cameras import in_image_many_kernel, monotonic_radius
 from sim.sensing.draws import (
     FRAGMENTS_COCO17,
     MIN_SCORE,
@@ -43,7 +44,6 @@ from sim.sensing.draws import (
 from sim.sensing.offsets import JointOffsets
 from sim.sensing.profiles import DetectorConfig
 from sim.sensing.rays import RAY_GEOM_TYPES, cast_keypoint_rays, count_views
-from sim.types import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
 
 _SCENE_ROWS = 64  # ticks per buffer of `Detector.scene_now` (about 7 blocks of store_layout2)
 

@@ -9,9 +9,9 @@ from typing import NamedTuple
 import numpy as np
 
 from core.jit import jit
+from core.records import DetectionEffect, DetectionRows
 from core.types import Skeleton
 from sim.sensing.profiles import JOINT_GROUPS
-from sim.types import DetectionEffect, DetectionRows
 
 # Body parts a fragment may keep (COCO-17 indices), each fewer than 6 joints.
 FRAGMENTS_COCO17 = (

@@ -12,6 +12,7 @@ import pytest
 
 from crossview import pipeline
 from crossview.cli import EXIT_BAD_INPUT, main
+from sim.scenario import from_source_text
 
 SCORE_KEYS = [
     "scenario", "seed", "num_cameras", "num_people", "duration_s", "pcp", "mpjpe_mm", "pck_100mm", "mota",
@@ -107,9 +108,9 @@ def test_camera_grid_fits_the_floor(count, expected):
 def test_the_watched_floor_is_the_floor_box_footprint_walls_included():
     import numpy as np
 
+    from core.records import Box, BoxKind
     from sim.scenario import load
     from sim.store import StoreGeometry
-    from sim.types import Box, BoxKind
 
     store = StoreGeometry(load("store_layout1").store)
     x0, y0, x1, y1 = pipeline.watched_floor(store.boxes)
@@ -234,6 +235,7 @@ def test_the_truth_head_is_the_one_the_recorded_scenario_names(store_recording, 
     # ... the stores keep the default, and a converted dataset is scored on its own annotations.
     assert pipeline.truth_head(recording.open_recording(store_recording)) is None
     converted = tmp_path / "campus_real.mcap"
-    datasets.convert(Path(__file__).resolve().parents[1] / "data" / "campus", converted)
+    datasets.convert(Path(__file__).resolve().parents[1] / "data" / "campus", converted,
+                     check_scenario=from_source_text)
     real = recording.open_recording(converted)
     assert real.skeleton.name == "campus14" and pipeline.truth_head(real) is None

@@ -1,12 +1,12 @@
-"""OpenCV's camera model as a plain vectorised numpy formula: the reference `sim.cameras.in_image_many_kernel`
+"""OpenCV's camera model as a plain vectorised numpy formula: the reference `core.projection.in_image_many_kernel`
 is tested against, bit for bit (and this against `cv2.projectPoints`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
+from core.projection import MIN_DEPTH_M, monotonic_radius
 from core.types import Camera
-from sim.cameras import MIN_DEPTH_M, monotonic_radius
 
 
 def _distort(xn: np.ndarray, yn: np.ndarray, dist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -51,7 +51,7 @@ def _project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`sim.cameras.in_image` as numpy: pixels, and in front, within the monotonic radius and inside the image."""
+    """`core.projection.in_image` as numpy: pixels, and in front, within the monotonic radius and inside the image."""
     px, in_front, r = _project(camera, points_world)
     with np.errstate(invalid="ignore"):
         inside = (

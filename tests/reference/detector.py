@@ -3,8 +3,8 @@ to get a frame (the simulation runs the same steps block by block)."""
 
 from __future__ import annotations
 
+from core.records import CameraFrame, Capture, PoseTruth
 from sim.sensing.detector import Detector
-from sim.types import CameraFrame, Capture, PoseTruth
 
 
 def detect_many(detector: Detector, world, requests: list[Capture]) -> list[CameraFrame]:

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.records import CameraFrame, PoseTruth
 from crossview.recording.schemas import CameraFrameMsg
-from sim.types import CameraFrame, PoseTruth
 
 
 def pose_truth_to_msg(truth: PoseTruth, msg) -> None:

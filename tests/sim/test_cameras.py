@@ -13,17 +13,10 @@ import numpy as np
 import pytest
 
 from core.errors import ScenarioError
+from core.projection import in_image
 from core.types import Camera
 from sim import scenario as scenario_mod
-from sim.cameras import (
-    CalibrationFormat,
-    CameraPlacement,
-    build_rig,
-    in_image,
-    load_panoptic,
-    look_at,
-    mujoco_camera_pose,
-)
+from sim.cameras import CalibrationFormat, CameraPlacement, build_rig, load_panoptic, look_at, mujoco_camera_pose
 from tests.conftest import render_env
 from tests.reference import cameras as reference
 
@@ -370,7 +363,7 @@ def test_bad_dataset_calibrations_are_scenario_errors_naming_file_and_key(tmp_pa
 
 def _stacked_rig(rig) -> tuple:
     """R, t, K, dist, size, monotonic radius of every camera, stacked as the compiled projection takes them."""
-    from sim.cameras import monotonic_radius
+    from core.projection import monotonic_radius
 
     return (np.array([c.R_cam_from_world for c in rig]), np.array([c.t_cam_from_world for c in rig]),
             np.array([c.K for c in rig]), np.array([c.dist for c in rig]),
@@ -382,7 +375,7 @@ def _stacked_rig(rig) -> tuple:
 def test_in_image_many_agrees_with_in_image_per_camera(layout):
     """The compiled projection of a block's captures gives what `in_image` (numpy) gives camera by camera,
     bit for bit, for cameras straight down (store_layout2) and tilted (store_layout1)."""
-    from sim.cameras import in_image_many
+    from core.projection import in_image_many
 
     rig = build_rig(scenario_mod.load(layout), np.random.default_rng(0))
     rng = np.random.default_rng(2)
@@ -401,7 +394,7 @@ def test_in_image_many_agrees_with_in_image_per_camera(layout):
 def test_in_image_many_kernel_agrees_with_in_image_on_single_skeletons():
     """The detector projects each phantom skeleton (17 points, one camera) with the compiled kernel: the
     pixels and flags are `in_image`'s bit for bit, whatever the camera's lens terms."""
-    from sim.cameras import in_image_many_kernel
+    from core.projection import in_image_many_kernel
     from sim.sensing.draws import TEMPLATE_COCO17 as _TEMPLATE_COCO17
 
     for layout in ("store_layout2", "store_layout1"):

@@ -162,7 +162,7 @@ def test_same_seed_same_gestures_other_seed_other():
 
 
 def test_limb_speeds_are_distances_over_the_span_and_split_by_activity():
-    from sim.types import PoseTruth
+    from core.records import PoseTruth
 
     speeds = LimbSpeeds(50.0)
     velocity = np.array([0.3, -0.4, 0.0])  # 0.5 m/s

@@ -4,8 +4,9 @@ themselves are checked in tests/sim/test_cameras.py and tests/crossview/pictures
 import numpy as np
 import pytest
 
+from core.projection import in_image
 from sim import render
-from sim.cameras import build_rig, in_image
+from sim.cameras import build_rig
 from sim.render import RenderingUnavailable, choose_backend, lens_map
 from tests.sim.test_cameras import _scenario
 

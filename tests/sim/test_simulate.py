@@ -7,9 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from core.records import CameraFrame, PoseTruth
 from sim import scenario as scenario_mod
 from sim.simulate import Simulation
-from sim.types import CameraFrame, PoseTruth
 
 
 @pytest.fixture(scope="module")
@@ -65,7 +65,7 @@ def test_a_second_pass_replays_the_same_events(small):
 
 
 def test_frames_project_the_poses_at_capture(small):
-    from sim.cameras import in_image
+    from core.projection import in_image
 
     sim = Simulation(dataclasses.replace(small, detector=dataclasses.replace(small.detector, profile=type(
         small.detector.profile).IDEAL)), seed=2)

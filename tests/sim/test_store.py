@@ -9,9 +9,9 @@ import scipy.sparse
 import scipy.sparse.csgraph
 
 from core.errors import ScenarioError
+from core.records import BoxKind
 from sim import scenario as sc
 from sim.store import ShelfConfig, StoreConfig, StoreGeometry, _distance_to_blocked, rect_distance
-from sim.types import BoxKind
 from tests.reference import store as store_reference
 
 SHIPPED = ("store_layout1", "store_layout2", "supermarket")

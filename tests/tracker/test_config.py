@@ -49,6 +49,22 @@ def test_out_of_range_values_name_the_field(field, value):
         TrackerConfig(**{field: value})
 
 
+def test_every_bad_value_of_every_field_is_a_config_error():
+    """One class for every bad value, raised where it is checked: text, null or a list in any field is a
+    ConfigError naming the field (score_threshold and ghost_min_seen_ratio once raised a TypeError)."""
+    for f in dataclasses.fields(TrackerConfig):
+        for bad in ("x", None, [1]):
+            with pytest.raises(ConfigError, match=f.name):
+                TrackerConfig(**{f.name: bad})
+
+
+def test_a_toml_value_of_the_wrong_type_is_a_config_error_naming_the_file(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text('score_threshold = "high"\n')
+    with pytest.raises(ConfigError, match=r"bad\.toml: TrackerConfig\.score_threshold: 'high' is not a number"):
+        TrackerConfig.from_toml(path)
+
+
 def test_toml_overrides_a_preset(tmp_path):
     path = tmp_path / "t.toml"
     path.write_text('alpha_3d_m = 0.3\ntriangulation = "paper"\nrow_norm = "row"\n')

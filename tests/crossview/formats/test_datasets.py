@@ -6,12 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.layouts import coco17_to_campus14
 from core.types import CAMPUS14, Frame
 from crossview import pipeline, recording
 from crossview.cli import main
 from crossview.formats.datasets import (
     DatasetError,
-    campus14_to_coco17,
     convert,
     load_cameras,
     load_frames,
@@ -20,7 +20,7 @@ from crossview.formats.datasets import (
     write_result_3d,
 )
 from crossview.scoring.campus import evaluate
-from crossview.scoring.pose import coco17_to_campus14
+from sim.scenario import from_source_text
 from tracker.config import TrackerConfig
 from tracker.geometry import project
 from tracker.tracker import Tracker
@@ -110,18 +110,11 @@ def test_result_file_round_trips_through_the_published_mapping(tmp_path):
     assert not np.any(np.all(written == 0.0, axis=-1))
 
 
-def test_campus14_to_coco17_keeps_a_head_on_the_evaluated_line():
-    # A head that lies where evaluate.py's factors put it is reproduced exactly.
-    coco = np.random.default_rng(1).normal(size=(17, 3))
-    campus = coco17_to_campus14(coco)
-    np.testing.assert_allclose(coco17_to_campus14(campus14_to_coco17(campus)), campus, atol=1e-9)
-
-
 def test_convert_writes_a_recording_the_tracker_can_read(tmp_path):
     from crossview import recording
 
     root = _tiny_dataset(tmp_path / "d")
-    assert convert(root, tmp_path / "d.mcap") == 2
+    assert convert(root, tmp_path / "d.mcap", check_scenario=from_source_text) == 2
     rec = recording.open_recording(tmp_path / "d.mcap")
     assert rec.header.skeleton_name == "campus14"
     frames = list(rec.frames(with_poses=True))
@@ -174,9 +167,9 @@ def test_campus_pcp_from_ground_truth_2d_joints(campus, tmp_path):
 
 def _typical_detector(frames, cams, seed):
     """The simulator's `typical` detector errors (noise, misses, gross errors, swaps) on the true 2D joints."""
+    from core.records import Capture, PoseTruth
     from sim.sensing.detector import Detector
     from sim.sensing.profiles import DetectorConfig
-    from sim.types import Capture, PoseTruth
 
     detector = Detector(DetectorConfig(), list(cams), np.random.default_rng(seed), skeleton=CAMPUS14)
     index = {c.name: i for i, c in enumerate(cams)}

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from crossview.formats import datasets
 from crossview.formats.datasets import DatasetError
+from sim.scenario import from_source_text
 from tests.fuzz import FUZZ
 
 # A small valid dataset in the published layout: two cameras, three frames of 14 joints, one truth entry.
@@ -135,7 +136,7 @@ def test_fuzz_any_openpose_folder_converts_or_is_refused_naming_the_file(files, 
             (dataset / name).write_text(json.dumps(doc), encoding="utf-8")
         out = folder / "out.mcap"
         try:
-            written = datasets.convert(dataset, out, fps=fps)
+            written = datasets.convert(dataset, out, fps=fps, check_scenario=from_source_text)
         except CrossviewError as e:
             assert str(e).startswith(str(dataset)) and "\n" not in str(e), e
             assert sorted(p.name for p in folder.iterdir()) == ["op"], e

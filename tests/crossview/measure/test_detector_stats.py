@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.records import CameraFrame, DetectionTruth, PoseTruth
 from core.types import CAMPUS14, COCO17, Camera, Frame
 from crossview import pipeline
 from crossview.cli import main
@@ -23,7 +24,7 @@ from crossview.measure.detector_stats import (
 )
 from sim import scenario as scenario_mod
 from sim.cameras import look_at
-from sim.types import CameraFrame, DetectionTruth, PoseTruth
+from sim.scenario import from_source_text
 
 CAMPUS = Path(__file__).resolve().parents[2] / "data" / "campus"
 J = COCO17.num_joints
@@ -218,7 +219,7 @@ def test_a_joint_offset_shared_by_every_camera_shows_in_3d_not_in_cross_view_agr
 def campus_recording(tmp_path_factory) -> Path:
     """The Campus fixture converted: its ground-truth 2D joints as the detections, its 3D truth."""
     out = tmp_path_factory.mktemp("campus") / "campus.mcap"
-    datasets.convert(CAMPUS, out)
+    datasets.convert(CAMPUS, out, check_scenario=from_source_text)
     return out
 
 
@@ -249,7 +250,7 @@ def test_coco17_detections_beside_the_published_14_joint_truth_are_measured_alik
             pose.update(points_2d=points, scores=scores, id=-1)
     (folder / "detection.json").write_text(json.dumps(data))
     out = tmp_path / "coco.mcap"
-    datasets.convert(folder, out)
+    datasets.convert(folder, out, check_scenario=from_source_text)
     coco, campus = recording_detector_stats(out), recording_detector_stats(campus_recording)
     for key in ("matched_detections", "person_views", "joints_measured", "false_positive_people_per_frame"):
         assert coco[key] == campus[key], key

@@ -2,9 +2,10 @@
 
 import numpy as np
 
+from core.projection import in_image
 from crossview.pictures.layout import floor_footprint
 from sim import scenario as scenario_mod
-from sim.cameras import build_rig, in_image
+from sim.cameras import build_rig
 from sim.rng import child_rng
 
 

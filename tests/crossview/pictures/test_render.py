@@ -11,10 +11,10 @@ import sys
 import numpy as np
 import pytest
 
+from core.projection import in_image
 from crossview import pipeline, recording
 from crossview.cli import EXIT_BAD_INPUT, main
 from sim import scenario as scenario_mod
-from sim.cameras import in_image
 from sim.rng import child_rng
 from tests.conftest import render_env
 from tests.crossview.test_cli import _run_bad
@@ -63,7 +63,7 @@ choose_backend(sys.argv[3])
 import mujoco
 import numpy as np
 from crossview import recording
-from crossview.pictures.render import scene_of
+from crossview.pictures.layout.render import scene_of
 from sim import humanoid
 
 rec = recording.open_recording(sys.argv[1])
@@ -261,7 +261,7 @@ from sim.render import choose_backend
 choose_backend(sys.argv[3])
 import cv2
 from crossview import recording
-from crossview.pictures.render import scene_of
+from crossview.pictures.layout.render import scene_of
 from sim.render import IMAGE_MULTISAMPLES, JPEG_QUALITY
 
 rec = recording.open_recording(sys.argv[1])

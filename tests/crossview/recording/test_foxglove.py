@@ -11,10 +11,10 @@ import pytest
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from scipy.spatial.transform import Rotation
 
+from core.records import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
 from core.types import COCO17, Camera, Frame
 from crossview import recording
 from crossview.recording import foxglove
-from sim.types import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
 
 LAYOUT = Path(__file__).resolve().parents[3] / "crossview" / "foxglove" / "layout.json"

@@ -9,10 +9,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from core.errors import CrossviewError
+from core.records import Box, BoxKind, CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from core.types import COCO17, Camera, Frame
 from crossview import recording
 from crossview.recording import (
@@ -27,7 +29,6 @@ from crossview.recording import (
     open_tracks,
     reader,
 )
-from sim.types import Box, BoxKind, CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from tests.reference import recording as reference
 from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
 
@@ -406,6 +407,38 @@ def test_corrupt_chunk_fails_the_crc_check(tmp_path, world):
     with pytest.raises(RecordingError, match=r"bad\.mcap: corrupt"):
         rec = open_recording(bad)
         list(rec.events())
+
+
+@pytest.mark.parametrize("bug", [TypeError, ValueError, KeyError, RuntimeError])
+def test_a_bug_inside_the_reader_is_not_reported_as_corrupt_data(tmp_path, world, monkeypatch, bug):
+    """Only the mcap library's documented errors, and the damage the reader finds itself, become a
+    RecordingError: any other exception out of the reading code is a bug and keeps its class (these four were
+    once all reported as "corrupt MCAP data")."""
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events)
+    assert len(list(open_recording(path).events())) == len(events)
+
+    def broken(self, n=-1):
+        raise bug("a bug in the reader")
+
+    monkeypatch.setattr(reader.FileWithinSize, "read", broken)
+    with pytest.raises(bug, match="a bug in the reader") as raised:
+        open_recording(path)
+    assert not isinstance(raised.value, RecordingError)
+
+
+def test_a_corrupt_offset_or_a_short_record_is_corrupt_data_not_a_crash(tmp_path, world):
+    """A damaged length or offset ends a read short (mcap's `EndOfFile`, raised where the file wrapper sees it)."""
+    cameras, events = world
+    path = write_recording(tmp_path / "rec.mcap", cameras, events)
+    with open(path, "rb") as f:
+        within = reader.FileWithinSize(f, path.stat().st_size)
+        with pytest.raises(EndOfFile):
+            within.seek(2 ** 70)
+        within.seek(-4, 2)
+        with pytest.raises(EndOfFile):
+            within.read(8)
+    assert reader.describe_read_error(EndOfFile()) == "unexpected end of file"
 
 
 def test_newer_format_version_is_refused(tmp_path, world):

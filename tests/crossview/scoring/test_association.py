@@ -4,6 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
+from core.records import CameraFrame, DetectionTruth, PoseTruth
 from core.types import Camera, Frame
 from crossview.scoring import score
 from crossview.scoring.association import (
@@ -15,7 +16,6 @@ from crossview.scoring.association import (
     projection_volume,
 )
 from crossview.scoring.identity import body_roots
-from sim.types import CameraFrame, DetectionTruth, PoseTruth
 from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
 
 

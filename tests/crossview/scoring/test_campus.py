@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.layouts import coco17_to_campus14
 from crossview.formats.datasets import DatasetError, write_result_3d
 from crossview.scoring.campus import DatasetLayoutError, evaluate, format_evaluation
-from crossview.scoring.pose import coco17_to_campus14
 from tracker.types import Target, TrackerOutput
 
 CAMPUS = Path(__file__).resolve().parents[2] / "data" / "campus"  # the fixture cut from the dataset

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from core.errors import CrossviewError
+from core.records import CameraFrame, DetectionTruth
 from core.types import Camera, Frame
 from crossview.scoring.association import pose_boxes, stamp_key
 from crossview.scoring.per_camera import (
@@ -20,7 +21,6 @@ from crossview.scoring.per_camera import (
     joint_distances,
     projected_2d_scores,
 )
-from sim.types import CameraFrame, DetectionTruth
 from tracker.types import Target, TrackerOutput
 
 J = 17

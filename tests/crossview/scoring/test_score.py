@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
+from core.layouts import coco17_to_campus14
+from core.records import PoseTruth
 from core.types import CAMPUS14
 from crossview.scoring import JSON_KEYS, ScoringError, TruthTimeline, score
-from crossview.scoring.pose import coco17_to_campus14
-from sim.types import PoseTruth
 from tracker.types import Target, TrackerOutput
 
 TEMPLATE = np.random.default_rng(3).normal(0.0, 0.25, (17, 3)) + [0.0, 0.0, 1.0]
@@ -59,9 +59,9 @@ def test_truth_between_samples_follows_the_one_rule_arrivals_and_departures_incl
 def test_the_scored_truth_at_a_capture_time_is_what_the_camera_saw():
     """Scoring and the simulator share the truth-at-t rule: at each frame's true capture time, the truth a
     score compares with is, bit for bit, the poses the frame was made from (`poses_at_capture`)."""
+    from core.records import CameraFrame
     from sim.scenario import load
     from sim.simulate import Simulation
-    from sim.types import CameraFrame
 
     scenario = load("store_layout1", {"crowd.people": 3, "cameras.rows": 2, "cameras.cols": 2})
     events = list(Simulation(scenario, seed=3, worker_process=False).events(1.0))

@@ -7,15 +7,16 @@ import dataclasses
 import numpy as np
 import pytest
 
+from core.projection import in_image
+from core.records import Capture, DetectionEffect, PoseTruth
 from core.types import COCO17
-from sim.cameras import CameraPlacement, CameraRigConfig, build_rig, in_image
+from sim.cameras import CameraPlacement, CameraRigConfig, build_rig
 from sim.scenario import Scenario
 from sim.sensing.detector import Detector
 from sim.sensing.draws import TEMPLATE_COCO17 as _TEMPLATE_COCO17
 from sim.sensing.draws import person_size_px
 from sim.sensing.profiles import DetectorConfig, DetectorProfile
 from sim.store import StoreConfig
-from sim.types import Capture, DetectionEffect, PoseTruth
 from tests.reference.detector import detect
 
 # Bodies of the stand-in person (COCO-17 keypoint -> body): head, torso, arms, legs.

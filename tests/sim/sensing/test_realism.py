@@ -8,13 +8,13 @@ import cv2
 import numpy as np
 import pytest
 
+from core.records import PoseTruth
 from core.types import COCO17
 from sim.cameras import CameraPlacement
 from sim.sensing.detector import Detector
 from sim.sensing.draws import TEMPLATE_COCO17
 from sim.sensing.offsets import JointOffsets
 from sim.sensing.profiles import PROFILES, DetectorConfig, DetectorProfile
-from sim.types import PoseTruth
 from tests.reference.detector import detect
 from tests.sim.sensing.test_detector import BoxWorld, _cameras, _frames, _only
 

@@ -16,7 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from sim.types import Capture, DetectionRows, PoseTruth
+from core.records import Capture, DetectionRows, PoseTruth
 
 # Order of events that share a log time: the truth first, then frames by camera index (then capture time).
 _TRUTH_KIND, _FRAME_KIND = 0, 1

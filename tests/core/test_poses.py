@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.poses import interpolate_poses, interpolate_ticks
-from sim.types import PoseTruth
+from core.poses import interpolate_poses, interpolate_ticks
+from core.records import PoseTruth
 
 
 def test_a_capture_at_a_tick_time_gets_that_ticks_poses_exactly():

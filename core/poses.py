@@ -9,8 +9,8 @@ import math
 import numpy as np
 
 from core.jit import jit
+from core.records import PoseTruth
 from core.truth import truth_between
-from sim.types import PoseTruth
 
 
 def interpolate_poses(before: PoseTruth | None, after: PoseTruth | None, t_s: float) -> PoseTruth:
