@@ -14,15 +14,13 @@ import functools
 import json
 import math
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-from llvmlite import ir as llvm_ir
-from numba import types
-from numba.extending import intrinsic
 
 from core.errors import ScenarioError
-from core.jit import jit
+from core.jit import intrinsic, jit, llvm_ir, types
 from core.types import MAX_IMAGE_PX as MAX_CALIBRATION_IMAGE_PX
 from core.types import Camera
 from sim.config import bounded, check_ranges
@@ -359,7 +357,14 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
     return px, inside
 
 
-@intrinsic
+def _plain_fma(a, b, c):
+    """a * b + c rounded once, in Python: exact rational arithmetic, then one rounding."""
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+        return a * b + c
+    return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+
+@intrinsic(plain=_plain_fma)
 def _fma(typingctx, a, b, c):
     """a * b + c rounded once (LLVM's fma intrinsic), as the BLAS kernels behind numpy's matmul compute."""
     signature = types.float64(types.float64, types.float64, types.float64)
