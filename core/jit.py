@@ -27,11 +27,7 @@ MODE_ENV = "CROSSVIEW_JIT"
 PLAIN_ENV = "CROSSVIEW_JIT_PLAIN"
 GROUPS: dict[str, tuple[str, ...]] = {
     # group: the modules whose kernels it holds
-    "sim.store": ("sim.store",),
-    "sim.crowd": ("sim.crowd",),
-    "sim.gestures": ("sim.gestures",),
     "sim.world": ("sim.world",),
-    "sim.poses": ("sim.poses",),
     "sim.cameras": ("sim.cameras",),
     "sim.sensing.rays": ("sim.sensing.rays",),
     "sim.sensing.draws": ("sim.sensing.draws",),

@@ -77,9 +77,10 @@ def test_the_switch_reads_its_environment_variables():
     assert jit._plain_groups({}) == frozenset()
     assert jit._plain_groups({"CROSSVIEW_JIT": "on"}) == frozenset()
     assert jit._plain_groups({"CROSSVIEW_JIT": "off"}) == frozenset(jit.GROUPS)
-    assert jit._plain_groups({"CROSSVIEW_JIT_PLAIN": " sim.crowd,crossview.wire ,"}) == {"sim.crowd", "crossview.wire"}
+    listed = {"CROSSVIEW_JIT_PLAIN": " sim.cameras,crossview.wire ,"}
+    assert jit._plain_groups(listed) == {"sim.cameras", "crossview.wire"}
     with pytest.raises(ConfigError, match=r"^CROSSVIEW_JIT_PLAIN: unknown kernel group 'sim.nope'; groups are sim"):
-        jit._plain_groups({"CROSSVIEW_JIT_PLAIN": "sim.crowd,sim.nope"})
+        jit._plain_groups({"CROSSVIEW_JIT_PLAIN": "sim.cameras,sim.nope"})
     with pytest.raises(ConfigError, match=r"^CROSSVIEW_JIT='fast': must be on .* or off"):
         jit._plain_groups({"CROSSVIEW_JIT": "fast"})
 
