@@ -35,8 +35,6 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "tracker.geometry": ("tracker.geometry",),
     "tracker.visibility": ("tracker.visibility",),
     "tracker.affinity": ("tracker.affinity",),
-    "tracker.initialization": ("tracker.initialization",),
-    "tracker.lifecycle": ("tracker.lifecycle",),
     # the frame's kernels call the body's and triangulation's, which call `sort_prefix` (below)
     "tracker.kernels": ("tracker.kernels", "tracker.body", "tracker.triangulation", "core.jit"),
 }
