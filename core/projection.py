@@ -7,13 +7,11 @@ from __future__ import annotations
 
 import functools
 import math
+from fractions import Fraction
 
 import numpy as np
-from llvmlite import ir as llvm_ir
-from numba import types
-from numba.extending import intrinsic
 
-from core.jit import jit
+from core.jit import intrinsic, jit, llvm_ir, types
 from core.types import Camera
 
 # Points closer than this in front of the camera plane count as behind it (their projection blows up).
@@ -88,7 +86,14 @@ def in_image_many(R: np.ndarray, t: np.ndarray, K: np.ndarray, dist: np.ndarray,
     return px, inside
 
 
-@intrinsic
+def _plain_fma(a, b, c):
+    """a * b + c rounded once, in Python: exact rational arithmetic, then one rounding."""
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+        return a * b + c
+    return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+
+@intrinsic(plain=_plain_fma)
 def _fma(typingctx, a, b, c):
     """a * b + c rounded once (LLVM's fma intrinsic), as the BLAS kernels behind numpy's matmul compute."""
     signature = types.float64(types.float64, types.float64, types.float64)

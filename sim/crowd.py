@@ -27,11 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.errors import ScenarioError
-from core.jit import jit
 from sim.config import bounded, check_ranges
 from sim.gestures import Gestures
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
-from sim.store import StoreGeometry, astar, segment_free
+from sim.store import StoreGeometry
 from sim.types import Activity
 
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
@@ -235,7 +234,6 @@ class Crowd:
         self.agents = [_Agent() for _ in range(S)]
         self._spots = store.browse_spots()
         self._obstacles = store.obstacle_arrays()
-        _warm_up()
         checkout = [o for o in store.obstacles if o.key == "store.checkout_m"]
         self._checkout_spots = []
         self._checkout_top = checkout[0].height if checkout else 0.0
@@ -589,10 +587,10 @@ class Crowd:
         return np.array([a.activity for a in self.agents], dtype=np.int64)
 
 
-# -- compiled kernels (plain floats and loops: a few dozen people make numpy's per-call cost dominate) ------
+# -- kernels (plain floats and loops: a few dozen people make numpy's per-call cost dominate; compiled, they
+# made no whole command 1.3x faster: docs/benchmarks.md, "Kernel ledger") ---------------------------------
 
 
-@jit
 def _obstacle_distance(x, y, center, half, cos, sin):
     """Distance from the point (x, y) to the nearest footprint (inf without any); as `rect_distance`."""
     best = np.inf
@@ -604,7 +602,6 @@ def _obstacle_distance(x, y, center, half, cos, sin):
     return best
 
 
-@jit
 def _steer_kernel(pos, want, vel, active, walking, speed_pref, center, half, cos, sin):
     """In place: each active person's wish want (S, 2) steered off predicted close passes with the other
     active people (walkers only: time to closest approach against everybody's current motion, plus a
@@ -664,7 +661,6 @@ def _steer_kernel(pos, want, vel, active, walking, speed_pref, center, half, cos
         want[i, 0], want[i, 1] = wx0 * scale, wy0 * scale
 
 
-@jit
 def _violations_kernel(q, lo, hi, center, half, cos, sin, bad):
     """bad (n,): whether each point of q (n, 2) is outside its wall bounds lo/hi (n, 2), closer than
     SHELF_CLEARANCE_M to a footprint, or closer than SEPARATION_M to another point."""
@@ -683,7 +679,6 @@ def _violations_kernel(q, lo, hi, center, half, cos, sin, bad):
         bad[i] = b
 
 
-@jit
 def _project_kernel(p, lo, hi, center, half, cos, sin):
     """Moves the points p (n, 2) in place toward the hard constraints: up to three rounds of pushing
     pairs apart to SEPARATION_M + PROJECTION_MARGIN_M (half each), pushing points out of every footprint
@@ -740,7 +735,6 @@ def _project_kernel(p, lo, hi, center, half, cos, sin):
             p[i, 1] = min(max(p[i, 1], lo[i, 1]), hi[i, 1])
 
 
-@jit
 def _accelerate_kernel(want, vel, pos, active, new):
     """new (S, 2): where everybody active would be after STEP_S moving from pos toward the wished velocity
     want (S, 2) with acceleration at most MAX_ACCEL_M_S2 from vel; the inactive stay at pos."""
@@ -755,7 +749,6 @@ def _accelerate_kernel(want, vel, pos, active, new):
         new[s, 1] = pos[s, 1] + (vel[s, 1] + dvy * scale) * dt
 
 
-@jit
 def _turn_and_gait_kernel(old, new, want_heading, active, height, vel, heading, omega, phase, stride, feet, liftoff,
                           swing_len):
     """In place: vel (S, 2) from the step old -> new (S, 2); the heading (S,) turns, at most MAX_TURN_RAD_S,
@@ -774,7 +767,6 @@ def _turn_and_gait_kernel(old, new, want_heading, active, height, vel, heading, 
     _gait_kernel(speed, omega, height, active, heading, new, vel, phase, stride, feet, liftoff, swing_len)
 
 
-@jit
 def _gait_kernel(speed, omega, height, active, heading, pos, vel, phase, stride, feet, liftoff, swing_len):
     """Advances the gait phase (S,) and moves the feet (S, 2, 2) in place.
 
@@ -816,25 +808,3 @@ def _gait_kernel(speed, omega, height, active, heading, pos, vel, phase, stride,
                 feet[s, leg, 0] = pos[s, 0] + c * back - sn * lateral
                 feet[s, leg, 1] = pos[s, 1] + sn * back + c * lateral
 
-
-_WARM = []
-
-
-def _warm_up():
-    """Loads (or, the first time on a machine, compiles) the kernels for the argument types the steps use,
-    so that the first steps run as fast as the others."""
-    if _WARM:
-        return
-    pts, obs = np.zeros((2, 2)), (np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), np.zeros(1))
-    flags = np.zeros(2, dtype=bool)
-    _steer_kernel(pts, pts.copy(), pts, flags, flags, np.ones(2), *obs)
-    _violations_kernel(pts, pts, pts, *obs, flags.copy())
-    _project_kernel(pts.copy(), pts, pts, *obs)
-    one = np.ones(2)
-    _accelerate_kernel(pts, pts, pts, flags, np.empty((2, 2)))
-    _turn_and_gait_kernel(pts, pts, one, flags, one, pts.copy(), one.copy(), one.copy(), np.zeros(2), np.zeros(2),
-                          np.zeros((2, 2, 2)), np.zeros((2, 2, 2)), np.zeros((2, 2)))
-    grid = np.ones((2, 2), dtype=bool)
-    segment_free(grid, 0.05, 0.05, 0.15, 0.15, 0.1)
-    astar(grid, 0, 3, 0.1)
-    _WARM.append(True)

@@ -31,7 +31,6 @@ from typing import NamedTuple
 
 import numpy as np
 
-from core.jit import jit
 from sim import humanoid as hm
 from sim.types import Activity
 
@@ -437,7 +436,6 @@ class Gestures:
         return [Segment(np.array([shift]), rng.uniform(*SHIFT_MOVE_S), rng.uniform(*SHIFT_HOLD_S), zero, zero, None)]
 
 
-@jit
 def _evaluate(t, dt, frm, to, t0, t1, a_frm, a_to, b_frm, b_to, freq, phase, base, amp_a, amp_b, out):
     """Every slot's channels at time t: per channel a minimum-jerk move from frm to to (S, K) over [t0, t1]
     (the weight e = 10u³ - 15u⁴ + 6u⁵ of u, the fraction of the move done), then held, plus the two

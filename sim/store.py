@@ -15,7 +15,6 @@ import cv2
 import numpy as np
 
 from core.errors import ScenarioError
-from core.jit import jit
 from core.records import Box, BoxKind
 from sim.config import bounded, check_ranges
 
@@ -314,7 +313,7 @@ class StoreGeometry:
         return np.sqrt(ox * ox + oy * oy).min(axis=1)
 
     def obstacle_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """The footprints as contiguous arrays for compiled loops: centres (O, 2), half extents (O, 2),
+        """The footprints as contiguous arrays for the crowd's loops: centres (O, 2), half extents (O, 2),
         cos and sin of the yaws (O,)."""
         return tuple(np.ascontiguousarray(a, dtype=float) for a in (self._ob_center, self._ob_half, self._ob_cos,
                                                                      self._ob_sin))
@@ -469,7 +468,6 @@ class StoreGeometry:
         return spots
 
 
-@jit
 def segment_free(free, ax, ay, bx, by, cell):
     """Whether the segment (ax, ay)-(bx, by) stays on the True cells of free (nx, ny), sampled every half cell."""
     dx, dy = bx - ax, by - ay
@@ -483,7 +481,6 @@ def segment_free(free, ax, ay, bx, by, cell):
     return True
 
 
-@jit
 def astar(free, start, goal, cell):
     """(L,) int64 flat cells (i * ny + j) of a shortest 8-connected path over the True cells of free (nx, ny)
     from start to goal, both included; empty if there is none. Edges cost cell or cell * sqrt(2); ties

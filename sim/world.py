@@ -8,10 +8,11 @@ its own forward kinematics of the keypoint chain (a compiled kernel; equal to Mu
 ~1e-15 m); MuJoCo's `mj_kinematics`, which is all `mj_ray` needs to see the bodies where they are, runs
 when `data` is next asked for, so people-only simulation skips it.
 
-Speed: the per-step and per-tick numeric work (posing, keypoints, and in `sim.crowd` steering, hard
-constraints, gait; A* in `sim.store`) runs in numba-compiled loops over plain floats, because with a few
-dozen people numpy's per-call cost dominated. Kernels are compiled once per machine (cached on disk
-under __pycache__) and loaded when the first world is built.
+Speed: the per-tick numeric work (posing, keypoints) runs in numba-compiled loops over plain floats, because
+with a few dozen people numpy's per-call cost dominated; `sim.crowd`'s steering, hard constraints and gait and
+`sim.store`'s A* are the same kind of loops run as plain Python (compiled, they made no whole command 1.3x
+faster: docs/benchmarks.md, "Kernel ledger"). Kernels are compiled once per machine (cached on disk under
+__pycache__) and loaded when the first world is built.
 """
 
 from __future__ import annotations

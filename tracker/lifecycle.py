@@ -13,14 +13,14 @@ States are held as small integer codes in the tracker's arrays; `to_state` maps 
   matched in fewer than `ghost_min_seen_ratio` of the frames of cameras that should see it, or an observed
   body that stayed implausible for `implausible_after_s`).
 
-The rules run per target in compiled loops (the tracker applies them at every camera frame).
+The rules run per target in plain Python loops (the tracker applies them at every camera frame; compiled,
+they made no whole `crossview track` 1.3x faster: docs/benchmarks.md, "Kernel ledger").
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from core.jit import jit
 from tracker.config import TrackerConfig
 from tracker.types import TargetState
 
@@ -55,7 +55,6 @@ def ghosts(expected: np.ndarray, sighted: np.ndarray, state: np.ndarray, implaus
     return out
 
 
-@jit
 def _ghosts(expected, sighted, state, implausible_s, now_s, min_expected, min_seen_ratio, implausible_after_s, out):
     for i in range(state.shape[0]):
         unseen = expected[i] >= min_expected and sighted[i] < min_seen_ratio * expected[i] and state[i] != LOST
@@ -76,7 +75,6 @@ def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: 
     return new
 
 
-@jit
 def _on_time(state, last_update_s, now_s, tentative_timeout_s, lost_after_s, remove_after_s, ghost, new):
     """`on_time` per target (a ghost is removed, unless the lost rule applies to it first)."""
     for i in range(state.shape[0]):
@@ -109,7 +107,6 @@ def on_match(
     return new
 
 
-@jit
 def _on_match(state, born_s, num_updates, now_s, min_updates, min_age_s, has_body, new):
     """`on_match` per target."""
     for i in range(state.shape[0]):

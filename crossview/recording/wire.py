@@ -13,12 +13,12 @@ out when empty; sint64 is zigzag encoded; a message field is written whenever it
 
 from __future__ import annotations
 
-import numpy as np
-from llvmlite import ir as llvm_ir
-from numba import njit, types
-from numba.extending import intrinsic
+import struct
 
-_jit = njit(cache=True, nogil=True, error_model="numpy")
+import numpy as np
+
+from core.jit import intrinsic, llvm_ir, types
+from core.jit import jit as _jit
 
 _VARINT, _FIXED64, _LEN = 0, 1, 2  # wire types
 _POINT2_BYTES = 20  # one Point2 element: tag, length (18), then x and y as fixed64 fields 1 and 2
@@ -49,7 +49,11 @@ def _put_key(out, pos, field, wire_type):
     return _put_varint(out, pos, (field << 3) | wire_type)
 
 
-@intrinsic
+def _plain_bits(value):
+    return struct.unpack("<q", struct.pack("<d", value))[0]
+
+
+@intrinsic(plain=_plain_bits)
 def _bits(typingctx, value):
     """The 64 bits of a number as a float64, as an int64 (a register move: viewing a one-element array, as
     this did before, allocated the array: 40 ns a value)."""
@@ -509,7 +513,11 @@ TARGET_ID, TARGET_STATE, TARGET_STATE_END, TARGET_CODES, TARGET_CODES_END = rang
 """Columns of `tracker_output_arrays`'s target rows: the id, then byte offsets into the message (-1: absent)."""
 
 
-@intrinsic
+def _plain_double(bits):
+    return struct.unpack("<d", struct.pack("<q", bits))[0]
+
+
+@intrinsic(plain=_plain_double)
 def _double(typingctx, bits):
     """The float64 whose 64 bits are the int64 `bits` (`_bits` the other way)."""
     if not isinstance(bits, types.Integer):
@@ -521,7 +529,11 @@ def _double(typingctx, bits):
     return types.float64(bits), codegen
 
 
-@intrinsic
+def _plain_single(bits):
+    return np.float32(struct.unpack("<f", struct.pack("<I", int(bits) & 0xFFFFFFFF))[0])
+
+
+@intrinsic(plain=_plain_single)
 def _single(typingctx, bits):
     """The float32 whose 32 bits are the low 32 bits of the integer `bits`."""
     if not isinstance(bits, types.Integer):
