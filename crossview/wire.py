@@ -1,11 +1,11 @@
 """Protobuf wire bytes of a recording's camera frames and their 2D annotations, written by one numba-compiled
 loop over many frames (`frames_and_annotations`), the one compiled encoder of the recording
-(`crossview.recording.Encoder.frames`): protobuf's own serialisation of the same messages, one Python object
-per annotated point, made `crossview generate` about 1.3 to 1.5 times slower (docs/performance.md). The tests
-decode these bytes with protobuf and compare them with its serialisation of the same messages. Only the
-writer imports this module, so reading a recording never loads numba.
+(`crossview.recording.Encoder.frames`): protobuf's own serialisation of the same messages, one Python
+object per annotated point, made `crossview generate` 1.3 to 1.5 times slower (docs/recording-format.md).
+The tests decode these bytes with protobuf and compare them with its serialisation of the same messages.
+Only the writer imports this module, so reading a recording never loads numba.
 
-proto3 rules kept here as there: a scalar whose value is its default (a double with all bits zero, an
+proto3 rules kept here as protobuf keeps them: a scalar whose value is its default (a double with all bits zero, an
 integer 0, an empty string) is left out; a packed repeated field is one length-delimited run and is left
 out when empty; sint64 is zigzag encoded; a message field is written whenever it is set.
 """

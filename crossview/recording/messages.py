@@ -1,14 +1,14 @@
 """Message bytes: one encoder per message type of the recording's time series (`Encoder`, one per writer) and
 one decoder per message type (protobuf's parser, then arrays).
 
-Every message is what protobuf serialises for it; the one compiled encoder (`crossview.wire`) writes the
-camera frames and their 2D annotations, whose per-point messages made protobuf's own serialisation a third
-of `crossview generate` (docs/performance.md); the others are protobuf's `SerializeToString`."""
+Every message is what protobuf serialises for it. The one compiled encoder (`crossview.wire`) writes the
+camera frames and their 2D annotations: protobuf's own serialisation of them, one object per annotated point,
+made `crossview generate` 1.3 to 1.5 times slower (docs/recording-format.md). The others are protobuf's
+`SerializeToString`."""
 
 from __future__ import annotations
 
 import functools
-import itertools
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -99,14 +99,14 @@ class Encoder:
         J = self.skeleton.num_joints
         D = int(bounds[-1]) if bounds.size else 0
         if times.shape[0] != n or bounds.shape != (n + 1,) or len(rows) != len(_ROWS):
-            raise ValueError(f"encode_frames: {n} cameras, times {times.shape}, bounds {bounds.shape} and "
+            raise ValueError(f"Encoder.frames: {n} cameras, times {times.shape}, bounds {bounds.shape} and "
                              f"{len(rows)} row arrays; expected (n, 3) times, (n + 1,) bounds and {len(_ROWS)} arrays")
         columns = []
         for (owner, name, dtype, tail), array in zip(_ROWS.values(), rows):
             array = np.ascontiguousarray(array, dtype=dtype)
             expected = (D, J, 2)[:1 + tail]
             if array.shape != expected:
-                raise ValueError(f"encode_frames: {owner}.{name} rows expected {expected}, got {array.shape}")
+                raise ValueError(f"Encoder.frames: {owner}.{name} rows expected {expected}, got {array.shape}")
             columns.append(array)
         ids, kp, scores, *truth = columns
         effects = columns[-1]
@@ -258,25 +258,32 @@ def tracker_output_from_bytes(data: bytes) -> TrackerOutput:
 
 def _tracker_output_from_msg(msg) -> TrackerOutput:
     J = msg.num_joints
-    # All targets' joints in one array (each target's pose is a row of it): one conversion per message.
-    # A pose is in pose_m32 (format 4) or in pose_m (formats 1 to 3), never in both.
-    if any(len(t.pose_m) + len(t.pose_m32) != J * 3 or (len(t.pose_m) and len(t.pose_m32)) for t in msg.targets):
-        raise ValueError(f"a target pose of {msg.camera}@{msg.stamp_s} does not hold {J} joints x 3 in one field")
-    poses = np.fromiter(itertools.chain.from_iterable(t.pose_m32 or t.pose_m for t in msg.targets), np.float64,
-                        count=len(msg.targets) * J * 3).reshape(len(msg.targets), J, 3)
-    known = [len(t.joint_state) == J and J > 0 for t in msg.targets]
-    codes = np.fromiter(itertools.chain.from_iterable(t.joint_state for t, k in zip(msg.targets, known) if k),
-                        np.uint8, count=sum(known) * J).reshape(sum(known), J)
-    states = [_TARGET_STATES.get(t.state) or TargetState(t.state) for t in msg.targets]
-    stamps = [t.stamp_s for t in msg.targets]
+    # One pass over the targets, their values gathered into lists, then one array per field.
+    ids, stamps, names, values, codes, known = [], [], [], [], [], []
+    for t in msg.targets:
+        pose_m32, pose_m = t.pose_m32, t.pose_m  # a pose is in pose_m32 (format 4) or pose_m (1 to 3), never both
+        if len(pose_m32) + len(pose_m) != 3 * J or (pose_m32 and pose_m):
+            raise ValueError(f"a target pose of {msg.camera}@{msg.stamp_s} does not hold {J} joints x 3 in one field")
+        values.extend(pose_m32 or pose_m)
+        joint_state = t.joint_state
+        known.append(J > 0 and len(joint_state) == J)
+        if known[-1]:
+            codes.extend(joint_state)
+        ids.append(t.id)
+        stamps.append(t.stamp_s)
+        names.append(t.state)
+    T = len(ids)
+    poses = np.array(values, dtype=np.float64).reshape(T, J, 3)
+    codes = np.array(codes, dtype=np.uint8).reshape(-1, J) if J else np.zeros((0, 0), dtype=np.uint8)
+    states = {name: _TARGET_STATES.get(name) or TargetState(name) for name in set(names)}
     detection_ids = np.array(msg.detection_target_ids, dtype=np.int64)
-    if states and all(known) and len(set(states)) == 1 and all(stamp == stamps[0] for stamp in stamps):
-        ids = np.fromiter((t.id for t in msg.targets), np.int64, count=len(states))
+    if T and all(known) and len(states) == 1 and all(stamp == stamps[0] for stamp in stamps):
         return TrackerOutput(stamp_s=msg.stamp_s, camera=msg.camera, detection_target_ids=detection_ids,
-                             targets=TargetArrays(ids, poses, codes, stamps[0], states[0]))
+                             targets=TargetArrays(np.array(ids, dtype=np.int64), poses, codes, stamps[0],
+                                                  states[names[0]]))
     rows = iter(codes)
     targets = [
-        Target(id=t.id, pose=pose, stamp_s=stamp, state=state, joint_state=next(rows) if k else None)
-        for t, pose, stamp, state, k in zip(msg.targets, poses, stamps, states, known, strict=True)
+        Target(id=target_id, pose=pose, stamp_s=stamp, state=states[name], joint_state=next(rows) if k else None)
+        for target_id, pose, stamp, name, k in zip(ids, poses, stamps, names, known, strict=True)
     ]
     return TrackerOutput(stamp_s=msg.stamp_s, camera=msg.camera, targets=targets, detection_target_ids=detection_ids)
