@@ -1,7 +1,9 @@
 """Foxglove messages for people to look at: the store, camera frusta and calibrations, skeletons, 2D detections.
 
-Every function returns a message of one of the exact Foxglove protobuf schemas
-(`foxglove_schemas_protobuf`), so a recording opens in Foxglove with the store in the 3D panel. This
+Every message function returns a message of one of the exact Foxglove protobuf schemas
+(`foxglove_schemas_protobuf`), so a recording opens in Foxglove with the store in the 3D panel. The 2D
+detections (`ImageAnnotations`) are written by the compiled frame encoder (`crossview.wire`) from the
+serialized styles made here (`detection_style_pieces`, kept per person in a `PieceTable`). This
 module knows nothing of MCAP; `crossview.recording` writes what it builds. Times are integer
 nanoseconds (the recording converts seconds in one place); poses are metres in the world frame (z up).
 """
@@ -309,9 +311,10 @@ def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> S
 
 
 def detection_style_pieces(person_id: int) -> tuple[bytes, bytes, bytes, bytes]:
-    """Serialized style of a detection's bones and joints in `image_annotations` (person -1: a false positive),
-    each split around the points field so that type, points, colours, thickness come in field-number order:
-    bones before, bones after, joints before, joints after (a `PieceTable`'s pieces)."""
+    """Serialized style of a detection's bones and joints in its 2D annotations (`wire.image_annotations`;
+    person -1: a false positive), each split around the points field so that type, points, colours, thickness
+    come in field-number order: bones before, bones after, joints before, joints after (a `PieceTable`'s
+    pieces)."""
     rgba = detection_color(person_id)
     bones_type = PointsAnnotation(type=PointsAnnotation.LINE_LIST)
     bones_rest = PointsAnnotation(outline_color=rgba, thickness=DETECTION_LINE_PX)
