@@ -188,7 +188,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
                                                                inputs=(scenario.source_path or None,)))
         bar = stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
                                        disable=not progress, leave=False))
-        recording.warm_up(sim.skeleton)
+        writer.encoder.warm_up()
         images = None
         if images_per_s is not None:  # (made here, after the worker's fork: its OpenGL context stays here)
             from sim.render import FrameImages

@@ -23,14 +23,7 @@ Modules: `schemas` (topics, schemas, headers, versions), `messages` (message byt
 
 from core.errors import RecordingError
 from crossview.recording.info import format_info, info
-from crossview.recording.messages import (
-    EncodedFrame,
-    camera_frame_bytes,
-    encode_camera_frames,
-    encode_frames,
-    pose_truth_bytes,
-    warm_up,
-)
+from crossview.recording.messages import EncodedFrame, Encoder
 from crossview.recording.reader import CameraImage, Recording, Tracks, open_recording, open_tracks
 from crossview.recording.schemas import (  # a store box's JSON form, as the header's
     CHUNK_SIZE,
@@ -56,9 +49,7 @@ from crossview.recording.writer import RecordingWriter, TracksWriter
 __all__ = [
     "CHUNK_SIZE", "FORMAT_VERSION", "TRACKS_FORMAT_VERSION", "TOPIC_HEADER", "TOPIC_OUTPUTS", "TOPIC_STORE",
     "TOPIC_TRACK_SCENE", "TOPIC_TRUTH", "CameraImage",
-    "TOPIC_TRUTH_SCENE", "EncodedFrame", "PoseTruthMsg", "Recording", "RecordingError", "RecordingHeader",
+    "TOPIC_TRUTH_SCENE", "EncodedFrame", "Encoder", "PoseTruthMsg", "Recording", "RecordingError", "RecordingHeader",
     "RecordingWriter", "Tracks", "TracksHeader", "TracksWriter", "box_from_json", "box_json",
-    "camera_frame_bytes", "camera_topic",
-    "encode_camera_frames", "encode_frames", "format_info", "info", "open_recording", "open_tracks",
-    "pose_truth_bytes", "software_version", "to_ns", "warm_up",
+    "camera_topic", "format_info", "info", "open_recording", "open_tracks", "software_version", "to_ns",
 ]

@@ -1,7 +1,9 @@
 """Foxglove messages for people to look at: the store, camera frusta and calibrations, skeletons, 2D detections.
 
-Every function returns a message of one of the exact Foxglove protobuf schemas
-(`foxglove_schemas_protobuf`), so a recording opens in Foxglove with the store in the 3D panel. This
+Every message function returns a message of one of the exact Foxglove protobuf schemas
+(`foxglove_schemas_protobuf`), so a recording opens in Foxglove with the store in the 3D panel. The 2D
+detections (`ImageAnnotations`) are written by the compiled frame encoder (`crossview.recording.wire`) from the
+serialized styles made here (`detection_style_pieces`, kept per person in a `PieceTable`). This
 module knows nothing of MCAP; `crossview.recording` writes what it builds. Times are integer
 nanoseconds (the recording converts seconds in one place); poses are metres in the world frame (z up).
 """
@@ -13,7 +15,7 @@ import functools
 import math
 import struct
 import zlib
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 from foxglove_schemas_protobuf.CameraCalibration_pb2 import CameraCalibration
@@ -24,7 +26,6 @@ from foxglove_schemas_protobuf.FrameTransform_pb2 import FrameTransform
 from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
 from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
 from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
-from foxglove_schemas_protobuf.Point2_pb2 import Point2
 from foxglove_schemas_protobuf.Point3_pb2 import Point3
 from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 from foxglove_schemas_protobuf.Pose_pb2 import Pose
@@ -39,9 +40,9 @@ from google.protobuf import descriptor_pb2
 from google.protobuf.descriptor import Descriptor
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from core.records import Box, BoxKind, CameraFrame, PoseTruth
+from core.records import Box, BoxKind, PoseTruth
 from core.types import Camera, Skeleton
-from tracker.types import TargetArrays, TrackerOutput
+from tracker.types import TrackerOutput
 
 WORLD_FRAME = "world"
 FRUSTUM_DEPTH_M = 0.6  # how far the drawn frustum reaches along the optical axis
@@ -66,12 +67,6 @@ FALSE_POSITIVE_COLOR = (0.6, 0.6, 0.6, 1.0)
 def camera_frame_id(camera_name: str) -> str:
     """The Foxglove frame id of a camera's optical frame (OpenCV axes: x right, y down, z forward)."""
     return f"camera_{camera_name}"
-
-
-def _timestamp_bytes(t_ns: int) -> bytes:
-    """Wire bytes of `timestamp(t_ns)` (seconds and nanos as varints, each left out when 0)."""
-    seconds, nanos = divmod(int(t_ns), 1_000_000_000)
-    return wire_uint(1, seconds) + wire_uint(2, nanos)
 
 
 def timestamp(t_ns: int) -> Timestamp:
@@ -247,27 +242,6 @@ def camera_image(camera: Camera, t_ns: int, jpeg: bytes) -> CompressedImage:
     return CompressedImage(timestamp=timestamp(t_ns), frame_id=camera_frame_id(camera.name), data=jpeg, format="jpeg")
 
 
-# Repeated Point2/Point3 fields are written straight in protobuf wire format with numpy: building one
-# Python message per point was most of the cost of writing a recording. Each element is the field's tag
-# (wire type 2), the length, then x, y (, z) as fixed64 fields 1, 2 (, 3).
-_POINT2_WIRE = np.dtype([("tag", "u1"), ("len", "u1"), ("kx", "u1"), ("x", "<f8"), ("ky", "u1"), ("y", "<f8")])
-_POINT3_WIRE = np.dtype([("tag", "u1"), ("len", "u1"), ("kx", "u1"), ("x", "<f8"), ("ky", "u1"), ("y", "<f8"),
-                         ("kz", "u1"), ("z", "<f8")])
-
-
-def encode_points(field_number: int, points: np.ndarray) -> bytes:
-    """Wire bytes of `repeated foxglove.Point2/Point3 <field_number>` holding `points`, (N, 2) or (N, 3)."""
-    points = np.asarray(points, dtype=np.float64)
-    dims = points.shape[1]
-    out = np.empty(len(points), _POINT2_WIRE if dims == 2 else _POINT3_WIRE)
-    out["tag"] = (field_number << 3) | 2
-    out["len"] = 9 * dims
-    for number, axis in enumerate("xyz"[:dims], start=1):
-        out[f"k{axis}"] = (number << 3) | 1
-        out[axis] = points[:, number - 1]
-    return out.tobytes()
-
-
 def _bone_points(points: np.ndarray, skeleton: Skeleton) -> np.ndarray:
     """LINE_LIST endpoints of the bones whose both ends are known: (J, K) -> (2 * bones kept, K)."""
     bones = np.asarray(skeleton.bones, dtype=np.intp).reshape(-1, 2)
@@ -276,68 +250,15 @@ def _bone_points(points: np.ndarray, skeleton: Skeleton) -> np.ndarray:
     return points[kept.ravel()]
 
 
-def _varint_uncached(value: int) -> bytes:
-    out = bytearray()
-    while True:
-        byte, value = value & 0x7F, value >> 7
-        if value:
-            out.append(byte | 0x80)
-        else:
-            out.append(byte)
-            return bytes(out)
-
-
-_SMALL_VARINTS = tuple(_varint_uncached(v) for v in range(1 << 14))
-
-
-def _varint(value: int) -> bytes:
-    """Wire bytes of a non-negative varint (the small ones, every length and tag here, from a table)."""
-    return _SMALL_VARINTS[value] if value < 16384 else _varint_uncached(value)
-
-
-def _length_delimited(field_number: int, payload: bytes) -> bytes:
-    """Wire bytes of one length-delimited field (an embedded message)."""
-    return _SMALL_VARINTS[(field_number << 3) | 2] + _varint(len(payload)) + payload
-
-
-# Protobuf wire format written straight from numpy (proto3: a scalar equal to its default is left out,
-# as protobuf itself does; packed repeated fields are one length-delimited run). The writer's tests
-# check these bytes against protobuf's own serialisation.
-_ZERO8 = bytes(8)
-
-
-def wire_double(field_number: int, value: float) -> bytes:
-    """A proto3 `double` field (left out when its bits are all zero, as protobuf does)."""
-    data = struct.pack("<d", value)
-    return b"" if data == _ZERO8 else _SMALL_VARINTS[(field_number << 3) | 1] + data
-
-
-def wire_uint(field_number: int, value: int) -> bytes:
-    """A proto3 unsigned varint field (uint32/uint64/bool), left out when 0."""
-    return _SMALL_VARINTS[field_number << 3] + _varint(int(value)) if value else b""
-
-
-def wire_string(field_number: int, value: str) -> bytes:
-    """A proto3 `string` field, left out when empty."""
-    data = value.encode()
-    return _length_delimited(field_number, data) if data else b""
-
-
-def _with_points(message, field_number: int, points: np.ndarray):
-    """`message` with its repeated point field `field_number` set to `points` (parsed from wire bytes)."""
-    return type(message).FromString(message.SerializeToString() + encode_points(field_number, points))
-
-
 def _skeleton_entity(
     entity_id: str, pose: np.ndarray, skeleton: Skeleton, t_ns: int, rgba: Color, thickness_m: float, label: str
 ) -> SceneEntity:
     known = pose[np.all(np.isfinite(pose), axis=1)]
     entity = SceneEntity(timestamp=timestamp(t_ns), frame_id=WORLD_FRAME, id=entity_id)
-    line = LinePrimitive(
+    entity.lines.append(LinePrimitive(
         type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)), thickness=thickness_m, color=rgba,
-    )
-    entity.lines.append(_with_points(line, LinePrimitive.DESCRIPTOR.fields_by_name["points"].number,
-                                     _bone_points(pose, skeleton)))
+        points=[Point3(x=x, y=y, z=z) for x, y, z in _bone_points(pose, skeleton).tolist()],
+    ))
     if len(known):
         top = known[np.argmax(known[:, 2])]
         entity.texts.append(
@@ -377,74 +298,6 @@ def truth_skeletons(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> SceneUpd
     return _replace_all(t_ns, entities)
 
 
-def _entity_parts(kind: str, identity: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
-    """Constant wire pieces of a skeleton entity (`kind` "truth": a person's, "track": a target's): the id
-    field, the bone line before and after its points, and what follows the pose in the label and in the top
-    sphere."""
-    prefix, rgba, thickness, label = (("person", truth_color(identity), TRUTH_LINE_M, f"p{identity}")
-                                      if kind == "truth" else
-                                      ("target", track_color(identity), TRACK_LINE_M, f"T{identity}"))
-    line_head = LinePrimitive(type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)),
-                              thickness=thickness).SerializeToString()
-    line_tail = LinePrimitive(color=rgba).SerializeToString()
-    text_tail = TextPrimitive(billboard=True, font_size=12.0, scale_invariant=True, color=rgba,
-                              text=label).SerializeToString()
-    sphere_tail = SpherePrimitive(size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
-                                  color=rgba).SerializeToString()
-    return wire_string(3, f"{prefix}/{identity}"), line_head, line_tail, text_tail, sphere_tail
-
-
-_ORIENTATION_IDENTITY = Pose(orientation=Quaternion(w=1.0)).SerializeToString()
-_ORIENTATION_IDENTITY_BYTES = np.frombuffer(_ORIENTATION_IDENTITY, dtype=np.uint8)
-_LINE_POINTS_FIELD = LinePrimitive.DESCRIPTOR.fields_by_name["points"].number
-_LINE_POINTS_KEY = (_LINE_POINTS_FIELD << 3) | 2
-
-
-def truth_skeletons_bytes(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> bytes:
-    """`truth_skeletons(...)` as its wire bytes (what the recording writes): `_skeletons_bytes`."""
-    return _skeletons_bytes(truth.person_ids, truth.poses, _TRUTH_PIECES, skeleton, t_ns,
-                            lambda: truth_skeletons(truth, skeleton, t_ns))
-
-
-def tracker_skeletons_bytes(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> bytes:
-    """`tracker_skeletons(...)` as its wire bytes (what the tracks file writes): `_skeletons_bytes`."""
-    targets = output.targets
-    if isinstance(targets, TargetArrays):
-        ids, poses = targets.ids, targets.poses
-    else:
-        ids = np.array([t.id for t in targets], dtype=np.int64)
-        poses = np.array([t.pose for t in targets], dtype=np.float64).reshape(len(ids), skeleton.num_joints, 3)
-    if (np.asarray(ids) < 0).any():  # (a plug-in's negative id: the piece table keys ids >= -1)
-        return tracker_skeletons(output, skeleton, t_ns).SerializeToString()
-    return _skeletons_bytes(ids, poses, _TRACK_PIECES, skeleton, t_ns,
-                            lambda: tracker_skeletons(output, skeleton, t_ns))
-
-
-def _skeletons_bytes(ids, poses, pieces: _PieceTable, skeleton: Skeleton, t_ns: int, built) -> bytes:
-    """A skeleton scene's wire bytes, written by a compiled loop (`wire.skeletons`) from the cached pieces of
-    each id; `built()` makes the message the usual way where the loop cannot (a coordinate of exactly +0.0,
-    which protobuf leaves out: the rare instant goes through it)."""
-    from crossview.recording import wire  # (numba: loaded for writing only)
-
-    poses = np.ascontiguousarray(poses, dtype=np.float64)
-    ids = np.ascontiguousarray(ids, dtype=np.int64)
-    head = np.frombuffer(_length_delimited(1, _timestamp_bytes(t_ns)) + wire_string(2, WORLD_FRAME), dtype=np.uint8)
-    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL).SerializeToString()
-    deletion = np.frombuffer(_length_delimited(1, deletion), dtype=np.uint8)
-    bones = _bone_table(tuple(skeleton.bones))[0]
-    while True:  # (an id seen for the first time gets a row of pieces, then the instant is encoded again)
-        capacity = deletion.size + len(ids) * (head.size + pieces.table.shape[1] + len(bones) * 60 + 160)
-        out = _annotation_buffer(capacity)
-        size = wire.skeletons(out, poses, ids, pieces.lut, pieces.table, pieces.sizes, bones, head, deletion,
-                              _ORIENTATION_IDENTITY_BYTES, _LINE_POINTS_KEY)
-        if size != wire.NEW_STYLE:
-            break
-        pieces.add(ids)
-    if size < 0:
-        return built().SerializeToString()
-    return out[:size].tobytes()
-
-
 def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
     """The tracker's targets after one update, each in its own saturated colour, labelled with its id."""
     entities = [
@@ -457,44 +310,24 @@ def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> S
     return _replace_all(t_ns, entities)
 
 
-@functools.lru_cache(maxsize=1024)
-def _detection_styles(person_id: int) -> tuple[bytes, bytes, bytes, bytes, int, int]:
-    """Serialized style of a detection's bones and joints (-1: false positive), each split around the
-    points field so that type, points, colours, thickness come in field-number order: bones before,
-    bones after, joints before, joints after; then the bones' and the joints' total style length."""
-    rgba = truth_color(person_id) if person_id >= 0 else color(FALSE_POSITIVE_COLOR)
-    rgba.a = 1.0
+def detection_style_pieces(person_id: int) -> tuple[bytes, bytes, bytes, bytes]:
+    """Serialized style of a detection's bones and joints in its 2D annotations (`wire.image_annotations`;
+    person -1: a false positive), each split around the points field so that type, points, colours, thickness
+    come in field-number order: bones before, bones after, joints before, joints after (a `PieceTable`'s
+    pieces)."""
+    rgba = detection_color(person_id)
     bones_type = PointsAnnotation(type=PointsAnnotation.LINE_LIST)
     bones_rest = PointsAnnotation(outline_color=rgba, thickness=DETECTION_LINE_PX)
     joints_type = PointsAnnotation(type=PointsAnnotation.POINTS)
     joints_rest = PointsAnnotation(outline_color=rgba, fill_color=rgba, thickness=2 * DETECTION_LINE_PX)
-    pieces = tuple(m.SerializeToString() for m in (bones_type, bones_rest, joints_type, joints_rest))
-    return (*pieces, len(pieces[0]) + len(pieces[1]), len(pieces[2]) + len(pieces[3]))
+    return tuple(m.SerializeToString() for m in (bones_type, bones_rest, joints_type, joints_rest))
 
 
-def image_annotations(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> ImageAnnotations:
-    """One camera frame's 2D detections: keypoints and bones in pixels, coloured by the true person
-    behind each detection (grey for false positives). Per detection, a line list of the bones whose two
-    ends were detected, then the detected joints as points."""
-    kp = np.asarray(camera_frame.frame.keypoints_px, dtype=np.float64)
-    person_ids = np.asarray(camera_frame.truth.person_ids).tolist()
-    stamp = timestamp(t_ns)
-    message = ImageAnnotations()
-    for d in range(kp.shape[0]):
-        pid = person_ids[d] if d < len(person_ids) else -1
-        rgba = truth_color(pid) if pid >= 0 else color(FALSE_POSITIVE_COLOR)
-        rgba.a = 1.0
-        known = np.isfinite(kp[d]).all(axis=1)
-        ends = [end for a, b in skeleton.bones if known[a] and known[b] for end in (a, b)]
-        if ends:
-            message.points.append(PointsAnnotation(
-                timestamp=stamp, type=PointsAnnotation.LINE_LIST, outline_color=rgba, thickness=DETECTION_LINE_PX,
-                points=[Point2(x=x, y=y) for x, y in kp[d, ends].tolist()]))
-        if known.any():
-            message.points.append(PointsAnnotation(
-                timestamp=stamp, type=PointsAnnotation.POINTS, outline_color=rgba, fill_color=rgba,
-                thickness=2 * DETECTION_LINE_PX, points=[Point2(x=x, y=y) for x, y in kp[d, known].tolist()]))
-    return message
+def detection_color(person_id: int) -> Color:
+    """A detection's colour in the 2D view: its true person's, opaque (grey for a false positive, id < 0)."""
+    rgba = truth_color(person_id) if person_id >= 0 else color(FALSE_POSITIVE_COLOR)
+    rgba.a = 1.0
+    return rgba
 
 
 _POINTS_FIELD = PointsAnnotation.DESCRIPTOR.fields_by_name["points"].number
@@ -503,98 +336,51 @@ _STAMP_FIELD = PointsAnnotation.DESCRIPTOR.fields_by_name["timestamp"].number
 
 
 @functools.lru_cache(maxsize=64)
-def _bone_table(bones: tuple) -> tuple[np.ndarray, np.ndarray]:
-    table = np.asarray(bones, dtype=np.intp).reshape(-1, 2)
-    return table, table.ravel()
+def _bone_table(bones: tuple) -> np.ndarray:
+    return np.asarray(bones, dtype=np.intp).reshape(-1, 2)
 
 
-def image_annotations_bytes(camera_frame: CameraFrame, skeleton: Skeleton, t_ns: int) -> bytes:
-    """`image_annotations` as its wire bytes, written by a compiled loop (what the recording writes)."""
-    from crossview.recording import wire  # (numba: loaded for writing only)
-
-    frame, truth = camera_frame.frame, camera_frame.truth
-    kp = np.ascontiguousarray(frame.keypoints_px, dtype=np.float64)  # (D, J, 2)
-    D = kp.shape[0]
-    if D == 0:
-        return b""
-    person_ids = np.ascontiguousarray(truth.person_ids, dtype=np.int64)
-    bones = _bone_table(tuple(skeleton.bones))[0]
-    styles = _DETECTION_STYLES
-    while True:  # (a person seen for the first time gets a style row, then the frame is encoded again)
-        out = _annotation_buffer(wire.image_annotations_capacity(D, kp.shape[1], len(bones), styles.table.shape[1]))
-        size = wire.image_annotations(out, kp, bones, person_ids, styles.lut, styles.table, styles.sizes, int(t_ns),
-                                      _STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)
-        if size != wire.NEW_STYLE:
-            break
-        styles.add(person_ids)
-    if size < 0:  # a coordinate of exactly +0.0, which protobuf leaves out: such rare messages go through it
-        return image_annotations(camera_frame, skeleton, t_ns).SerializeToString()
-    return out[:size].tobytes()
-
-
-_ANNOTATIONS_KEY = np.frombuffer(_SMALL_VARINTS[(_ANNOTATIONS_FIELD << 3) | 2], dtype=np.uint8)
+_ANNOTATIONS_KEY = np.frombuffer(bytes([(_ANNOTATIONS_FIELD << 3) | 2]), dtype=np.uint8)
 _POINTS_KEY = (_POINTS_FIELD << 3) | 2
-if _POINTS_KEY >= 128 or _STAMP_FIELD >= 16:
+if _POINTS_KEY >= 128 or _ANNOTATIONS_KEY[0] >= 128 or _STAMP_FIELD >= 16:
     raise RuntimeError("PointsAnnotation: the compiled encoder expects one-byte field tags")
 ANNOTATION_FIELDS = (_STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)  # the field arguments of wire.image_annotations
 
 
-def detection_styles(person_ids: np.ndarray) -> _PieceTable:
-    """The style table of the detections' wire pieces, with a row for each of `person_ids` (for encoders
-    of many frames at once; `image_annotations_bytes` adds rows as it meets people)."""
-    styles = _DETECTION_STYLES
-    ids = np.maximum(np.asarray(person_ids, dtype=np.int64), -1) + 1
-    if ids.size and (ids.max() >= styles.lut.size or (styles.lut[ids] < 0).any()):
-        styles.add(person_ids)
-    return styles
-
-
 def bone_table(skeleton: Skeleton) -> np.ndarray:
-    """(B, 2) joint pairs of the skeleton's bones, as the encoders take them."""
-    return _bone_table(tuple(skeleton.bones))[0]
+    """(B, 2) joint pairs of the skeleton's bones, as the compiled encoder takes them."""
+    return _bone_table(tuple(skeleton.bones))
 
 
-class _PieceTable:
-    """Constant wire pieces per person id (-1: false positives) for a compiled encoder: the pieces of each
-    id back to back in a row of one uint8 `table`, their `sizes` (rows, pieces), and `lut`, which maps
-    id + 1 to the row (-1: none yet; `add` makes them)."""
+class PieceTable:
+    """Constant wire pieces per person id for a compiled encoder: the pieces of each id back to back in a row
+    of one uint8 `table`, with their `sizes` (rows, pieces). An encoder owns one (`rows` adds the ids it has
+    not met) and hands the encoder each detection's row."""
 
-    def __init__(self, pieces, count: int):
-        self._pieces = pieces  # person id -> `count` byte strings
+    def __init__(self, pieces: Callable[[int], tuple[bytes, ...]]):
+        self._pieces = pieces  # person id -> its byte strings
         self._rows: dict[int, int] = {}
         self.table = np.zeros((0, 0), dtype=np.uint8)
-        self.sizes = np.zeros((0, count), dtype=np.int64)
-        self.lut = np.full(0, -1, dtype=np.int64)
+        self.sizes = np.zeros((0, 0), dtype=np.int64)
 
-    def add(self, person_ids: np.ndarray) -> None:
-        for pid in {-1, *np.maximum(person_ids, -1).tolist()}:
-            if pid in self._rows:
-                continue
-            pieces = self._pieces(pid)
-            blob = b"".join(pieces)
-            width = max(self.table.shape[1], len(blob))
-            grown = np.zeros((self.table.shape[0] + 1, width), dtype=np.uint8)
-            grown[:-1, :self.table.shape[1]] = self.table
-            grown[-1, :len(blob)] = np.frombuffer(blob, dtype=np.uint8)
-            self._rows[pid] = self.table.shape[0]
+    def rows(self, person_ids: np.ndarray) -> np.ndarray:
+        """(n,) int64 the row of each of `person_ids` (n,), made for the ids met for the first time."""
+        ids = np.asarray(person_ids, dtype=np.int64)
+        unique, inverse = np.unique(ids, return_inverse=True)
+        new = [pid for pid in unique.tolist() if pid not in self._rows]
+        if new:
+            blobs = [self._pieces(pid) for pid in new]
+            width = max(self.table.shape[1], *(sum(len(p) for p in b) for b in blobs))
+            grown = np.zeros((self.table.shape[0] + len(new), width), dtype=np.uint8)
+            grown[:self.table.shape[0], :self.table.shape[1]] = self.table
+            for k, (pid, blob) in enumerate(zip(new, blobs)):
+                data = b"".join(blob)
+                grown[self.table.shape[0] + k, :len(data)] = np.frombuffer(data, dtype=np.uint8)
+                self._rows[pid] = self.table.shape[0] + k
+            self.sizes = np.vstack([self.sizes.reshape(-1, len(blobs[0])),
+                                    [[len(p) for p in b] for b in blobs]]).astype(np.int64)
             self.table = grown
-            self.sizes = np.vstack([self.sizes, [[len(p) for p in pieces]]]).astype(np.int64)
-        lut = np.full(max(self._rows) + 2, -1, dtype=np.int64)
-        for pid, row in self._rows.items():
-            lut[pid + 1] = row
-        self.lut = lut
-
-
-_DETECTION_STYLES = _PieceTable(lambda pid: _detection_styles(pid)[:4], 4)
-_TRUTH_PIECES = _PieceTable(functools.partial(_entity_parts, "truth"), 5)
-_TRACK_PIECES = _PieceTable(functools.partial(_entity_parts, "track"), 5)
-_ANNOTATION_BUFFER = [np.empty(1 << 16, dtype=np.uint8)]
-
-
-def _annotation_buffer(size: int) -> np.ndarray:
-    if _ANNOTATION_BUFFER[0].size < size:
-        _ANNOTATION_BUFFER[0] = np.empty(2 * size, dtype=np.uint8)
-    return _ANNOTATION_BUFFER[0]
+        return np.array([self._rows[pid] for pid in unique.tolist()], dtype=np.int64)[inverse.reshape(-1)]
 
 
 def file_descriptor_set(descriptor: Descriptor) -> bytes:

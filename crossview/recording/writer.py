@@ -13,13 +13,7 @@ from core.stream import Block, LogTimeOrder, frame_times
 from core.types import SKELETONS, Camera
 from crossview.outputs import AtomicOutput
 from crossview.recording import foxglove
-from crossview.recording.messages import (
-    EncodedFrame,
-    encode_camera_frames,
-    encode_frames,
-    pose_truth_bytes,
-    tracker_output_bytes,
-)
+from crossview.recording.messages import EncodedFrame, Encoder
 from crossview.recording.schemas import (
     CHUNK_SIZE,
     COMPRESSION,
@@ -213,6 +207,7 @@ class RecordingWriter(_WriterContext):
         self._counts = {"truth": 0, "frames": 0, "images": 0}
         self._camera_of = {c.name: c for c in self.cameras}
         self._order = LogTimeOrder()  # the blocks' truth ticks and encoded frames not yet due
+        self.encoder = Encoder(self.skeleton)
 
     def _log_time(self, t_ns: int, what: str) -> int:
         if t_ns < self._last_ns:
@@ -228,8 +223,8 @@ class RecordingWriter(_WriterContext):
 
     def write_many(self, events: Sequence[PoseTruth | CameraFrame | EncodedFrame]) -> None:
         """`write` of each event in turn (the same bytes), with all the CameraFrames among them encoded
-        in one compiled call (`encode_camera_frames`): what a producer of many events at a time should use."""
-        encoded = iter(encode_camera_frames([e for e in events if isinstance(e, CameraFrame)], self.skeleton))
+        in one compiled call (`Encoder.camera_frames`): what a producer of many events at a time should use."""
+        encoded = iter(self.encoder.camera_frames([e for e in events if isinstance(e, CameraFrame)]))
         messages = []
         for event in events:
             if isinstance(event, CameraFrame):
@@ -248,9 +243,9 @@ class RecordingWriter(_WriterContext):
                 self._counts["frames"] += 1
             elif isinstance(event, PoseTruth):
                 t = self._log_time(to_ns(event.t_s), "PoseTruth")
-                messages.append((self._truth, t, pose_truth_bytes(event)))
+                messages.append((self._truth, t, self.encoder.pose_truth(event)))
                 if t >= self._next_scene_ns:
-                    messages.append((self._truth_scene, t, foxglove.truth_skeletons_bytes(event, self.skeleton, t)))
+                    messages.append((self._truth_scene, t, self.encoder.truth_scene(event, t)))
                     self._next_scene_ns = t + to_ns(TRUTH_SCENE_PERIOD_S)
                 self._people.update(np.asarray(event.person_ids).tolist())
                 self._counts["truth"] += 1
@@ -261,7 +256,7 @@ class RecordingWriter(_WriterContext):
 
     def write_block(self, block: Block, images: Sequence[bytes | None] | None = None) -> int:
         """Takes a simulation's next block (`sim.simulate.Simulation.blocks`): encodes its frames straight from
-        the detector's rows (`encode_frames`, no CameraFrame objects in between) and writes whatever of the
+        the detector's rows (`Encoder.frames`, no CameraFrame objects in between) and writes whatever of the
         recording is now due, in log-time order (`core.stream.LogTimeOrder`); the rest waits for the next
         blocks, or `close`. Returns the number of the block's frames.
 
@@ -280,10 +275,9 @@ class RecordingWriter(_WriterContext):
 
     def encode_frames(self, cameras: Sequence[int], times: np.ndarray, bounds: np.ndarray,
                       rows: DetectionRows) -> list[EncodedFrame]:
-        """`encode_frames` (the module's) of frames from this recording's cameras, given by index; `times` (n, 3)
-        in the columns of `core.stream.frame_times`."""
-        names = [self.cameras[i].name for i in cameras]
-        return encode_frames(names, times, bounds, rows, self.skeleton)
+        """`Encoder.frames` of frames from this recording's cameras, given by index; `times` (n, 3) in the columns
+        of `core.stream.frame_times`."""
+        return self.encoder.frames([self.cameras[i].name for i in cameras], times, bounds, rows)
 
     def close(self) -> None:
         try:
@@ -342,6 +336,7 @@ class TracksWriter(_WriterContext):
             self._out.abort()
             raise
         self._summary: dict = {}
+        self.encoder = Encoder(self.skeleton)
         self._next_scene_ns = 0
         self._targets: set[int] = set()
         self._count = 0
@@ -349,9 +344,9 @@ class TracksWriter(_WriterContext):
     def write(self, output: TrackerOutput) -> None:
         """Appends the tracker's output after one frame."""
         t_ns = to_ns(max(0.0, float(output.stamp_s)))
-        self._out.add(self._outputs, t_ns, tracker_output_bytes(output, self.skeleton.num_joints))
+        self._out.add(self._outputs, t_ns, self.encoder.tracker_output(output))
         if t_ns >= self._next_scene_ns:
-            self._out.add(self._scene, t_ns, foxglove.tracker_skeletons_bytes(output, self.skeleton, t_ns))
+            self._out.add(self._scene, t_ns, self.encoder.tracker_scene(output, t_ns))
             self._next_scene_ns = t_ns + to_ns(TRACK_SCENE_PERIOD_S)
         targets = output.targets
         self._targets.update(targets.ids.tolist() if isinstance(targets, TargetArrays) else

@@ -85,13 +85,9 @@ def test_the_switch_reads_its_environment_variables():
 
 
 @pytest.mark.parametrize("value", [0.0, -0.0, 1.5, -3.25e-300, 5e-324, np.inf, -np.inf, np.nan, 2**52 + 1])
-def test_the_plain_intrinsics_give_numpys_bits(value):
+def test_the_plain_intrinsic_gives_numpys_bits(value):
     bits = int(np.array([value], dtype=np.float64).view(np.int64)[0])
     assert wire._plain_bits(value) == bits
-    assert np.array([wire._plain_double(bits)]).view(np.int64)[0] == bits
-    single = np.array([value], dtype=np.float32)
-    low = int(single.view(np.uint32)[0]) | (0x5A5A5A5A << 32)  # (the high bits are not the float's)
-    assert np.array([wire._plain_single(low)], dtype=np.float32).view(np.uint32)[0] == single.view(np.uint32)[0]
 
 
 def test_the_plain_fma_rounds_once():

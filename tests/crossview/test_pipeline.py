@@ -157,7 +157,7 @@ def test_generate_interrupted_leaves_no_file_and_no_worker(tmp_path, monkeypatch
             raise KeyboardInterrupt
 
     if where == "opening":  # (warm_up runs once the worker has started, before the first event)
-        monkeypatch.setattr(recording, "warm_up", interrupt)
+        monkeypatch.setattr(recording.Encoder, "warm_up", interrupt)
     else:
         monkeypatch.setattr(recording.RecordingWriter, "write_many", interrupt)
     scenario = pipeline.load_scenario("store_layout2", duration_s=3.0, seed=5)

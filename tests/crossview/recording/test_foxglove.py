@@ -15,7 +15,7 @@ from core.records import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
 from core.types import COCO17, Camera, Frame
 from crossview import recording
 from crossview.recording import foxglove
-from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
+from tracker.types import Target, TrackerOutput
 
 LAYOUT = Path(__file__).resolve().parents[3] / "crossview" / "foxglove" / "layout.json"
 
@@ -116,6 +116,8 @@ def test_tracker_colours_differ_from_truth_colours():
 
 
 def test_image_annotations_hold_the_detected_pixels():
+    from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
+
     J = COCO17.num_joints
     kp = np.random.default_rng(2).uniform(0, 500, (2, J, 2))
     kp[1, 3] = np.nan
@@ -123,7 +125,8 @@ def test_image_annotations_hold_the_detected_pixels():
     truth = DetectionTruth(0.1, 0.13, np.array([3, -1]), kp, np.ones((2, J), bool), np.zeros((2, J), bool),
                            np.zeros((2, J), bool), np.zeros(2, np.int64))
     cf = CameraFrame(Frame("cam00", 0.1, kp, scores), truth, PoseTruth(0.1, np.zeros(0, np.int64), np.zeros((0, J, 3))))
-    annotations = foxglove.image_annotations(cf, COCO17, t_ns=130_000_000)
+    # What the recording writes for the frame (stamped at its delivery), read by Foxglove's own protobuf class.
+    annotations = ImageAnnotations.FromString(recording.Encoder(COCO17).camera_frames([cf])[0].annotations)
     joints = [a for a in annotations.points if a.type == a.POINTS]
     assert [len(a.points) for a in joints] == [J, J - 1]
     np.testing.assert_array_equal([[p.x, p.y] for p in joints[1].points], np.delete(kp[1], 3, axis=0))
@@ -173,29 +176,6 @@ def test_layout_is_valid_and_names_channels_the_recording_writes():
     assert named <= written
 
 
-@pytest.mark.parametrize("dims", [2, 3])
-def test_wire_encoded_points_equal_points_built_by_protobuf(dims):
-    from foxglove_schemas_protobuf.LinePrimitive_pb2 import LinePrimitive
-    from foxglove_schemas_protobuf.Point2_pb2 import Point2
-    from foxglove_schemas_protobuf.Point3_pb2 import Point3
-    from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
-
-    points = np.random.default_rng(dims).normal(0, 100, (7, dims))
-    points[2] = 0.0  # proto3 leaves zeros out when it builds the message; the parse must agree anyway
-    points[3, 0] = -0.0
-    if dims == 2:
-        reference = PointsAnnotation(thickness=2.0, points=[Point2(x=x, y=y) for x, y in points.tolist()])
-        fast = PointsAnnotation.FromString(PointsAnnotation(thickness=2.0).SerializeToString()
-                                           + foxglove.encode_points(3, points))
-    else:
-        reference = LinePrimitive(thickness=2.0, points=[Point3(x=x, y=y, z=z) for x, y, z in points.tolist()])
-        fast = LinePrimitive.FromString(LinePrimitive(thickness=2.0).SerializeToString()
-                                        + foxglove.encode_points(5, points))
-    assert fast == reference
-    got = np.array([[p.x, p.y] + ([p.z] if dims == 3 else []) for p in fast.points])
-    assert got.tobytes() == points.tobytes()  # bit for bit, -0.0 included
-
-
 def test_camera_backdrop_is_a_png_of_the_camera_size(camera):
     image = foxglove.camera_backdrop(camera, t_ns=0)
     assert image.format == "png" and image.frame_id == "camera_cam07"
@@ -206,48 +186,26 @@ def test_camera_backdrop_is_a_png_of_the_camera_size(camera):
     assert len(image.data) < 5000  # bytes: a blank picture costs next to nothing
 
 
-def test_byte_builders_write_what_protobuf_writes():
+def test_compiled_annotations_are_what_protobuf_writes():
+    """The recording writes 2D detections with a compiled encoder from cached wire pieces; the bytes must
+    equal protobuf's serialisation of the message built point by point, zero coordinates (left out)
+    included, and protobuf's parser must read them back."""
     from foxglove_schemas_protobuf.ImageAnnotations_pb2 import ImageAnnotations
     from foxglove_schemas_protobuf.Point2_pb2 import Point2
     from foxglove_schemas_protobuf.PointsAnnotation_pb2 import PointsAnnotation
 
-    """The recording writes truth scenes and 2D detections from cached wire pieces; the bytes must equal
-    protobuf's serialisation of the message-built versions, zero coordinates (left out) included."""
     rng = np.random.default_rng(4)
-    poses = rng.normal(0, 2, (4, 17, 3))
-    poses[1, 5:] = np.nan
-    poses[2] = np.nan
-    truth = PoseTruth(0.37, np.array([3, 8, 12, 1000]), poses)
-    for t_ns in (0, 370_000_000):
-        assert foxglove.truth_skeletons_bytes(truth, COCO17, t_ns) == \
-            foxglove.truth_skeletons(truth, COCO17, t_ns).SerializeToString()
-    poses[3, 0] = 0.0
-    assert foxglove.truth_skeletons_bytes(truth, COCO17, 5) == \
-        foxglove.truth_skeletons(truth, COCO17, 5).SerializeToString()
-    # The tracks file's scenes: the same compiled path, with the targets' pieces, as arrays or as a list.
-    poses[3, 0] = 1.0
-    codes = np.zeros((4, 17), dtype=np.uint8)
-    arrays = TargetArrays(np.array([0, 7, 12, 3000]), poses, codes, 0.37, TargetState.CONFIRMED)
-    for targets in (arrays, list(arrays)):
-        output = TrackerOutput(stamp_s=0.37, camera="cam00", targets=targets, detection_target_ids=np.zeros(0))
-        for t_ns in (0, 370_000_000):
-            assert foxglove.tracker_skeletons_bytes(output, COCO17, t_ns) == \
-                foxglove.tracker_skeletons(output, COCO17, t_ns).SerializeToString()
-    poses[0, 3] = 0.0
-    output = TrackerOutput(stamp_s=0.37, camera="cam00", targets=arrays, detection_target_ids=np.zeros(0))
-    assert foxglove.tracker_skeletons_bytes(output, COCO17, 5) == \
-        foxglove.tracker_skeletons(output, COCO17, 5).SerializeToString()
-    negative = TrackerOutput(stamp_s=0.37, camera="cam00", detection_target_ids=np.zeros(0),
-                             targets=[Target(id=i, pose=poses[1], stamp_s=0.37) for i in (-3, -1, 4)])
-    assert foxglove.tracker_skeletons_bytes(negative, COCO17, 5) == \
-        foxglove.tracker_skeletons(negative, COCO17, 5).SerializeToString()
+    truth = PoseTruth(0.37, np.array([3, 8, 12, 1000]), rng.normal(0, 2, (4, 17, 3)))
+    encoder = recording.Encoder(COCO17)
     base = rng.uniform(0, 600, (3, 17, 2))
     base[0, ::3] = np.nan
-    # The compiled encoder's bytes, and (with a zero coordinate) protobuf's own path.
+    # Without and with zero coordinates (+0.0 is left out, -0.0 kept).
     for zero in (False, True):
         kp = base.copy()
         if zero:
             kp[2, 4] = (0.0, 17.0)
+            kp[1, 2] = (-0.0, 0.0)
+            kp[1, 7] = (0.0, 0.0)
         scores = np.where(np.isnan(kp[..., 0]), 0.0, 0.7)
         flags = np.zeros((3, 17), dtype=bool)
         cf = CameraFrame(
@@ -269,5 +227,7 @@ def test_byte_builders_write_what_protobuf_writes():
                         timestamp=foxglove.timestamp(120_000_000), type=kind, outline_color=rgba,
                         thickness=foxglove.DETECTION_LINE_PX * (1 if kind == PointsAnnotation.LINE_LIST else 2),
                         points=[Point2(x=x, y=y) for x, y in kp[d, joints].tolist()], **extra))
-        assert foxglove.image_annotations_bytes(cf, COCO17, 120_000_000) == reference.SerializeToString()
+        data = encoder.camera_frames([cf])[0].annotations
+        assert data == reference.SerializeToString()
+        assert ImageAnnotations.FromString(data) == reference
         assert len(reference.points) == 6
