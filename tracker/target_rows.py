@@ -8,15 +8,15 @@ import numpy as np
 
 
 class TargetRows(NamedTuple):
-    """Every live target's state, a row per target (T targets, C cameras, J joints, H history slots).
+    """The live targets' state that the kernels read and write in place, a row per target (T targets,
+    C cameras, J joints, H history slots).
 
-    The kernels read and write the arrays in place; the tracker's `_Targets` owns them and hands out this
-    tuple of their current views (numba compiles a NamedTuple of arrays as a struct of them).
+    The tracker's `_Targets` owns the arrays (and the lifecycle's own: ids, states, birth times) and hands out
+    this tuple of their current views. numba compiles a NamedTuple of arrays as a struct of them, but its
+    dispatch looks at every field on every call (a few tenths of a microsecond each), so the tuple holds only
+    what the kernels use.
 
     Attributes:
-        ids: (T,) int64 target ids.
-        state: (T,) int8 lifecycle codes (`tracker.lifecycle`).
-        born_s: (T,) creation time, s.
         last_update_s: (T,) time of the last matched frame, s.
         num_updates: (T,) int64 matched frames so far.
         pos: (T, J, 3) X_t' per joint, m (NaN never triangulated).
@@ -32,12 +32,8 @@ class TargetRows(NamedTuple):
         expected: (T,) decayed count of frames of cameras that should have seen the target.
         sighted: (T,) of those, decayed count of the frames that matched it.
         evidence_s: (T,) time of the last count, s.
-        implausible_s: (T,) since when the observed body is implausible, s (NaN when it is not).
     """
 
-    ids: np.ndarray
-    state: np.ndarray
-    born_s: np.ndarray
     last_update_s: np.ndarray
     num_updates: np.ndarray
     pos: np.ndarray
@@ -53,19 +49,17 @@ class TargetRows(NamedTuple):
     expected: np.ndarray
     sighted: np.ndarray
     evidence_s: np.ndarray
-    implausible_s: np.ndarray
 
     @staticmethod
     def empty(T: int, C: int, J: int, H: int) -> TargetRows:
-        """T targets that nothing has been seen of yet (ids 0 and state 0: the caller sets them)."""
+        """T targets that nothing has been seen of yet."""
         return TargetRows(
-            ids=np.zeros(T, dtype=np.int64), state=np.zeros(T, dtype=np.int8), born_s=np.zeros(T),
             last_update_s=np.zeros(T), num_updates=np.zeros(T, dtype=np.int64), pos=np.full((T, J, 3), np.nan),
             joint_s=np.full((T, J), -np.inf), seen_s=np.full((T, J), -np.inf), vel=np.zeros((T, J, 3)),
             obs_px=np.full((T, C, J, 2), np.nan), obs_s=np.full((T, C, J), np.nan), cam_s=np.full((T, C), np.nan),
             hist_pos=np.full((T, H, J, 3), np.nan), hist_s=np.full((T, H, J), np.nan),
             hist_next=np.zeros(T, dtype=np.int64), expected=np.zeros(T), sighted=np.zeros(T),
-            evidence_s=np.zeros(T), implausible_s=np.full(T, np.nan))
+            evidence_s=np.zeros(T))
 
     def copy(self) -> TargetRows:
         """A copy of every array (the kernels write in place)."""

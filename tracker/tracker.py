@@ -80,16 +80,20 @@ class _Targets(Rows):
     """
 
     def __init__(self, num_cameras: int, num_joints: int, history: int):
+        self.ids = np.zeros(0, dtype=np.int64)
+        self.state = np.zeros(0, dtype=np.int8)
+        self.born_s = np.zeros(0)
         # The fields of `TargetRows`, which documents them.
-        for name, empty in zip(self._FIELDS, TargetRows.empty(0, num_cameras, num_joints, history)):
+        for name, empty in zip(TargetRows._fields, TargetRows.empty(0, num_cameras, num_joints, history)):
             setattr(self, name, empty)
+        self.implausible_s = np.zeros(0)  # since when the observed body is implausible, NaN when it is not
         self._views()
 
-    _FIELDS = TargetRows._fields
+    _FIELDS = ("ids", "state", "born_s", *TargetRows._fields, "implausible_s")
 
     def _views(self) -> None:
         super()._views()
-        self.arrays = TargetRows._make(self.__dict__[name] for name in self._FIELDS)
+        self.arrays = TargetRows._make(self.__dict__[name] for name in TargetRows._fields)
 
 
 class Tracker:
