@@ -112,6 +112,7 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
     hit = np.empty(J, dtype=np.bool_)
     values = np.empty(J)
     fresh = np.empty(C, dtype=np.int64)
+    observations = Observations(cams, points, dts, decays)  # refilled per joint
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
@@ -146,8 +147,7 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
                     decays[num] = cached_decay[k]  # eq. (11): e^(-2 λt (t - t_i)), squared
                     num += 1
             V[0], V[1], V[2] = vel[r, j, 0], vel[r, j, 1], vel[r, j, 2]
-            triangulate_point(P, Observations(cams, points, dts, decays, num), V, triangulation, plain, compensated,
-                              work, scratch)
+            triangulate_point(P, observations, num, V, triangulation, plain, compensated, work, scratch)
             update[j] = np.isfinite(plain[0])
             use_compensated = use_velocity and np.isfinite(compensated[0])
             for k in range(3):

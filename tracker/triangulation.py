@@ -46,21 +46,20 @@ class TriangulationParams(NamedTuple):
 
 
 class Observations(NamedTuple):
-    """The first `num` observations of one point, in arrays that may be longer (work space reused per point).
+    """One point's observations, in arrays of which the first `num` count (the callers' work space, made once
+    and refilled per point; `num` travels beside the tuple, so that the tuple is made once too).
 
     Attributes:
         cam: (>=num,) int64 camera of each observation.
         points_px: (>=num, 2) undistorted pixels.
         dts: (>=num,) t - t_i >= 0, s.
         decays: (>=num,) e^(-2 λt (t - t_i)), the squared time factors of the eq. (11) weights.
-        num: how many observations count.
     """
 
     cam: np.ndarray
     points_px: np.ndarray
     dts: np.ndarray
     decays: np.ndarray
-    num: int
 
 
 def row_norm_code(config: TrackerConfig, reconstruction: bool = False) -> int:
@@ -343,6 +342,7 @@ def _triangulate_groups(P, starts, cam, points_px, dts, V, params, plain, compen
     dts_n, decays_n = np.empty(size), np.empty(size)
     scratch = np.empty((4, 8))
     V_n, plain_n, compensated_n = np.empty(3), np.empty(3), np.empty(3)
+    observations = Observations(cam_n, points_n, dts_n, decays_n)
     for n in range(starts.size - 1):
         a, num = starts[n], starts[n + 1] - starts[n]
         for i in range(num):
@@ -350,30 +350,28 @@ def _triangulate_groups(P, starts, cam, points_px, dts, V, params, plain, compen
                 points_px[a + i, 1], dts[a + i]
             decays_n[i] = np.exp(-2.0 * params.lambda_t_per_s * dts[a + i])
         V_n[0], V_n[1], V_n[2] = V[n, 0], V[n, 1], V[n, 2]
-        triangulate_point(P, Observations(cam_n, points_n, dts_n, decays_n, num), V_n, params, plain_n,
-                          compensated_n, work, scratch)
+        triangulate_point(P, observations, num, V_n, params, plain_n, compensated_n, work, scratch)
         for k in range(3):
             plain[n, k], compensated[n, k] = plain_n[k], compensated_n[k]
 
 
 @jit
-def triangulate_point(P, observations, V, params, plain, compensated, work, scratch):
+def triangulate_point(P, observations, num, V, params, plain, compensated, work, scratch):
     """Eq. (6)-(11) for one point from its observations, with the robust second pass (compiled kernel).
 
     Args:
         P: (C, 3, 4) projection matrices.
         observations: the point's `Observations` (its decays carry the time weights; params.lambda_t_per_s
-            is not read).
+            is not read); num: how many of them count.
         V: (3,) the point's velocity, m/s (read only when params.use_velocity).
         params: `TriangulationParams`.
         plain, compensated: (3,) outputs, NaN when not determined (compensated untouched without velocity).
         work: (3, 4, 4) and scratch: (4, 8) work space.
     """
-    cam, points_px, dts, num = observations.cam, observations.points_px, observations.dts, observations.num
-    decays = observations.decays
+    cam, points_px, dts, decays = observations.cam, observations.points_px, observations.dts, observations.decays
     use_velocity, min_views, reject_factor = params.use_velocity, params.min_views, params.reject_factor
     reject_floor_px = params.reject_floor_px
-    _solve_observations(P, observations, V, params, plain, compensated, work, scratch)
+    _solve_observations(P, observations, num, V, params, plain, compensated, work, scratch)
     if reject_factor <= 0.0 or num == 0:
         return
     X = compensated if use_velocity else plain
@@ -409,7 +407,7 @@ def triangulate_point(P, observations, V, params, plain, compensated, work, scra
         decays2[i] = decays[keep[i]]
     plain2 = np.empty(3)
     compensated2 = np.empty(3)
-    _solve_observations(P, Observations(cam2, points2, dts2, decays2, kept), V, params, plain2, compensated2, work,
+    _solve_observations(P, Observations(cam2, points2, dts2, decays2), kept, V, params, plain2, compensated2, work,
                         scratch)
     if np.isfinite(plain2[0]):
         plain[:] = plain2
@@ -418,11 +416,10 @@ def triangulate_point(P, observations, V, params, plain, compensated, work, scra
 
 
 @jit
-def _solve_observations(P, observations, V, params, plain, compensated, work, scratch):
+def _solve_observations(P, observations, num, V, params, plain, compensated, work, scratch):
     """The normal matrices of eq. (8), (10) with the weights of eq. (11) (without its row norms unless
     `params.row_norm`), and their smallest eigenvectors (arguments as `triangulate_point`)."""
-    cam, points_px, dts, num = observations.cam, observations.points_px, observations.dts, observations.num
-    decays = observations.decays
+    cam, points_px, dts, decays = observations.cam, observations.points_px, observations.dts, observations.decays
     use_velocity, min_views, row_norm = params.use_velocity, params.min_views, params.row_norm
     plain[0] = plain[1] = plain[2] = np.nan
     if use_velocity:
