@@ -28,6 +28,10 @@ PLAIN_ENV = "CROSSVIEW_JIT_PLAIN"
 GROUPS: dict[str, tuple[str, ...]] = {
     # group: the modules whose kernels it holds
     "sim.world": ("sim.world",),
+    "sim.crowd": ("sim.crowd",),
+    "sim.store": ("sim.store",),
+    "sim.gestures": ("sim.gestures",),
+    "core.poses": ("core.poses",),
     "core.projection": ("core.projection",),
     "sim.sensing.rays": ("sim.sensing.rays",),
     "sim.sensing.draws": ("sim.sensing.draws",),

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from core.jit import jit
 from core.records import PoseTruth
 from core.truth import truth_between
 
@@ -27,7 +28,7 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
                       times_s: np.ndarray) -> list[PoseTruth]:
     """`interpolate_poses` for the captures of several consecutive ticks at once: capture i at `times_s[i]`,
     between `ticks[tick_of[i]]` and the tick before it (`previous` for the first). The same poses, bit for
-    bit: where the same people are present at both ticks, the same arithmetic per element in one numpy
+    bit: where the same people are present at both ticks, the same arithmetic per element in one compiled
     pass for all those captures together; every other capture is `interpolate_poses`'s own.
 
     Args:
@@ -58,7 +59,7 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
         out[i] = interpolate_poses(chain[k - 1] if k else None, chain[k], time_list[i])
     if not linear.any():
         return out
-    # The linear captures in one numpy pass over the stack of every tick's people (rows of J * 3).
+    # The linear captures in one compiled pass over the stack of every tick's people (rows of J * 3).
     index = np.nonzero(linear)[0]
     k = tick[index]
     a = (times[index] - t_chain[k - 1]) / (t_chain[k] - t_chain[k - 1])  # `interpolate_poses`'s weight
@@ -76,11 +77,16 @@ def interpolate_ticks(previous: PoseTruth | None, ticks: list[PoseTruth], tick_o
     return out
 
 
+@jit
 def _lerp_rows(rows, before, after, counts, a, out):
     """Per capture i, the next counts[i] rows of out (M, W): rows[before[i] + r] + (rows[after[i] + r] -
     rows[before[i] + r]) * a[i] for r < counts[i]. The arithmetic of `interpolate_poses`, element by element
-    (numpy's elementwise operations round each one, as `interpolate_poses` does)."""
-    capture = np.repeat(np.arange(len(counts)), counts)
-    r = np.arange(len(capture)) - np.repeat(np.cumsum(counts) - counts, counts)
-    b, f = rows[before[capture] + r], rows[after[capture] + r]
-    out[:] = b + (f - b) * a[capture][:, None]
+    (no fused multiply-add: numba contracts none without fastmath)."""
+    o = 0
+    for i in range(counts.shape[0]):
+        w = a[i]
+        for r in range(counts[i]):
+            b, f = before[i] + r, after[i] + r
+            for j in range(out.shape[1]):
+                out[o, j] = rows[b, j] + (rows[f, j] - rows[b, j]) * w
+            o += 1

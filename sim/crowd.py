@@ -23,14 +23,16 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from core.errors import ScenarioError
+from core.jit import jit
 from sim.config import bounded, check_ranges
 from sim.gestures import Gestures
 from sim.humanoid import HIP_HALF_WIDTH, SUPPORTED_HEIGHT_M, sample_heights
-from sim.store import StoreGeometry
+from sim.store import StoreGeometry, astar, segment_free
 from sim.types import Activity
 
 # Crowd time step. Poses between steps are interpolated, so this bounds how far anyone moves unseen.
@@ -228,12 +230,15 @@ class Crowd:
         self.feet = np.zeros((S, 2, 2))
         self.liftoff = np.zeros((S, 2, 2))
         self.swing_len = np.zeros((S, 2))
+        # The same arrays as the gait kernel takes them (written in place, never replaced).
+        self._gait = Gait(self.phase, self.stride, self.feet, self.liftoff, self.swing_len)
         self.gestures = Gestures(S, rng, config)
         self.arrivals = 0
         self.departures = 0
         self.agents = [_Agent() for _ in range(S)]
         self._spots = store.browse_spots()
         self._obstacles = store.obstacle_arrays()
+        _warm_up()
         checkout = [o for o in store.obstacles if o.key == "store.checkout_m"]
         self._checkout_spots = []
         self._checkout_top = checkout[0].height if checkout else 0.0
@@ -486,7 +491,7 @@ class Crowd:
         # 6. Velocity and heading from the step taken, then the gait.
         self.pos = new
         _turn_and_gait_kernel(old, new, want_heading, active, self.height, self.vel, self.heading, self.omega,
-                              self.phase, self.stride, self.feet, self.liftoff, self.swing_len)
+                              self._gait)
         self.gestures.update(t, dt, self.person_id, self.activities(), self.height)
 
     def _pausing(self, s: int, agent: _Agent, t: float, left_m: float) -> bool:
@@ -749,11 +754,29 @@ def _accelerate_kernel(want, vel, pos, active, new):
         new[s, 1] = pos[s, 1] + (vel[s, 1] + dvy * scale) * dt
 
 
-def _turn_and_gait_kernel(old, new, want_heading, active, height, vel, heading, omega, phase, stride, feet, liftoff,
-                          swing_len):
+class Gait(NamedTuple):
+    """Everybody's gait state (S slots), which `_gait_kernel` advances in place.
+
+    Attributes:
+        phase: (S,) the gait phase, cycles.
+        stride: (S,) the distance per gait cycle, m.
+        feet: (S, 2, 2) each foot's floor position, m.
+        liftoff: (S, 2, 2) where each foot left the floor, m.
+        swing_len: (S, 2) each swing's length, m.
+    """
+
+    phase: np.ndarray
+    stride: np.ndarray
+    feet: np.ndarray
+    liftoff: np.ndarray
+    swing_len: np.ndarray
+
+
+@jit
+def _turn_and_gait_kernel(old, new, want_heading, active, height, vel, heading, omega, gait):
     """In place: vel (S, 2) from the step old -> new (S, 2); the heading (S,) turns, at most MAX_TURN_RAD_S,
     toward the direction of motion above 0.3 m/s or else toward want_heading (S,), omega is its rate;
-    then `_gait_kernel`."""
+    then `_gait_kernel` moves the `Gait`."""
     dt = STEP_S
     speed = np.empty(old.shape[0])
     for s in range(old.shape[0]):
@@ -764,17 +787,19 @@ def _turn_and_gait_kernel(old, new, want_heading, active, height, vel, heading, 
         turn = min(max(turn, -MAX_TURN_RAD_S * dt), MAX_TURN_RAD_S * dt)
         heading[s] += turn
         omega[s] = turn / dt
-    _gait_kernel(speed, omega, height, active, heading, new, vel, phase, stride, feet, liftoff, swing_len)
+    _gait_kernel(speed, omega, height, active, heading, new, vel, gait)
 
 
-def _gait_kernel(speed, omega, height, active, heading, pos, vel, phase, stride, feet, liftoff, swing_len):
-    """Advances the gait phase (S,) and moves the feet (S, 2, 2) in place.
+@jit
+def _gait_kernel(speed, omega, height, active, heading, pos, vel, gait):
+    """Advances the gait phase (S,) and moves the feet (S, 2, 2) of the `Gait` in place.
 
     A foot is locked to the floor in stance; at lift-off its position is kept (liftoff) and it swings
     (minimum-jerk easing) toward where it lands: ahead by half the stance travel, at the body's
     predicted position; at touchdown it is locked where the swing was heading, less the stance already
     done. swing_len (S, 2) is each swing's length, stride (S,) the distance per gait cycle.
     """
+    phase, stride, feet, liftoff, swing_len = gait.phase, gait.stride, gait.feet, gait.liftoff, gait.swing_len
     dt = STEP_S
     for s in range(speed.shape[0]):
         v_eff = speed[s] + 0.3 * abs(omega[s])
@@ -808,3 +833,25 @@ def _gait_kernel(speed, omega, height, active, heading, pos, vel, phase, stride,
                 feet[s, leg, 0] = pos[s, 0] + c * back - sn * lateral
                 feet[s, leg, 1] = pos[s, 1] + sn * back + c * lateral
 
+
+_WARM = []
+
+
+def _warm_up():
+    """Loads (or, the first time on a machine, compiles) the kernels for the argument types the steps use,
+    so that the first steps run as fast as the others."""
+    if _WARM:
+        return
+    pts, obs = np.zeros((2, 2)), (np.zeros((1, 2)), np.ones((1, 2)), np.ones(1), np.zeros(1))
+    flags = np.zeros(2, dtype=bool)
+    _steer_kernel(pts, pts.copy(), pts, flags, flags, np.ones(2), *obs)
+    _violations_kernel(pts, pts, pts, *obs, flags.copy())
+    _project_kernel(pts.copy(), pts, pts, *obs)
+    one = np.ones(2)
+    _accelerate_kernel(pts, pts, pts, flags, np.empty((2, 2)))
+    _turn_and_gait_kernel(pts, pts, one, flags, one, pts.copy(), one.copy(), one.copy(),
+                          Gait(np.zeros(2), np.zeros(2), np.zeros((2, 2, 2)), np.zeros((2, 2, 2)), np.zeros((2, 2))))
+    grid = np.ones((2, 2), dtype=bool)
+    segment_free(grid, 0.05, 0.05, 0.15, 0.15, 0.1)
+    astar(grid, 0, 3, 0.1)
+    _WARM.append(True)

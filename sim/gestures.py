@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from core.jit import jit
 from sim import humanoid as hm
 from sim.types import Activity
 
@@ -184,6 +185,37 @@ def _arms(left, right, w_left: float, w_right: float, spine: float = 0.0, neck: 
     return np.array([*left, *right, w_left, w_right, spine, neck])
 
 
+class Moves(NamedTuple):
+    """The moves every slot's channels are making (S slots, K channels), as `_evaluate` reads them.
+
+    Attributes:
+        frm, to: (S, K) each channel's minimum-jerk move from frm to to.
+        t0, t1: (S, K) its start and end, s.
+        a_frm, a_to, b_frm, b_to: (S, K) the two sinusoids' amplitudes, moving with the same weight.
+        freq: (S,) the sinusoids' frequency, Hz.
+    """
+
+    frm: np.ndarray
+    to: np.ndarray
+    t0: np.ndarray
+    t1: np.ndarray
+    a_frm: np.ndarray
+    a_to: np.ndarray
+    b_frm: np.ndarray
+    b_to: np.ndarray
+    freq: np.ndarray
+
+
+class Channels(NamedTuple):
+    """What `_evaluate` writes per slot and channel (S, K): the move's value (base), the sinusoids' amplitudes
+    (amp_a, amp_b) and the channel (value)."""
+
+    base: np.ndarray
+    amp_a: np.ndarray
+    amp_b: np.ndarray
+    value: np.ndarray
+
+
 class Gestures:
     """Everybody's arm, gaze and weight motion, one row per body slot.
 
@@ -217,8 +249,11 @@ class Gestures:
         self.liveliness = np.ones(S)
         self.reach_top = np.zeros(S)  # top of the shelf or counter a person stands at (0: none)
         self.height = np.full(S, hm.REFERENCE_HEIGHT_M)
-        _evaluate(0.0, 0.0, self.frm, self.to, self.t0, self.t1, self.a_frm, self.a_to, self.b_frm, self.b_to,
-                  self.freq, self.phase, self.base, self.amp_a, self.amp_b, self.value)
+        # The same arrays as the kernel takes them (they are written in place, never replaced).
+        self._moves = Moves(self.frm, self.to, self.t0, self.t1, self.a_frm, self.a_to, self.b_frm, self.b_to,
+                            self.freq)
+        self._channels = Channels(self.base, self.amp_a, self.amp_b, self.value)
+        _evaluate(0.0, 0.0, self._moves, self.phase, self._channels)
 
     def update(self, t_s: float, dt_s: float, person_id: np.ndarray, activity: np.ndarray, height: np.ndarray):
         """Advances everybody's motion to t_s (dt_s after the previous update) and plans what comes next.
@@ -230,8 +265,7 @@ class Gestures:
             activity: (S,) `Activity` value of each slot.
             height: (S,) body heights.
         """
-        _evaluate(t_s, dt_s, self.frm, self.to, self.t0, self.t1, self.a_frm, self.a_to, self.b_frm, self.b_to,
-                  self.freq, self.phase, self.base, self.amp_a, self.amp_b, self.value)
+        _evaluate(t_s, dt_s, self._moves, self.phase, self._channels)
         new = np.nonzero((person_id != self.person) & (person_id >= 0))[0]
         for s in new.tolist():
             self._reset(s, int(person_id[s]), float(height[s]), t_s)
@@ -436,12 +470,16 @@ class Gestures:
         return [Segment(np.array([shift]), rng.uniform(*SHIFT_MOVE_S), rng.uniform(*SHIFT_HOLD_S), zero, zero, None)]
 
 
-def _evaluate(t, dt, frm, to, t0, t1, a_frm, a_to, b_frm, b_to, freq, phase, base, amp_a, amp_b, out):
-    """Every slot's channels at time t: per channel a minimum-jerk move from frm to to (S, K) over [t0, t1]
-    (the weight e = 10u³ - 15u⁴ + 6u⁵ of u, the fraction of the move done), then held, plus the two
+@jit
+def _evaluate(t, dt, moves, phase, channels):
+    """Every slot's channels at time t, s: per channel a minimum-jerk move from frm to to (S, K) over [t0, t1]
+    (`Moves`; the weight e = 10u³ - 15u⁴ + 6u⁵ of u, the fraction of the move done), then held, plus the two
     sinusoids sin(phase) and sin(GOLDEN phase + 1) with amplitudes moving from a_frm/b_frm to a_to/b_to with
-    the same weight. phase (S,) advances by 2 pi freq dt first. base, amp_a, amp_b (S, K) get the move's value
-    and the amplitudes at t, out (S, K) the channels."""
+    the same weight. phase (S,) advances by 2 pi freq dt first (dt, s). The `Channels` get the move's value and
+    the amplitudes at t (base, amp_a, amp_b) and the channels (value)."""
+    frm, to, t0, t1 = moves.frm, moves.to, moves.t0, moves.t1
+    a_frm, a_to, b_frm, b_to, freq = moves.a_frm, moves.a_to, moves.b_frm, moves.b_to, moves.freq
+    base, amp_a, amp_b, out = channels.base, channels.amp_a, channels.amp_b, channels.value
     two_pi = 2 * math.pi
     for s in range(frm.shape[0]):
         phase[s] += two_pi * freq[s] * dt

@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 
 from core.errors import ScenarioError
+from core.jit import jit
 from core.records import Box, BoxKind
 from sim.config import bounded, check_ranges
 
@@ -468,6 +469,7 @@ class StoreGeometry:
         return spots
 
 
+@jit
 def segment_free(free, ax, ay, bx, by, cell):
     """Whether the segment (ax, ay)-(bx, by) stays on the True cells of free (nx, ny), sampled every half cell."""
     dx, dy = bx - ax, by - ay
@@ -481,6 +483,7 @@ def segment_free(free, ax, ay, bx, by, cell):
     return True
 
 
+@jit
 def astar(free, start, goal, cell):
     """(L,) int64 flat cells (i * ny + j) of a shortest 8-connected path over the True cells of free (nx, ny)
     from start to goal, both included; empty if there is none. Edges cost cell or cell * sqrt(2); ties

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -128,12 +129,12 @@ class World:
                 self._fk_body[self._body_slot[b], self._body_local[b]] = b
         if S and not np.array_equal(self._body_local[m.site_bodyid[self._kp_sites]], np.tile(_FK_KP_BODY, (S, 1))):
             raise RuntimeError("keypoint sites are not on the bodies sim.humanoid names")
-        self._body_pos, self._site_pos = m.body_pos, m.site_pos  # views: they see the resizing
+        # The model's body and site offsets are views: they see the resizing.
+        self._kinematics = Kinematics(self._fk_body, _FK_TABLES, _FK_HINGES, m.body_pos, self._kp_sites, m.site_pos)
         # Load (or compile) the per-tick kernel now rather than in the first `advance`.
         no_slot = np.zeros((0, hm.NQ))
         _pose_kernel(no_slot, no_slot, np.zeros(0), np.zeros(0), 0.0, np.zeros(0, dtype=bool), np.zeros(0),
-                     np.zeros(0, dtype=np.int64), self._fk_body, _FK_TABLES, _FK_HINGES, self._body_pos, self._kp_sites,
-                     self._site_pos, np.empty((0, J, 3)))
+                     np.zeros(0, dtype=np.int64), self._kinematics, np.empty((0, J, 3)))
 
     # -- model -------------------------------------------------------------------------------------
 
@@ -239,8 +240,7 @@ class World:
         # body, geom and site) runs when `data` is next asked for.
         poses = np.empty((len(order), self.skeleton.num_joints, 3))
         q0, h0, a = (cur.qpos, cur.heading, 0.0) if exact else (prev.qpos, prev.heading, (t_s - prev.time_s) / STEP_S)
-        _pose_kernel(q0, cur.qpos, h0, cur.heading, a, present, self._data.qpos, order, self._fk_body, _FK_TABLES,
-                     _FK_HINGES, self._body_pos, self._kp_sites, self._site_pos, poses)
+        _pose_kernel(q0, cur.qpos, h0, cur.heading, a, present, self._data.qpos, order, self._kinematics, poses)
         self._kinematics_stale = True
         self._present = present
         return PoseTruth(t_s=float(t_s), person_ids=self._ids, poses=poses)
@@ -462,8 +462,29 @@ if any(hm.J[f"right_{n}"] - hm.J[f"left_{n}"] != LEG_STRIDE for n in ("hip_flex"
     raise RuntimeError("humanoid hinge layout: right limbs are not the left ones shifted")
 
 
+class Kinematics(NamedTuple):
+    """The model's constants that `_pose_kernel`'s forward kinematics reads (S slots, 16 bodies, 17 keypoints).
+
+    Attributes:
+        body: (S, 16) int64 model body ids.
+        tables: (16 + 17, 3) int64 per local body its parent, first hinge and hinge count, then per keypoint
+            its local body (`_FK_TABLES`).
+        hinges: (H, 3) int64 qpos column, axis (0 x, 1 y, 2 z) and sign of each hinge (`_FK_HINGES`).
+        body_pos: (nbody, 3) the model's body offsets in their parent frames, m.
+        kp_sites: (S, 17) int64 model site ids of the keypoints.
+        site_pos: (nsite, 3) the model's site offsets in their body frames, m.
+    """
+
+    body: np.ndarray
+    tables: np.ndarray
+    hinges: np.ndarray
+    body_pos: np.ndarray
+    kp_sites: np.ndarray
+    site_pos: np.ndarray
+
+
 @jit
-def _pose_kernel(q0, q1, h0, h1, a, present, qpos, order, body, tables, hinges, body_pos, kp_sites, site_pos, out):
+def _pose_kernel(q0, q1, h0, h1, a, present, qpos, order, kinematics, out):
     """Poses the bodies between two crowd steps and computes the keypoint sites of those present.
 
     qpos (S * NQ,) becomes the joint positions a (0..1) of the way from q0 to q1 (S, NQ), with the
@@ -473,10 +494,10 @@ def _pose_kernel(q0, q1, h0, h1, a, present, qpos, order, body, tables, hinges, 
     and its hinges in order (the humanoid's bodies, joints and sites have no rotation or offset of their
     own, and every hinge axis is a signed unit axis).
 
-    body (S, 16): model body ids; tables (16 + 17, 3): per local body parent, first hinge, hinge count,
-    then per keypoint its local body; hinges (H, 3): qpos column, axis (0 x, 1 y, 2 z) and sign of each
-    hinge; kp_sites (S, 17) model site ids; body_pos, site_pos: the model's (after resizing).
+    kinematics: the model's `Kinematics` (after resizing).
     """
+    body, tables, hinges = kinematics.body, kinematics.tables, kinematics.hinges
+    body_pos, kp_sites, site_pos = kinematics.body_pos, kinematics.kp_sites, kinematics.site_pos
     S, nq = q0.shape
     for s in range(S):
         for j in range(nq):

@@ -5,6 +5,8 @@ All functions are pure and vectorised; matrices are (T, D) with targets as rows 
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from core.jit import jit
@@ -117,28 +119,50 @@ def combine(a2d: np.ndarray | None, a3d: np.ndarray, normalize: bool) -> np.ndar
     return total
 
 
+class AffinityParams(NamedTuple):
+    """The weights and thresholds of eq. (1)-(5) that do not change from frame to frame (`affinity_matrix`).
+
+    Attributes:
+        w_2d: eq. (2)'s weight.
+        alpha_2d_floor_px: the least threshold of eq. (2), pixels (as `affinity_2d`'s floor_px).
+        w_3d: eq. (4)'s weight.
+        alpha_3d_m: eq. (4)'s threshold, m.
+        lambda_a_per_s: λa of eq. (2), (4), 1/s.
+        max_predict_s: the longest horizon of eq. (5)'s prediction, s.
+        normalize: as `combine`.
+    """
+
+    w_2d: float
+    alpha_2d_floor_px: float
+    w_3d: float
+    alpha_3d_m: float
+    lambda_a_per_s: float
+    max_predict_s: float
+    normalize: bool
+
+
 @jit
-def affinity_matrix(
-    positions, velocities, joint_stamp_s, seen_stamp_s, prev_px, prev_stamp_s, camera, det_px, world_from_pixel, center,
-    stamp_s, w_2d, alpha_2d_px_per_s, alpha_2d_floor_px, w_3d, alpha_3d_m, lambda_a_per_s, max_predict_s, normalize,
-    rows, out,
-):
+def affinity_matrix(targets, camera, det_px, world_from_pixel, center, stamp_s, alpha_2d_px_per_s, params, rows, out):
     """Eq. (1)-(5) in one pass from the tracker's target arrays: `combine` of `affinity_2d` and `affinity_3d`
     after `predict_positions` and `geometry.ray_directions` (compiled kernel, no intermediate (T, D, J) arrays).
 
     Args:
-        positions, velocities: (T, J, 3) X_t' (NaN unknown) and V_t'; joint_stamp_s: (T, J) t' of X_t', s.
-        seen_stamp_s: (T, J) last observation of each joint, from which eq. (4)'s time penalty counts, s.
-        prev_px: (T, C, J, 2) last matched undistorted joints per camera; prev_stamp_s: (T, C, J) their stamps
-            (NaN none); only camera `camera` is read (eq. 2).
+        targets: the `TargetRows`, read: pos, vel (T, J, 3) X_t' (NaN unknown) and V_t'; joint_s (T, J) t' of
+            X_t', s; seen_s (T, J) last observation of each joint, from which eq. (4)'s time penalty counts, s;
+            obs_px (T, C, J, 2) last matched undistorted joints per camera and obs_s (T, C, J) their stamps
+            (NaN none), of camera `camera` only (eq. 2).
         det_px: (D, J, 2) the frame's undistorted joints (NaN missing).
         world_from_pixel: (3, 3) R^T K^-1 of the camera; center: (3,) its centre (eq. 3).
-        stamp_s: t, s. The weights and thresholds as in `affinity_2d` (α2D converted to pixels per second with
-            the camera's frame period), `affinity_3d` and `predict_positions`.
-        normalize: as `combine`.
+        stamp_s: t, s.
+        alpha_2d_px_per_s: eq. (2)'s α2D in pixels per second (converted with the camera's frame period).
+        params: `AffinityParams`, as in `affinity_2d`, `affinity_3d`, `predict_positions` and `combine`.
         rows: (R,) the target rows to score (those in the camera's view, `visibility.targets_in_view`).
         out: (R, D) the affinity matrix of those rows, written.
     """
+    positions, velocities, joint_stamp_s, seen_stamp_s = targets.pos, targets.vel, targets.joint_s, targets.seen_s
+    prev_px, prev_stamp_s = targets.obs_px, targets.obs_s
+    w_2d, alpha_2d_floor_px, w_3d, alpha_3d_m = params.w_2d, params.alpha_2d_floor_px, params.w_3d, params.alpha_3d_m
+    lambda_a_per_s, max_predict_s, normalize = params.lambda_a_per_s, params.max_predict_s, params.normalize
     J = positions.shape[1]
     D = det_px.shape[0]
     rays = np.empty((D, J, 3))

@@ -8,23 +8,61 @@ would otherwise be a few hundred small numpy calls: `update_matched` (eq. 6-11 t
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from core.jit import jit, sort_prefix
 from tracker.body import fill_poses, joint_states
-from tracker.triangulation import triangulate_point
+from tracker.triangulation import Observations, TriangulationParams, triangulate_point
 
 MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
 
 
+class UpdateParams(NamedTuple):
+    """The `TrackerConfig` fields of a matched target's update (`update_matched`) and of the output poses.
+
+    Attributes:
+        max_observation_age_s: a camera's latest point of a joint older than this is left out of eq. (6), s.
+        triangulation: `TriangulationParams` of eq. (6)-(11) (λt 0 where the configuration's triangulation
+            mode does not weigh time).
+        max_bone_m: the bone gate's length, m.
+        velocity_window_s: eq. (5)'s velocity fits the samples of this last span, s.
+        max_speed_m_per_s: a joint speed beyond this is clipped, m/s.
+        stale_after_s: a joint not seen for this long moves with the body, s.
+        max_predict_s: the longest horizon of eq. (5)'s prediction, s.
+    """
+
+    max_observation_age_s: float
+    triangulation: TriangulationParams
+    max_bone_m: float
+    velocity_window_s: float
+    max_speed_m_per_s: float
+    stale_after_s: float
+    max_predict_s: float
+
+
+class BodyLimits(NamedTuple):
+    """When a matched target's observed body is implausible (`implausible_bodies`).
+
+    Attributes:
+        stale_after_s: a joint triangulated within this span is observed, s.
+        min_bottom_m, max_top_m: the heights an observed joint should lie between, m.
+        max_bone_m: the longest plausible observed bone, m.
+        max_reprojection_px: the largest plausible median reprojection error, pixels.
+        share: more than this share of the observed joints (or bones) out of the limits is implausible.
+    """
+
+    stale_after_s: float
+    min_bottom_m: float
+    max_top_m: float
+    max_bone_m: float
+    max_reprojection_px: float
+    share: float
+
+
 @jit
-def update_matched(
-    rows, cols, det_px, camera, stamp_s,
-    pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next, last_update_s, num_updates,
-    P, bones,
-    max_observation_age_s, lambda_t_per_s, use_velocity, row_norm, min_views, reject_factor, reject_floor_px,
-    max_bone_m, velocity_window_s, max_speed_m_per_s, stale_after_s, max_predict_s,
-):
+def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, params):
     """Updates the matched targets in place: eq. (6)-(11) per joint, bone gate, eq. (5) velocity, stale joints.
 
     For each matched pair (rows[m], cols[m]):
@@ -42,14 +80,19 @@ def update_matched(
     Args:
         rows: (M,) matched target rows; cols: (M,) their detections in det_px (D, J, 2) undistorted pixels.
         camera: the frame's camera index; stamp_s: its stamp t, s.
-        pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next, last_update_s, num_updates:
-            the target arrays of `tracker._Targets` (updated in place); cam_s (T, C) is the stamp of the last
-            frame of each camera matched to the target (NaN none), >= every obs_s of that camera, so that only
-            the cameras with a fresh point are visited per joint.
-        P: (C, 3, 4) projection matrices; bones: (B, 2) joint pairs.
-        The rest: `TrackerConfig` fields (row_norm: `triangulation.row_norm_code`; a λt of 0 from its
-            `triangulation`).
+        targets: the `TargetRows` (pos, vel, joint_s, seen_s, obs_px, obs_s, cam_s, hist_pos, hist_s, hist_next,
+            last_update_s, num_updates updated in place); its cam_s (T, C), the stamp of the last frame of each
+            camera matched to the target (NaN none), >= every obs_s of that camera, lets only the cameras with a
+            fresh point be visited per joint.
+        P: (C, 3, 4) projection matrices; bones: (B, 2) int64 joint pairs.
+        params: `UpdateParams`.
     """
+    pos, vel, joint_s, seen_s = targets.pos, targets.vel, targets.joint_s, targets.seen_s
+    obs_px, obs_s, cam_s = targets.obs_px, targets.obs_s, targets.cam_s
+    hist_pos, hist_s, hist_next = targets.hist_pos, targets.hist_s, targets.hist_next
+    max_observation_age_s, max_bone_m = params.max_observation_age_s, params.max_bone_m
+    triangulation = params.triangulation
+    lambda_t_per_s, use_velocity = triangulation.lambda_t_per_s, triangulation.use_velocity
     C, J = obs_s.shape[1], obs_s.shape[2]
     H = hist_s.shape[1]
     cams = np.empty(C, dtype=np.int64)
@@ -69,6 +112,7 @@ def update_matched(
     hit = np.empty(J, dtype=np.bool_)
     values = np.empty(J)
     fresh = np.empty(C, dtype=np.int64)
+    observations = Observations(cams, points, dts, decays)  # refilled per joint
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
@@ -103,8 +147,7 @@ def update_matched(
                     decays[num] = cached_decay[k]  # eq. (11): e^(-2 λt (t - t_i)), squared
                     num += 1
             V[0], V[1], V[2] = vel[r, j, 0], vel[r, j, 1], vel[r, j, 2]
-            triangulate_point(P, cams, points, dts, decays, num, V, use_velocity, min_views, reject_factor,
-                              reject_floor_px, row_norm, plain, compensated, work, scratch)
+            triangulate_point(P, observations, num, V, triangulation, plain, compensated, work, scratch)
             update[j] = np.isfinite(plain[0])
             use_compensated = use_velocity and np.isfinite(compensated[0])
             for k in range(3):
@@ -141,11 +184,12 @@ def update_matched(
             for k in range(3):
                 hist_pos[r, slot, j, k] = samples[j, k] if update[j] else np.nan
         hist_next[r] = (slot + 1) % H
-        _fit_velocities(hist_pos, hist_s, r, update, stamp_s, velocity_window_s, max_speed_m_per_s, vel)
+        _fit_velocities(hist_pos, hist_s, r, update, stamp_s, params.velocity_window_s, params.max_speed_m_per_s,
+                        vel)
         # 5. Joints nobody has seen for `stale_after_s` move with the body (beyond the paper).
-        _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, stale_after_s, max_predict_s, values)
-        last_update_s[r] = stamp_s
-        num_updates[r] += 1
+        _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, params.stale_after_s, params.max_predict_s, values)
+        targets.last_update_s[r] = stamp_s
+        targets.num_updates[r] += 1
 
 
 @jit
@@ -253,7 +297,10 @@ def output_poses(state, code, ids, pos, vel, joint_s, seen_s, stamp_s, max_predi
     """The frame's output: the ids (K,) of the targets in lifecycle state `code`, their poses (K, J, 3) predicted
     to stamp_s by eq. (5), X_t' + V_t' (t - t'), the horizon clipped to [0, max_predict_s], with the joints never
     triangulated filled from the target's own body (`body.fill_poses`, model and bones), and their (K, J)
-    `JointState` codes (`body.joint_states`, stale after `stale_after_s`)."""
+    `JointState` codes (`body.joint_states`, stale after `stale_after_s`); the arrays as in `TargetRows`.
+
+    (Twelve arguments, the target arrays among them one by one: a NamedTuple argument costs numba's dispatch
+    microseconds per call, and this runs for every frame.)"""
     rows = np.flatnonzero(state == code)
     J = pos.shape[1]
     out = np.empty((rows.size, J, 3))
@@ -291,12 +338,13 @@ def has_body(pos, rows, hips, min_joints):
 
 
 @jit
-def implausible_bodies(rows, cols, det_px, P, pos, seen_s, stamp_s, stale_after_s, bones, min_bottom_m, max_top_m,
-                       max_bone_m, max_reprojection_px, share, out):
-    """out[m] = whether matched target rows[m]'s observed body is implausible (see `Tracker._record_evidence`):
-    more than `share` of its observed joints (triangulated within `stale_after_s`) outside
-    [min_bottom_m, max_top_m] or of its observed bones longer than `max_bone_m`, or a median reprojection
-    error (through P (3, 4), against detection cols[m] of det_px (D, J, 2)) above `max_reprojection_px`."""
+def implausible_bodies(rows, cols, det_px, P, pos, seen_s, stamp_s, bones, limits, out):
+    """out[m] = whether matched target rows[m]'s observed body (pos (T, J, 3), seen_s (T, J) of `TargetRows`)
+    is implausible (see `Tracker._record_evidence`) by the `BodyLimits` limits: more than `share` of its
+    observed joints (triangulated within `stale_after_s`) outside [min_bottom_m, max_top_m] or of its observed
+    bones (B, 2) longer than `max_bone_m`, or a median reprojection error (through P (3, 4), against detection
+    cols[m] of det_px (D, J, 2)) above `max_reprojection_px`."""
+    stale_after_s, share = limits.stale_after_s, limits.share
     J, B = pos.shape[1], bones.shape[0]
     observed = np.empty(J, dtype=np.bool_)
     errors = np.empty(J)
@@ -309,7 +357,7 @@ def implausible_bodies(rows, cols, det_px, P, pos, seen_s, stamp_s, stale_after_
                 continue
             count += 1
             z = pos[r, j, 2]
-            if z < min_bottom_m or z > max_top_m:
+            if z < limits.min_bottom_m or z > limits.max_top_m:
                 off += 1
             h0 = P[0, 0] * pos[r, j, 0] + P[0, 1] * pos[r, j, 1] + P[0, 2] * pos[r, j, 2] + P[0, 3]
             h1 = P[1, 0] * pos[r, j, 0] + P[1, 1] * pos[r, j, 1] + P[1, 2] * pos[r, j, 2] + P[1, 3]
@@ -323,10 +371,10 @@ def implausible_bodies(rows, cols, det_px, P, pos, seen_s, stamp_s, stale_after_
             a, e = bones[b, 0], bones[b, 1]
             if observed[a] and observed[e]:
                 both += 1
-                if _distance(pos, r, a, e) > max_bone_m:
+                if _distance(pos, r, a, e) > limits.max_bone_m:
                     long += 1
         bad = off > share * max(count, 1) or long > share * max(both, 1)
         if n:
             sort_prefix(errors, n)
-            bad = bad or (errors[(n - 1) // 2] + errors[n // 2]) / 2.0 > max_reprojection_px
+            bad = bad or (errors[(n - 1) // 2] + errors[n // 2]) / 2.0 > limits.max_reprojection_px
         out[m] = bad

@@ -33,11 +33,28 @@ from tracker.body import mean_body
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, ray_directions, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, consensus_views, partition_graph, reconstruct
-from tracker.kernels import has_body, implausible_bodies, output_poses, split_detections, update_matched
+from tracker.kernels import (
+    BodyLimits,
+    UpdateParams,
+    has_body,
+    implausible_bodies,
+    output_poses,
+    split_detections,
+    update_matched,
+)
 from tracker.rows import Rows
-from tracker.triangulation import row_norm_code
+from tracker.target_rows import TargetRows
+from tracker.triangulation import TriangulationParams, row_norm_code
 from tracker.types import TargetArrays, TrackerOutput
-from tracker.visibility import all_view_planes, count_sightings, overlapping_views, sight_map_grid, targets_in_view
+from tracker.visibility import (
+    EvidenceParams,
+    SightMap,
+    all_view_planes,
+    count_sightings,
+    overlapping_views,
+    sight_map_grid,
+    targets_in_view,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -55,33 +72,28 @@ MAX_SIGHT_MAP_CELLS = 20_000_000
 
 
 class _Targets(Rows):
-    """Array storage of all live targets (rows), grown on demand and compacted on removal."""
+    """Array storage of all live targets (rows), grown on demand and compacted on removal.
+
+    Attributes:
+        arrays: the current views of the fields as one `TargetRows`, the way the kernels take them (made again
+            whenever the views are).
+    """
 
     def __init__(self, num_cameras: int, num_joints: int, history: int):
-        C, J, H = num_cameras, num_joints, history
         self.ids = np.zeros(0, dtype=np.int64)
         self.state = np.zeros(0, dtype=np.int8)
         self.born_s = np.zeros(0)
-        self.last_update_s = np.zeros(0)
-        self.num_updates = np.zeros(0, dtype=np.int64)
-        self.pos = np.zeros((0, J, 3))  # X_t' per joint, NaN never triangulated
-        self.joint_s = np.zeros((0, J))  # t' per joint (-inf never): the time X_t' refers to
-        self.seen_s = np.zeros((0, J))  # last time the joint was triangulated from observations (-inf never)
-        self.vel = np.zeros((0, J, 3))  # V_t' per joint (eq. 5)
-        self.obs_px = np.zeros((0, C, J, 2))  # last matched undistorted joint per camera (eq. 2, 6)
-        self.obs_s = np.zeros((0, C, J))  # its stamp, NaN none
-        self.cam_s = np.zeros((0, C))  # stamp of the last frame of each camera matched to the target, NaN none
-        self.hist_pos = np.zeros((0, H, J, 3))  # ring buffer of past joint estimates for the velocity fit
-        self.hist_s = np.zeros((0, H, J))
-        self.hist_next = np.zeros(0, dtype=np.int64)
-        self.expected = np.zeros(0)  # decayed count of frames of cameras that should have seen the target
-        self.sighted = np.zeros(0)  # of those, decayed count of the frames that matched it
-        self.evidence_s = np.zeros(0)  # time of the last count
+        # The fields of `TargetRows`, which documents them.
+        for name, empty in zip(TargetRows._fields, TargetRows.empty(0, num_cameras, num_joints, history)):
+            setattr(self, name, empty)
         self.implausible_s = np.zeros(0)  # since when the observed body is implausible, NaN when it is not
+        self._views()
 
-    _FIELDS = ("ids", "state", "born_s", "last_update_s", "num_updates", "pos", "joint_s", "seen_s", "vel", "obs_px",
-               "obs_s", "cam_s", "hist_pos", "hist_s", "hist_next", "expected", "sighted", "evidence_s",
-               "implausible_s")
+    _FIELDS = ("ids", "state", "born_s", *TargetRows._fields, "implausible_s")
+
+    def _views(self) -> None:
+        super()._views()
+        self.arrays = TargetRows._make(self.__dict__[name] for name in TargetRows._fields)
 
 
 class Tracker:
@@ -112,16 +124,25 @@ class Tracker:
         self._dist = [np.ascontiguousarray(cam.dist, dtype=np.float64) for cam in self.cameras]
         cfg = config
         self._init_min_joints = int(cfg.init_min_joints)
-        self._affinity_params = (float(cfg.alpha_2d_floor_px), float(cfg.w_3d), float(cfg.alpha_3d_m),
-                                 float(cfg.lambda_a_per_s), float(cfg.max_predict_s), bool(cfg.normalize_affinity))
+        self._affinity_params = aff.AffinityParams(
+            w_2d=float(cfg.w_2d), alpha_2d_floor_px=float(cfg.alpha_2d_floor_px), w_3d=float(cfg.w_3d),
+            alpha_3d_m=float(cfg.alpha_3d_m), lambda_a_per_s=float(cfg.lambda_a_per_s),
+            max_predict_s=float(cfg.max_predict_s), normalize=bool(cfg.normalize_affinity))
         mode = cfg.triangulation
         self._reconstruction_row_norm = row_norm_code(cfg, reconstruction=True)
-        self._update_params = (float(cfg.max_observation_age_s),
-                               float(cfg.lambda_t_per_s) if mode.weighs_time else 0.0,
-                               mode is Triangulation.VELOCITY, row_norm_code(cfg), int(cfg.min_views),
-                               float(cfg.reject_factor), float(cfg.reject_floor_px), float(cfg.max_bone_m),
-                               float(cfg.velocity_window_s), float(cfg.max_speed_m_per_s), float(cfg.stale_after_s),
-                               float(cfg.max_predict_s))
+        self._update_params = UpdateParams(
+            max_observation_age_s=float(cfg.max_observation_age_s),
+            triangulation=TriangulationParams(
+                lambda_t_per_s=float(cfg.lambda_t_per_s) if mode.weighs_time else 0.0,
+                use_velocity=mode is Triangulation.VELOCITY, min_views=int(cfg.min_views),
+                reject_factor=float(cfg.reject_factor), reject_floor_px=float(cfg.reject_floor_px),
+                row_norm=row_norm_code(cfg)),
+            max_bone_m=float(cfg.max_bone_m),
+            velocity_window_s=float(cfg.velocity_window_s), max_speed_m_per_s=float(cfg.max_speed_m_per_s),
+            stale_after_s=float(cfg.stale_after_s), max_predict_s=float(cfg.max_predict_s))
+        self._evidence_params = EvidenceParams(
+            max_predict_s=float(cfg.max_predict_s), inside_m=float(cfg.ghost_inside_m),
+            window_s=float(cfg.ghost_window_s), prior_count=float(cfg.ghost_map_prior_count))
         # View volumes (which targets a frame is scored against) and the camera pairs whose views share part
         # of the band of heights where joints can be (the only pairs initialisation links, so the only ones
         # whose fundamental matrix is needed).
@@ -133,13 +154,11 @@ class Tracker:
             if a != b:
                 self._F[a, b] = fundamental_matrix(self.cameras[a], self.cameras[b])
         # Each camera's sight map (docs/tracker.md, "No ghosts"): how often it matched confirmed targets per cell.
-        self._sight_grid, nx, ny = sight_map_grid(self.cameras, config.ghost_cell_m)
+        grid, nx, ny = sight_map_grid(self.cameras, config.ghost_cell_m)
         if C * nx * ny > MAX_SIGHT_MAP_CELLS:
             raise ConfigError(f"TrackerConfig.ghost_cell_m: {config.ghost_cell_m} m makes {C} sight maps of "
                               f"{nx * ny:,} cells (over {MAX_SIGHT_MAP_CELLS:,} in all); raise it, or 0 for no map")
-        self._sight_shape = (nx, ny)
-        self._sight_expected = np.zeros((C, nx * ny + 1))  # cells, then the camera's total
-        self._sight_matched = np.zeros((C, nx * ny + 1))
+        self._sight_maps = [SightMap(grid, nx, ny, np.zeros(nx * ny + 1), np.zeros(nx * ny + 1)) for _ in range(C)]
         self._targets = _Targets(C, J, config.velocity_history)
         self._next_id = 0
         self._camera_last_s = np.full(C, -np.inf)
@@ -158,6 +177,10 @@ class Tracker:
             max_reprojection_px=config.init_max_reprojection_px, min_joints_3d=config.init_min_joints_3d,
             max_bone_m=config.init_max_bone_m, min_top_m=config.init_min_top_m, max_top_m=config.init_max_top_m,
             min_bottom_m=config.init_min_bottom_m)
+        self._body_limits = BodyLimits(
+            stale_after_s=float(config.stale_after_s), min_bottom_m=float(config.init_min_bottom_m),
+            max_top_m=float(config.init_max_top_m), max_bone_m=float(config.init_max_bone_m),
+            max_reprojection_px=float(config.init_max_reprojection_px), share=IMPLAUSIBLE_SHARE)
         self._mean_body = mean_body(skeleton)
         self._hips = self._hip_joints(skeleton)
         self.last_output = TrackerOutput(stamp_s=0.0, camera="", targets=[],
@@ -278,9 +301,8 @@ class Tracker:
         # before the camera's second frame, when no target can hold a point of this camera for eq. 2.)
         alpha_2d_px_per_s = max(cfg.alpha_2d_px_per_frame / self._period_s[c], cfg.alpha_2d_floor_px_per_s)
         matrix = np.empty((rows.size, det_px.shape[0]))
-        aff.affinity_matrix(tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s, c, det_px,
-                            self._world_from_pixel[c], self._centers[c], t, float(cfg.w_2d), alpha_2d_px_per_s,
-                            *self._affinity_params, rows, matrix)
+        aff.affinity_matrix(tg.arrays, c, det_px, self._world_from_pixel[c], self._centers[c], t, alpha_2d_px_per_s,
+                            self._affinity_params, rows, matrix)
         matched, cols = associate(matrix)  # eq. (1), (T, D)
         return rows[matched], cols
 
@@ -297,9 +319,7 @@ class Tracker:
             rows: (M,) matched targets; cols: (M,) their detections in det_px (D, J, 2).
         """
         tg = self._targets
-        update_matched(rows, cols, det_px, c, t, tg.pos, tg.vel, tg.joint_s, tg.seen_s, tg.obs_px, tg.obs_s, tg.cam_s,
-                       tg.hist_pos, tg.hist_s, tg.hist_next, tg.last_update_s, tg.num_updates, self._P, self._bones,
-                       *self._update_params)
+        update_matched(rows, cols, det_px, c, t, tg.arrays, self._P, self._bones, self._update_params)
         tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, self.config,
                                             self._has_body(rows))
 
@@ -320,20 +340,17 @@ class Tracker:
         Args:
             rows, cols: (M,) the matched targets and their detections in det_px (D, J, 2).
         """
-        tg, cfg, lim = self._targets, self.config, self._limits
+        tg = self._targets
         if not len(tg) or self._hips.size == 0:
             return
         matched = np.zeros(len(tg), dtype=np.bool_)
         matched[rows] = True
-        count_sightings(self._planes[c], self._hips, tg.pos, tg.vel, tg.joint_s, t, float(cfg.max_predict_s),
-                        float(cfg.ghost_inside_m), float(cfg.ghost_window_s), matched, tg.state == lifecycle.CONFIRMED,
-                        self._sight_grid, *self._sight_shape, self._sight_expected[c], self._sight_matched[c],
-                        float(cfg.ghost_map_prior_count), tg.expected, tg.sighted, tg.evidence_s)
+        count_sightings(self._planes[c], self._hips, tg.arrays, t, matched, tg.state == lifecycle.CONFIRMED,
+                        self._sight_maps[c], self._evidence_params)
         if rows.size:
             bad = np.empty(rows.size, dtype=np.bool_)
-            implausible_bodies(rows, cols, det_px, self._P[c], tg.pos, tg.seen_s, t, float(cfg.stale_after_s),
-                               self._bones, float(lim.min_bottom_m), float(lim.max_top_m), float(lim.max_bone_m),
-                               float(lim.max_reprojection_px), IMPLAUSIBLE_SHARE, bad)
+            implausible_bodies(rows, cols, det_px, self._P[c], tg.pos, tg.seen_s, t, self._bones, self._body_limits,
+                               bad)
             start = bad & np.isnan(tg.implausible_s[rows])
             tg.implausible_s[rows[start]] = t
             tg.implausible_s[rows[~bad]] = np.nan
@@ -387,9 +404,9 @@ class Tracker:
         node_cam = np.concatenate([np.full(self._pool_px[k].shape[0], k) for k in cams])
         node_pos = np.concatenate([np.arange(self._pool_px[k].shape[0]) for k in cams])
         node_px = np.concatenate([self._pool_px[k] for k in cams])
-        epipolar = (self._F, cfg.alpha_epipolar_px, cfg.init_min_common_joints, self._linked)
-        to_pool = aff.epipolar_affinity_between(new_px, np.full(new_px.shape[0], c), node_px, node_cam,
-                                                *epipolar)  # eq. (S2), (D_c, n)
+        alpha_px, min_common = cfg.alpha_epipolar_px, cfg.init_min_common_joints
+        to_pool = aff.epipolar_affinity_between(new_px, np.full(new_px.shape[0], c), node_px, node_cam, self._F,
+                                                alpha_px, min_common, self._linked)  # eq. (S2), (D_c, n)
         taken = np.zeros(node_cam.size, dtype=bool)
         created: list[tuple[int, np.ndarray]] = []
         used: dict[int, list[int]] = {c: []}
@@ -407,7 +424,7 @@ class Tracker:
                 continue
             ks = np.concatenate([[c], node_cam[near]])
             pts = np.concatenate([new_px[x:x + 1], node_px[near]])  # (V, J, 2)
-            A = aff.epipolar_affinity_matrix(pts, ks, *epipolar)
+            A = aff.epipolar_affinity_matrix(pts, ks, self._F, alpha_px, min_common, self._linked)
             cluster = next(p for p in partition_graph(A, cfg.milp_max_nodes) if p[0] == 0)  # the one holding x
             if cluster.size < cfg.min_views:
                 continue
@@ -510,9 +527,9 @@ class Tracker:
     def _emit(self, t: float, camera: str, assigned: np.ndarray) -> TargetArrays:
         tg = self._targets
         # Eq. (5) to the stamp; joints never triangulated from the target's own body (tracker.body).
+        params = self._update_params
         ids, poses, codes = output_poses(tg.state, lifecycle.CONFIRMED, tg.ids, tg.pos, tg.vel, tg.joint_s, tg.seen_s,
-                                         t, self._update_params[-1], float(self.config.stale_after_s),
-                                         self._mean_body, self._bones)
+                                         t, params.max_predict_s, params.stale_after_s, self._mean_body, self._bones)
         targets = TargetArrays(ids, poses, codes, t, lifecycle.to_state(lifecycle.CONFIRMED))
         self.last_output = TrackerOutput(stamp_s=t, camera=camera, targets=targets, detection_target_ids=assigned)
         return targets

@@ -3,6 +3,8 @@ velocity-compensated variant for unsynchronised cameras."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from core.jit import jit, sort_prefix
@@ -20,6 +22,44 @@ PLANE_ROW = 2
 camera centre and the image line x = x_i (or y = y_i), whatever the world origin. With detector noise in
 pixels proportional to the person's size in the image (the simulated detector's, docs/sensor-model.md), that
 distance has about the same spread in every view, so equal weights are what least squares wants."""
+
+
+class TriangulationParams(NamedTuple):
+    """How the compiled triangulation (`triangulate_point`) weighs and filters a point's observations.
+
+    Attributes:
+        lambda_t_per_s: λt of eq. (11)'s time weights, 1/s (0: every observation weighs the same).
+        use_velocity: also compute the velocity-compensated estimate.
+        min_views: least number of views of a point.
+        reject_factor: the robust second pass leaves out views whose reprojection error exceeds both
+            `reject_floor_px` and this times the point's median error (0: no second pass).
+        reject_floor_px: see reject_factor, pixels.
+        row_norm: eq. (11)'s division of the rows (UNIT_ROWS, WHOLE_ROW or PLANE_ROW).
+    """
+
+    lambda_t_per_s: float
+    use_velocity: bool
+    min_views: int
+    reject_factor: float
+    reject_floor_px: float
+    row_norm: int
+
+
+class Observations(NamedTuple):
+    """One point's observations, in arrays of which the first `num` count (the callers' work space, made once
+    and refilled per point; `num` travels beside the tuple, so that the tuple is made once too).
+
+    Attributes:
+        cam: (>=num,) int64 camera of each observation.
+        points_px: (>=num, 2) undistorted pixels.
+        dts: (>=num,) t - t_i >= 0, s.
+        decays: (>=num,) e^(-2 λt (t - t_i)), the squared time factors of the eq. (11) weights.
+    """
+
+    cam: np.ndarray
+    points_px: np.ndarray
+    dts: np.ndarray
+    decays: np.ndarray
 
 
 def row_norm_code(config: TrackerConfig, reconstruction: bool = False) -> int:
@@ -284,16 +324,16 @@ def triangulate_observations_robust(
     V = np.array(velocities, dtype=np.float64, order="C") if use_velocity else np.zeros((num_groups, 3))
     plain = np.empty((num_groups, 3))
     compensated = np.empty((num_groups, 3))
-    _triangulate_groups(P, starts, np.asarray(cam, dtype=np.int64)[order], points, dts, V, use_velocity,
-                        int(min_views), float(lambda_t_per_s), float(reject_factor), float(reject_floor_px),
-                        int(row_norm), plain, compensated)
+    params = TriangulationParams(float(lambda_t_per_s), use_velocity, int(min_views), float(reject_factor),
+                                 float(reject_floor_px), int(row_norm))
+    _triangulate_groups(P, starts, np.asarray(cam, dtype=np.int64)[order], points, dts, V, params, plain, compensated)
     return plain, compensated if use_velocity else None
 
 
 @jit
-def _triangulate_groups(P, starts, cam, points_px, dts, V, use_velocity, min_views, lambda_t_per_s, reject_factor,
-                        reject_floor_px, row_norm, plain, compensated):
-    """`triangulate_point` for each group of observations cam/points_px/dts[starts[n]:starts[n + 1]]."""
+def _triangulate_groups(P, starts, cam, points_px, dts, V, params, plain, compensated):
+    """`triangulate_point` for each group of observations cam/points_px/dts[starts[n]:starts[n + 1]], with the
+    velocity V[n] (N, 3), into plain and compensated (N, 3) (params: `TriangulationParams`)."""
     work = np.empty((3, 4, 4))
     size = 4
     for n in range(starts.size - 1):
@@ -302,36 +342,36 @@ def _triangulate_groups(P, starts, cam, points_px, dts, V, use_velocity, min_vie
     dts_n, decays_n = np.empty(size), np.empty(size)
     scratch = np.empty((4, 8))
     V_n, plain_n, compensated_n = np.empty(3), np.empty(3), np.empty(3)
+    observations = Observations(cam_n, points_n, dts_n, decays_n)
     for n in range(starts.size - 1):
         a, num = starts[n], starts[n + 1] - starts[n]
         for i in range(num):
             cam_n[i], points_n[i, 0], points_n[i, 1], dts_n[i] = cam[a + i], points_px[a + i, 0], \
                 points_px[a + i, 1], dts[a + i]
-            decays_n[i] = np.exp(-2.0 * lambda_t_per_s * dts[a + i])
+            decays_n[i] = np.exp(-2.0 * params.lambda_t_per_s * dts[a + i])
         V_n[0], V_n[1], V_n[2] = V[n, 0], V[n, 1], V[n, 2]
-        triangulate_point(P, cam_n, points_n, dts_n, decays_n, num, V_n, use_velocity, min_views, reject_factor,
-                          reject_floor_px, row_norm, plain_n, compensated_n, work, scratch)
+        triangulate_point(P, observations, num, V_n, params, plain_n, compensated_n, work, scratch)
         for k in range(3):
             plain[n, k], compensated[n, k] = plain_n[k], compensated_n[k]
 
 
 @jit
-def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, reject_factor, reject_floor_px,
-                      row_norm, plain, compensated, work, scratch):
-    """Eq. (6)-(11) for one point from its `num` observations, with the robust second pass (compiled kernel).
+def triangulate_point(P, observations, num, V, params, plain, compensated, work, scratch):
+    """Eq. (6)-(11) for one point from its observations, with the robust second pass (compiled kernel).
 
     Args:
         P: (C, 3, 4) projection matrices.
-        cam: (≥num,) camera of each observation; points_px: (≥num, 2) undistorted pixels; dts: (≥num,) t - t_i ≥ 0, s.
-        decays: (≥num,) e^(-2 λt (t - t_i)), the squared time factors of the eq. (11) weights.
-        V: (3,) the point's velocity, m/s (read only when use_velocity).
-        use_velocity: also compute the velocity-compensated estimate.
-        min_views, reject_factor, reject_floor_px, row_norm: as `triangulate_observations_robust`.
+        observations: the point's `Observations` (its decays carry the time weights; params.lambda_t_per_s
+            is not read); num: how many of them count.
+        V: (3,) the point's velocity, m/s (read only when params.use_velocity).
+        params: `TriangulationParams`.
         plain, compensated: (3,) outputs, NaN when not determined (compensated untouched without velocity).
         work: (3, 4, 4) and scratch: (4, 8) work space.
     """
-    _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, row_norm, plain,
-                        compensated, work, scratch)
+    cam, points_px, dts, decays = observations.cam, observations.points_px, observations.dts, observations.decays
+    use_velocity, min_views, reject_factor = params.use_velocity, params.min_views, params.reject_factor
+    reject_floor_px = params.reject_floor_px
+    _solve_observations(P, observations, num, V, params, plain, compensated, work, scratch)
     if reject_factor <= 0.0 or num == 0:
         return
     X = compensated if use_velocity else plain
@@ -367,8 +407,8 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
         decays2[i] = decays[keep[i]]
     plain2 = np.empty(3)
     compensated2 = np.empty(3)
-    _solve_observations(P, cam2, points2, dts2, decays2, kept, V, use_velocity, min_views, row_norm, plain2,
-                        compensated2, work, scratch)
+    _solve_observations(P, Observations(cam2, points2, dts2, decays2), kept, V, params, plain2, compensated2, work,
+                        scratch)
     if np.isfinite(plain2[0]):
         plain[:] = plain2
         if use_velocity:
@@ -376,10 +416,11 @@ def triangulate_point(P, cam, points_px, dts, decays, num, V, use_velocity, min_
 
 
 @jit
-def _solve_observations(P, cam, points_px, dts, decays, num, V, use_velocity, min_views, row_norm, plain,
-                        compensated, work, scratch):
+def _solve_observations(P, observations, num, V, params, plain, compensated, work, scratch):
     """The normal matrices of eq. (8), (10) with the weights of eq. (11) (without its row norms unless
-    `row_norm`), and their smallest eigenvectors."""
+    `params.row_norm`), and their smallest eigenvectors (arguments as `triangulate_point`)."""
+    cam, points_px, dts, decays = observations.cam, observations.points_px, observations.dts, observations.decays
+    use_velocity, min_views, row_norm = params.use_velocity, params.min_views, params.row_norm
     plain[0] = plain[1] = plain[2] = np.nan
     if use_velocity:
         compensated[0] = compensated[1] = compensated[2] = np.nan

@@ -16,6 +16,7 @@ regardless (`targets_in_view`).
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -215,23 +216,63 @@ def sight_map_grid(cameras: Sequence[Camera], cell_m: float, pad_m: float = 10.0
     return np.array([lo[0], lo[1], cell_m]), int(n[0]), int(n[1])
 
 
+class SightMap(NamedTuple):
+    """One camera's sight map (docs/tracker.md, "No ghosts"): how often it matched the confirmed targets it
+    should have seen, per floor cell.
+
+    Attributes:
+        grid: (3,) the cells' corner x0, y0 and side, m (`sight_map_grid`; side 0: no map).
+        nx, ny: the cell counts along x and y.
+        expected: (nx * ny + 1,) decayed count of the confirmed targets the camera should have seen per cell,
+            then over all cells.
+        matched: (nx * ny + 1,) of those, the ones it matched.
+    """
+
+    grid: np.ndarray
+    nx: int
+    ny: int
+    expected: np.ndarray
+    matched: np.ndarray
+
+
+class EvidenceParams(NamedTuple):
+    """The `TrackerConfig` fields of the sightings count (`count_sightings`).
+
+    Attributes:
+        max_predict_s: the horizon of eq. (5), s.
+        inside_m: how far inside the view volume a hip centre is seen, m.
+        window_s: the time constant of the decayed counts, s.
+        prior_count: the pseudo-sightings of a map cell (see `count_sightings`).
+    """
+
+    max_predict_s: float
+    inside_m: float
+    window_s: float
+    prior_count: float
+
+
 @jit
-def count_sightings(planes, hips, pos, vel, joint_s, stamp_s, max_predict_s, inside_m, window_s, matched, confirmed,
-                    grid, nx, ny, map_expected, map_matched, prior_count, expected, sighted, evidence_s):
+def count_sightings(planes, hips, targets, stamp_s, matched, confirmed, sight_map, params):
     """Counts what one camera frame says about each target (in place).
 
-    A target whose predicted hip centre (eq. 5, both hips known) lies at least `inside_m` inside the camera's
-    view volume (planes (5, 4)) was expected to be seen, as often as this camera matches the confirmed targets
-    standing in the same floor cell (its sight map: shelves and crowds hide people from some cameras in some
-    places). That rate is the cell's share of matched sightings with `prior_count` pseudo-sightings at the
-    camera's share over all cells, itself with `prior_count` at 1: a new map trusts the camera everywhere,
-    a cell learns from the camera as a whole until it has its own sightings.
-    expected (T,) and sighted (T,) are counts decayed with time constant `window_s` since evidence_s (T,):
-    the first adds that rate (1 for a matched target outside the volume), the second 1 for each frame that
-    matched the target (matched (T,) bool). The confirmed targets (confirmed (T,) bool) inside the volume
-    teach the camera's map: map_expected and map_matched (nx * ny + 1,), its cells (x0, y0, cell side) = grid
-    then the camera's totals; cell side 0: no map, every rate is 1.
+    A target (`TargetRows`) whose predicted hip centre (eq. 5, hips (2,) known) lies at least `inside_m` inside
+    the camera's view volume (planes (5, 4)) was expected to be seen, as often as this camera matches the
+    confirmed targets standing in the same floor cell (its `SightMap`: shelves and crowds hide people from some
+    cameras in some places). That rate is the cell's share of matched sightings with `prior_count`
+    pseudo-sightings at the camera's share over all cells, itself with `prior_count` at 1: a new map trusts the
+    camera everywhere, a cell learns from the camera as a whole until it has its own sightings.
+    The targets' expected (T,) and sighted (T,) are counts decayed with time constant `window_s` since their
+    evidence_s (T,): the first adds that rate (1 for a matched target outside the volume), the second 1 for
+    each frame that matched the target (matched (T,) bool). The confirmed targets (confirmed (T,) bool) inside
+    the volume teach the camera's map; a map without cells (side 0) makes every rate 1. The scalars are
+    `EvidenceParams` params.
     """
+    pos, vel, joint_s = targets.pos, targets.vel, targets.joint_s
+    expected, sighted, evidence_s = targets.expected, targets.sighted, targets.evidence_s
+    grid, nx, ny = sight_map.grid, sight_map.nx, sight_map.ny
+    map_expected, map_matched = sight_map.expected, sight_map.matched
+    max_predict_s, inside_m, window_s, prior_count = params.max_predict_s, params.inside_m, params.window_s, \
+        params.prior_count
     T = pos.shape[0]
     total = nx * ny
     c = np.empty(3)  # the predicted hip centre, one buffer for every target

@@ -43,7 +43,7 @@ from sim.sensing.draws import (
 )
 from sim.sensing.offsets import JointOffsets
 from sim.sensing.profiles import DetectorConfig
-from sim.sensing.rays import RAY_GEOM_TYPES, cast_keypoint_rays, count_views
+from sim.sensing.rays import RAY_GEOM_TYPES, KeypointRays, RayHits, RayModel, Scenes, cast_keypoint_rays, count_views
 
 _SCENE_ROWS = 64  # ticks per buffer of `Detector.scene_now` (about 7 blocks of store_layout2)
 
@@ -194,7 +194,7 @@ class Detector:
         buffer.used += 1
         return SceneTick(buffer.pos[i], buffer.mat[i], size, rbound, owner, buffer, i)
 
-    def _scene_arrays(self, scenes: list[SceneTick]) -> tuple:
+    def _scene_arrays(self, scenes: list[SceneTick]) -> Scenes:
         """The `scene_now` snapshots of several ticks as the ray caster takes them: positions (T, G, 3) and
         rotations (T, G, 9) (a slice of the buffer when `scene_now` wrote them to consecutive rows), the
         distinct sizes (U, G, 3), radii (U, G) and owners (U, G), and per tick its index in those (T,)."""
@@ -222,13 +222,13 @@ class Detector:
                 const_of[i] = len(distinct)
                 distinct.append(scene)
         size, rbound, owner = (np.stack([getattr(scene, k) for scene in distinct]) for k in ("size", "rbound", "owner"))
-        return xpos, xmat, size, rbound, owner.astype(np.int64, copy=False), const_of
+        return Scenes(xpos, xmat, size, rbound, owner.astype(np.int64, copy=False), const_of)
 
     def _ray_scratch(self, R: int, N: int, T: int, K: int) -> tuple:
         """Scratch arrays for the ray caster, kept between blocks (new ones of this size each block cost
         page faults): hit geoms (R, N) int32 and distances (R, N) (written, not read here), and the geom
         and group boxes (T, G + K, 6)."""
-        G = len(self._scene_cache[2])
+        G = len(self._scene_cache.geom_type)
         held = self._ray_held
         if held is None or held[0].size < R * N or held[2].shape[0] < T or held[2].shape[1] != G + K:
             size = max(R * N, 64 * 32 * 17)
@@ -291,13 +291,11 @@ class Detector:
             large = large_enough(px.reshape(n_req * most, J, 2), np.repeat(self.min_size_px[cams], most))
             cast = in_img & np.repeat(large.reshape(n_req, most), J, axis=1)
         if scenes is not None and cast.any():
-            kp_bodies, geom_body, geom_type, groups = self._scene_cache
-            xpos, xmat, size, rbound, owner, const_of = self._scene_arrays(scenes)
-            geomid, dist, bounds = self._ray_scratch(n_req, N, len(scenes), len(groups) - 1)
-            cast_keypoint_rays(self._centre_array[cams], points, cast, ids, J, kp_bodies, geom_type, geom_body,
-                                groups, xpos, xmat, size, rbound, owner, const_of,
-                                np.asarray(scene_of, dtype=np.int64), float(self.config.self_hit_margin_m), occluded,
-                                self_occluded, geomid, dist, cams, self.visibility_counts, bounds)
+            model = self._scene_cache
+            geomid, dist, bounds = self._ray_scratch(n_req, N, len(scenes), len(model.groups) - 1)
+            rays = KeypointRays(self._centre_array[cams], points, cast, ids, np.asarray(scene_of, dtype=np.int64), cams)
+            cast_keypoint_rays(rays, model, self._scene_arrays(scenes), float(self.config.self_hit_margin_m),
+                               RayHits(occluded, self_occluded, geomid, dist), self.visibility_counts, bounds)
         else:
             count_views(cams, cast, occluded, self_occluded, self.visibility_counts)
         found = px
@@ -329,7 +327,7 @@ class Detector:
         return tuple(np.concatenate([a[i, :P] for i, P in enumerate(counts)])
                      for a in (px, in_img, occluded, self_occluded, found))
 
-    def _scene(self, world) -> tuple:
+    def _scene(self, world) -> RayModel:
         """What the ray caster needs of `world` that does not change while it runs (cached per world):
         (J, 2) body and parent body of each keypoint and, per geom, its body within its person, its type
         and the groups of geoms that move together (`World.geom_groups`)."""
@@ -344,9 +342,9 @@ class Detector:
             if unsupported:
                 raise ValueError(f"world geoms: mjtGeom types {unsupported} are not supported by the keypoint ray "
                                  "caster (spheres, capsules, ellipsoids, cylinders and boxes are)")
-            self._scene_cache = (np.ascontiguousarray(np.stack([bodies, parents], axis=1)),
-                                 np.asarray(world.geom_body_ids(), dtype=np.int64), geom_type,
-                                 np.asarray(world.geom_groups(), dtype=np.int64))
+            self._scene_cache = RayModel(np.ascontiguousarray(np.stack([bodies, parents], axis=1)),
+                                         np.asarray(world.geom_body_ids(), dtype=np.int64), geom_type,
+                                         np.asarray(world.geom_groups(), dtype=np.int64))
             self._scene_of = world
         return self._scene_cache
 
@@ -354,19 +352,20 @@ class Detector:
         """Occluded and self-occluded flags (R, N) of keypoints points (R, N, 3) seen from origins (R, 3),
         where mask (R, N); person (R, N // J) is the person id of each row of J keypoints. Also the nearest
         geom hit before each keypoint (R, N) (-1: none) and its distance."""
-        kp_bodies, geom_body, geom_type, groups = self._scene(world)
+        model = self._scene(world)
         xpos, xmat, size, rbound, owner = self.scene_now(world, copy=False)[:5]
         shape = mask.shape
-        occluded, self_occluded = np.empty(shape, dtype=bool), np.empty(shape, dtype=bool)
-        geomid, dist = np.empty(shape, dtype=np.int32), np.empty(shape)
-        cast_keypoint_rays(
-            np.ascontiguousarray(origins, dtype=np.float64), np.ascontiguousarray(points, dtype=np.float64),
-            np.ascontiguousarray(mask), np.ascontiguousarray(person, dtype=np.int64), self.skeleton.num_joints,
-            kp_bodies, geom_type, geom_body, groups, xpos[None], xmat[None], size[None], rbound[None], owner[None],
-            np.zeros(1, dtype=np.int64), np.zeros(shape[0], dtype=np.int64), float(self.config.self_hit_margin_m),
-            occluded, self_occluded, geomid, dist, np.zeros(shape[0], dtype=np.int64), np.zeros((1, 3), dtype=np.int64),
-            np.empty((1, len(geom_type) + len(groups) - 1, 6)))
-        return occluded, self_occluded, geomid, dist
+        hits = RayHits(np.empty(shape, dtype=bool), np.empty(shape, dtype=bool), np.empty(shape, dtype=np.int32),
+                       np.empty(shape))
+        rays = KeypointRays(np.ascontiguousarray(origins, dtype=np.float64),
+                            np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(mask),
+                            np.ascontiguousarray(person, dtype=np.int64), np.zeros(shape[0], dtype=np.int64),
+                            np.zeros(shape[0], dtype=np.int64))
+        scenes = Scenes(xpos[None], xmat[None], size[None], rbound[None], owner[None], np.zeros(1, dtype=np.int64))
+        bounds = np.empty((1, len(model.geom_type) + len(model.groups) - 1, 6))
+        cast_keypoint_rays(rays, model, scenes, float(self.config.self_hit_margin_m), hits,
+                           np.zeros((1, 3), dtype=np.int64), bounds)
+        return hits.occluded, hits.self_occluded, hits.geomid, hits.dist
 
     def detect_visible(self, requests, visibilities) -> list[CameraFrame]:
         """The frames of captures whose visibility is already known (`visibility_many` of the same poses, or

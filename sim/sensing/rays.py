@@ -4,6 +4,7 @@ person's own body hides."""
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -290,24 +291,93 @@ def _build_grid(geom_box, x0, y0, z0, cell, nx, ny, starts, tops, entries, fill_
     return starts[ncell]
 
 
+class KeypointRays(NamedTuple):
+    """The rays to cast: from each capture's camera centre to its keypoints (R captures, N keypoints each).
+
+    Attributes:
+        origins: (R, 3) the camera centre of each capture, m.
+        points: (R, N, 3) keypoints, m.
+        mask: (R, N) bool which to cast.
+        person: (R, N // J) int64 person id of each row of J keypoints.
+        scene_of: (R,) int64 the instant (of `Scenes`) of each capture.
+        cams: (R,) int64 the camera of each capture (its row of the counts).
+    """
+
+    origins: np.ndarray
+    points: np.ndarray
+    mask: np.ndarray
+    person: np.ndarray
+    scene_of: np.ndarray
+    cams: np.ndarray
+
+
+class RayModel(NamedTuple):
+    """What the ray caster needs of the world that does not change while it runs (G geoms, K groups).
+
+    Attributes:
+        kp_bodies: (J, 2) int64 body and parent body of each keypoint.
+        geom_body: (G,) int64 each geom's body within its person.
+        geom_type: (G,) int64 mjtGeom type of each geom.
+        groups: (K + 1,) int64 starts of contiguous geom groups (a person's geoms, the store's).
+    """
+
+    kp_bodies: np.ndarray
+    geom_body: np.ndarray
+    geom_type: np.ndarray
+    groups: np.ndarray
+
+
+class Scenes(NamedTuple):
+    """The geoms at T instants; their constant parts once per distinct set (U sets).
+
+    Attributes:
+        xpos: (T, G, 3) positions, m.
+        xmat: (T, G, 9) rotations, rows of 9.
+        size: (U, G, 3) sizes, m.
+        rbound: (U, G) bounding radii, m.
+        owner: (U, G) int64 the person owning each geom.
+        const_of: (T,) int64 the set of each instant.
+    """
+
+    xpos: np.ndarray
+    xmat: np.ndarray
+    size: np.ndarray
+    rbound: np.ndarray
+    owner: np.ndarray
+    const_of: np.ndarray
+
+
+class RayHits(NamedTuple):
+    """What the ray caster writes per keypoint (R, N).
+
+    Attributes:
+        occluded, self_occluded: (R, N) bool.
+        geomid: (R, N) int32 the nearest geom hit before the keypoint (-1: none).
+        dist: (R, N) its distance, m (-1: none).
+    """
+
+    occluded: np.ndarray
+    self_occluded: np.ndarray
+    geomid: np.ndarray
+    dist: np.ndarray
+
+
 @jit
-def cast_keypoint_rays(origins, points, mask, person, J, kp_bodies, geom_type, geom_body, groups, scene_xpos,
-                        scene_xmat, scene_size, scene_rbound, scene_person, const_of, scene_of, margin, occluded,
-                        self_occluded, geomid, dist, cams, counts, bounds):
+def cast_keypoint_rays(rays, model, scenes, margin, hits, counts, bounds):
     """Occlusion flags of keypoints seen from camera centres (see the section comment).
 
-    origins (R, 3): the camera centre of each capture; points (R, N, 3) keypoints, mask (R, N) which to
-    cast, person (R, N // J) person id of each row of J keypoints; kp_bodies (J, 2) body and parent body
-    of each keypoint; geom_type, geom_body (G,); groups (K + 1,) starts of contiguous geom groups (a
-    person's geoms, the store's); scene_xpos, scene_xmat (T, G, ...) the geoms' positions and
-    rotations (rows of 9) at T instants; scene_size, scene_rbound, scene_person (U, G, ...) their sizes,
-    bounding radii and owners (U sets; const_of (T,) the set of each instant); scene_of (R,) the instant of
-    each capture;
+    rays: the `KeypointRays`; model: the world's `RayModel`; scenes: the geoms at each instant (`Scenes`);
     margin: self_hit_margin_m.
-    Writes occluded, self_occluded (R, N) bool and the nearest hit geomid (R, N) int32 (-1: none nearer
-    than the keypoint) and its distance dist (R, N); adds each capture's keypoints cast, occluded and
-    self-occluded to its camera's row cams[r] of counts (C, 3). bounds: scratch, (T, G + K, 6) at least.
+    Writes the `RayHits` hits; adds each capture's keypoints cast, occluded and self-occluded to its camera's
+    row of counts (C, 3). bounds: scratch, (T, G + K, 6) at least.
     """
+    origins, points, mask, person, scene_of, cams = rays.origins, rays.points, rays.mask, rays.person, \
+        rays.scene_of, rays.cams
+    kp_bodies, geom_type, geom_body, groups = model.kp_bodies, model.geom_type, model.geom_body, model.groups
+    J = kp_bodies.shape[0]
+    scene_xpos, scene_xmat, scene_size, scene_rbound = scenes.xpos, scenes.xmat, scenes.size, scenes.rbound
+    scene_person, const_of = scenes.owner, scenes.const_of
+    occluded, self_occluded, geomid, dist = hits.occluded, hits.self_occluded, hits.geomid, hits.dist
     T, G = scene_xpos.shape[0], geom_type.shape[0]
     for s in range(T):
         u = const_of[s]

@@ -6,6 +6,7 @@ import pytest
 from tests.reference.plain import plain_python
 from tests.tracker.synthetic import look_at_camera
 from tracker.affinity import (
+    AffinityParams,
     affinity_2d,
     affinity_3d,
     affinity_matrix,
@@ -16,6 +17,7 @@ from tracker.affinity import (
     predict_positions,
 )
 from tracker.geometry import fundamental_matrix, project, ray_directions, world_from_pixel_matrix
+from tracker.target_rows import TargetRows
 
 
 def test_2d_affinity_by_hand():
@@ -118,15 +120,17 @@ def test_compiled_affinity_matrix_equals_the_per_equation_functions(normalize):
     a3d = affinity_3d(predicted, seen_s, cam.center_world, ray_directions(cam, det, M), t, w3, a3, lam)
     a2d = affinity_2d(prev_px[:, c], prev_s[:, c], det, t, w2, a2, lam, floor)
     expected = combine(a2d, a3d, normalize)
+    targets = TargetRows.empty(T, C, J, 1)._replace(pos=pos, vel=vel, joint_s=joint_s, seen_s=seen_s, obs_px=prev_px,
+                                                    obs_s=prev_s)
+    params = AffinityParams(w_2d=w2, alpha_2d_floor_px=floor, w_3d=w3, alpha_3d_m=a3, lambda_a_per_s=lam,
+                            max_predict_s=horizon, normalize=normalize)
     for kernel in (affinity_matrix, plain_python(affinity_matrix)):
         out = np.full((T, D), np.nan)
-        kernel(pos, vel, joint_s, seen_s, prev_px, prev_s, c, det, M, cam.center_world, t, w2, a2, floor, w3, a3, lam,
-               horizon, normalize, np.arange(T), out)
+        kernel(targets, c, det, M, cam.center_world, t, a2, params, np.arange(T), out)
         np.testing.assert_allclose(out, expected, rtol=1e-12, atol=1e-12)
         some = np.array([3, 1])
         part = np.full((2, D), np.nan)
-        kernel(pos, vel, joint_s, seen_s, prev_px, prev_s, c, det, M, cam.center_world, t, w2, a2, floor, w3, a3, lam,
-               horizon, normalize, some, part)
+        kernel(targets, c, det, M, cam.center_world, t, a2, params, some, part)
         np.testing.assert_allclose(part, expected[some], rtol=1e-12, atol=1e-12)
 
 

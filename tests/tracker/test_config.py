@@ -110,5 +110,5 @@ def test_each_triangulation_reaches_the_update_kernel_as_its_weights(preset, mod
     from tracker.tracker import Tracker
 
     config = TrackerConfig.preset(preset).replace(triangulation=mode)
-    params = Tracker(ceiling_rig(4, 5.0, 4.0), config)._update_params
-    assert params[1:4] == (lambda_t, velocity, row_norm)
+    params = Tracker(ceiling_rig(4, 5.0, 4.0), config)._update_params.triangulation
+    assert (params.lambda_t_per_s, params.use_velocity, params.row_norm) == (lambda_t, velocity, row_norm)

@@ -11,6 +11,7 @@ from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
 from tracker.geometry import project_distorted
 from tracker.kernels import update_matched
+from tracker.target_rows import TargetRows
 from tracker.tracker import Tracker
 from tracker.types import JointState, TargetState
 
@@ -170,15 +171,12 @@ def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
         det_px, _ = tracker._clean(frame, c)
         rows, cols = tracker._associate(c, det_px, frame.stamp_s)
         assert rows.size
-        tg = tracker._targets
-        names = ("pos", "vel", "joint_s", "seen_s", "obs_px", "obs_s", "cam_s", "hist_pos", "hist_s", "hist_next",
-                 "last_update_s", "num_updates")
         results = []
         for kernel in (update_matched, plain_python(update_matched)):
-            arrays = [getattr(tg, name).copy() for name in names]
-            kernel(rows, cols, det_px, c, frame.stamp_s, *arrays, tracker._P, tracker._bones, *tracker._update_params)
+            arrays = tracker._targets.arrays.copy()
+            kernel(rows, cols, det_px, c, frame.stamp_s, arrays, tracker._P, tracker._bones, tracker._update_params)
             results.append(arrays)
-        for name, compiled, plain in zip(names, *results):
+        for name, compiled, plain in zip(TargetRows._fields, *results):
             np.testing.assert_allclose(compiled, plain, rtol=0, atol=1e-12, err_msg=name)
         tracker.update(frame)
 
@@ -337,9 +335,9 @@ def test_the_sight_map_keeps_people_whom_some_cameras_never_see_there(layout1):
 
 
 def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
-    from tracker.kernels import implausible_bodies
+    from tracker.kernels import BodyLimits, implausible_bodies
     from tracker.tracker import IMPLAUSIBLE_SHARE
-    from tracker.visibility import count_sightings
+    from tracker.visibility import EvidenceParams, count_sightings
 
     cams, _, frames, _ = layout1
     tracker = Tracker(cams, CONFIG)
@@ -351,21 +349,23 @@ def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
         rows, cols = tracker._associate(c, det_px, frame.stamp_s)
         matched = np.zeros(len(tg), dtype=bool)
         matched[rows] = True
-        pos = tg.pos.copy()
-        pos[0, :4, 2] = 3.5  # a few joints too high, to exercise the rule
+        limits = BodyLimits(stale_after_s=0.3, min_bottom_m=lim.min_bottom_m, max_top_m=lim.max_top_m,
+                            max_bone_m=lim.max_bone_m, max_reprojection_px=lim.max_reprojection_px,
+                            share=IMPLAUSIBLE_SHARE)
+        params = EvidenceParams(max_predict_s=0.5, inside_m=0.3, window_s=1.0, prior_count=20.0)
         counts, bads = [], []
         for sightings, bodies in ((count_sightings, implausible_bodies),
                                   (count_sightings.py_func, implausible_bodies.py_func)):
-            arrays = [tg.expected.copy(), tg.sighted.copy(), tg.evidence_s.copy()]
-            maps = [tracker._sight_expected[c].copy(), tracker._sight_matched[c].copy()]
-            sightings(tracker._planes[c], tracker._hips, pos, tg.vel, tg.joint_s, frame.stamp_s, 0.5, 0.3, 1.0,
-                      matched, tg.state == lifecycle.CONFIRMED, tracker._sight_grid, *tracker._sight_shape, *maps,
-                      20.0, *arrays)
-            arrays += maps
+            state = tg.arrays.copy()
+            state.pos[0, :4, 2] = 3.5  # a few joints too high, to exercise the rule
+            sight_map = tracker._sight_maps[c]
+            sight_map = sight_map._replace(expected=sight_map.expected.copy(), matched=sight_map.matched.copy())
+            sightings(tracker._planes[c], tracker._hips, state, frame.stamp_s, matched,
+                      tg.state == lifecycle.CONFIRMED, sight_map, params)
             bad = np.empty(rows.size, dtype=bool)
-            bodies(rows, cols, det_px, tracker._P[c], pos, tg.seen_s, frame.stamp_s, 0.3, tracker._bones,
-                   lim.min_bottom_m, lim.max_top_m, lim.max_bone_m, lim.max_reprojection_px, IMPLAUSIBLE_SHARE, bad)
-            counts.append(arrays)
+            bodies(rows, cols, det_px, tracker._P[c], state.pos, state.seen_s, frame.stamp_s, tracker._bones, limits,
+                   bad)
+            counts.append([state.expected, state.sighted, state.evidence_s, sight_map.expected, sight_map.matched])
             bads.append(bad)
         for compiled, plain in zip(*counts):
             np.testing.assert_allclose(compiled, plain, rtol=0, atol=1e-12)

@@ -11,6 +11,7 @@ from tracker.triangulation import (
     PLANE_ROW,
     UNIT_ROWS,
     WHOLE_ROW,
+    TriangulationParams,
     _inverse_iteration_gauss_jordan,
     _triangulate_groups,
     dlt_rows,
@@ -259,8 +260,10 @@ def test_compiled_triangulation_runs_the_same_as_plain_python(rig, velocity):
     outputs = []
     for kernel in (_triangulate_groups, plain_python(_triangulate_groups)):
         plain, compensated = np.empty((6, 3)), np.empty((6, 3))
-        kernel(rig, starts, cam[order], px[order], np.maximum(1.0 - stamps[order], 0.0), V, velocity, 2, 5.0, 3.0,
-               10.0, PLANE_ROW if velocity else WHOLE_ROW, plain, compensated)
+        params = TriangulationParams(lambda_t_per_s=5.0, use_velocity=velocity, min_views=2, reject_factor=3.0,
+                                     reject_floor_px=10.0, row_norm=PLANE_ROW if velocity else WHOLE_ROW)
+        kernel(rig, starts, cam[order], px[order], np.maximum(1.0 - stamps[order], 0.0), V, params, plain,
+               compensated)
         outputs.append(plain if not velocity else compensated)
     np.testing.assert_allclose(outputs[0], outputs[1], atol=1e-12)  # m
     assert np.isfinite(outputs[0]).all()

@@ -7,8 +7,17 @@ from core.types import COCO17
 from tests.tracker.synthetic import Walkers, look_at_camera, make_frames
 from tracker.config import TrackerConfig
 from tracker.geometry import project
+from tracker.target_rows import TargetRows
 from tracker.tracker import Tracker
-from tracker.visibility import count_sightings, overlapping_views, sight_map_grid, targets_in_view, view_planes
+from tracker.visibility import (
+    EvidenceParams,
+    SightMap,
+    count_sightings,
+    overlapping_views,
+    sight_map_grid,
+    targets_in_view,
+    view_planes,
+)
 
 
 def _corridor(num_cameras=8, spacing_m=2.0):
@@ -85,11 +94,13 @@ def test_sight_map_expects_as_often_as_the_camera_sees_people_there(compiled):
     map_expected[cell_a], map_matched[cell_a] = 40.0, 10.0
     map_expected[total], map_matched[total] = 40.0, 10.0
 
-    def step(matched, confirmed, prior, sight=(grid, nx, ny, map_expected, map_matched)):
-        counts = [np.zeros(3), np.zeros(3), np.zeros(3)]
-        kernel(view_planes(cam), np.array([11, 12]), pos, np.zeros_like(pos), np.zeros((3, J)), 0.0, 0.5, 0.3, 1.0,
-               np.array(matched), np.array(confirmed), *sight, prior, *counts)
-        return counts
+    sight_map = SightMap(grid, nx, ny, map_expected, map_matched)
+
+    def step(matched, confirmed, prior, sight=sight_map):
+        targets = TargetRows.empty(3, 1, J, 1)._replace(pos=pos, joint_s=np.zeros((3, J)))
+        kernel(view_planes(cam), np.array([11, 12]), targets, 0.0, np.array(matched), np.array(confirmed), sight,
+               EvidenceParams(max_predict_s=0.5, inside_m=0.3, window_s=1.0, prior_count=prior))
+        return targets.expected, targets.sighted, targets.evidence_s
 
     expected, sighted, _ = step([True, False, False], [False, False, False], 10.0)
     camera_rate = (10 + 10) / (40 + 10)  # the camera over all cells, with 10 pseudo-sightings at 1
@@ -103,7 +114,7 @@ def test_sight_map_expects_as_often_as_the_camera_sees_people_there(compiled):
     np.testing.assert_allclose(expected[:2], [11 / 41, 0.0])
     # No map: every frame whose view holds the target counts 1.
     expected, _, _ = step([False, False, False], [True, True, True], 10.0,
-                          (*sight_map_grid([cam], 0.0), np.zeros(2), np.zeros(2)))
+                          SightMap(*sight_map_grid([cam], 0.0), np.zeros(2), np.zeros(2)))
     np.testing.assert_allclose(expected, [1.0, 1.0, 0.0])
 
 
@@ -118,12 +129,12 @@ def test_a_target_without_hips_is_expected_by_no_camera(compiled):
     pos[1, 12] = np.nan  # target 1 has no right hip: where it stands is not known
     for cam in cams:  # the cameras that see the place and those that do not
         grid, nx, ny = sight_map_grid([cam], 1.0)
-        expected, sighted, evidence_s = np.zeros(2), np.zeros(2), np.zeros(2)
-        kernel(view_planes(cam), np.array([11, 12]), pos, np.zeros_like(pos), np.zeros((2, J)), 0.0, 0.5, 0.3, 1.0,
-               np.zeros(2, dtype=bool), np.zeros(2, dtype=bool), grid, nx, ny, np.zeros(nx * ny + 1),
-               np.zeros(nx * ny + 1), 10.0, expected, sighted, evidence_s)
-        assert expected[1] == 0.0 and sighted[1] == 0.0
-        assert expected[0] == (1.0 if cam is cams[0] else 0.0)
+        targets = TargetRows.empty(2, 1, J, 1)._replace(pos=pos, joint_s=np.zeros((2, J)))
+        kernel(view_planes(cam), np.array([11, 12]), targets, 0.0, np.zeros(2, dtype=bool), np.zeros(2, dtype=bool),
+               SightMap(grid, nx, ny, np.zeros(nx * ny + 1), np.zeros(nx * ny + 1)),
+               EvidenceParams(max_predict_s=0.5, inside_m=0.3, window_s=1.0, prior_count=10.0))
+        assert targets.expected[1] == 0.0 and targets.sighted[1] == 0.0
+        assert targets.expected[0] == (1.0 if cam is cams[0] else 0.0)
 
 
 def test_sight_maps_too_large_for_memory_are_refused():
