@@ -344,7 +344,7 @@ _ANNOTATIONS_KEY = np.frombuffer(bytes([(_ANNOTATIONS_FIELD << 3) | 2]), dtype=n
 _POINTS_KEY = (_POINTS_FIELD << 3) | 2
 if _POINTS_KEY >= 128 or _ANNOTATIONS_KEY[0] >= 128 or _STAMP_FIELD >= 16:
     raise RuntimeError("PointsAnnotation: the compiled encoder expects one-byte field tags")
-ANNOTATION_FIELDS = (_STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)  # the field arguments of wire.image_annotations
+ANNOTATION_FIELDS = (_STAMP_FIELD, _ANNOTATIONS_KEY, _POINTS_KEY)  # the fields of wire.AnnotationStyle
 
 
 def bone_table(skeleton: Skeleton) -> np.ndarray:

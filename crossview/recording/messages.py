@@ -124,10 +124,10 @@ class Encoder:
             d, J, len(self._bones), self._styles.table.shape[1]) for d, a in zip(counts, names))
         out = self._buffer_of(capacity)
         ends = np.empty(2 * n, dtype=np.int64)
+        style = wire.AnnotationStyle(self._bones, self._styles.table, self._styles.sizes, *foxglove.ANNOTATION_FIELDS)
         wire.frames_and_annotations(out, ends, np.concatenate(names) if names else np.zeros(0, np.uint8), name_ends,
-                                    times, np.asarray(t_ns, dtype=np.int64), bounds, kp, scores, ids, *truth,
-                                    self._bones, style_rows, self._styles.table, self._styles.sizes,
-                                    *foxglove.ANNOTATION_FIELDS)
+                                    times, np.asarray(t_ns, dtype=np.int64), bounds,
+                                    wire.FrameRows(kp, scores, ids, *truth), style_rows, style)
         ends = ends.tolist()
         data = out[:ends[-1] if n else 0].tobytes()
         result, start = [], 0

@@ -13,6 +13,7 @@ out when empty; sint64 is zigzag encoded; a message field is written whenever it
 from __future__ import annotations
 
 import struct
+from typing import NamedTuple
 
 import numpy as np
 
@@ -20,6 +21,44 @@ from core.jit import intrinsic, llvm_ir, types
 from core.jit import jit as _jit
 
 _VARINT, _FIXED64, _LEN = 0, 1, 2  # wire types
+
+
+class FrameRows(NamedTuple):
+    """A block's detections as rows, the frames' rows back to back (what a CameraFrame holds of each).
+
+    Attributes:
+        keypoints: (D, J, 2) detected pixels; scores: (D, J) joint scores; person_ids: (D,) int64 true person
+            (-1: a false positive); true_keypoints: (D, J, 2) the person's true pixels.
+        in_image, occluded, self_occluded: (D, J) bool; effects: (D,) uint32 `DetectionEffect` masks.
+    """
+
+    keypoints: np.ndarray
+    scores: np.ndarray
+    person_ids: np.ndarray
+    true_keypoints: np.ndarray
+    in_image: np.ndarray
+    occluded: np.ndarray
+    self_occluded: np.ndarray
+    effects: np.ndarray
+
+
+class AnnotationStyle(NamedTuple):
+    """What `image_annotations` writes around each detection's points.
+
+    Attributes:
+        bones: (B, 2) int64 joint pairs of the skeleton's bones.
+        styles: (S, L) uint8 rows holding bones-before, bones-after, joints-before and joints-after back to back
+            (`foxglove.detection_style_pieces`); style_sizes: (S, 4) int64 their sizes.
+        stamp_field_number: the Timestamp's field number in PointsAnnotation; key: (k,) uint8 the varint tag of
+            ImageAnnotations.points; points_key: that of PointsAnnotation.points (one byte).
+    """
+
+    bones: np.ndarray
+    styles: np.ndarray
+    style_sizes: np.ndarray
+    stamp_field_number: int
+    key: np.ndarray
+    points_key: int
 _POINT2_BYTES = 20  # the most one Point2 element takes: tag, length (18), then x and y as fixed64 fields
 
 
@@ -153,14 +192,11 @@ def _put_varints(out, pos, field, values, zigzag):
 
 
 @_jit
-def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores, person_ids, true_keypoints, in_image,
-                 occluded, self_occluded, effects):
-    """`crossview.CameraFrame` into `out` (uint8, at least `camera_frame_capacity`); returns its size.
-
-    camera: the camera name's UTF-8 bytes; stamp_s, capture_s, delivery_s: its times; keypoints
-    (D, J, 2), scores (D, J), person_ids (D,), true_keypoints (D, J, 2), in_image, occluded, self_occluded
-    (D, J) bool, effects (D,) uint32 masks (the caller checks them).
-    """
+def camera_frame(out, camera, stamp_s, capture_s, delivery_s, rows, a, b):
+    """`crossview.CameraFrame` of the detections rows[a:b] (`FrameRows`) into `out` (uint8, at least
+    `camera_frame_capacity`); returns its size. camera: the camera name's UTF-8 bytes; stamp_s, capture_s,
+    delivery_s: its times (the caller checks the effects' masks)."""
+    keypoints = rows.keypoints[a:b]
     pos = _put_string(out, 0, 1, camera)
     pos = _put_double_field(out, pos, 2, stamp_s)
     pos = _put_double_field(out, pos, 3, capture_s)
@@ -168,13 +204,13 @@ def camera_frame(out, camera, stamp_s, capture_s, delivery_s, keypoints, scores,
     pos = _put_uint_field(out, pos, 5, keypoints.shape[0])
     pos = _put_uint_field(out, pos, 6, keypoints.shape[1])
     pos = _put_fixed(out, pos, 7, keypoints)
-    pos = _put_fixed(out, pos, 8, scores)
-    pos = _put_varints(out, pos, 9, person_ids, True)
-    pos = _put_fixed(out, pos, 10, true_keypoints)
-    pos = _put_bools(out, pos, 11, in_image)
-    pos = _put_bools(out, pos, 12, occluded)
-    pos = _put_bools(out, pos, 13, self_occluded)
-    return _put_varints(out, pos, 14, effects, False)
+    pos = _put_fixed(out, pos, 8, rows.scores[a:b])
+    pos = _put_varints(out, pos, 9, rows.person_ids[a:b], True)
+    pos = _put_fixed(out, pos, 10, rows.true_keypoints[a:b])
+    pos = _put_bools(out, pos, 11, rows.in_image[a:b])
+    pos = _put_bools(out, pos, 12, rows.occluded[a:b])
+    pos = _put_bools(out, pos, 13, rows.self_occluded[a:b])
+    return _put_varints(out, pos, 14, rows.effects[a:b], False)
 
 
 def camera_frame_capacity(D: int, J: int, name_bytes: int) -> int:
@@ -199,8 +235,7 @@ def _put_point2(out, pos, points_key, x, y):
 
 
 @_jit
-def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, t_ns, stamp_field_number, key,
-                      points_key):
+def image_annotations(out, keypoints, style_rows, style, t_ns):
     """`foxglove.ImageAnnotations` of one frame's detections into `out` (uint8, at least
     `image_annotations_capacity`); returns the number of bytes.
 
@@ -208,19 +243,18 @@ def image_annotations(out, keypoints, bones, style_rows, styles, style_sizes, t_
     POINTS one of its known joints, each left out when empty; each is the stamp field, its style's part
     before the points, the points, its style's part after them.
 
-    keypoints (D, J, 2), NaN where unknown; bones (B, 2) joint pairs; style_rows (D,) each detection's row
-    of styles (S, L) uint8 rows holding bones-before, bones-after, joints-before and joints-after back to
-    back, with their sizes in style_sizes (S, 4); t_ns: the stamp (a Timestamp in PointsAnnotation field
-    `stamp_field_number`); key: the varint tag of ImageAnnotations.points; points_key: that of
-    PointsAnnotation.points (one byte).
+    keypoints (D, J, 2), NaN where unknown; style_rows (D,) each detection's row of the `AnnotationStyle`'s
+    styles; t_ns: the stamp (a Timestamp in PointsAnnotation field `style.stamp_field_number`).
     """
     D, J = keypoints.shape[0], keypoints.shape[1]
+    bones, styles, style_sizes, key, points_key = style.bones, style.styles, style.style_sizes, style.key, \
+        style.points_key
     # The timestamp field: seconds and nanos as varints, each left out when 0.
     seconds, nanos = t_ns // 1_000_000_000, t_ns % 1_000_000_000
     stamp_field = np.empty(32, dtype=np.uint8)
     n = _put_uint_field(stamp_field, 2, 1, seconds)
     n = _put_uint_field(stamp_field, n, 2, nanos)
-    stamp_field[0] = (stamp_field_number << 3) | _LEN
+    stamp_field[0] = (style.stamp_field_number << 3) | _LEN
     stamp_field[1] = n - 2
     stamp_field = stamp_field[:n]
     known = np.empty(J, dtype=np.bool_)
@@ -274,25 +308,20 @@ def image_annotations_capacity(D: int, J: int, B: int, style_bytes: int) -> int:
 
 
 @_jit
-def frames_and_annotations(out, ends, names, name_ends, times, t_ns, det_ends, keypoints, scores, person_ids,
-                           true_keypoints, in_image, occluded, self_occluded, effects, bones, style_rows, styles,
-                           style_sizes, stamp_field_number, key, points_key):
+def frames_and_annotations(out, ends, names, name_ends, times, t_ns, det_ends, rows, style_rows, style):
     """`camera_frame` then `image_annotations` of n frames, back to back in `out`, in one call.
 
-    The frames' rows are concatenated: frame i owns rows det_ends[i]:det_ends[i + 1] of keypoints, scores,
-    person_ids, true_keypoints, in_image, occluded, self_occluded, effects, style_rows, and bytes
-    name_ends[i]:name_ends[i + 1] of names (its camera's UTF-8 name); times (n, 3): stamp, capture and
-    delivery; t_ns (n,): the annotations' stamp. The other arguments are `image_annotations`'s.
+    Frame i owns rows det_ends[i]:det_ends[i + 1] of `rows` (`FrameRows`) and style_rows (its detections'
+    rows of the `AnnotationStyle`'s styles), and bytes name_ends[i]:name_ends[i + 1] of names (its camera's
+    UTF-8 name); times (n, 3): stamp, capture and delivery; t_ns (n,): the annotations' stamp.
     Writes ends (2 n,): where frame i's CameraFrame (2 i) and its annotations (2 i + 1) end.
     """
     pos = 0
     for i in range(t_ns.size):
         a, b = det_ends[i], det_ends[i + 1]
         pos += camera_frame(out[pos:], names[name_ends[i]:name_ends[i + 1]], times[i, 0], times[i, 1], times[i, 2],
-                            keypoints[a:b], scores[a:b], person_ids[a:b], true_keypoints[a:b], in_image[a:b],
-                            occluded[a:b], self_occluded[a:b], effects[a:b])
+                            rows, a, b)
         ends[2 * i] = pos
-        pos += image_annotations(out[pos:], keypoints[a:b], bones, style_rows[a:b], styles, style_sizes, t_ns[i],
-                                 stamp_field_number, key, points_key)
+        pos += image_annotations(out[pos:], rows.keypoints[a:b], style_rows[a:b], style, t_ns[i])
         ends[2 * i + 1] = pos
     return pos
