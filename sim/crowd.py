@@ -596,6 +596,7 @@ class Crowd:
 # made no whole command 1.3x faster: docs/benchmarks.md, "Kernel ledger") ---------------------------------
 
 
+@jit
 def _obstacle_distance(x, y, center, half, cos, sin):
     """Distance from the point (x, y) to the nearest footprint (inf without any); as `rect_distance`."""
     best = np.inf
@@ -607,6 +608,7 @@ def _obstacle_distance(x, y, center, half, cos, sin):
     return best
 
 
+@jit
 def _steer_kernel(pos, want, vel, active, walking, speed_pref, center, half, cos, sin):
     """In place: each active person's wish want (S, 2) steered off predicted close passes with the other
     active people (walkers only: time to closest approach against everybody's current motion, plus a
@@ -666,6 +668,7 @@ def _steer_kernel(pos, want, vel, active, walking, speed_pref, center, half, cos
         want[i, 0], want[i, 1] = wx0 * scale, wy0 * scale
 
 
+@jit
 def _violations_kernel(q, lo, hi, center, half, cos, sin, bad):
     """bad (n,): whether each point of q (n, 2) is outside its wall bounds lo/hi (n, 2), closer than
     SHELF_CLEARANCE_M to a footprint, or closer than SEPARATION_M to another point."""
@@ -684,6 +687,7 @@ def _violations_kernel(q, lo, hi, center, half, cos, sin, bad):
         bad[i] = b
 
 
+@jit
 def _project_kernel(p, lo, hi, center, half, cos, sin):
     """Moves the points p (n, 2) in place toward the hard constraints: up to three rounds of pushing
     pairs apart to SEPARATION_M + PROJECTION_MARGIN_M (half each), pushing points out of every footprint
@@ -740,6 +744,7 @@ def _project_kernel(p, lo, hi, center, half, cos, sin):
             p[i, 1] = min(max(p[i, 1], lo[i, 1]), hi[i, 1])
 
 
+@jit
 def _accelerate_kernel(want, vel, pos, active, new):
     """new (S, 2): where everybody active would be after STEP_S moving from pos toward the wished velocity
     want (S, 2) with acceleration at most MAX_ACCEL_M_S2 from vel; the inactive stay at pos."""
