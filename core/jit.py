@@ -39,6 +39,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "tracker.geometry": ("tracker.geometry",),
     "tracker.visibility": ("tracker.visibility",),
     "tracker.affinity": ("tracker.affinity",),
+    "tracker.initialization": ("tracker.initialization",),
     # the frame's kernels call the body's and triangulation's, which call `sort_prefix` (below)
     "tracker.kernels": ("tracker.kernels", "tracker.body", "tracker.triangulation", "core.jit"),
 }

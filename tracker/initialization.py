@@ -12,7 +12,7 @@ A component whose every pair has a positive affinity (two detections joined by o
 one cluster without a solver: joining all of it takes every term of (S3) and breaks no (S5). A component of
 up to `ENUMERATE_MAX_NODES` detections is solved exactly by scoring every partition of it at once (203 for
 six), which is what milp would return at a hundredth of its set-up cost (ties aside). A larger component
-(up to `max_exact_nodes`) is solved exactly by a branch and bound over its partitions (plain Python), started from
+(up to `max_exact_nodes`) is solved exactly by a compiled branch and bound over its partitions, started from
 the greedy merge's value and bounded by the positive affinities not yet placed; milp takes over only when
 that search runs past `BRANCH_AND_BOUND_MAX_STEPS` (a crowd puts one person in ten or more views at once,
 where milp's set-up alone cost more than the whole search).
@@ -29,6 +29,7 @@ import numpy as np
 from scipy.optimize import Bounds, LinearConstraint, milp
 from scipy.sparse import coo_matrix
 
+from core.jit import jit
 from core.types import Skeleton
 from tracker.triangulation import WHOLE_ROW, reprojection_error_px, triangulate_incremental
 
@@ -144,6 +145,7 @@ def _partition_branch_and_bound(a: np.ndarray) -> list[np.ndarray] | None:
     return [np.flatnonzero(labels == c) for c in np.unique(labels)]
 
 
+@jit
 def _branch_and_bound(w, best_value, best_labels, max_steps):
     """Depth-first search over the partitions of n nodes (node k joins one of the clusters of nodes 0..k-1 or
     opens the next), pruning a branch whose value plus every positive affinity still to place cannot beat
@@ -252,6 +254,7 @@ def _partition_greedy(a: np.ndarray) -> list[np.ndarray]:
     return [np.flatnonzero(labels == c) for c in np.unique(labels)]
 
 
+@jit
 def _greedy_merge(S, labels):
     """`_partition_greedy` in place: S (n, n) the affinities between the current clusters (-inf: never),
     labels (n,) each node's cluster, the smallest node index of it when done.
@@ -299,6 +302,7 @@ def _greedy_merge(S, labels):
                 best_col[i] = x
 
 
+@jit
 def _row_best(S, i, best, best_col):
     """The largest entry of row i of S and the first column holding it."""
     best[i] = -np.inf
@@ -347,6 +351,7 @@ def consensus_views(origin: np.ndarray, rays: np.ndarray, origins: np.ndarray, c
     return agree[best] & placed
 
 
+@jit
 def _pair_spots(origin, rays, origins, candidate_rays, min_common_joints, out):
     """`consensus_views`' placements: out (L, 3) the mean over joints of the midpoints between the detection's
     ray and each candidate's, NaN where fewer than `min_common_joints` joints meet in front of both cameras."""

@@ -283,6 +283,36 @@ def _skeleton_entity(
     return entity
 
 
+def truth_entity_pieces(person_id: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
+    """Constant wire pieces of a person's entity in `truth_skeletons` (a `PieceTable`'s pieces, for the
+    compiled `wire.skeleton_scene`): the id field, the bone line before and after its points, and what follows
+    the pose in the label and in the top sphere, each what protobuf writes for those fields."""
+    rgba = truth_color(person_id)
+    line_head = LinePrimitive(type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)),
+                              thickness=TRUTH_LINE_M).SerializeToString()
+    line_tail = LinePrimitive(color=rgba).SerializeToString()
+    text_tail = TextPrimitive(billboard=True, font_size=12.0, scale_invariant=True, color=rgba,
+                              text=f"p{person_id}").SerializeToString()
+    sphere_tail = SpherePrimitive(size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
+                                  color=rgba).SerializeToString()
+    return SceneEntity(id=f"person/{person_id}").SerializeToString(), line_head, line_tail, text_tail, sphere_tail
+
+
+def scene_heads(t_ns: int) -> tuple[np.ndarray, np.ndarray]:
+    """The wire pieces of a skeleton scene stamped t_ns (for `wire.skeleton_scene`): each entity's timestamp
+    and frame id fields, and the SceneUpdate's deletions field."""
+    head = SceneEntity(timestamp=timestamp(t_ns), frame_id=WORLD_FRAME).SerializeToString()
+    deletion = SceneUpdate(deletions=[SceneEntityDeletion(timestamp=timestamp(t_ns),
+                                                          type=SceneEntityDeletion.ALL)]).SerializeToString()
+    return np.frombuffer(head, dtype=np.uint8), np.frombuffer(deletion, dtype=np.uint8)
+
+
+ORIENTATION_FIELD = np.frombuffer(Pose(orientation=Quaternion(w=1.0)).SerializeToString(), dtype=np.uint8)
+"""The identity orientation field of a Pose, as protobuf writes it."""
+LINE_POINTS_KEY = (LinePrimitive.DESCRIPTOR.fields_by_name["points"].number << 3) | 2
+"""The one-byte tag of LinePrimitive.points."""
+
+
 def _replace_all(t_ns: int, entities: list[SceneEntity]) -> SceneUpdate:
     """A SceneUpdate that first deletes everything older, so people who left disappear."""
     deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL)

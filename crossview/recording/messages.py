@@ -53,6 +53,7 @@ class Encoder:
         self.skeleton = skeleton
         self._bones = foxglove.bone_table(skeleton)
         self._styles = foxglove.PieceTable(foxglove.detection_style_pieces)
+        self._entities = foxglove.PieceTable(foxglove.truth_entity_pieces)
         self._buffer = np.empty(1 << 16, dtype=np.uint8)
 
     def _buffer_of(self, size: int) -> np.ndarray:
@@ -72,8 +73,23 @@ class Encoder:
                             poses_m=poses.ravel().tolist()).SerializeToString()
 
     def truth_scene(self, truth: PoseTruth, t_ns: int) -> bytes:
-        """`foxglove.truth_skeletons` (a SceneUpdate) of one truth tick, stamped t_ns."""
-        return foxglove.truth_skeletons(truth, self.skeleton, t_ns).SerializeToString()
+        """`foxglove.truth_skeletons` (a SceneUpdate) of one truth tick, stamped t_ns, as protobuf writes it,
+        by the compiled `wire.skeleton_scene` (it is written at every truth tick: docs/benchmarks.md, "Kernel
+        ledger", has what compiling it buys)."""
+        from crossview.recording import wire  # (numba: loaded for writing only)
+
+        poses = np.ascontiguousarray(truth.poses, dtype=np.float64)
+        ids = np.asarray(truth.person_ids, dtype=np.int64)
+        if poses.ndim != 3 or poses.shape[2] != 3 or poses.shape[0] != ids.shape[0]:
+            raise ValueError(f"PoseTruth@{truth.t_s}: poses expected (P, J, 3) with P={ids.shape[0]}, got "
+                             f"{poses.shape}")
+        rows = self._entities.rows(ids)
+        head, deletion = foxglove.scene_heads(t_ns)
+        style = wire.SceneStyle(self._entities.table, self._entities.sizes, self._bones, head, deletion,
+                                foxglove.ORIENTATION_FIELD, foxglove.LINE_POINTS_KEY)
+        out = self._buffer_of(wire.skeleton_scene_capacity(len(ids), len(self._bones), self._entities.table.shape[1],
+                                                           head.size, deletion.size))
+        return out[:wire.skeleton_scene(out, poses, rows, style)].tobytes()
 
     def tracker_scene(self, output: TrackerOutput, t_ns: int) -> bytes:
         """`foxglove.tracker_skeletons` (a SceneUpdate) of one tracker output, stamped t_ns."""

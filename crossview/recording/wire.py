@@ -325,3 +325,140 @@ def frames_and_annotations(out, ends, names, name_ends, times, t_ns, det_ends, r
         pos += image_annotations(out[pos:], rows.keypoints[a:b], style_rows[a:b], style, t_ns[i])
         ends[2 * i + 1] = pos
     return pos
+
+
+# --------------------------------------------------------------------------------------------------
+# The truth's skeleton scene: a SceneUpdate at every truth tick (100 Hz), protobuf's bytes written by one loop.
+
+
+class SceneStyle(NamedTuple):
+    """The constant wire pieces `skeleton_scene` writes around each person's points.
+
+    Attributes:
+        pieces: (S, L) uint8 rows, one per person: the entity's id field, the bone line before and after its
+            points, and what follows the pose in the label and in the top sphere, back to back
+            (`foxglove.truth_entity_pieces`); piece_sizes: (S, 5) int64 their sizes.
+        bones: (B, 2) int64 joint pairs of the skeleton's bones.
+        head: (h,) uint8 each entity's timestamp and frame id fields; deletion: (d,) uint8 the SceneUpdate's
+            deletions field; orientation: (o,) uint8 the identity orientation field of a Pose.
+        points_key: the one-byte tag of LinePrimitive.points.
+    """
+
+    pieces: np.ndarray
+    piece_sizes: np.ndarray
+    bones: np.ndarray
+    head: np.ndarray
+    deletion: np.ndarray
+    orientation: np.ndarray
+    points_key: int
+
+
+@_jit
+def _ld_size(n):
+    """Bytes of a length-delimited field with a one-byte tag and an n-byte payload."""
+    return 1 + _varint_size(n) + n
+
+
+@_jit
+def _put_ld_head(out, pos, field, n):
+    pos = _put_key(out, pos, field, _LEN)
+    return _put_varint(out, pos, n)
+
+
+@_jit
+def _put_bytes(out, pos, data):
+    out[pos:pos + data.size] = data
+    return pos + data.size
+
+
+@_jit
+def _vector3_size(x, y, z):
+    """Bytes of a Vector3 or Point3's fields (a coordinate whose bits are all zero is left out)."""
+    return (0 if _is_zero_bits(x) else 9) + (0 if _is_zero_bits(y) else 9) + (0 if _is_zero_bits(z) else 9)
+
+
+@_jit
+def _put_vector3(out, pos, x, y, z):
+    pos = _put_double_field(out, pos, 1, x)
+    pos = _put_double_field(out, pos, 2, y)
+    return _put_double_field(out, pos, 3, z)
+
+
+@_jit
+def _put_pose(out, pos, x, y, z, orientation):
+    """A foxglove.Pose: position (x, y, z), then the (constant) orientation field's bytes."""
+    pos = _put_ld_head(out, pos, 1, _vector3_size(x, y, z))
+    pos = _put_vector3(out, pos, x, y, z)
+    return _put_bytes(out, pos, orientation)
+
+
+@_jit
+def skeleton_scene(out, poses, rows, style):
+    """`foxglove.truth_skeletons` (a SceneUpdate) into `out`; returns the number of bytes.
+
+    poses (P, J, 3) metres, NaN where unknown; rows (P,) each person's row of the `SceneStyle`'s pieces. Per
+    person (in order) an entity: head, id, a sphere and a label (at the highest known joint, the label 0.25 m
+    above) when a joint is known, and the line of the bones whose two ends are known. `out` holds at least
+    `skeleton_scene_capacity` bytes.
+    """
+    P, J = poses.shape[0], poses.shape[1]
+    bones = style.bones
+    known = np.empty(J, dtype=np.bool_)
+    starts = np.zeros(6, dtype=np.int64)
+    pos = _put_bytes(out, 0, style.deletion)
+    for i in range(P):
+        row = rows[i]
+        sizes = style.piece_sizes[row]
+        for k in range(5):
+            starts[k + 1] = starts[k] + sizes[k]
+        top, top_z = -1, -np.inf
+        for j in range(J):
+            known[j] = np.isfinite(poses[i, j, 0]) and np.isfinite(poses[i, j, 1]) and np.isfinite(poses[i, j, 2])
+            if known[j] and (top < 0 or poses[i, j, 2] > top_z):
+                top, top_z = j, poses[i, j, 2]
+        points = 0
+        for b in range(bones.shape[0]):
+            if known[bones[b, 0]] and known[bones[b, 1]]:
+                for end in range(2):
+                    j = bones[b, end]
+                    points += 2 + _vector3_size(poses[i, j, 0], poses[i, j, 1], poses[i, j, 2])
+        line = sizes[1] + points + sizes[2]
+        entity = style.head.size + sizes[0] + _ld_size(line)
+        x, y, z = 0.0, 0.0, 0.0
+        sphere_pose, text_pose, sphere, text = 0, 0, 0, 0
+        if top >= 0:
+            x, y, z = poses[i, top, 0], poses[i, top, 1], poses[i, top, 2]
+            sphere_pose = _ld_size(_vector3_size(x, y, z)) + style.orientation.size
+            text_pose = _ld_size(_vector3_size(x, y, z + 0.25)) + style.orientation.size
+            sphere = _ld_size(sphere_pose) + sizes[4]
+            text = _ld_size(text_pose) + sizes[3]
+            entity += _ld_size(sphere) + _ld_size(text)
+        pos = _put_ld_head(out, pos, 2, entity)
+        pos = _put_bytes(out, pos, style.head)
+        pos = _put_bytes(out, pos, style.pieces[row, starts[0]:starts[1]])
+        if top >= 0:
+            pos = _put_ld_head(out, pos, 9, sphere)
+            pos = _put_ld_head(out, pos, 1, sphere_pose)
+            pos = _put_pose(out, pos, x, y, z, style.orientation)
+            pos = _put_bytes(out, pos, style.pieces[row, starts[4]:starts[5]])
+        pos = _put_ld_head(out, pos, 11, line)
+        pos = _put_bytes(out, pos, style.pieces[row, starts[1]:starts[2]])
+        for b in range(bones.shape[0]):
+            if known[bones[b, 0]] and known[bones[b, 1]]:
+                for end in range(2):
+                    j = bones[b, end]
+                    out[pos] = style.points_key
+                    out[pos + 1] = _vector3_size(poses[i, j, 0], poses[i, j, 1], poses[i, j, 2])
+                    pos = _put_vector3(out, pos + 2, poses[i, j, 0], poses[i, j, 1], poses[i, j, 2])
+        pos = _put_bytes(out, pos, style.pieces[row, starts[2]:starts[3]])
+        if top >= 0:
+            pos = _put_ld_head(out, pos, 13, text)
+            pos = _put_ld_head(out, pos, 1, text_pose)
+            pos = _put_pose(out, pos, x, y, z + 0.25, style.orientation)
+            pos = _put_bytes(out, pos, style.pieces[row, starts[3]:starts[4]])
+    return pos
+
+
+def skeleton_scene_capacity(P: int, B: int, style_bytes: int, head_bytes: int, deletion_bytes: int) -> int:
+    """An upper bound of the bytes of `skeleton_scene` (P people, B bones, rows of `style_bytes` pieces)."""
+    return deletion_bytes + P * (16 + head_bytes + style_bytes + 2 * B * 29 + 2 * 64)

@@ -72,13 +72,14 @@ def test_branch_and_bound_matches_brute_force_and_milp():
         assert _objective(A, partition_graph(A, max_exact_nodes=14)) == pytest.approx(_objective(A, _partition_milp(A)))
 
 
-def test_branch_and_bound_finishes_within_a_budget_and_gives_up_past_it():
+def test_branch_and_bound_plain_python_agrees_and_gives_up_past_its_budget():
     rng = np.random.default_rng(8)
     A = _random_problem(rng, 9, 9) + 0.2
     w = np.where(np.isfinite(A), A, -np.inf)
-    labels = np.zeros(9, dtype=np.int64)
-    assert _branch_and_bound(w, -np.inf, labels, 10**7)
-    assert not _branch_and_bound(w, -np.inf, labels, 5)
+    labels_c, labels_p = np.zeros(9, dtype=np.int64), np.zeros(9, dtype=np.int64)
+    assert _branch_and_bound(w, -np.inf, labels_c, 10**7) and _branch_and_bound.py_func(w, -np.inf, labels_p, 10**7)
+    np.testing.assert_array_equal(labels_c, labels_p)
+    assert not _branch_and_bound(w, -np.inf, labels_c, 5)
 
 
 def test_mostly_positive_problems_and_their_all_positive_components_stay_exact():

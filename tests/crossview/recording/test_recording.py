@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 from mcap.exceptions import EndOfFile
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
@@ -25,6 +26,7 @@ from crossview.recording import (
     RecordingWriter,
     TracksHeader,
     TracksWriter,
+    foxglove,
     open_recording,
     open_tracks,
     reader,
@@ -647,6 +649,7 @@ def test_encoded_messages_are_protobufs_own_serialisation(world):
             poses = event.poses.copy()
             if poses.size:
                 poses[0, 0] = (0.0, -0.0, np.nan)
+                poses[0, 5] = (0.0, -0.0, 1.5)  # a known joint (a bone's end) with a +0.0 and a -0.0 coordinate
             extra.append(PoseTruth(0.0, np.asarray(event.person_ids) * 100_003 - 7, poses))
     extra.append(PoseTruth(0.0, np.zeros(0, dtype=np.int64), np.zeros((0, 17, 3))))
     checked = 0
@@ -659,6 +662,10 @@ def test_encoded_messages_are_protobufs_own_serialisation(world):
             back = recording.PoseTruthMsg.FromString(data)
             assert list(back.person_ids) == np.asarray(event.person_ids).tolist()
             assert np.array(back.poses_m).tobytes() == np.asarray(event.poses, dtype=np.float64).tobytes()
+            # The truth's skeleton scene (compiled): Foxglove's SceneUpdate as protobuf writes it.
+            scene = encoder.truth_scene(event, 1_234_567_891)
+            assert scene == foxglove.truth_skeletons(event, COCO17, 1_234_567_891).SerializeToString()
+            assert len(SceneUpdate.FromString(scene).entities) == len(event.person_ids)
         else:
             effects = rng.integers(0, 1 << 31, len(event.truth.effects))
             bigger = CameraFrame(event.frame, dataclasses.replace(event.truth, effects=effects), event.poses_at_capture)
