@@ -1,7 +1,8 @@
-"""Protobuf wire bytes of a recording's camera frames and their 2D annotations, written by one numba-compiled
-loop over many frames (`frames_and_annotations`), the one compiled encoder of the recording
-(`crossview.recording.Encoder.frames`): protobuf's own serialisation of the same messages, one Python
-object per annotated point, made `crossview generate` 1.3 to 1.5 times slower (docs/recording-format.md).
+"""Protobuf wire bytes of a recording's camera frames with their 2D annotations (`frames_and_annotations`, one
+numba-compiled loop over many frames: `crossview.recording.Encoder.frames`) and of the truth's skeleton scene
+(`skeleton_scene`, at every truth tick: `Encoder.truth_scene`), the recording's two compiled encoders:
+protobuf's own serialisation of the same messages, one Python object per point, made `crossview generate`
+1.3 to 1.5 times slower each (docs/recording-format.md).
 The tests decode these bytes with protobuf and compare them with its serialisation of the same messages.
 Only the writer imports this module, so reading a recording never loads numba.
 
