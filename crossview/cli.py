@@ -709,7 +709,7 @@ def _cmd_bench(args) -> None:
 
 
 def _cmd_render(args) -> None:
-    from crossview.pictures.layout.render import Request, render
+    from crossview.pictures.render import Request, render
 
     done = render(Request(
         recording=args.recording, output=args.output, tracks=args.tracks, camera=args.camera,

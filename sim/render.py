@@ -321,7 +321,7 @@ class SceneRenderer:
     """A scenario's world, built again and posed at any true time, rendered through its cameras.
 
     Args:
-        scenario: the `sim.scenario.Scenario` simulated (a recording's: `crossview.pictures.layout.render.scene_of`).
+        scenario: the `sim.scenario.Scenario` simulated (a recording's: `crossview.pictures.render.scene_of`).
         seed: its seed (the crowd's random stream is `child_rng(seed, "crowd")`, as the simulation's).
         cameras: the rig.
         multisamples: the renders' samples per pixel (`CameraRenderer`); None: MuJoCo's 4.

@@ -132,8 +132,8 @@ def coverage(scenario, cameras: list[Camera] | None = None) -> Coverage:
 
 def write_map(cov: Coverage, path: Path, px_per_m: float | None = None) -> Path:
     """Writes the coverage map (PNG): the store from above at hip height and at head height side by side,
-    each walkable cell coloured by how many cameras see it (`crossview.pictures.layout.layout.draw_layout`)."""
-    from crossview.pictures.layout.layout import layout as pictures
+    each walkable cell coloured by how many cameras see it (`crossview.pictures.layout.draw_layout`)."""
+    from crossview.pictures import layout as pictures
 
     floor = next(b for b in cov.boxes if b.kind == BoxKind.FLOOR)
     scale = px_per_m or pictures.layout_scale(floor.size_m[0])

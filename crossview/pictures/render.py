@@ -27,7 +27,7 @@ from core.records import CameraFrame
 from core.types import Camera, Skeleton
 from crossview import pipeline
 from crossview.outputs import write_bytes
-from crossview.pictures.layout.layout import FALSE_POSITIVE_BGR, person_bgr
+from crossview.pictures.layout import FALSE_POSITIVE_BGR, person_bgr
 from sim.render import SceneRenderer
 from tracker.types import TrackerOutput
 
@@ -383,7 +383,7 @@ def render(request: Request) -> RenderResult:
     else:
         check_time(request.time_s, duration, "--time", rec.path)
     if request.top_down:
-        from crossview.pictures.layout.layout import top_down_picture
+        from crossview.pictures.layout import top_down_picture
 
         t0, t1 = (request.from_s, request.to_s) if clip else (0.0, request.time_s)
         image = top_down_picture(rec, data.tracks, t0, t1)

@@ -191,7 +191,9 @@ def _typical_detector(frames, cams, seed):
 def test_campus_pcp_with_typical_detector_noise(campus, tmp_path):
     root, cams, frames = campus
     result = _campus_pcp(root, cams, _typical_detector(frames, cams, seed=0), tmp_path)
-    assert result["average"] >= 0.96  # the paper: 0.966 with a real detector
+    # The paper's tracker scored 0.966 on Campus with a real detector: `typical`'s errors (fitted to OpenPose
+    # on Shelf) on the annotated joints should score about as much, neither flattering nor harsher (2 points).
+    assert 0.946 <= result["average"] <= 0.986
 
 
 # ---------------------------------------------------------------------------------------------- export

@@ -63,7 +63,7 @@ choose_backend(sys.argv[3])
 import mujoco
 import numpy as np
 from crossview import recording
-from crossview.pictures.layout.render import scene_of
+from crossview.pictures.render import scene_of
 from sim import humanoid
 
 rec = recording.open_recording(sys.argv[1])
@@ -261,7 +261,7 @@ from sim.render import choose_backend
 choose_backend(sys.argv[3])
 import cv2
 from crossview import recording
-from crossview.pictures.layout.render import scene_of
+from crossview.pictures.render import scene_of
 from sim.render import IMAGE_MULTISAMPLES, JPEG_QUALITY
 
 rec = recording.open_recording(sys.argv[1])
