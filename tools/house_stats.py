@@ -37,7 +37,7 @@ def is_kernel(node: ast.FunctionDef) -> bool:
     for d in node.decorator_list:
         target = d.func if isinstance(d, ast.Call) else d
         name = target.attr if isinstance(target, ast.Attribute) else getattr(target, "id", "")
-        if name in ("jit", "njit"):
+        if name.lstrip("_") in ("jit", "njit"):
             return True
     return False
 
