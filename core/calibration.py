@@ -71,7 +71,8 @@ def dataset_cameras(calibration, width_px: int, height_px: int, *, use_distortio
             raise ValueError(f"camera {name!r}: K, Tw and dist_coeffs must be arrays of numbers ({exc})") from None
         if K.shape != (3, 3) or Tw.shape != (4, 4):
             raise ValueError(f"camera {name!r}: K must be 3x3 and Tw 4x4, got {K.shape} and {Tw.shape}")
-        K = K * np.array([[width_px], [height_px], [1.0]])
+        with np.errstate(over="ignore"):  # (an overflowing K is refused just below, by name)
+            K = K * np.array([[width_px], [height_px], [1.0]])
         if not (np.isfinite(K).all() and np.isfinite(Tw).all() and np.abs(Tw).max() <= MAX_ABS_CM):
             raise ValueError(f"camera {name!r}: K and Tw must hold numbers (no null), Tw's within {MAX_ABS_CM:g} cm")
         # Tw's rotation is orthonormal only to the precision the file was written with.
