@@ -138,15 +138,9 @@ def _put_uint_field(out, pos, field, value):
 
 @_jit
 def _put_fixed(out, pos, field, values):
-    """A packed fixed-width field of `values` (any shape, C order): double for float64, float for float32."""
-    flat = values.reshape(-1)
-    if flat.size == 0:
-        return pos
-    raw = flat.view(np.uint8)
-    pos = _put_key(out, pos, field, _LEN)
-    pos = _put_varint(out, pos, raw.size)
-    out[pos:pos + raw.size] = raw
-    return pos + raw.size
+    """A packed fixed-width field of `values` (any shape, C order): double for float64, float for float32; on
+    the wire, the length-delimited bytes `_put_string` writes."""
+    return _put_string(out, pos, field, values.reshape(-1).view(np.uint8))
 
 
 @_jit
