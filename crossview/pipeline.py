@@ -167,7 +167,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
     started = math.nan
     with contextlib.ExitStack() as stack:
         # The simulation starts first: while its worker process builds the world, this process imports the
-        # writer's modules, opens the file and loads the encoders. (Left in any way, the stack aborts the
+        # writer's modules, loads its encoders and opens the file. (Left in any way, the stack aborts the
         # file and stops the worker.)
         blocks = stack.enter_context(sim.blocks(scenario.duration_s, with_poses=False))
         from tqdm import tqdm
@@ -184,11 +184,11 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             software_version=recording.software_version(),
             format_version=recording.FORMAT_VERSION,
         )
+        recording.Encoder(sim.skeleton).warm_up()  # (before the file opens: `Encoder.warm_up`)
         writer = stack.enter_context(recording.RecordingWriter(out, header, sim.cameras, sim.boxes,
                                                                inputs=(scenario.source_path or None,)))
         bar = stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
                                        disable=not progress, leave=False))
-        writer.encoder.warm_up()
         images = None
         if images_per_s is not None:  # (made here, after the worker's fork: its OpenGL context stays here)
             from sim.render import FrameImages
@@ -299,6 +299,7 @@ def track(
         format_version=recording.TRACKS_FORMAT_VERSION,
     )
     warm_up_tracker(method, rec, preset, config_path, skeleton, overrides)
+    recording.Encoder(skeleton).warm_up()  # (before the file opens: `Encoder.warm_up`)
     updates = 0
     tracker_s = 0.0
     with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path)) as writer:

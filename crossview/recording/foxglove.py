@@ -287,15 +287,24 @@ def truth_entity_pieces(person_id: int) -> tuple[bytes, bytes, bytes, bytes, byt
     """Constant wire pieces of a person's entity in `truth_skeletons` (a `PieceTable`'s pieces, for the
     compiled `wire.skeleton_scene`): the id field, the bone line before and after its points, and what follows
     the pose in the label and in the top sphere, each what protobuf writes for those fields."""
-    rgba = truth_color(person_id)
+    return _entity_pieces(f"person/{person_id}", truth_color(person_id), TRUTH_LINE_M, f"p{person_id}")
+
+
+def track_entity_pieces(target_id: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
+    """`truth_entity_pieces` of a target's entity in `tracker_skeletons`."""
+    return _entity_pieces(f"target/{target_id}", track_color(target_id), TRACK_LINE_M, f"T{target_id}")
+
+
+def _entity_pieces(entity_id: str, rgba: Color, thickness_m: float, label: str) -> tuple[bytes, ...]:
+    """The pieces of `_skeleton_entity`'s entity around its points (`truth_entity_pieces`)."""
     line_head = LinePrimitive(type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)),
-                              thickness=TRUTH_LINE_M).SerializeToString()
+                              thickness=thickness_m).SerializeToString()
     line_tail = LinePrimitive(color=rgba).SerializeToString()
     text_tail = TextPrimitive(billboard=True, font_size=12.0, scale_invariant=True, color=rgba,
-                              text=f"p{person_id}").SerializeToString()
+                              text=label).SerializeToString()
     sphere_tail = SpherePrimitive(size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
                                   color=rgba).SerializeToString()
-    return SceneEntity(id=f"person/{person_id}").SerializeToString(), line_head, line_tail, text_tail, sphere_tail
+    return SceneEntity(id=entity_id).SerializeToString(), line_head, line_tail, text_tail, sphere_tail
 
 
 def scene_heads(t_ns: int) -> tuple[np.ndarray, np.ndarray]:

@@ -1,10 +1,11 @@
 """Message bytes: one encoder per message type of the recording's time series (`Encoder`, one per writer) and
 one decoder per message type (protobuf's parser, then arrays).
 
-Every message is what protobuf serialises for it. Two are written by compiled encoders
-(`crossview.recording.wire`): the camera frames with their 2D annotations, and the truth's skeleton scene at
-every truth tick; protobuf's own serialisation of them, one object per point, made `crossview generate` 1.3
-to 1.5 times slower (docs/recording-format.md). The others are protobuf's `SerializeToString`."""
+Every message is what protobuf serialises for it. Two kinds are written by compiled encoders
+(`crossview.recording.wire`): the camera frames with their 2D annotations, and the skeleton scenes (the
+truth's at every truth tick, the tracker's at every update); protobuf's own serialisation of them, one object
+per point, made `crossview generate` 1.3 to 1.5 times slower and `crossview track` 1.2 times
+(docs/recording-format.md). The others are protobuf's `SerializeToString`."""
 
 from __future__ import annotations
 
@@ -54,6 +55,7 @@ class Encoder:
         self._bones = foxglove.bone_table(skeleton)
         self._styles = foxglove.PieceTable(foxglove.detection_style_pieces)
         self._entities = foxglove.PieceTable(foxglove.truth_entity_pieces)
+        self._tracks = foxglove.PieceTable(foxglove.track_entity_pieces)
         self._buffer = np.empty(1 << 16, dtype=np.uint8)
 
     def _buffer_of(self, size: int) -> np.ndarray:
@@ -76,24 +78,37 @@ class Encoder:
         """`foxglove.truth_skeletons` (a SceneUpdate) of one truth tick, stamped t_ns, as protobuf writes it,
         by the compiled `wire.skeleton_scene` (it is written at every truth tick: docs/benchmarks.md, "Kernel
         ledger", has what compiling it buys)."""
-        from crossview.recording import wire  # (numba: loaded for writing only)
-
         poses = np.ascontiguousarray(truth.poses, dtype=np.float64)
         ids = np.asarray(truth.person_ids, dtype=np.int64)
         if poses.ndim != 3 or poses.shape[2] != 3 or poses.shape[0] != ids.shape[0]:
             raise ValueError(f"PoseTruth@{truth.t_s}: poses expected (P, J, 3) with P={ids.shape[0]}, got "
                              f"{poses.shape}")
-        rows = self._entities.rows(ids)
+        return self._scene(ids, poses, self._entities, t_ns)
+
+    def _scene(self, ids: np.ndarray, poses: np.ndarray, pieces: foxglove.PieceTable, t_ns: int) -> bytes:
+        """A skeleton scene of the entities `ids` (n,) with poses (n, J, 3), from their rows of `pieces`."""
+        from crossview.recording import wire  # (numba: loaded for writing only)
+
+        rows = pieces.rows(ids)
         head, deletion = foxglove.scene_heads(t_ns)
-        style = wire.SceneStyle(self._entities.table, self._entities.sizes, self._bones, head, deletion,
-                                foxglove.ORIENTATION_FIELD, foxglove.LINE_POINTS_KEY)
-        out = self._buffer_of(wire.skeleton_scene_capacity(len(ids), len(self._bones), self._entities.table.shape[1],
+        style = wire.SceneStyle(pieces.table, pieces.sizes, self._bones, head, deletion, foxglove.ORIENTATION_FIELD,
+                                foxglove.LINE_POINTS_KEY)
+        out = self._buffer_of(wire.skeleton_scene_capacity(len(ids), len(self._bones), pieces.table.shape[1],
                                                            head.size, deletion.size))
         return out[:wire.skeleton_scene(out, poses, rows, style)].tobytes()
 
     def tracker_scene(self, output: TrackerOutput, t_ns: int) -> bytes:
-        """`foxglove.tracker_skeletons` (a SceneUpdate) of one tracker output, stamped t_ns."""
-        return foxglove.tracker_skeletons(output, self.skeleton, t_ns).SerializeToString()
+        """`foxglove.tracker_skeletons` (a SceneUpdate) of one tracker output, stamped t_ns, as protobuf writes it,
+        by the compiled `wire.skeleton_scene` (written at every tracker update: docs/recording-format.md)."""
+        targets = output.targets
+        J = self.skeleton.num_joints
+        if isinstance(targets, TargetArrays):
+            ids, poses = np.asarray(targets.ids, dtype=np.int64), targets.poses
+        else:
+            ids = np.array([t.id for t in targets], dtype=np.int64)
+            poses = np.array([np.asarray(t.pose, dtype=np.float64) for t in targets]).reshape(len(ids), J, 3)
+        return self._scene(ids, np.ascontiguousarray(poses, dtype=np.float64).reshape(len(ids), J, 3), self._tracks,
+                           t_ns)
 
     def frames(self, cameras: Sequence[str], times: np.ndarray, bounds: np.ndarray,
                rows: DetectionRows) -> list[EncodedFrame]:
@@ -202,8 +217,11 @@ class Encoder:
         return msg.SerializeToString()
 
     def warm_up(self) -> None:
-        """Loads the compiled encoder (its first use costs tens of milliseconds) by encoding two made-up frames:
-        call it where the time is free, e.g. while a simulation worker starts."""
+        """Loads every compiled encoder (the camera frames' and the skeleton scenes'): their first use costs tens
+        of milliseconds from numba's cache, and tens of seconds on a fresh install, where they compile. Call it
+        before the output file is opened (`crossview.pipeline` does, on a throwaway Encoder): then no compile
+        falls while a temporary output exists, where a signal must be held until the compiler returns
+        (`crossview.cli`) and a fresh cache once left the temporary file behind."""
         J = self.skeleton.num_joints
         ids = np.array([3], dtype=np.int64)
         seen = np.ones((1, J), dtype=bool)
@@ -211,6 +229,7 @@ class Encoder:
                             DetectionTruth(0.5, 0.5, ids, np.ones((1, J, 2)), seen, ~seen, ~seen,
                                            np.zeros(1, dtype=np.int64)), None)
         self.camera_frames([frame, frame])
+        self.truth_scene(PoseTruth(0.5, ids, np.ones((1, J, 3))), 500_000_000)  # (and so the tracker's scene)
 
 
 def _checked_pose(output: TrackerOutput, target: Target, num_joints: int) -> np.ndarray:

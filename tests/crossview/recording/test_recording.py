@@ -976,3 +976,23 @@ def test_tracks_of_format_2_are_read_without_joint_states(tmp_path):
     assert tracks.header.format_version == 2
     read = [t for out in tracks.outputs() for t in out.targets]
     assert read and all(t.joint_state is None for t in read)
+
+
+def test_the_tracker_scene_is_protobufs_own_serialisation():
+    """The tracks file's skeleton scene (compiled) is Foxglove's SceneUpdate as protobuf writes it, for the
+    built-in tracker's arrays and a plug-in's list of targets alike: +0.0 and -0.0 coordinates, unknown joints,
+    a negative and a large id, no target."""
+    encoder = recording.Encoder(COCO17)
+    rng = np.random.default_rng(5)
+    poses = rng.normal(size=(3, 17, 3))
+    poses[0, 5] = (0.0, -0.0, 1.5)
+    poses[1, :4] = np.nan
+    poses[2] = np.nan
+    ids = np.array([-3, 7, 2**40])
+    arrays = TargetArrays(ids, poses, np.zeros((3, 17), np.uint8), 1.0)
+    listed = [Target(int(i), pose, 1.0) for i, pose in zip(ids, poses)]
+    for targets in (arrays, listed, []):
+        output = TrackerOutput(1.0, "cam00", targets, np.zeros(0, np.int64))
+        data = encoder.tracker_scene(output, 1_000_000_123)
+        assert data == foxglove.tracker_skeletons(output, COCO17, 1_000_000_123).SerializeToString()
+        assert len(SceneUpdate.FromString(data).entities) == len(targets)
