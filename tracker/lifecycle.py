@@ -13,8 +13,9 @@ States are held as small integer codes in the tracker's arrays; `to_state` maps 
   matched in fewer than `ghost_min_seen_ratio` of the frames of cameras that should see it, or an observed
   body that stayed implausible for `implausible_after_s`).
 
-The rules run per target in plain Python loops (the tracker applies them at every camera frame; compiled,
-they made no whole `crossview track` 1.3x faster: docs/benchmarks.md, "Kernel ledger").
+The rules run per target in plain Python loops over the arrays' values as lists (the tracker applies them at
+every camera frame; compiled, they made no whole `crossview track` 1.3x faster: docs/benchmarks.md, "Kernel
+ledger").
 """
 
 from __future__ import annotations
@@ -56,9 +57,9 @@ def ghosts(expected: np.ndarray, sighted: np.ndarray, state: np.ndarray, implaus
 
 
 def _ghosts(expected, sighted, state, implausible_s, now_s, min_expected, min_seen_ratio, implausible_after_s, out):
-    for i in range(state.shape[0]):
-        unseen = expected[i] >= min_expected and sighted[i] < min_seen_ratio * expected[i] and state[i] != LOST
-        out[i] = unseen or now_s - implausible_s[i] >= implausible_after_s  # False for NaN
+    out[:] = [(e >= min_expected and s < min_seen_ratio * e and code != LOST)
+              or now_s - since >= implausible_after_s  # False for NaN
+              for e, s, code, since in zip(expected.tolist(), sighted.tolist(), state.tolist(), implausible_s.tolist())]
 
 
 def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: TrackerConfig,
@@ -77,18 +78,19 @@ def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: 
 
 def _on_time(state, last_update_s, now_s, tentative_timeout_s, lost_after_s, remove_after_s, ghost, new):
     """`on_time` per target (a ghost is removed, unless the lost rule applies to it first)."""
-    for i in range(state.shape[0]):
-        idle = now_s - last_update_s[i]
-        code = state[i]
-        if ghost.size and ghost[i]:
+    ghosts = ghost.tolist() if ghost.size else [False] * state.shape[0]
+    codes = []
+    for old, last_s, is_ghost in zip(state.tolist(), last_update_s.tolist(), ghosts):
+        idle = now_s - last_s
+        code = REMOVED if is_ghost else old
+        if old == TENTATIVE and idle > tentative_timeout_s:
             code = REMOVED
-        if state[i] == TENTATIVE and idle > tentative_timeout_s:
-            code = REMOVED
-        if state[i] == CONFIRMED and idle > lost_after_s:
+        if old == CONFIRMED and idle > lost_after_s:
             code = LOST
         if code == LOST and idle > remove_after_s:
             code = REMOVED
-        new[i] = code
+        codes.append(code)
+    new[:] = codes
 
 
 def on_match(
@@ -109,11 +111,13 @@ def on_match(
 
 def _on_match(state, born_s, num_updates, now_s, min_updates, min_age_s, has_body, new):
     """`on_match` per target."""
-    for i in range(state.shape[0]):
-        ready = num_updates[i] >= min_updates and now_s - born_s[i] >= min_age_s and (has_body.size == 0 or has_body[i])
-        code = state[i]
-        if state[i] == TENTATIVE and ready:
+    bodies = has_body.tolist() if has_body.size else [True] * state.shape[0]
+    codes = []
+    for old, born, updates, body in zip(state.tolist(), born_s.tolist(), num_updates.tolist(), bodies):
+        code = old
+        if old == TENTATIVE and updates >= min_updates and now_s - born >= min_age_s and body:
             code = CONFIRMED
-        if state[i] == LOST:
+        if old == LOST:
             code = CONFIRMED
-        new[i] = code
+        codes.append(code)
+    new[:] = codes
