@@ -35,6 +35,7 @@ GROUPS: dict[str, tuple[str, ...]] = {
     "core.projection": ("core.projection",),
     "sim.sensing.rays": ("sim.sensing.rays",),
     "sim.sensing.draws": ("sim.sensing.draws",),
+    "sim.sensing.offsets": ("sim.sensing.offsets",),
     "crossview.recording.wire": ("crossview.recording.wire",),
     "tracker.geometry": ("tracker.geometry",),
     "tracker.visibility": ("tracker.visibility",),

@@ -14,6 +14,18 @@ from typing import Protocol
 
 import numpy as np
 
+TRUTH_RATE_HZ = 100.0
+"""Truth ticks per second: the simulator writes everybody's pose at every tick (tick k at k / TRUTH_RATE_HZ)."""
+
+
+def tick_of(times_s: np.ndarray) -> np.ndarray:
+    """(N,) int64 the tick whose captures include a capture at each time: the first tick at or after it (a
+    capture up to a tick's time sees that tick's bodies, `sim.simulate`)."""
+    k = np.ceil(np.asarray(times_s, dtype=np.float64) * TRUTH_RATE_HZ)
+    k -= (k - 1) / TRUTH_RATE_HZ >= times_s  # (the product rounded up past a tick's own time)
+    k += k / TRUTH_RATE_HZ < times_s
+    return k.astype(np.int64)
+
 
 class Tick(Protocol):
     """A truth tick (`core.records.PoseTruth`): `t_s` seconds, `person_ids` (P,) int64, `poses` (P, J, 3) metres."""

@@ -12,6 +12,7 @@ from core import jit, processes
 from core.poses import interpolate_ticks
 from core.records import CameraFrame, Capture, DetectionRows, PoseTruth
 from core.stream import CAPTURE, DELIVERY, STAMP, Block, LogTimeOrder, frame_times
+from core.truth import TRUTH_RATE_HZ
 from core.types import COCO17
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
@@ -19,7 +20,6 @@ from sim.rng import child_rng
 from sim.sensing.detector import Detector
 from sim.sensing.draws import large_enough
 
-TRUTH_RATE_HZ = 100.0
 # The captures of this many truth ticks (0.3 s) are projected, ray cast and given their detector errors
 # together, so that the per-call costs are shared by many frames (about 84 of store_layout2).
 _DETECT_BLOCK_TICKS = 30

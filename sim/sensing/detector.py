@@ -25,6 +25,7 @@ import numpy as np
 
 from core.projection import in_image_many_kernel, monotonic_radius
 from core.records import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
+from core.truth import tick_of
 from core.types import COCO17, Camera, Skeleton
 from sim.sensing.draws import (
     FRAGMENTS_COCO17,
@@ -302,9 +303,9 @@ class Detector:
         if self.offsets.active:
             # The detector's own joints, for the person-views it may detect (the others take no draw: they keep
             # the truth's pixels), each view projected as a capture of its own. A person's offset is one world
-            # vector per truth tick, shared by every camera capturing in that tick: drawn at the tick's first
-            # capture (its time and pose), the captures of a tick lying within 1 / TRUTH_RATE_HZ of each
-            # other against the offset's `offset_time_s` of seconds.
+            # vector per truth tick, shared by every camera capturing in that tick: the offset of the tick's
+            # time, turned with the pose at its first capture (the captures of a tick lie within
+            # 1 / TRUTH_RATE_HZ of each other, against the offset's `offset_time_s` of seconds).
             r_idx, p_idx = np.nonzero(cast.reshape(n_req, most, J).any(axis=2))
             found = px.copy()
             if len(r_idx):
@@ -312,8 +313,8 @@ class Detector:
                 person = ids[r_idx, p_idx]
                 tick_person = np.stack([np.asarray(scene_of, dtype=np.int64)[r_idx], person], axis=1)
                 _, first, shared = np.unique(tick_person, axis=0, return_index=True, return_inverse=True)
-                capture_s = np.array([r.capture_s for r in requests])[r_idx[first]]
-                shifted = true + self.offsets.offsets(person[first], capture_s, true[first])[shared.ravel()]
+                ticks = tick_of(np.array([r.capture_s for r in requests])[r_idx[first]])
+                shifted = true + self.offsets.offsets(person[first], ticks, true[first])[shared.ravel()]
                 views_px = np.empty((len(r_idx), J, 2))
                 in_image_many_kernel(self._R, self._t, self._K, self._dist, self._size, self._max_radius, shifted,
                                      cams[r_idx], tangential[r_idx], skew[r_idx], views_px,

@@ -14,6 +14,15 @@ torso), s_j a Student-t scale per axis (heavy tails across people and joints), u
 process with correlation exp(-|Δt| / offset_time_s) per axis (random Fourier features of that kernel) and z
 the world's up. Everything about a person is drawn from the person's id and the detector's seed alone, so the
 offsets do not depend on which camera asks, in which process, or in which order.
+
+The offsets live on the truth's ticks (`core.truth.TRUTH_RATE_HZ`): one per person and tick, shared by every
+camera capturing in it. Each feature's cos(ω_k t + φ_k) is a phasor turned by ω_k / TRUTH_RATE_HZ from tick to
+tick (`fourier_sums`): its cosine and sine are evaluated at every `ANCHOR_TICKS`-th tick and rotated from there,
+so that a person costs one complex product per feature and tick, not a cosine of a large angle (the offsets
+were a third of the simulation's geometry). The value at a tick is the same bits whoever asks: the anchor and
+the number of turns depend on the tick alone. It agrees with the cosines evaluated directly to within the
+rounding of their angles (ω t is large for the Cauchy's fast features): 5e-11 of the unit-variance process in
+the first 30 s, 1e-8 an hour in (under a nanometre of offset).
 """
 
 from __future__ import annotations
@@ -22,11 +31,14 @@ import math
 
 import numpy as np
 
+from core.jit import jit
+from core.truth import TRUTH_RATE_HZ
 from core.types import Skeleton
 from sim.sensing.draws import joint_groups
 from sim.sensing.profiles import DetectorParams
 
 _FEATURES = 6  # random Fourier features per axis: enough for a near-Gaussian marginal
+ANCHOR_TICKS = 32  # the features' phasors are evaluated directly at every ANCHOR_TICKS-th tick, turned between
 _SIDES = ("left_", "right_")
 _PARENT = {"elbow": "shoulder", "wrist": "elbow", "knee": "hip", "ankle": "knee"}
 
@@ -58,33 +70,36 @@ class JointOffsets:
                 for child, parent in _PARENT.items():
                     if name == side + child and side + parent in index:
                         self._parent[i] = index[side + parent]
-        self._torso = tuple(index.get(n, -1) for n in ("left_hip", "right_hip", "left_shoulder", "right_shoulder"))
+        self._torso = np.array([index.get(n, -1) for n in ("left_hip", "right_hip", "left_shoulder", "right_shoulder")],
+                               dtype=np.int64)
         self._slot_of: dict[int, int] = {}
-        # Per person (a row each): the features' angular frequencies (rad/s) and phases, (S, J, 3, 2, K), and
-        # each axis's amplitude (S, J, 3): offset_m x the person's Student-t scale x sqrt(2 / K).
-        self._fourier = np.empty((0, self._J, 3, 2, _FEATURES))
+        # Per person (a row each): the features' angular frequencies (rad/s), phases and turn per tick
+        # (cos, sin of ω / TRUTH_RATE_HZ), (S, J, 3, 4, K), and each axis's amplitude (S, J, 3): offset_m x the
+        # person's Student-t scale x sqrt(2 / K).
+        self._fourier = np.empty((0, self._J, 3, 4, _FEATURES))
         self._amplitude_m = np.empty((0, self._J, 3))
 
-    def offsets(self, person_ids: np.ndarray, t_s: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    def offsets(self, person_ids: np.ndarray, ticks: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, J, 3) where the detector's joints lie relative to the truth's, metres (world frame).
 
         Args:
             person_ids: (N,) int64 the person of each pose (>= 0).
-            t_s: (N,) the time of each pose, seconds.
+            ticks: (N,) int64 the truth tick of each pose (`core.truth.tick_of`; tick k is k / TRUTH_RATE_HZ s).
             poses: (N, J, 3) the true poses, metres.
         """
         N = len(person_ids)
         if N == 0 or not self.active:
             return np.zeros((N, self._J, 3))
         slots = self._slots(person_ids)
+        ticks = np.asarray(ticks, dtype=np.int64)
         # u(t) = sqrt(2 / K) Σ_k cos(ω_k t + φ_k), ω_k ~ Cauchy(0, 1 / time): unit variance, correlation
         # exp(-|Δt| / time) (the spectral density of that kernel is the Cauchy's).
-        fourier = self._fourier[slots]  # (N, J, 3, 2, K)
-        angle = fourier[..., 0, :] * np.asarray(t_s, dtype=np.float64)[:, None, None, None]
-        angle += fourier[..., 1, :]
-        local = np.cos(angle, out=angle).sum(axis=-1) * self._amplitude_m[slots]  # (N, J, 3)
-        world = np.einsum("njab,njb->nja", self._frames(np.asarray(poses, dtype=np.float64)), local)
-        world[..., 2] += self.lift_m
+        local = np.empty((N, self._J, 3))
+        fourier_sums(slots, ticks, np.lexsort((ticks, slots)), self._fourier, ANCHOR_TICKS, TRUTH_RATE_HZ, local)
+        local *= self._amplitude_m[slots]  # (N, J, 3)
+        world = np.empty((N, self._J, 3))
+        segment_frames_to_world(np.ascontiguousarray(poses, dtype=np.float64), self._parent, self._torso, local,
+                                self.lift_m, world)
         return world
 
     def _slots(self, person_ids: np.ndarray) -> np.ndarray:
@@ -93,12 +108,14 @@ class JointOffsets:
         new = [pid for pid in dict.fromkeys(person_ids.tolist()) if pid not in slot_of]
         if new:
             J = self._J
-            fourier, scale = np.empty((len(new), J, 3, 2, _FEATURES)), np.empty((len(new), J, 3))
+            fourier, scale = np.empty((len(new), J, 3, 4, _FEATURES)), np.empty((len(new), J, 3))
             for i, pid in enumerate(new):
                 rng = np.random.default_rng([self._seed, pid])
                 omega = rng.standard_cauchy((J, 3, _FEATURES))
                 fourier[i, :, :, 0] = omega / self._time_s if self._time_s > 0 else 0.0
                 fourier[i, :, :, 1] = rng.uniform(0.0, 2.0 * np.pi, (J, 3, _FEATURES))
+                fourier[i, :, :, 2] = np.cos(fourier[i, :, :, 0] / TRUTH_RATE_HZ)
+                fourier[i, :, :, 3] = np.sin(fourier[i, :, :, 0] / TRUTH_RATE_HZ)
                 # Student-t scale mixture: N(0, 1) x sqrt(dof / chi2(dof)) is Student-t.
                 scale[i] = np.sqrt(self._dof / rng.chisquare(self._dof, (J, 3))) if math.isfinite(self._dof) else 1.0
                 slot_of[pid] = len(self._fourier) + i
@@ -107,25 +124,103 @@ class JointOffsets:
             self._amplitude_m = np.concatenate([self._amplitude_m, amplitude])
         return np.array([slot_of[pid] for pid in person_ids.tolist()], dtype=np.int64)
 
-    def _frames(self, poses: np.ndarray) -> np.ndarray:
-        """(N, J, 3, 3) each joint's segment frame, columns (along the segment, across the body, their cross):
-        a limb joint's segment runs from its parent joint; the other joints take the torso's (mid-hip to
-        mid-shoulder). The identity where a frame cannot be built (no torso, a degenerate segment)."""
-        N, J = poses.shape[:2]
-        frames = np.broadcast_to(np.eye(3), (N, J, 3, 3)).copy()
-        lh, rh, ls, rs = self._torso
-        if min(self._torso) < 0:
-            return frames
-        across = poses[:, lh] - poses[:, rh]  # (N, 3), the body's left
-        along = np.broadcast_to(((poses[:, ls] + poses[:, rs]) / 2 - (poses[:, lh] + poses[:, rh]) / 2)[:, None],
-                                (N, J, 3)).copy()
-        limb = self._parent >= 0
-        along[:, limb] = poses[:, limb] - poses[:, self._parent[limb]]
-        a = along / np.linalg.norm(along, axis=-1, keepdims=True)
-        c = across[:, None, :] - np.einsum("nja,na->nj", a, across)[..., None] * a
-        c /= np.linalg.norm(c, axis=-1, keepdims=True)
-        b = np.cross(a, c)
-        built = np.stack([a, c, b], axis=-1)
-        ok = np.isfinite(built).all(axis=(-1, -2))
-        frames[ok] = built[ok]
-        return frames
+
+@jit
+def fourier_sums(slots, ticks, order, fourier, anchor_ticks, rate_hz, out):
+    """out[i, j, a] = Σ_k cos(ω_k t + φ_k) of row i's person (`slots[i]`, a row of `fourier`) at its tick
+    (t = ticks[i] / rate_hz), for every joint j and axis a (`JointOffsets.offsets`).
+
+    Each feature's (cos, sin) is evaluated at the anchor tick (ticks[i] // anchor_ticks) * anchor_ticks and
+    turned by (cos, sin)(ω / rate_hz) once per tick from there. The rows are visited in `order` (by person,
+    then tick), so a person's turns are shared by its rows of one anchor; the value of a row depends only on
+    its person and tick.
+
+    Args:
+        slots, ticks: (N,) int64; order: (N,) the rows sorted by slot, then tick.
+        fourier: (S, J, 3, 4, K) per person ω (rad/s), φ, cos(ω / rate_hz), sin(ω / rate_hz).
+        out: (N, J, 3) written.
+    """
+    J, K = fourier.shape[1], fourier.shape[4]
+    c = np.empty((J, 3, K))
+    s = np.empty((J, 3, K))
+    slot, at, anchor = -1, 0, -1
+    for n in range(order.shape[0]):
+        i = order[n]
+        k = ticks[i]
+        start = (k // anchor_ticks) * anchor_ticks
+        if slots[i] != slot or start != anchor:
+            slot, anchor, at = slots[i], start, start
+            t = start / rate_hz
+            for j in range(J):
+                for a in range(3):
+                    for f in range(K):
+                        angle = fourier[slot, j, a, 0, f] * t + fourier[slot, j, a, 1, f]
+                        c[j, a, f] = math.cos(angle)
+                        s[j, a, f] = math.sin(angle)
+        while at < k:
+            for j in range(J):
+                for a in range(3):
+                    for f in range(K):
+                        turn_c, turn_s = fourier[slot, j, a, 2, f], fourier[slot, j, a, 3, f]
+                        cf = c[j, a, f]
+                        c[j, a, f] = cf * turn_c - s[j, a, f] * turn_s
+                        s[j, a, f] = s[j, a, f] * turn_c + cf * turn_s
+            at += 1
+        for j in range(J):
+            for a in range(3):
+                total = 0.0
+                for f in range(K):
+                    total += c[j, a, f]
+                out[i, j, a] = total
+
+
+@jit
+def segment_frames_to_world(poses, parent, torso, local, lift_m, out):
+    """out[n, j] = B_j local[n, j] + lift_m[j] z, B_j the frame of joint j's body segment in pose n, columns
+    (along the segment, across the body, their cross): a limb joint's segment runs from its parent joint
+    (parent[j] >= 0), the other joints take the torso's (mid-hip to mid-shoulder; torso: the left and right
+    hip and shoulder joints). The identity where a frame cannot be built (no torso, a degenerate segment).
+
+    Args:
+        poses: (N, J, 3) the true poses, m; parent: (J,) int64; torso: (4,) int64 (-1: the layout lacks it).
+        local: (N, J, 3) the offsets in the segment frames, m; lift_m: (J,) up the world's z, m.
+        out: (N, J, 3) written, m.
+    """
+    N, J = poses.shape[0], poses.shape[1]
+    lh, rh, ls, rs = torso[0], torso[1], torso[2], torso[3]
+    has_torso = lh >= 0 and rh >= 0 and ls >= 0 and rs >= 0
+    across = np.zeros(3)
+    spine = np.zeros(3)
+    a = np.empty(3)
+    c = np.empty(3)
+    for n in range(N):
+        if has_torso:
+            for x in range(3):
+                across[x] = poses[n, lh, x] - poses[n, rh, x]  # the body's left
+                spine[x] = (poses[n, ls, x] + poses[n, rs, x]) / 2 - (poses[n, lh, x] + poses[n, rh, x]) / 2
+        for j in range(J):
+            built = has_torso
+            if built:
+                for x in range(3):
+                    a[x] = poses[n, j, x] - poses[n, parent[j], x] if parent[j] >= 0 else spine[x]
+                norm = math.sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2])
+                built = norm > 0.0 and norm < math.inf
+            if built:
+                for x in range(3):
+                    a[x] = a[x] / norm
+                along = a[0] * across[0] + a[1] * across[1] + a[2] * across[2]
+                for x in range(3):
+                    c[x] = across[x] - along * a[x]
+                norm = math.sqrt(c[0] * c[0] + c[1] * c[1] + c[2] * c[2])
+                built = norm > 0.0 and norm < math.inf
+            if built:
+                for x in range(3):
+                    c[x] = c[x] / norm
+                u, v, w = local[n, j, 0], local[n, j, 1], local[n, j, 2]
+                out[n, j, 0] = a[0] * u + c[0] * v + (a[1] * c[2] - a[2] * c[1]) * w
+                out[n, j, 1] = a[1] * u + c[1] * v + (a[2] * c[0] - a[0] * c[2]) * w
+                out[n, j, 2] = a[2] * u + c[2] * v + (a[0] * c[1] - a[1] * c[0]) * w
+            else:
+                for x in range(3):
+                    out[n, j, x] = local[n, j, x]
+            out[n, j, 2] += lift_m[j]

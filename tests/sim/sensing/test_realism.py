@@ -9,11 +9,12 @@ import numpy as np
 import pytest
 
 from core.records import PoseTruth
+from core.truth import TRUTH_RATE_HZ
 from core.types import COCO17
 from sim.cameras import CameraPlacement
 from sim.sensing.detector import Detector
 from sim.sensing.draws import TEMPLATE_COCO17
-from sim.sensing.offsets import JointOffsets
+from sim.sensing.offsets import ANCHOR_TICKS, JointOffsets, fourier_sums
 from sim.sensing.profiles import PROFILES, DetectorConfig, DetectorProfile
 from tests.reference.detector import detect
 from tests.sim.sensing.test_detector import BoxWorld, _cameras, _frames, _only
@@ -41,8 +42,8 @@ def test_offsets_have_the_profiles_std_lift_and_time_correlation():
     offsets = _offsets(offset_m=(std_m,) * 7, lift_m=(lift_m,) * 7, offset_time_s=time_s)
     poses = _crowd(3000)
     ids = np.arange(3000)
-    a = offsets.offsets(ids, np.full(3000, 10.0), poses)
-    b = offsets.offsets(ids, np.full(3000, 10.0 + time_s), poses)
+    a = offsets.offsets(ids, np.full(3000, 1000), poses)  # (ticks: 10 s)
+    b = offsets.offsets(ids, np.full(3000, 1000 + round(time_s * TRUTH_RATE_HZ)), poses)
     # Gaussian across people (offset_tail_dof inf): per axis std offset_m, the lift on the world's z.
     assert a[..., 0].std() == pytest.approx(std_m, rel=0.05)  # m
     assert a[..., 2].mean() == pytest.approx(lift_m, abs=0.002)  # m
@@ -55,14 +56,36 @@ def test_offsets_have_the_profiles_std_lift_and_time_correlation():
 def test_offsets_belong_to_the_person_not_to_who_asks_or_in_which_order():
     offsets, again = _offsets(offset_m=(0.05,) * 7), _offsets(offset_m=(0.05,) * 7)
     poses = _crowd(5)
-    t = np.linspace(0, 3, 5)
+    t = np.array([0, 75, 150, 225, 300])  # ticks
     first = offsets.offsets(np.arange(5), t, poses)
     # Another detector with the same seed, asked about the people in another order and among others.
     order = np.array([4, 2, 0, 3, 1])
-    again.offsets(np.array([9, 7]), np.zeros(2), _crowd(2))
+    again.offsets(np.array([9, 7]), np.zeros(2, dtype=np.int64), _crowd(2))
     np.testing.assert_array_equal(again.offsets(order, t[order], poses[order]), first[order])
     # A detector of another seed gives other offsets.
     assert not np.allclose(_offsets(seed=1, offset_m=(0.05,) * 7).offsets(np.arange(5), t, poses), first)
+
+
+def test_the_turned_phasors_are_the_cosines_and_a_tick_gives_the_same_bits_however_it_is_asked():
+    """`fourier_sums` turns each feature's phasor from tick to tick: it agrees with the cosines evaluated at each
+    tick's time, and a tick's value does not depend on the other rows of the call (which ticks were turned
+    through on the way)."""
+    rng = np.random.default_rng(3)
+    fourier = np.empty((6, 17, 3, 4, 6))  # 6 people: ω (Cauchy, 0.5 s), φ, the turn per tick
+    fourier[..., 0, :] = rng.standard_cauchy((6, 17, 3, 6)) / 0.5
+    fourier[..., 1, :] = rng.uniform(0, 2 * np.pi, (6, 17, 3, 6))
+    fourier[..., 2, :], fourier[..., 3, :] = (f(fourier[..., 0, :] / TRUTH_RATE_HZ) for f in (np.cos, np.sin))
+    slots, ticks = rng.integers(0, 6, 4000), rng.integers(0, 3000, 4000)
+    sums = np.empty((4000, 17, 3))
+    fourier_sums(slots, ticks, np.lexsort((ticks, slots)), fourier, ANCHOR_TICKS, TRUTH_RATE_HZ, sums)
+    omega, phase = fourier[slots, :, :, 0], fourier[slots, :, :, 1]
+    direct = np.cos(omega * (ticks / TRUTH_RATE_HZ)[:, None, None, None] + phase).sum(axis=-1)
+    np.testing.assert_allclose(sums, direct, rtol=0, atol=1e-9)
+    for i in (0, 17, 3999):  # each row alone: the same bits
+        alone = np.empty((1, 17, 3))
+        fourier_sums(slots[i:i + 1], ticks[i:i + 1], np.zeros(1, dtype=np.int64), fourier, ANCHOR_TICKS,
+                     TRUTH_RATE_HZ, alone)
+        np.testing.assert_array_equal(alone[0], sums[i])
 
 
 def test_offsets_turn_with_the_body():
@@ -70,13 +93,13 @@ def test_offsets_turn_with_the_body():
     pose = _crowd(1)
     yaw = 0.7
     rot = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
-    here = offsets.offsets(np.array([3]), np.array([1.0]), pose)
-    turned = offsets.offsets(np.array([3]), np.array([1.0]), pose @ rot.T)
+    here = offsets.offsets(np.array([3]), np.array([100]), pose)
+    turned = offsets.offsets(np.array([3]), np.array([100]), pose @ rot.T)
     np.testing.assert_allclose(turned, here @ rot.T, atol=1e-12)  # m
 
 
 def test_heavy_tailed_offsets_put_more_mass_far_out():
-    poses, ids, t = _crowd(3000), np.arange(3000), np.zeros(3000)
+    poses, ids, t = _crowd(3000), np.arange(3000), np.zeros(3000, dtype=np.int64)
     gauss = np.abs(_offsets(offset_m=(0.03,) * 7).offsets(ids, t, poses)[..., 0]).ravel()
     heavy = np.abs(_offsets(offset_m=(0.03,) * 7, offset_tail_dof=3.0).offsets(ids, t, poses)[..., 0]).ravel()
     assert np.percentile(heavy, 99.5) / np.median(heavy) > 1.3 * np.percentile(gauss, 99.5) / np.median(gauss)
@@ -95,7 +118,7 @@ def test_every_camera_sees_the_same_offset_joint_so_it_survives_triangulation():
     P = [c.K @ np.hstack([c.R_cam_from_world, c.t_cam_from_world.reshape(3, 1)]) for c in cams]
     points = cv2.triangulatePoints(P[0], P[1], frames[0].frame.keypoints_px[0].T, frames[1].frame.keypoints_px[0].T)
     found = (points[:3] / points[3]).T
-    want = truth.poses[0] + detector.offsets.offsets(np.array([0]), np.array([0.5]), truth.poses)[0]
+    want = truth.poses[0] + detector.offsets.offsets(np.array([0]), np.array([50]), truth.poses)[0]
     np.testing.assert_allclose(found, want, atol=1e-6)  # m
     assert np.linalg.norm(found - truth.poses[0], axis=1).mean() > 0.03  # m: not the truth's joints
 
