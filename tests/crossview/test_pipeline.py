@@ -172,8 +172,9 @@ def test_a_terminating_signal_ends_generate_cleanly(tmp_path, signum):
     """SIGTERM or SIGHUP in the middle of a real `crossview generate`: exit status 128 + the signal, one
     line saying so, no file under the final name or left as a temporary, and no worker process left."""
     out = tmp_path / "g.mcap"
-    command = [sys.executable, "-c", "from crossview.cli import run; run()", "--no-progress", "generate",
-               "store_layout2", "-o", str(out), "--duration", "600"]
+    # (-X faulthandler: a crash, once seen here as exit -11 with an empty stderr, then says where it was)
+    command = [sys.executable, "-X", "faulthandler", "-c", "from crossview.cli import run; run()", "--no-progress",
+               "generate", "store_layout2", "-o", str(out), "--duration", "600"]
     process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True, start_new_session=True)
     deadline = time.monotonic() + 120
     while not any(tmp_path.iterdir()) and time.monotonic() < deadline:  # the temporary file: it is writing

@@ -17,7 +17,8 @@ import pytest
 from crossview import cli, pipeline
 from crossview.cli import main
 
-CROSSVIEW = [sys.executable, "-c", "from crossview.cli import run; run()", "--no-progress"]
+# (-X faulthandler: should the process crash instead, its stderr, in the failure's message, says where)
+CROSSVIEW = [sys.executable, "-X", "faulthandler", "-c", "from crossview.cli import run; run()", "--no-progress"]
 
 
 @pytest.fixture(scope="module")
