@@ -184,7 +184,6 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             software_version=recording.software_version(),
             format_version=recording.FORMAT_VERSION,
         )
-        recording.Encoder(sim.skeleton).warm_up()  # (before the file opens: `Encoder.warm_up`)
         writer = stack.enter_context(recording.RecordingWriter(out, header, sim.cameras, sim.boxes,
                                                                inputs=(scenario.source_path or None,)))
         bar = stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
@@ -299,7 +298,6 @@ def track(
         format_version=recording.TRACKS_FORMAT_VERSION,
     )
     warm_up_tracker(method, rec, preset, config_path, skeleton, overrides)
-    recording.Encoder(skeleton).warm_up()  # (before the file opens: `Encoder.warm_up`)
     updates = 0
     tracker_s = 0.0
     with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path)) as writer:

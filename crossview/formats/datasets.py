@@ -306,7 +306,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
     import hashlib
 
     from core.records import CameraFrame, DetectionTruth, PoseTruth
-    from crossview.recording import Encoder, RecordingHeader, RecordingWriter, box_from_json
+    from crossview.recording import RecordingHeader, RecordingWriter, box_from_json
 
     dataset_dir = Path(dataset_dir)
     calibration = read_json(dataset_dir / "calibration.json")
@@ -361,7 +361,6 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
     J = skeleton.num_joints
     events = [(t, 0, i) for i, (t, _, _) in enumerate(truth)] + [(f.delivery_s, 1, i) for i, f in enumerate(frames)]
     events.sort()
-    Encoder(skeleton).warm_up()  # (before the file opens: `Encoder.warm_up`)
     with RecordingWriter(out_mcap, header, cameras, boxes, inputs=(*inputs, *sources)) as writer:
         for _, kind, i in events:
             if kind == 0:

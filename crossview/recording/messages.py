@@ -218,10 +218,10 @@ class Encoder:
 
     def warm_up(self) -> None:
         """Loads every compiled encoder (the camera frames' and the skeleton scenes'): their first use costs tens
-        of milliseconds from numba's cache, and tens of seconds on a fresh install, where they compile. Call it
-        before the output file is opened (`crossview.pipeline` does, on a throwaway Encoder): then no compile
-        falls while a temporary output exists, where a signal must be held until the compiler returns
-        (`crossview.cli`) and a fresh cache once left the temporary file behind."""
+        of milliseconds from numba's cache, and tens of seconds on a fresh install, where they compile. Each
+        writer calls it before it opens its file: then no compile falls while a temporary output exists, where a
+        signal must be held until the compiler returns (`crossview.cli`) and a fresh cache once left the
+        temporary file behind."""
         J = self.skeleton.num_joints
         ids = np.array([3], dtype=np.int64)
         seen = np.ones((1, J), dtype=bool)

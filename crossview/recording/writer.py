@@ -176,6 +176,8 @@ class RecordingWriter(_WriterContext):
             "cameras": [camera_json(c) for c in self.cameras],
             "boxes": [box_json(b) for b in self.boxes],
         }
+        self.encoder = Encoder(self.skeleton)
+        self.encoder.warm_up()  # (before the file opens: `Encoder.warm_up`)
         self._out = _AtomicMcapWriter(path, KIND_RECORDING, doc, _flat_metadata(KIND_RECORDING, header), chunk_size,
                                      inputs)
         try:
@@ -207,7 +209,6 @@ class RecordingWriter(_WriterContext):
         self._counts = {"truth": 0, "frames": 0, "images": 0}
         self._camera_of = {c.name: c for c in self.cameras}
         self._order = LogTimeOrder()  # the blocks' truth ticks and encoded frames not yet due
-        self.encoder = Encoder(self.skeleton)
 
     def _log_time(self, t_ns: int, what: str) -> int:
         if t_ns < self._last_ns:
@@ -327,6 +328,8 @@ class TracksWriter(_WriterContext):
             compact_json(header.config)
         except (TypeError, ValueError) as e:
             raise ValueError(f"TracksHeader.config: must be JSON-serialisable without NaN: {e}") from None
+        self.encoder = Encoder(self.skeleton)
+        self.encoder.warm_up()  # (before the file opens: `Encoder.warm_up`)
         self._out = _AtomicMcapWriter(path, KIND_TRACKS, doc, _flat_metadata(KIND_TRACKS, header), chunk_size, inputs)
         try:
             self._outputs = self._out.protobuf_channel(TOPIC_OUTPUTS, TrackerOutputMsg)
@@ -336,7 +339,6 @@ class TracksWriter(_WriterContext):
             self._out.abort()
             raise
         self._summary: dict = {}
-        self.encoder = Encoder(self.skeleton)
         self._next_scene_ns = 0
         self._targets: set[int] = set()
         self._count = 0
