@@ -12,7 +12,7 @@ from core import jit, processes
 from core.poses import interpolate_ticks
 from core.records import CameraFrame, Capture, DetectionRows, PoseTruth
 from core.stream import CAPTURE, DELIVERY, STAMP, Block, LogTimeOrder, frame_times
-from core.truth import TRUTH_RATE_HZ
+from core.truth import TRUTH_RATE_HZ, tick_of
 from core.types import COCO17
 from sim import cameras as cameras_mod
 from sim import clock as clock_mod
@@ -147,25 +147,25 @@ class Simulation:
         n_truth = int(np.ceil(duration * TRUTH_RATE_HZ - 1e-9)) + 1
         # Captures up to a tick see the poses interpolated between it and the tick before (10 ms apart: under
         # a millimetre from the exact pose even for a swinging wrist) and the bodies of that tick.
-        taken_by = np.searchsorted(capture_times, np.arange(n_truth) / TRUTH_RATE_HZ, side="right").tolist()
+        taken_by = np.searchsorted(tick_of(capture_times), np.arange(n_truth), side="right").tolist()
         previous: PoseTruth | None = None  # the previous block's last tick
         first = 0  # the block's first capture
         truths: list = []
         scenes: list = []  # what rays need of the bodies at each tick with captures (None: no ray casting)
         scene_of: list = []  # per capture of the block, its tick in `scenes`
-        tick_of: list = []  # per capture of the block, its tick in `truths`
+        truth_of: list = []  # per capture of the block, its tick in `truths`
         for k in range(n_truth):
             t = k / TRUTH_RATE_HZ
             truths.append(world.advance(t))
-            n = taken_by[k] - first - len(tick_of)
+            n = taken_by[k] - first - len(truth_of)
             if n:  # occlusion needs this tick's bodies; the poses, rays and error draws wait for the block
                 scene_of += [len(scenes)] * n
-                tick_of += [len(truths) - 1] * n
+                truth_of += [len(truths) - 1] * n
                 scenes.append(detector.scene_now(world))
             if (k + 1) % _DETECT_BLOCK_TICKS and k + 1 < n_truth:
                 continue
-            end = first + len(tick_of)
-            at_capture = interpolate_ticks(previous, truths, tick_of, capture_times[first:end])
+            end = first + len(truth_of)
+            at_capture = interpolate_ticks(previous, truths, truth_of, capture_times[first:end])
             requests = list(map(Capture, cams[first:end], at_capture, capture_s[first:end], stamp_s[first:end],
                                 delivery_s[first:end]))
             rows, bounds = DetectionRows.empty(self.skeleton.num_joints), np.zeros(1, dtype=np.int64)
@@ -174,7 +174,7 @@ class Simulation:
                 rows, bounds = detector.detection_rows_of(requests, *visible) if draws else (visible, None)
             yield Block(t, truths, requests, rows, bounds)
             previous, first = truths[-1], end
-            truths, scenes, scene_of, tick_of = [], [], [], []
+            truths, scenes, scene_of, truth_of = [], [], [], []
 
     def _blocks_from_worker(self, worker: processes.Worker, with_poses: bool) -> Iterator[Block]:
         """`_blocks` computed in the started `worker` process and received here, block by block. The captures'
@@ -329,8 +329,8 @@ def _unpack_block(packed: tuple, previous: PoseTruth | None, with_poses: bool) -
     capture_s = frame_times_s[:, CAPTURE]
     poses: list = [None] * len(capture_s)
     if with_poses and len(capture_s):
-        tick_of = np.searchsorted(times, capture_s, side="left")
-        poses = interpolate_ticks(previous, truths, tick_of, capture_s)
+        truth_of = np.searchsorted(times, capture_s, side="left")
+        poses = interpolate_ticks(previous, truths, truth_of, capture_s)
     requests = list(map(Capture, cams.tolist(), poses, capture_s.tolist(), frame_times_s[:, STAMP].tolist(),
                         frame_times_s[:, DELIVERY].tolist()))
     return t, truths, requests, visible, seen
