@@ -50,35 +50,26 @@ def ghosts(expected: np.ndarray, sighted: np.ndarray, state: np.ndarray, implaus
         expected, sighted: (T,) decayed counts of the frames that should have seen each target and of those that
             matched it; state: (T,) codes; implausible_s: (T,) since when the body is implausible (NaN: it is not).
     """
-    out = np.empty(state.shape[0], dtype=np.bool_)
-    _ghosts(expected, sighted, state, implausible_s, float(now_s), float(config.ghost_min_expected),
-            float(config.ghost_min_seen_ratio), float(config.implausible_after_s), out)
-    return out
-
-
-def _ghosts(expected, sighted, state, implausible_s, now_s, min_expected, min_seen_ratio, implausible_after_s, out):
-    out[:] = [(e >= min_expected and s < min_seen_ratio * e and code != LOST)
-              or now_s - since >= implausible_after_s  # False for NaN
-              for e, s, code, since in zip(expected.tolist(), sighted.tolist(), state.tolist(), implausible_s.tolist())]
+    now_s, min_expected = float(now_s), float(config.ghost_min_expected)
+    min_seen_ratio, implausible_after_s = float(config.ghost_min_seen_ratio), float(config.implausible_after_s)
+    return np.array([(e >= min_expected and s < min_seen_ratio * e and code != LOST)
+                     or now_s - since >= implausible_after_s  # False for NaN
+                     for e, s, code, since in zip(expected.tolist(), sighted.tolist(), state.tolist(),
+                                                  implausible_s.tolist())], dtype=np.bool_)
 
 
 def on_time(state: np.ndarray, last_update_s: np.ndarray, now_s: float, config: TrackerConfig,
             ghost: np.ndarray | None = None) -> np.ndarray:
-    """Transitions caused by time passing (no match): returns the new (T,) state codes.
+    """Transitions caused by time passing (no match): returns the new (T,) state codes. A ghost is removed,
+    unless the lost rule applies to it first.
 
     Args:
         state: (T,) codes; last_update_s: (T,) time of each target's last matched detection, s; now_s: s.
         ghost: (T,) whether the cameras' evidence marks the target a ghost (`ghosts`); None: none is.
     """
-    new = np.empty_like(state)
-    _on_time(state, last_update_s, float(now_s), float(config.tentative_timeout_s), float(config.lost_after_s),
-             float(config.remove_after_s), np.zeros(0, dtype=np.bool_) if ghost is None else ghost, new)
-    return new
-
-
-def _on_time(state, last_update_s, now_s, tentative_timeout_s, lost_after_s, remove_after_s, ghost, new):
-    """`on_time` per target (a ghost is removed, unless the lost rule applies to it first)."""
-    ghosts = ghost.tolist() if ghost.size else [False] * state.shape[0]
+    now_s, tentative_timeout_s = float(now_s), float(config.tentative_timeout_s)
+    lost_after_s, remove_after_s = float(config.lost_after_s), float(config.remove_after_s)
+    ghosts = [False] * state.shape[0] if ghost is None else ghost.tolist()
     codes = []
     for old, last_s, is_ghost in zip(state.tolist(), last_update_s.tolist(), ghosts):
         idle = now_s - last_s
@@ -90,7 +81,7 @@ def _on_time(state, last_update_s, now_s, tentative_timeout_s, lost_after_s, rem
         if code == LOST and idle > remove_after_s:
             code = REMOVED
         codes.append(code)
-    new[:] = codes
+    return np.array(codes, dtype=state.dtype)
 
 
 def on_match(
@@ -103,15 +94,8 @@ def on_match(
         state, born_s, num_updates: (M,) codes, birth times (s) and matched-detection counts (after this match).
         has_body: (M,) whether each has its hips and enough joints triangulated; None: all have.
     """
-    new = np.empty_like(state)
-    _on_match(state, born_s, num_updates, float(now_s), int(config.confirm_min_updates),
-              float(config.confirm_min_age_s), np.zeros(0, dtype=np.bool_) if has_body is None else has_body, new)
-    return new
-
-
-def _on_match(state, born_s, num_updates, now_s, min_updates, min_age_s, has_body, new):
-    """`on_match` per target."""
-    bodies = has_body.tolist() if has_body.size else [True] * state.shape[0]
+    now_s, min_updates, min_age_s = float(now_s), int(config.confirm_min_updates), float(config.confirm_min_age_s)
+    bodies = [True] * state.shape[0] if has_body is None else has_body.tolist()
     codes = []
     for old, born, updates, body in zip(state.tolist(), born_s.tolist(), num_updates.tolist(), bodies):
         code = old
@@ -120,4 +104,4 @@ def _on_match(state, born_s, num_updates, now_s, min_updates, min_age_s, has_bod
         if old == LOST:
             code = CONFIRMED
         codes.append(code)
-    new[:] = codes
+    return np.array(codes, dtype=state.dtype)
