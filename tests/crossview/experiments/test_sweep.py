@@ -578,3 +578,18 @@ def test_sigterm_during_a_ray_sweep_ends_it_like_everywhere_else(tmp_path):
     assert process.returncode == 143, err
     assert err.strip().splitlines()[-1] == "crossview: ended by SIGTERM; no partial output was kept", err
     assert "Traceback" not in err and not (out / "results.json").exists()
+    # The running cells end with the sweep's Ray job (its ray.shutdown), not left to run on.
+    deadline = time.monotonic() + 30
+    while _running_ray_cells() and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _running_ray_cells() == []
+
+
+def _running_ray_cells() -> list[int]:
+    """The processes running a sweep cell as a Ray task (titled `ray::run_cell`), by /proc (none without it)."""
+    found = []
+    for entry in Path("/proc").glob("[0-9]*"):
+        with contextlib.suppress(OSError):
+            if (entry / "cmdline").read_bytes().startswith(b"ray::run_cell"):
+                found.append(int(entry.name))
+    return found
