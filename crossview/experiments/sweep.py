@@ -9,6 +9,7 @@ the cell, so the serial, pool and Ray executors give the same `results.json`, by
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import csv
 import dataclasses
@@ -62,6 +63,10 @@ RAY_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_
 # default for a new local instance (`connect_ray`).
 RAY_AUTH_MODE_ENV = "RAY_AUTH_MODE"
 RAY_LOCAL_AUTH_MODE = "token"
+
+# Ray's switch (its environment variable, read when Ray is imported) that keeps its C++ failure-signal handler out
+# of a Python process: set for the sweep's driver and its local instance (`connect_ray`).
+RAY_NO_FAILURE_HANDLER_ENV = ("RAY_DISABLE_FAILURE_SIGNAL_HANDLER", "1")
 
 # Modules a pool's fork server imports once, so that each worker it forks starts with them loaded.
 _PRELOAD = ["crossview.experiments.sweep", "crossview.recording", "crossview.scoring", "sim.simulate",
@@ -644,11 +649,17 @@ def connect_ray(address: str | None, reaper: processes.Reaper | None = None) -> 
     Raises:
         CrossviewError: Ray is not installed, or the address cannot be reached.
     """
-    if not address and not os.environ.get("RAY_ADDRESS") and "ray" not in sys.modules:
-        # The local instance this starts keeps Ray's default, token authentication, said explicitly: Ray warns
-        # on every start where the mode is left unset (and only there). Ray reads the mode when it is first
-        # imported, so only before that. A mode the user set is kept; a cluster joined decides its own.
-        os.environ.setdefault(RAY_AUTH_MODE_ENV, RAY_LOCAL_AUTH_MODE)
+    if "ray" not in sys.modules:  # (Ray reads both settings below when it is first imported, so only before that)
+        if not address and not os.environ.get("RAY_ADDRESS"):
+            # The local instance this starts keeps Ray's default, token authentication, said explicitly: Ray warns
+            # on every start where the mode is left unset (and only there). A mode the user set is kept; a cluster
+            # joined decides its own.
+            os.environ.setdefault(RAY_AUTH_MODE_ENV, RAY_LOCAL_AUTH_MODE)
+        # Ray's failure-signal handler (a stack dump of its core) takes SIGTERM in this process from ray.init on,
+        # and ray.shutdown sets SIGTERM back to the default before it stops the local instance: a SIGTERM in that
+        # second then killed the sweep silently (exit -15) instead of ending it as the command's handler does.
+        # Without it, SIGTERM stays the command's, or held, throughout (`_signals_held_in_ray`).
+        os.environ.setdefault(*RAY_NO_FAILURE_HANDLER_ENV)
     try:
         import ray
     except ImportError:
@@ -658,15 +669,22 @@ def connect_ray(address: str | None, reaper: processes.Reaper | None = None) -> 
         _check_reachable(address)
     if ray.is_initialized():  # (a program that calls `run_sweep` connected already)
         return False
+    if not address and reaper is not None and not os.environ.get("RAY_ADDRESS"):
+        reaper.start()
     try:
-        with _command_signals_kept():
-            if address:
-                ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
-                         logging_level=logging.WARNING)
-            else:
-                if reaper is not None and not os.environ.get("RAY_ADDRESS"):
-                    reaper.start()
-                ray.init(log_to_driver=False, logging_level=logging.WARNING)
+        try:
+            with _signals_held_in_ray():
+                if address:
+                    ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
+                             logging_level=logging.WARNING)
+                else:
+                    ray.init(log_to_driver=False, logging_level=logging.WARNING)
+        except BaseException:
+            # A connection half made (a SIGTERM inside ray.init), or made just before a held signal, is undone:
+            # left to the interpreter's exit, it crashed it.
+            with _signals_held_in_ray():
+                ray.shutdown()
+            raise
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
         raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({_one_line(e)})".replace("  ", " ")
                              ) from None
@@ -674,19 +692,50 @@ def connect_ray(address: str | None, reaper: processes.Reaper | None = None) -> 
 
 
 @contextlib.contextmanager
-def _command_signals_kept():
-    """Runs a Ray call that sets its own handlers of the ending signals (ray.init: SIGTERM by sys.exit, exit 1 and a
-    dump of the task loop; ray.shutdown) and puts the command's back after it (one line, 128 + the signal, the cells
-    stopped)."""
-    ending = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
-    handlers = {s: signal.getsignal(s) for s in ending} if threading.current_thread() is threading.main_thread() \
-        else {}
+def _signals_held_in_ray():
+    """Runs a call into Ray (ray.init, ray.shutdown) with the ending signals held: one that comes meanwhile is raised
+    once the call has returned and the command's handlers are back, as the command's handler raises it (one line,
+    128 + the signal). A signal raised inside the call would leave Ray half connected or half stopped (the
+    interpreter's exit then crashed). ray.init puts its own SIGTERM handler over the holding one, which ends the
+    process by sys.exit (exit 15 before the driver connects; 1 once a local head stopped its processes): a
+    SystemExit out of the call is that SIGTERM. Outside the main thread (where handlers cannot be set) the call
+    just runs."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    held: list[int] = []
+
+    def hold(signum, frame):
+        held.append(signum)
+
+    handlers = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
     try:
         yield
+    except SystemExit:
+        if not callable(handlers[signal.SIGTERM]):  # (a program's own handling: Ray's exit stands)
+            raise
+        held.append(signal.SIGTERM)
+        # What Ray's handler leaves half made when it exits while ray.init connects (a core worker whose threads run
+        # on, out of reach of ray.shutdown) crashes the interpreter's exit (SIGSEGV). The command unwinds and cleans
+        # up as on any signal; the process then ends at the first step of that exit, with the signal's status.
+        atexit.register(_exit_at_once, 128 + signal.SIGTERM)
     finally:
         for signum, handler in handlers.items():
-            if handler is not None:
-                signal.signal(signum, handler)
+            signal.signal(signum, signal.SIG_DFL if handler is None else handler)  # (None: one set outside Python)
+        if held:
+            handler = handlers[held[0]]
+            if callable(handler):
+                handler(held[0], None)
+            elif handler in (signal.SIG_DFL, None):
+                signal.raise_signal(held[0])
+
+
+def _exit_at_once(status: int) -> None:
+    """Ends the process at once (no finalization: Ray's exit handlers, C++ destructors) once its output is out."""
+    for stream in (sys.stdout, sys.stderr, sys.__stdout__, sys.__stderr__):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(status)
 
 
 RAY_CONNECT_TIMEOUT_S = 5.0
@@ -962,12 +1011,14 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
                     bar.set_postfix_str(cell.label)
                     bar.update()
     finally:
-        if disconnect:
-            import ray
+        try:
+            if disconnect:
+                import ray
 
-            with _command_signals_kept():
-                ray.shutdown()
-        reaper.stop()
+                with _signals_held_in_ray():
+                    ray.shutdown()
+        finally:
+            reaper.stop()
     rows = [stored[c.key] for c in cells]
     write_results(out, wanted, rows)
     sweep_report.write_report(out, wanted, rows)
