@@ -7,8 +7,6 @@ the signal, and let go (SIGCONT), so that the signal always lands while it write
 import multiprocessing
 import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -16,9 +14,7 @@ import pytest
 
 from crossview import cli, pipeline
 from crossview.cli import main
-
-# (-X faulthandler: should the process crash instead, its stderr, in the failure's message, says where)
-CROSSVIEW = [sys.executable, "-X", "faulthandler", "-c", "from crossview.cli import run; run()", "--no-progress"]
+from tests.crossview.signalling import signal_when
 
 
 @pytest.fixture(scope="module")
@@ -32,35 +28,9 @@ def _temporaries(folder: Path, part: str = "") -> list[Path]:
     return [p for p in folder.rglob("*") if p.name.endswith(".tmp") and part in p.name]
 
 
-def _signal_when(argv, ready, what: str, signum: int, env=None, group: bool = False) -> tuple[str, int]:
-    """Runs `crossview ARGV`, signals it (its whole process group with `group`, as Ctrl-C in a terminal does)
-    once ready(process) holds; returns its stderr and process id (which is its group's)."""
-    # (SIGINT at its default, as in a terminal: a shell starts background jobs, and so a suite run in the
-    # background, with SIGINT ignored, which Python and its children keep)
-    process = subprocess.Popen([*CROSSVIEW, *argv], stderr=subprocess.PIPE, text=True, start_new_session=True,
-                               env=env, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-    try:
-        deadline = time.monotonic() + 300
-        while not ready(process) and process.poll() is None and time.monotonic() < deadline:
-            time.sleep(0.002)
-        process.send_signal(signal.SIGSTOP)
-        assert ready(process), f"{argv}: never {what} (exit {process.poll()})"
-        if group:
-            os.killpg(process.pid, signum)
-        else:
-            process.send_signal(signum)
-        process.send_signal(signal.SIGCONT)
-        _, err = process.communicate(timeout=120)
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-    assert process.returncode == 128 + signum, err
-    return err, process.pid
-
-
 def _signal_while_writing(argv, watched: Path, signum: int, env=None, part: str = "") -> tuple[str, int]:
-    """`_signal_when` a temporary output (with `part` in its name) exists under `watched`."""
-    return _signal_when(argv, lambda _: bool(_temporaries(watched, part)), "wrote", signum, env)
+    """`signal_when` a temporary output (with `part` in its name) exists under `watched`."""
+    return signal_when(argv, lambda _: bool(_temporaries(watched, part)), "wrote", signum, env)
 
 
 # Every command that writes, each under one of the three signals (generate under all three).
@@ -114,7 +84,7 @@ def test_a_signal_while_score_has_its_2d_worker_ends_both(signum, tmp_path, reco
     def has_worker(process):
         return bool(Path(f"/proc/{process.pid}/task/{process.pid}/children").read_text().split())
 
-    err, group = _signal_when(argv, has_worker, "started its worker", signum, group=signum == signal.SIGINT)
+    err, group = signal_when(argv, has_worker, "started its worker", signum, group=signum == signal.SIGINT)
     assert err.strip().splitlines()[-1].startswith("crossview: "), err
     assert not (tmp_path / "s.json").exists()
     # The worker is gone too: it ends on its own once its parent has (reaped by init, which may take a moment on

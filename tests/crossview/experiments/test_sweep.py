@@ -21,6 +21,7 @@ from core import processes
 from crossview.cli import EXIT_BAD_INPUT, main
 from crossview.experiments import sweep, sweep_report
 from sim import scenario as scenario_mod
+from tests.crossview.signalling import signal_when
 
 SCENARIOS = Path(scenarios.__file__).parent
 
@@ -561,9 +562,14 @@ def test_sigterm_during_a_ray_sweep_ends_it_like_everywhere_else(tmp_path):
     Ray returns: one line, exit 143. (2 s after sweep.json, the cells are running or, on a fast machine, have just
     ended and Ray is stopping: the test below sends its signal there on purpose.)"""
     out = tmp_path / "ray"
-    status, err, session = _ray_sweep_sent_sigterm(out, "2,3", 10, lambda pid: (out / "sweep.json").exists(),
-                                                   then_s=2.0)  # (sweep.json: written once Ray is up)
-    _ended_by_sigterm(status, err, session)
+    seen_s = []
+
+    def running(process) -> bool:  # (sweep.json: written once Ray is up)
+        if not seen_s and (out / "sweep.json").exists():
+            seen_s.append(time.monotonic())
+        return bool(seen_s) and time.monotonic() - seen_s[0] >= 2.0
+
+    _ended_by_sigterm(*_ray_sweep_signalled(out, "2,3", 10, running, "ran its cells"))
     assert not (out / "results.json").exists()
     # The running cells end with the sweep's Ray job (its ray.shutdown), not left to run on.
     assert _running_ray_cells() == []
@@ -576,8 +582,8 @@ def test_sigterm_while_ray_starts_ends_the_sweep_like_everywhere_else(tmp_path, 
     in about one run of two. A SIGTERM while the local instance starts ends the sweep as anywhere else, one line and
     exit 143, and none of Ray's processes is left."""
     out = tmp_path / "ray"
-    status, err, session = _ray_sweep_sent_sigterm(out, "2", 10, lambda pid: _child_running(pid, started) is not None)
-    _ended_by_sigterm(status, err, session)
+    _ended_by_sigterm(*_ray_sweep_signalled(out, "2", 10, lambda process: _child_running(process.pid, started),
+                                            f"started {started.decode()}"))
     assert not (out / "results.json").exists()
 
 
@@ -588,46 +594,30 @@ def test_sigterm_while_the_sweeps_ray_instance_stops_ends_it_like_everywhere_els
     stops it first), it now ends the sweep as anywhere else, once the instance has stopped."""
     raylets = []
 
-    def raylet_ended(pid: int) -> bool:
-        raylets[:] = raylets or [p for p in [_child_running(pid, b"raylet")] if p is not None]
+    def raylet_ended(process) -> bool:
+        if not raylets and (raylet := _child_running(process.pid, b"raylet")) is not None:
+            raylets.append(raylet)
         return bool(raylets) and not _alive(raylets[0])
 
-    status, err, session = _ray_sweep_sent_sigterm(tmp_path / "ray", "2", 2, raylet_ended)
-    _ended_by_sigterm(status, err, session)
+    _ended_by_sigterm(*_ray_sweep_signalled(tmp_path / "ray", "2", 2, raylet_ended, "stopped its raylet"))
 
 
-def _ray_sweep_sent_sigterm(out: Path, people: str, duration_s: float, when, then_s: float = 0.0
-                            ) -> tuple[int, str, int]:
-    """Runs `crossview sweep store_layout1 --ray` (a local instance) in a session of its own and sends it SIGTERM
-    `then_s` after `when(its pid)` first holds. Returns its exit status, its stderr and its session."""
+def _ray_sweep_signalled(out: Path, people: str, duration_s: float, ready, what: str) -> tuple[str, int]:
+    """`signal_when` SIGTERM to `crossview sweep store_layout1 --ray` (a local instance): its stderr and session."""
     pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
-    command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", people,
-               "--duration", str(duration_s), "--ray", "--out", str(out)]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
-    try:
-        while not when(process.pid) and process.poll() is None:
-            time.sleep(0.01)
-        time.sleep(then_s)
-        assert process.poll() is None, process.communicate()
-        process.send_signal(signal.SIGTERM)
-        _, err = process.communicate(timeout=120)
-    finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-    return process.returncode, err, process.pid
+    return signal_when(["sweep", "store_layout1", "--people", people, "--duration", str(duration_s), "--ray",
+                        "--out", str(out)], ready, what, signal.SIGTERM)
 
 
-def _ended_by_sigterm(status: int, err: str, session: int) -> None:
-    """A command ended by SIGTERM as everywhere: exit 143, one line, no traceback, and (within 30 s: Ray's processes
-    end with its job, or by the sweep's reaper) no process of its session left."""
-    assert status == 143, err
+def _ended_by_sigterm(err: str, session: int) -> None:
+    """A command ended by SIGTERM as everywhere (exit 143, checked by `signal_when`): one line, no traceback, and
+    (within 30 s: Ray's processes end with its job, or by the sweep's reaper) no process of its session left."""
     assert err.strip().splitlines()[-1] == "crossview: ended by SIGTERM; no partial output was kept", err
     assert "Traceback" not in err
     deadline = time.monotonic() + 30
-    while _in_session(session) and time.monotonic() < deadline:
+    while _session_processes(session) and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert _in_session(session) == []
+    assert _session_processes(session) == []
 
 
 def _alive(pid: int | None) -> bool:
@@ -646,17 +636,6 @@ def _child_running(pid: int, program: bytes) -> int | None:
                     program in (entry / "cmdline").read_bytes().split(b"\0")[0]:
                 return int(entry.name)
     return None
-
-
-def _in_session(session: int) -> list[int]:
-    """The live processes of a session (what a command started with start_new_session left), by /proc."""
-    found = []
-    for entry in Path("/proc").glob("[0-9]*"):
-        with contextlib.suppress(OSError, IndexError, ValueError):
-            fields = (entry / "stat").read_text().rsplit(") ", 1)[1].split()
-            if int(fields[3]) == session and fields[0] != "Z":
-                found.append(int(entry.name))
-    return found
 
 
 def _running_ray_cells() -> list[int]:
