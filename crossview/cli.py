@@ -229,6 +229,28 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
     p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
                    "scenario's)")
+    p.add_argument("--people", type=_non_negative_int, help="the crowd whose occlusion to predict (default: the "
+                   "scenario's [crowd] people)")
+    p.add_argument("--json", type=Path, metavar="FILE", help="write the figures as JSON here")
+
+    p = sub.add_parser("plan", help="how many cameras a store needs: the fewest ceiling cameras whose predicted "
+                       "tracking meets a PCP target, with --confirm measured by a short sweep")
+    p.add_argument("scenario", help="scenario file or shipped name (its rig a ceiling grid)")
+    p.add_argument("--target-pcp", type=float, required=True, metavar="P", help="the PCP to reach, in (0, 1]")
+    p.add_argument("--people", type=_non_negative_int, help="the crowd to plan for (default: the scenario's)")
+    p.add_argument("--heights", metavar="H1,H2", help="mounting heights to try, metres above the floor (default: "
+                   "the scenario's)")
+    p.add_argument("--lenses", metavar="DEG1,DEG2", help="lenses to try, horizontal field of view in degrees "
+                   "(default: the scenario's)")
+    p.add_argument("--max-cameras", type=_positive_int, help="the most cameras to try (default: one per m² of "
+                   "floor, at least 16)")
+    add_output(p, "the plan to write (JSON)", metavar="PLAN.json")
+    p.add_argument("--map", type=Path, metavar="MAP.png", help="the recommended rig's coverage map (default: "
+                   "PLAN.png beside the plan)")
+    p.add_argument("--confirm", action="store_true", help="measure the recommended rig: a sweep of 3 seeds x 30 s "
+                   "into PLAN.confirm/ beside the plan, and say whether the tracker agrees")
+    p.add_argument("--workers", type=_positive_int, help="with --confirm: local worker processes (default: the "
+                   "cores)")
 
     p = sub.add_parser("track", help="run a tracker over a recording")
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate or convert")
@@ -503,15 +525,57 @@ def _cmd_coverage(args) -> None:
     from crossview.measure import coverage
 
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
-    if args.output:
-        pipeline.check_writable(args.output)
-    cov = coverage.coverage(scenario)
+    for path in (args.output, args.json):
+        if path:
+            pipeline.check_writable(path)
+    cov = coverage.coverage(scenario, people=args.people)
     print("\n".join(cov.lines()))
     if args.output:
         print(f"map: {coverage.write_map(cov, args.output)}")
+    if args.json:
+        pipeline.write_json(cov.as_dict(), args.json)
+        print(f"figures: {args.json}")
     warning = cov.warning()
     if warning:
         print(warning, file=sys.stderr)
+
+
+def _cmd_plan(args) -> None:
+    from crossview import pipeline
+    from crossview.experiments import plan
+    from crossview.measure import coverage
+
+    if not 0.0 < args.target_pcp <= 1.0:  # (before any work; NaN fails too)
+        raise CrossviewError(f"--target-pcp: {args.target_pcp:g} is outside (0, 1]")
+    heights = plan.parse_floats("--heights", args.heights, 0.0, 20.0, "metres") if args.heights else None
+    lenses = plan.parse_floats("--lenses", args.lenses, 0.0, 179.0, "degrees") if args.lenses else None
+    map_path = args.map or args.output.with_suffix(".png")
+    confirm_dir = args.output.with_suffix(".confirm")
+    pipeline.check_writable(args.output)
+    pipeline.check_writable(map_path, inputs=(args.output,))
+    progress = None if args.no_progress else (lambda line: print(f"  {line}", file=sys.stderr))
+    result = plan.plan(args.scenario, args.target_pcp, people=args.people, heights_m=heights, lenses_deg=lenses,
+                       max_cameras=args.max_cameras, progress=progress)
+    rec = result.recommended
+    print(f"{result.scenario}, {result.people} people, target PCP {result.target_pcp:g}:")
+    print(result.table())
+    print(f"recommended: {rec.cameras} cameras ({rec.grid[0]} x {rec.grid[1]}) at {rec.height_m:g} m with "
+          f"{rec.hfov_deg:g} deg lenses, predicted PCP {rec.predicted_pcp:.3f}")
+    scenario = pipeline.load_scenario(args.scenario, people=args.people,
+                                      overrides=plan.rig_overrides(pipeline.load_scenario(args.scenario), rec.grid,
+                                                                    rec.height_m, rec.hfov_deg))
+    print(f"map: {coverage.write_map(coverage.coverage(scenario), map_path)}")
+    if args.confirm:
+        result = plan.Plan(**{**vars(result), "confirmed": plan.confirm(
+            args.scenario, result, confirm_dir, people=args.people, workers=args.workers,
+            progress=not args.no_progress)})
+        c = result.confirmed
+        verdict = "meets the target" if c["meets_target"] else "does NOT meet the target"
+        print(f"confirmed: measured PCP {c['pcp_mean']:.3f} (95 % interval {c['pcp_ci95'][0]:.3f} to "
+              f"{c['pcp_ci95'][1]:.3f}, seeds {', '.join(map(str, c['seeds']))}, {c['duration_s']:g} s each): "
+              f"{verdict} {result.target_pcp:g}")
+    pipeline.write_json(result.as_dict(), args.output)
+    print(f"plan: {args.output}")
 
 
 def _cmd_generate(args) -> None:
@@ -722,7 +786,7 @@ def _cmd_render(args) -> None:
     print(f"{done.path}: {done.images} image{'s' if done.images != 1 else ''}{rendered}")
 
 
-_OUTPUT_DESTS = frozenset({"output", "out", "json", "markdown"})
+_OUTPUT_DESTS = frozenset({"output", "out", "json", "markdown", "map"})
 """The options that name what a command writes; every other path it is given is something it reads."""
 
 
@@ -775,6 +839,7 @@ COMMANDS = {
     "run": _cmd_run,
     "generate": _cmd_generate,
     "coverage": _cmd_coverage,
+    "plan": _cmd_plan,
     "track": _cmd_track,
     "score": _cmd_score,
     "info": _cmd_info,

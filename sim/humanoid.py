@@ -229,6 +229,23 @@ def standalone_xml(height_m: float = REFERENCE_HEIGHT_M, prefix: str = "p_") -> 
             f"<worldbody>{humanoid_xml(prefix, height_m)}</worldbody></mujoco>")
 
 
+def standing_keypoints(height_m: float = REFERENCE_HEIGHT_M) -> np.ndarray:
+    """(17, 3) COCO-17 keypoints (`KEYPOINT_NAMES` order) of a person of `height_m` standing upright with the
+    arms hanging (every hinge at zero), the pelvis above the origin, facing +x, feet on the floor: the body
+    itself, placed by MuJoCo's forward kinematics, for what asks where a person's joints are without a crowd
+    (`crossview.measure.coverage`)."""
+    import mujoco
+
+    prefix = "p_"
+    model = mujoco.MjModel.from_xml_string(standalone_xml(height_m, prefix))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    points = np.array([data.site(prefix + name).xpos for name in KEYPOINT_NAMES])
+    points[:, :2] -= data.body(prefix + "pelvis").xpos[:2]
+    points[:, 2] -= points[:, 2].min() - ANKLE_HEIGHT * height_m
+    return points
+
+
 def sample_heights(rng: np.random.Generator, n: int, low_m: float, high_m: float) -> np.ndarray:
     """(n,) adult heights: an even mix of women N(1.63, 0.065) and men N(1.76, 0.07) m, redrawn outside [low, high]."""
     out = np.empty(n)

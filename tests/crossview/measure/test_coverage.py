@@ -62,7 +62,7 @@ def test_no_cameras_is_no_coverage_with_the_warning(tmp_path):
     cov = coverage(_room(tmp_path), [])
     assert all(h.share(1) == 0.0 for h in cov.heights)
     assert "only 0 % of the walkable floor is seen by two cameras or more" in cov.warning()
-    assert len(cov.lines()) == 3
+    assert len(cov.lines()) == 7 and "predicted PCP 0.000" in cov.lines()[1]
 
 
 def test_the_scenario_rig_is_the_one_generate_builds_and_store_layout1_needs_no_warning():
@@ -104,3 +104,145 @@ def test_an_invalid_scenario_is_named_in_one_line_exit_2(tmp_path, capsys):
     assert "bad.toml" in err and "width_m" in err
     assert not (tmp_path / "map.png").exists()
     assert main(["coverage", str(tmp_path / "missing.toml")]) == EXIT_BAD_INPUT
+
+
+# ---------------------------------------------------------------- the prediction (what the detector will detect)
+
+
+def test_the_shelf_test_agrees_with_mujocos_ray_caster():
+    """`_blocked_by_boxes` against `mujoco.mj_ray` on the same yawed boxes: segments from ceiling points to
+    points on the floor, blocked when the first hit comes before the segment's end."""
+    import mujoco
+
+    from crossview.measure.coverage import _blocked_by_boxes
+    from sim.store import Obstacle
+
+    rng = np.random.default_rng(3)
+    obstacles = [Obstacle(f"s{i}", rng.uniform(1.0, 7.0, 2), rng.uniform(0.2, 1.5, 2), rng.uniform(-np.pi, np.pi),
+                          rng.uniform(0.5, 2.2)) for i in range(5)]
+    geoms = "".join(
+        f'<geom type="box" pos="{o.center[0]} {o.center[1]} {o.height / 2}" size="{o.half[0]} {o.half[1]} '
+        f'{o.height / 2}" euler="0 0 {o.yaw}"/>' for o in obstacles)
+    model = mujoco.MjModel.from_xml_string(f'<mujoco><compiler angle="radian"/><worldbody>{geoms}</worldbody>'
+                                           "</mujoco>")
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    geomid = np.zeros(1, np.int32)
+    origins = np.column_stack([rng.uniform(0.0, 8.0, (40, 2)), rng.uniform(2.5, 4.0, 40)])
+    checked = hits = 0
+    for origin in origins:
+        points = np.column_stack([rng.uniform(0.0, 8.0, (50, 2)), rng.uniform(0.05, 1.9, 50)])
+        ours = _blocked_by_boxes(origin, points, obstacles)
+        for point, blocked in zip(points, ours):
+            x = mujoco.mj_ray(model, data, origin, point - origin, None, 1, -1, geomid)
+            if 0.0 <= x < 1.0 and x > 1.0 - 1e-6:  # (a surface at the point itself: either answer is right)
+                continue
+            assert blocked == (0.0 <= x < 1.0), (origin, point, x)
+            checked += 1
+            hits += blocked
+    assert checked > 1900 and 200 < hits < checked - 200  # both answers well represented
+
+
+def test_two_or_more_is_the_poisson_binomial_tail():
+    import itertools
+
+    from crossview.measure.coverage import _two_or_more
+
+    rng = np.random.default_rng(0)
+    p = rng.uniform(0.0, 1.0, (4, 6))
+    p[0, :3] = 0.0
+    p[1, 0] = 1.0
+    for row, got in zip(p, _two_or_more(p, axis=1)):
+        exact = sum(np.prod([q if bit else 1 - q for q, bit in zip(row, bits)])
+                    for bits in itertools.product((0, 1), repeat=len(row)) if sum(bits) >= 2)
+        assert got == pytest.approx(exact, abs=1e-9)
+
+
+def test_people_hide_a_ray_as_often_as_a_scattered_crowd_does():
+    """The closed form of `_people_hiding` against people scattered at random (Poisson, none within the personal
+    space of the point), each an upright cylinder: the share of scatterings in which one stands in the ray."""
+    from crossview.measure.coverage import OCCLUDER_HEIGHT_M, OCCLUDER_WIDTH_M, PERSONAL_SPACE_M, _people_hiding
+
+    origin = np.array([0.0, 0.0, 3.0])
+    points = np.array([[4.0, 0.0, 0.5], [4.0, 0.0, 1.2], [6.0, 0.0, 0.1], [1.0, 0.0, 1.0], [3.0, 0.0, 1.8]])
+    density = 0.4
+    predicted = _people_hiding(origin, points, density)
+    rng = np.random.default_rng(1)
+    trials = 4000
+    hidden = np.zeros(len(points))
+    for _ in range(trials):
+        n = rng.poisson(density * 100.0)
+        people = np.column_stack([rng.uniform(-1.0, 9.0, n), rng.uniform(-5.0, 5.0, n)])
+        for k, point in enumerate(points):
+            # The ray's height at each person's distance along it, and their distance across it.
+            d = point[:2] - origin[:2]
+            length = np.linalg.norm(d)
+            along = (people - origin[:2]) @ d / length
+            across = np.abs((people - origin[:2]) @ np.array([-d[1], d[0]]) / length)
+            height = origin[2] + (point[2] - origin[2]) * along / length
+            away = np.linalg.norm(people - point[:2], axis=1) >= PERSONAL_SPACE_M
+            blocks = (along > 0) & (along < length) & (across <= OCCLUDER_WIDTH_M / 2) & (height < OCCLUDER_HEIGHT_M)
+            hidden[k] += np.any(blocks & away & (length - along >= PERSONAL_SPACE_M))
+    np.testing.assert_allclose(hidden / trials, predicted, atol=0.03)
+    assert predicted[4] == 0.0 and predicted[0] > predicted[1]  # above the crowd's heads: never hidden
+
+
+def _one_person_room(tmp_path, text: str = "") -> scenario_mod.Scenario:
+    path = tmp_path / "room1.toml"
+    path.write_text("[store]\nwidth_m = 6.0\ndepth_m = 4.0\n[crowd]\npeople = 1\n" + text)
+    return scenario_mod.load(path)
+
+
+def test_a_person_in_plain_view_is_detected_at_the_profiles_rate(tmp_path):
+    from crossview.measure.coverage import PCP_BONE_JOINTS
+
+    scenario = _one_person_room(tmp_path)
+    params = scenario.detector.params()
+    cameras = [_looking_down("a", 3.0, 2.0), _looking_down("b", 3.0, 2.0)]
+    pred = coverage(scenario, cameras).prediction
+    whole = np.all(np.abs(pred.cells_xy - [3.0, 2.0]) < [0.5, 0.4], axis=1)  # well inside both images
+    assert whole.any()
+    # Alone (no crowd), under no shelf: each camera detects the person unless the detector misses them.
+    np.testing.assert_allclose(pred.detecting[whole], 2 * (1 - params.miss_prob), rtol=1e-9)
+    np.testing.assert_allclose(pred.two_view[whole], (1 - params.miss_prob) ** 2, rtol=1e-9)
+    # A bone is usable when both cameras report both of its ends: each camera's joint rates, per group.
+    wrist, elbow = params.joint_miss_prob[3], params.joint_miss_prob[2]
+    lower_arm = [k for k, (g, _) in enumerate(PCP_BONE_JOINTS) if g == "lower_arms"][0]
+    one = (1 - params.miss_prob)
+    expected = (one * (1 - wrist)) ** 2 * (one * (1 - elbow)) ** 2
+    np.testing.assert_allclose(pred.bones[whole, lower_arm], expected, rtol=1e-9)
+    assert pred.people == 1 and pred.density_per_m2 > 0  # (one person: nobody else to hide them)
+
+
+def test_a_shelf_between_hides_and_a_small_person_is_never_detected(tmp_path):
+    scenario = _one_person_room(tmp_path, "[[store.shelves]]\ncenter_m = [3.0, 2.0]\nsize_m = [0.4, 3.0, 2.5]\n")
+    # A camera low on the left wall looking right, across the shelf: it sees the right half only over the shelf.
+    cam = Camera("side", np.array([[400.0, 0.0, 319.5], [0.0, 400.0, 239.5], [0.0, 0.0, 1.0]]), np.zeros(5),
+                 *_look(np.array([0.1, 2.0, 1.2]), np.array([6.0, 2.0, 1.0])), 640, 480)
+    pred = coverage(scenario, [cam]).prediction
+    left, right = pred.cells_xy[:, 0] < 3.0, pred.cells_xy[:, 0] > 3.0
+    assert pred.detecting[right].max() == 0.0 and pred.detecting[left].max() > 0.9
+    assert pred.losses.hidden > 0.2
+    # The same rig with a detector that needs people half the image tall: those far away are too small.
+    small = _one_person_room(tmp_path, "[detector]\nmin_person_frac = 0.5\n")
+    pred = coverage(small, [cam]).prediction
+    assert pred.losses.too_small > 0.3 and pred.detecting[pred.cells_xy[:, 0] > 4.0].max() == 0.0
+
+
+def _look(position, target):
+    from sim.cameras import look_at
+
+    R = look_at(position, target)
+    return R, -R @ position
+
+
+def test_more_cameras_predict_better_on_the_convenience_store_sizes():
+    """The prediction on store_layout2's floor rises with the grid, where the geometric upper bound is already
+    saturated (the Why of the planner: 4 and 12 cameras looked the same)."""
+    from crossview import pipeline
+
+    low = coverage(pipeline.load_scenario("store_layout2", cameras=4))
+    high = coverage(pipeline.load_scenario("store_layout2", cameras=28))
+    assert high.prediction.predicted_pcp > low.prediction.predicted_pcp + 0.05
+    assert high.prediction.usable_two_view_share >= low.prediction.usable_two_view_share
+    assert set(high.as_dict()) >= {"predicted_pcp", "usable_two_view_share", "risk_share", "upper_bound"}
