@@ -1,0 +1,95 @@
+"""The coverage model's calibration: the tracker's PCP beside the model's floor quality, and the line between them.
+
+    python tools/calibrate_coverage.py --fit store_layout1:2,3,4,6,8,12 supermarket:6,9,12,20,30,60 \
+        --check scenarios/convenience.toml:4,8,12,20,30 store_layout2:6,9,12,20,28 [--seeds 0,1,2] \
+        [--duration 30] [--out calibration/]
+
+Each SCENARIO:COUNTS runs `crossview generate` (the scenario with `--cameras N`, `--seed S`, `--duration`),
+`crossview track` (store preset) and `crossview score` per camera count and seed, into OUT as
+NAME-cN-sS.mcap, .tracks.mcap and .score.json (a rerun skips what is there: the runs take minutes each). Then it
+predicts each rig (`crossview.measure.coverage`), fits PCP = low + (high - low) x quality by least squares on the
+`--fit` scenarios' runs alone, and prints a Markdown table of every scenario's counts: the floor quality, the
+prediction through the fitted line, the measured PCP (mean and spread over the seeds), and per scenario the rank
+correlation (Spearman) of predicted and measured PCP across the counts. docs/coverage.md holds the table and the
+line goes into `crossview.measure.coverage.PCP_CALIBRATION`. Not part of the test suite.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+from scipy import stats
+
+from crossview import pipeline
+from crossview.measure.coverage import coverage
+
+
+def parse_spec(text: str) -> tuple[str, tuple[int, ...]]:
+    name, _, counts = text.rpartition(":")
+    return name, tuple(int(c) for c in counts.split(","))
+
+
+def run(out: Path, path: str, count: int, seed: int, duration_s: float) -> dict:
+    scenario = pipeline.load_scenario(path, seed=seed, duration_s=duration_s, cameras=count)
+    stem = out / f"{scenario.name}-c{count}-s{seed}"
+    score_path = stem.with_suffix(".score.json")
+    if not score_path.exists():
+        rec, tracks = stem.with_suffix(".mcap"), stem.with_suffix(".tracks.mcap")
+        pipeline.generate(scenario, rec, progress=False)
+        pipeline.track(rec, tracks, progress=False)
+        _, result = pipeline.score(rec, tracks, progress=False)
+        pipeline.write_json(result, score_path)
+    return json.loads(score_path.read_text())
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--fit", nargs="+", required=True, metavar="SCENARIO:N1,N2")
+    parser.add_argument("--check", nargs="*", default=[], metavar="SCENARIO:N1,N2")
+    parser.add_argument("--seeds", default="0,1")
+    parser.add_argument("--duration", type=float, default=30.0)
+    parser.add_argument("--out", type=Path, default=Path("calibration"))
+    args = parser.parse_args()
+    seeds = tuple(int(s) for s in args.seeds.split(","))
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = []  # (role, scenario name, count, grid, prediction, measured pcps)
+    for role, specs in (("fit", args.fit), ("check", args.check)):
+        for spec in specs:
+            path, counts = parse_spec(spec)
+            for count in counts:
+                measured = [run(args.out, path, count, seed, args.duration)["pcp"] for seed in seeds]
+                rig = pipeline.load_scenario(path, cameras=count)
+                rows.append((role, rig.name, count, (rig.cameras.rows, rig.cameras.cols), coverage(rig).prediction,
+                             measured))
+    fit = [(r[4].floor_quality, p) for r in rows if r[0] == "fit" for p in r[5]]
+    quality, pcp = np.array(fit).T
+    slope, low = np.polyfit(quality, pcp, 1)
+    high = low + slope
+    print(f"PCP_CALIBRATION = ({low:.3f}, {high:.3f})  # fitted on {len(fit)} runs")
+    print()
+    print("| scenario | role | cameras | grid | floor quality | two detecting cameras | predicted PCP | measured PCP "
+          "(mean, min-max over seeds) |")
+    print("|---|---|---|---|---|---|---|---|")
+    for role, name, count, grid, pred, measured in rows:
+        predicted = float(np.clip(low + (high - low) * pred.floor_quality, 0, 1))
+        print(f"| {name} | {role} | {count} | {grid[0]} x {grid[1]} | {pred.floor_quality:.3f} | "
+              f"{100 * pred.usable_two_view_share:.1f} % | {predicted:.3f} | {np.mean(measured):.3f} "
+              f"({min(measured):.3f}-{max(measured):.3f}) |")
+    print()
+    errors = []
+    for name in dict.fromkeys(r[1] for r in rows):
+        mine = [r for r in rows if r[1] == name]
+        predicted = [low + (high - low) * r[4].floor_quality for r in mine]
+        measured = [float(np.mean(r[5])) for r in mine]
+        errors += [p - m for p, m in zip(predicted, measured)]
+        rho = stats.spearmanr(predicted, measured)[0] if len(mine) > 2 else float("nan")
+        print(f"{name}: rank correlation {rho:.2f} over {len(mine)} counts; mean |predicted - measured| "
+              f"{np.mean(np.abs(np.subtract(predicted, measured))):.3f}")
+    print(f"all: mean |predicted - measured| {np.mean(np.abs(errors)):.3f}")
+
+
+if __name__ == "__main__":
+    main()
