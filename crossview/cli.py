@@ -247,8 +247,11 @@ def build_parser() -> argparse.ArgumentParser:
     add_output(p, "the plan to write (JSON)", metavar="PLAN.json")
     p.add_argument("--map", type=Path, metavar="MAP.png", help="the recommended rig's coverage map (default: "
                    "PLAN.png beside the plan)")
-    p.add_argument("--confirm", action="store_true", help="measure the recommended rig: a sweep of 3 seeds x 30 s "
-                   "into PLAN.confirm/ beside the plan, and say whether the tracker agrees")
+    p.add_argument("--confirm", action="store_true", help="measure the recommended rig: a sweep (--seeds x "
+                   "--duration) into PLAN.confirm/ beside the plan, and say whether the tracker agrees")
+    p.add_argument("--seeds", default="0,1,2", help="with --confirm: comma-separated seeds (default 0,1,2)")
+    p.add_argument("--duration", type=_positive_float, default=30.0, help="with --confirm: simulated seconds per "
+                   "seed (default 30)")
     p.add_argument("--workers", type=_positive_int, help="with --confirm: local worker processes (default: the "
                    "cores)")
 
@@ -547,6 +550,9 @@ def _cmd_plan(args) -> None:
 
     if not 0.0 < args.target_pcp <= 1.0:  # (before any work; NaN fails too)
         raise CrossviewError(f"--target-pcp: {args.target_pcp:g} is outside (0, 1]")
+    from crossview.experiments import sweep
+
+    seeds = sweep.parse_seeds(args.seeds)
     heights = plan.parse_floats("--heights", args.heights, 0.0, 20.0, "metres") if args.heights else None
     lenses = plan.parse_floats("--lenses", args.lenses, 0.0, 179.0, "degrees") if args.lenses else None
     map_path = args.map or args.output.with_suffix(".png")
@@ -567,8 +573,8 @@ def _cmd_plan(args) -> None:
     print(f"map: {coverage.write_map(coverage.coverage(scenario), map_path)}")
     if args.confirm:
         result = plan.Plan(**{**vars(result), "confirmed": plan.confirm(
-            args.scenario, result, confirm_dir, people=args.people, workers=args.workers,
-            progress=not args.no_progress)})
+            args.scenario, result, confirm_dir, people=args.people, seeds=seeds, duration_s=args.duration,
+            workers=args.workers, progress=not args.no_progress)})
         c = result.confirmed
         verdict = "meets the target" if c["meets_target"] else "does NOT meet the target"
         print(f"confirmed: measured PCP {c['pcp_mean']:.3f} (95 % interval {c['pcp_ci95'][0]:.3f} to "

@@ -118,6 +118,7 @@ class Prediction:
         bones: (M, 10) chance that each bone of the score (`PCP_BONE_JOINTS`) has both ends reported by two
             cameras or more.
         losses: where the person-views go (`ViewLosses`).
+        camera_detect: (C, M) chance that each camera detects a person on each cell in a frame.
     """
 
     cells_xy: np.ndarray
@@ -128,6 +129,7 @@ class Prediction:
     two_view: np.ndarray
     bones: np.ndarray
     losses: ViewLosses
+    camera_detect: np.ndarray
 
     @property
     def usable_two_view_share(self) -> float:
@@ -279,7 +281,7 @@ def predict(store, cameras: list[Camera], params, people: int, occlusion: bool =
     bones = np.stack([np.prod(joint_two[:, :, list(ends)], axis=2) for _, ends in PCP_BONE_JOINTS],
                      axis=-1).mean(axis=1)  # (M, 10)
     return Prediction(cells_xy, step * GRID_CELL_M, int(people), density, detect.sum(axis=0).mean(axis=1),
-                      two_view, bones, losses)
+                      two_view, bones, losses, detect.mean(axis=2))
 
 
 @dataclass(frozen=True)

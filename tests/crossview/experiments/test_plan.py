@@ -86,3 +86,23 @@ def test_a_height_above_the_ceiling_or_a_placed_rig_is_refused(tmp_path, capsys)
     err = _run_bad(capsys, ["plan", str(placed), "--target-pcp", "0.9", "-o", str(out)])
     assert "cameras.placements" in err and "grids" in err
     assert not out.exists()
+
+
+def test_confirm_measures_the_recommended_rig_with_the_tracker(tmp_path, capsys):
+    out = tmp_path / "l1.json"
+    assert main(["--no-progress", "plan", "store_layout1", "--target-pcp", "0.5", "--confirm", "--seeds", "0,1",
+                 "--duration", "2", "--workers", "1", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    plan = json.loads(out.read_text())
+    confirmed = plan["confirmed"]
+    assert confirmed["cameras"] == plan["recommended_cameras"] and confirmed["grid"] == plan["grid"]
+    assert confirmed["seeds"] == [0, 1] and len(confirmed["pcp"]) == 2
+    low, high = confirmed["pcp_ci95"]
+    assert low <= confirmed["pcp_mean"] <= high and confirmed["pcp_mean"] == pytest.approx(np.mean(confirmed["pcp"]),
+                                                                                          abs=1e-4)
+    assert confirmed["meets_target"] == (confirmed["pcp_mean"] >= 0.5)
+    assert "confirmed: measured PCP" in printed
+    # The sweep's own results hold the cells: the recommended grid, the seeds.
+    results = json.loads((tmp_path / "l1.confirm" / "results.json").read_text())
+    cells = results["cells"] if isinstance(results, dict) else results
+    assert len(cells) == 2

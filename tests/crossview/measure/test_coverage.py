@@ -246,3 +246,31 @@ def test_more_cameras_predict_better_on_the_convenience_store_sizes():
     assert high.prediction.predicted_pcp > low.prediction.predicted_pcp + 0.05
     assert high.prediction.usable_two_view_share >= low.prediction.usable_two_view_share
     assert set(high.as_dict()) >= {"predicted_pcp", "usable_two_view_share", "risk_share", "upper_bound"}
+
+
+def test_the_predicted_detections_are_the_simulated_detectors(store_recording):
+    """The model against the simulator it stands for: over a recording of store_layout1 (12 cameras, 4 people
+    walking, browsing, gesturing), each camera's predicted chance of detecting each person where they stand,
+    summed over the frames, against the detections the simulated detector made of them."""
+    from crossview import pipeline
+    from crossview.recording.reader import open_recording
+
+    cov = coverage(pipeline.load_scenario("store_layout1"))
+    pred = cov.prediction
+    names = [c.name for c in cov.cameras]
+    expected = found = 0.0
+    rec = open_recording(store_recording)
+    hips = list(rec.skeleton.hips)
+    for cf in rec.frames(with_poses=True):
+        c = names.index(cf.frame.camera)
+        truth = cf.poses_at_capture
+        pelvis = truth.poses[:, hips, :2].mean(axis=1)
+        distance = np.linalg.norm(pelvis[:, None] - pred.cells_xy[None], axis=2)
+        cell, near = distance.argmin(axis=1), distance.min(axis=1) < pred.cell_m
+        detected = set(cf.truth.person_ids[(cf.truth.effects & 2) == 0].tolist())  # (duplicates aside)
+        for pid, k, on_floor in zip(truth.person_ids, cell, near):
+            if on_floor:
+                expected += pred.camera_detect[c, k]
+                found += int(pid) in detected
+    assert found > 500
+    assert expected == pytest.approx(found, rel=0.12)
