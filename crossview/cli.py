@@ -231,7 +231,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "scenario's)")
     p.add_argument("--people", type=_non_negative_int, help="the crowd whose occlusion to predict (default: the "
                    "scenario's [crowd] people)")
-    p.add_argument("--json", type=Path, metavar="FILE", help="write the figures as JSON here")
+    p.add_argument("--figures", type=Path, metavar="FILE.json", help="write the figures as JSON here")
 
     p = sub.add_parser("plan", help="how many cameras a store needs: the fewest ceiling cameras whose predicted "
                        "tracking meets a PCP target, with --confirm measured by a short sweep")
@@ -528,16 +528,16 @@ def _cmd_coverage(args) -> None:
     from crossview.measure import coverage
 
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
-    for path in (args.output, args.json):
+    for path in (args.output, args.figures):
         if path:
             pipeline.check_writable(path)
     cov = coverage.coverage(scenario, people=args.people)
     print("\n".join(cov.lines()))
     if args.output:
         print(f"map: {coverage.write_map(cov, args.output)}")
-    if args.json:
-        pipeline.write_json(cov.as_dict(), args.json)
-        print(f"figures: {args.json}")
+    if args.figures:
+        pipeline.write_json(cov.as_dict(), args.figures)
+        print(f"figures: {args.figures}")
     warning = cov.warning()
     if warning:
         print(warning, file=sys.stderr)
@@ -792,7 +792,7 @@ def _cmd_render(args) -> None:
     print(f"{done.path}: {done.images} image{'s' if done.images != 1 else ''}{rendered}")
 
 
-_OUTPUT_DESTS = frozenset({"output", "out", "json", "markdown", "map"})
+_OUTPUT_DESTS = frozenset({"output", "out", "json", "markdown", "map", "figures"})
 """The options that name what a command writes; every other path it is given is something it reads."""
 
 

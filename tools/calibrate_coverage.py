@@ -1,17 +1,18 @@
 """The coverage model's calibration: the tracker's PCP beside the model's floor quality, and the line between them.
 
     python tools/calibrate_coverage.py --fit store_layout1:2,3,4,6,8,12 supermarket:6,9,12,20,30,60 \
-        --check scenarios/convenience.toml:4,8,12,20,30 store_layout2:6,9,12,20,28 [--seeds 0,1,2] \
-        [--duration 30] [--out calibration/]
+        --check convenience:4,8,12,20,30@0,1,2 store_layout2:6,12,28 [--seeds 0,1] [--duration 30] \
+        [--out calibration/]
 
-Each SCENARIO:COUNTS runs `crossview generate` (the scenario with `--cameras N`, `--seed S`, `--duration`),
+Each SCENARIO:COUNTS[@SEEDS] runs `crossview generate` (the scenario with `--cameras N`, `--seed S`, `--duration`),
 `crossview track` (store preset) and `crossview score` per camera count and seed, into OUT as
-NAME-cN-sS.mcap, .tracks.mcap and .score.json (a rerun skips what is there: the runs take minutes each). Then it
-predicts each rig (`crossview.measure.coverage`), fits PCP = low + (high - low) x quality by least squares on the
-`--fit` scenarios' runs alone, and prints a Markdown table of every scenario's counts: the floor quality, the
-prediction through the fitted line, the measured PCP (mean and spread over the seeds), and per scenario the rank
-correlation (Spearman) of predicted and measured PCP across the counts. docs/coverage.md holds the table and the
-line goes into `crossview.measure.coverage.PCP_CALIBRATION`. Not part of the test suite.
+NAME-cN-sS.mcap, .tracks.mcap and .score.json (a rerun skips what is there: the runs take minutes each). Then
+it predicts each rig (`crossview.measure.coverage`), fits the calibration curve
+PCP = 1 / (1 + exp(-(a + b ln(q / (1 - q))))) of the floor quality q by least squares on the `--fit` scenarios'
+runs alone, and prints a Markdown table of every scenario's counts: the floor quality, the prediction through the
+fitted curve, the measured PCP (mean and spread over the seeds), and per scenario the rank correlation (Spearman)
+of predicted and measured PCP across the counts. docs/coverage.md holds the table, and (a, b) go into
+`crossview.measure.coverage.PCP_CALIBRATION`. Not part of the test suite.
 """
 
 from __future__ import annotations
@@ -21,15 +22,17 @@ import json
 from pathlib import Path
 
 import numpy as np
-from scipy import stats
+from scipy import optimize, stats
 
 from crossview import pipeline
-from crossview.measure.coverage import coverage
+from crossview.measure.coverage import calibrated_pcp, coverage
 
 
-def parse_spec(text: str) -> tuple[str, tuple[int, ...]]:
+def parse_spec(text: str, seeds: tuple[int, ...]) -> tuple[str, tuple[int, ...], tuple[int, ...]]:
+    """SCENARIO:N1,N2[@S1,S2]: the scenario, its camera counts and its seeds (default `seeds`)."""
+    text, _, own = text.partition("@")
     name, _, counts = text.rpartition(":")
-    return name, tuple(int(c) for c in counts.split(","))
+    return name, tuple(int(c) for c in counts.split(",")), tuple(int(s) for s in own.split(",")) if own else seeds
 
 
 def run(out: Path, path: str, count: int, seed: int, duration_s: float) -> dict:
@@ -58,23 +61,22 @@ def main() -> None:
     rows = []  # (role, scenario name, count, grid, prediction, measured pcps)
     for role, specs in (("fit", args.fit), ("check", args.check)):
         for spec in specs:
-            path, counts = parse_spec(spec)
+            path, counts, own_seeds = parse_spec(spec, seeds)
             for count in counts:
-                measured = [run(args.out, path, count, seed, args.duration)["pcp"] for seed in seeds]
+                measured = [run(args.out, path, count, seed, args.duration)["pcp"] for seed in own_seeds]
                 rig = pipeline.load_scenario(path, cameras=count)
                 rows.append((role, rig.name, count, (rig.cameras.rows, rig.cameras.cols), coverage(rig).prediction,
                              measured))
     fit = [(r[4].floor_quality, p) for r in rows if r[0] == "fit" for p in r[5]]
     quality, pcp = np.array(fit).T
-    slope, low = np.polyfit(quality, pcp, 1)
-    high = low + slope
-    print(f"PCP_CALIBRATION = ({low:.3f}, {high:.3f})  # fitted on {len(fit)} runs")
+    (a, b), _ = optimize.curve_fit(lambda q, a, b: calibrated_pcp(q, (a, b)), quality, pcp, p0=(1.0, 1.0))
+    print(f"PCP_CALIBRATION = ({a:.3f}, {b:.3f})  # fitted on {len(fit)} runs")
     print()
     print("| scenario | role | cameras | grid | floor quality | two detecting cameras | predicted PCP | measured PCP "
           "(mean, min-max over seeds) |")
     print("|---|---|---|---|---|---|---|---|")
     for role, name, count, grid, pred, measured in rows:
-        predicted = float(np.clip(low + (high - low) * pred.floor_quality, 0, 1))
+        predicted = float(calibrated_pcp(pred.floor_quality, (a, b)))
         print(f"| {name} | {role} | {count} | {grid[0]} x {grid[1]} | {pred.floor_quality:.3f} | "
               f"{100 * pred.usable_two_view_share:.1f} % | {predicted:.3f} | {np.mean(measured):.3f} "
               f"({min(measured):.3f}-{max(measured):.3f}) |")
@@ -82,7 +84,7 @@ def main() -> None:
     errors = []
     for name in dict.fromkeys(r[1] for r in rows):
         mine = [r for r in rows if r[1] == name]
-        predicted = [low + (high - low) * r[4].floor_quality for r in mine]
+        predicted = [float(calibrated_pcp(r[4].floor_quality, (a, b))) for r in mine]
         measured = [float(np.mean(r[5])) for r in mine]
         errors += [p - m for p, m in zip(predicted, measured)]
         rho = stats.spearmanr(predicted, measured)[0] if len(mine) > 2 else float("nan")

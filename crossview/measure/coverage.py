@@ -24,7 +24,7 @@ scenario's `DetectorParams`) would do with that person-view:
 This gives each camera's chance of reporting each joint of a person at the cell in a frame. The chance that two
 cameras or more report a joint follows (cameras independent, a Poisson-binomial); a bone of the score's ten
 (`crossview.scoring.pose`) is usable when its end joints are, and the cell's *quality* is the mean over the ten
-bones. The predicted PCP is that quality through a line calibrated once against the tracker on the shipped
+bones. The predicted PCP is that quality through a curve calibrated once against the tracker on the shipped
 scenarios (`PCP_CALIBRATION`; docs/coverage.md gives the runs and the fit), the same for every scenario.
 
 The old figure, a point above the cell inside two frustums, is kept as an upper bound: the most a rig can see
@@ -79,10 +79,20 @@ PCP_BONE_JOINTS: tuple[tuple[str, tuple[int, ...]], ...] = (
     ("head", (0, 3, 4)), ("torso", (5, 6, 11, 12)),
 )
 
-PCP_CALIBRATION = (0.0, 1.0)
-"""(PCP where no bone is usable, PCP where every bone is): the predicted PCP is the first plus their difference
-times the floor's quality. Fitted once by least squares to the tracker's PCP on the shipped scenarios at several
-camera counts and seeds (docs/coverage.md, "Calibration"), the same for every scenario."""
+PCP_CALIBRATION = (1.318, 1.004)
+"""(a, b) of the calibration curve: the predicted PCP's log-odds are a + b x the quality's log-odds,
+PCP = 1 / (1 + exp(-(a + b ln(q / (1 - q))))): 0 where no bone is usable, 1 where every bone always is, and in
+between the tracker's odds of a correct bone are e^a times (b = 1: proportional to) the odds that the bone has two
+views (it recovers part of the rest from its memory of earlier views). Fitted once by least squares to the
+tracker's PCP on store_layout1 and supermarket at several camera counts (`tools/calibrate_coverage.py`;
+docs/coverage.md, "Calibration"), the same for every scenario."""
+
+
+def calibrated_pcp(quality, calibration: tuple[float, float] = PCP_CALIBRATION):
+    """A floor's (or a cell's) quality as a PCP, through the calibration curve (`PCP_CALIBRATION`)."""
+    a, b = calibration
+    q = np.clip(np.asarray(quality, dtype=float), 1e-9, 1.0 - 1e-9)
+    return 1.0 / (1.0 + np.exp(-(a + b * np.log(q / (1.0 - q)))))
 
 
 @dataclass(frozen=True)
@@ -147,9 +157,8 @@ class Prediction:
 
     @property
     def predicted_pcp(self) -> float:
-        """The floor's quality through the calibration line (`PCP_CALIBRATION`)."""
-        low, high = PCP_CALIBRATION
-        return float(np.clip(low + (high - low) * self.floor_quality, 0.0, 1.0))
+        """The floor's quality through the calibration curve (`calibrated_pcp`)."""
+        return float(calibrated_pcp(self.floor_quality))
 
     @property
     def risk_share(self) -> float:
@@ -372,7 +381,7 @@ class Coverage:
         return out
 
     def as_dict(self) -> dict:
-        """The figures as JSON-ready data (`crossview coverage --json`, `crossview plan`)."""
+        """The figures as JSON-ready data (`crossview coverage --figures`, `crossview plan`)."""
         pred = self.prediction
         return {
             "scenario": self.scenario, "cameras": len(self.cameras), "grid": list(self.grid) if self.grid else None,
