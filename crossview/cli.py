@@ -331,6 +331,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "optionally LABEL=METHOD to name it in the results (default crossview)")
     p.add_argument("--preset", default="store", help="comma-separated tracker presets (default store)")
     p.add_argument("--duration", type=_positive_float, help="simulated seconds per cell (default: the scenario's)")
+    p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="leave the first S seconds "
+                   "of each cell out of its score (default: the warm-up rule of docs/metrics.md, min(5 s, half a "
+                   "cell))")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=_positive_int, help="local worker processes (default: the cores; 1 runs "
                        "the cells one after another in this process)")
@@ -460,6 +463,7 @@ def _cmd_sweep(args) -> None:
         scenario=args.scenario, axes=axes, seeds=seeds,
         methods=methods,
         presets=sweep.parse_names("--preset", args.preset, PRESETS), duration_s=args.duration,
+        warm_up_s=args.from_s,
     )
     if args.ray is not None:
         executor = sweep.Executor.RAY

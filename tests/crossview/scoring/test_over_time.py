@@ -1,6 +1,8 @@
 """score's warm-up (`from_s`), its per-person time line and its floor grid, against references made by hand and
 against scoring the same inputs cut at the warm-up's end."""
 
+import json
+
 import numpy as np
 import pytest
 
@@ -103,3 +105,26 @@ def test_the_time_line_and_the_floor_grid_hold_the_counted_misses_switches_and_f
 def test_the_default_warm_up_is_at_most_half_a_run():
     assert default_from_s(60.0) == default_from_s(120.0) > 0
     assert default_from_s(2.0) == 1.0
+
+
+def test_score_from_and_map_on_the_command_line(store_recording, store_tracks, tmp_path, capsys):
+    """`score --from 2 -o --map`: the JSON records the warm-up and holds the time line and floor grid, the map is a
+    PNG; a warm-up past the end of the 6 s recording is one line, exit 2, nothing written."""
+    from matplotlib.image import imread
+
+    from crossview.cli import EXIT_BAD_INPUT, main
+
+    out, picture = tmp_path / "s.json", tmp_path / "map.png"
+    assert main(["--no-progress", "score", str(store_recording), str(store_tracks), "--from", "2", "-o", str(out),
+                 "--map", str(picture)]) == 0
+    assert "Scored from" in capsys.readouterr().out
+    result = json.loads(out.read_text())
+    assert result["from_s"] == 2.0 and result["timeline"]["start_s"] == pytest.approx(2.0, abs=0.01)
+    assert sum(sum(row) for row in result["floor_grid"]["truth"]) == result["eval_instants"] * 4  # 4 people
+    assert imread(picture).shape[2] in (3, 4)
+    status = main(["--no-progress", "score", str(store_recording), str(store_tracks), "--from", "7", "-o",
+                   str(tmp_path / "late.json"), "--map", str(tmp_path / "late.png")])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1
+    assert "--from 7: the warm-up reaches past the end of the recording, which holds 6.00 s of truth" in err
+    assert not (tmp_path / "late.json").exists() and not (tmp_path / "late.png").exists()
