@@ -25,8 +25,9 @@ METRICS = (
     ("tracker_fps", "tracker FPS (all cameras once)", None),
 )
 """(score JSON field, title, limit drawn on its plot) of each plot."""
-EXTRA_MEANS = (("hota", "HOTA", None), ("mpjpe_mm", "MPJPE (mm)", None))
-"""Further fields of results.json's "means" (no plot)."""
+MEANS = ("pcp", "idf1", "mota", "id_switches", "false_positives", "hota", "mpjpe_mm")
+"""The fields of results.json's "means": the plotted scores and HOTA and MPJPE, not the speeds (they vary from run
+to run: timings.json has them)."""
 
 
 @dataclass(frozen=True)
@@ -90,9 +91,7 @@ def t_interval(values: list[float], confidence: float = CONFIDENCE) -> tuple[flo
 
 def means(wanted: dict, rows: list[dict]) -> list[dict]:
     """results.json's "means": per x value of each line (`_lines`), each metric's mean over seeds, its 95 %
-    interval and how many values it has (not the speeds, which vary from run to run: timings.json)."""
-    from crossview.experiments.sweep import TIMING_FIELDS
-
+    interval and how many values it has (the fields of `MEANS`)."""
     if not wanted["axes"]:
         lines = {"all": {None: rows}}
         first, xs = None, [None]
@@ -106,9 +105,7 @@ def means(wanted: dict, rows: list[dict]) -> list[dict]:
                 continue
             entry = {"line": label, **({first: x} if first else {}), "cells": len(here),
                      "ok": sum(r["status"] == "ok" for r in here)}
-            for field, _, _ in METRICS + EXTRA_MEANS:
-                if field in TIMING_FIELDS:
-                    continue  # (they vary from run to run: results.json keeps none, timings.json has them)
+            for field in MEANS:
                 pt = point(here, field)
                 entry[field] = None if math.isnan(pt.mean) else {
                     "mean": pt.mean, "ci95": [pt.low, pt.high], "n": pt.n}
