@@ -34,6 +34,14 @@ def score_map_png(score: dict, boxes: tuple[Box, ...] | list[Box] = (), title: s
         boxes: the store's boxes, outlined on the maps.
         title: the figure's title.
     """
+    buffer = io.BytesIO()
+    score_map_figure(score, boxes, title).savefig(buffer, format="png", metadata={"Software": None})
+    return buffer.getvalue()
+
+
+def score_map_figure(score: dict, boxes: tuple[Box, ...] | list[Box] = (), title: str = ""):
+    """The matplotlib Figure of `score_map_png`: three floor maps (missed share, false positives, switches) over
+    the plan, and the people's time line under them."""
     from matplotlib.figure import Figure
 
     floor, timeline = score["floor_grid"], score["timeline"]
@@ -90,6 +98,4 @@ def score_map_png(score: dict, boxes: tuple[Box, ...] | list[Box] = (), title: s
     ax.set_xlabel("time (s); grey: not in the store, white to red: share of the bin missed, x: identity switch")
     ax.set_facecolor("0.85")
     ax.set_title(f"per-person time line ({bin_s:g} s bins, scored from {start:g} s)", fontsize="medium")
-    buffer = io.BytesIO()
-    figure.savefig(buffer, format="png", metadata={"Software": None})
-    return buffer.getvalue()
+    return figure
