@@ -205,8 +205,8 @@ def figure(wanted: dict, rows: list[dict], field: str, title: str, limit: float 
     ax.set_xlabel(first)
     ax.set_ylabel(title)
     ax.set_title(f"{title}\nmean over {len(wanted['seeds'])} seed{'s' if len(wanted['seeds']) != 1 else ''}, "
-                 f"bars 95 % interval (t) ({wanted['scenario']}, {wanted['duration_s']:g} s a cell"
-                 f"{_warm_up(rows, ', scored from {} s')})", fontsize="medium")
+                 f"bars 95 % interval (t)\n{wanted['scenario']}, {wanted['duration_s']:g} s a cell"
+                 f"{_warm_up(rows, ', scored from {} s')}", fontsize="medium")
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize="small")
     return chart
