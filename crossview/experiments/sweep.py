@@ -861,6 +861,7 @@ smaller or a larger grid of the same sweep): a cell's key says whether it is alr
 
 def _identity(definition: dict) -> dict:
     identity = {k: definition.get(k) for k in IDENTITY if k != "axis_keys"}
+    identity["warm_up_s"] = definition.get("warm_up_s", 0.0)  # (a folder from before warm-ups scored from 0)
     identity["axis_keys"] = [a.get("key") if isinstance(a, dict) else a for a in definition.get("axes") or []]
     return identity
 

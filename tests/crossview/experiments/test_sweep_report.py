@@ -74,3 +74,10 @@ def test_cells_leave_out_the_default_warm_up_or_the_given_one_and_a_longer_one_i
     with pytest.raises(sweep.CrossviewError, match=r"--from 3: the warm-up reaches past the end of the cells, "
                                                    r"which simulate 2 s"):
         sweep.plan(sweep.SweepSpec("store_layout1", axes=axes, warm_up_s=3.0))
+
+
+def test_a_folder_from_before_warm_ups_is_the_same_sweep_as_one_scored_from_0():
+    old = {"format": 1, "version": "v", "scenario": "s", "axes": [{"key": "cameras"}], "duration_s": 10.0,
+           "scenario_resolved_sha256": "x"}
+    assert sweep._identity(old) == sweep._identity({**old, "warm_up_s": 0.0})
+    assert sweep._identity(old) != sweep._identity({**old, "warm_up_s": None})  # (the default rule: 5 s here)
