@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import signal
 import sys
@@ -136,6 +137,16 @@ def _minutes_as_s(text: str) -> float:
     return 60.0 * value
 
 
+def _non_negative_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a number of seconds >= 0")
+    return value
+
+
 def _non_negative_int(text: str) -> int:
     try:
         value = int(text)
@@ -206,6 +217,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_output(p, "folder for NAME.mcap, NAME.tracks.mcap, NAME.score.json (default recordings/)",
                required=False, default=Path("recordings"), old=("--out",), metavar="DIR")
     p.add_argument("--json", type=Path, help="score JSON path (default OUTPUT/NAME.score.json)")
+    p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="score from S seconds on, "
+                   "leaving out the warm-up before (default: the warm-up rule of docs/metrics.md)")
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios, print one resolved, or the key reference")
     show = p.add_mutually_exclusive_group()
@@ -265,6 +278,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("tracks", type=Path, help="tracks file (.mcap), result_3d.json or JSON lines "
                    "(docs/recording-format.md)")
     add_output(p, "write the score JSON here (default: print the table only)", required=False, old=("--json",))
+    p.add_argument("--from", dest="from_s", type=_non_negative_float, default=0.0, metavar="S",
+                   help="leave out a warm-up: truth and tracks before S seconds are not scored (default 0)")
+    p.add_argument("--map", type=Path, metavar="MAP.png", help="draw where and when the tracker failed: floor "
+                   "heat maps of misses, false positives and ID switches, and each person's time line")
 
     p = sub.add_parser("info", help="describe a recording or tracks file")
     p.add_argument("file", type=Path, help="a recording or tracks file (.mcap)")
@@ -314,6 +331,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "optionally LABEL=METHOD to name it in the results (default crossview)")
     p.add_argument("--preset", default="store", help="comma-separated tracker presets (default store)")
     p.add_argument("--duration", type=_positive_float, help="simulated seconds per cell (default: the scenario's)")
+    p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="leave the first S seconds "
+                   "of each cell out of its score (default: the warm-up rule of docs/metrics.md, min(5 s, half a "
+                   "cell))")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=_positive_int, help="local worker processes (default: the cores; 1 runs "
                        "the cells one after another in this process)")
@@ -443,6 +463,7 @@ def _cmd_sweep(args) -> None:
         scenario=args.scenario, axes=axes, seeds=seeds,
         methods=methods,
         presets=sweep.parse_names("--preset", args.preset, PRESETS), duration_s=args.duration,
+        warm_up_s=args.from_s,
     )
     if args.ray is not None:
         executor = sweep.Executor.RAY
@@ -470,7 +491,7 @@ def _cmd_verify(args) -> None:
 
 
 def _cmd_run(args) -> None:
-    from crossview import pipeline
+    from crossview import pipeline, scoring
 
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
@@ -491,7 +512,8 @@ def _cmd_run(args) -> None:
         rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config, progress=progress
     )
     print(f"tracked   {trk.path}: {trk.updates} updates at {trk.tracker_fps:.1f} FPS (all cameras once)")
-    report, result = pipeline.score(rec_path, tracks_path, progress=progress)
+    from_s = scoring.default_from_s(scenario.duration_s) if args.from_s is None else args.from_s
+    report, result = pipeline.score(rec_path, tracks_path, progress=progress, from_s=from_s)
     pipeline.write_json(result, json_path, inputs=(rec_path, tracks_path))
     print(report.table())
     print(f"score JSON: {json_path}")
@@ -619,12 +641,18 @@ def _cmd_track(args) -> None:
 def _cmd_score(args) -> None:
     from crossview import pipeline
 
+    inputs = (args.recording, args.tracks)
     if args.output:
-        pipeline.check_writable(args.output, inputs=(args.recording, args.tracks))
-    report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress)
+        pipeline.check_writable(args.output, inputs=inputs)
+    if args.map:
+        pipeline.check_writable(args.map, inputs=(*inputs, *([args.output] if args.output else [])))
+    report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress, from_s=args.from_s)
     print(report.table())
     if args.output:
-        pipeline.write_json(result, args.output, inputs=(args.recording, args.tracks))
+        pipeline.write_json(result, args.output, inputs=inputs)
+    if args.map:
+        pipeline.write_score_map(result, args.recording, args.map, inputs=inputs)
+        print(f"map: {args.map}")
 
 
 def _cmd_info(args) -> None:

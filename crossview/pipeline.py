@@ -389,7 +389,8 @@ def open_run(rec_path: Path, tracks_path: Path):
     return rec, tracks
 
 
-def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_process: bool | None = None):
+def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_process: bool | None = None,
+          from_s: float = 0.0):
     """Scores a tracks file, or a result file (result_3d.json or JSON lines, `crossview.formats.results`), against
     the recording it was made from; returns (report, json dict).
 
@@ -400,6 +401,8 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
     which reads the tracks file on its own while this one computes the rest (`SCORED_HERE` of the cameras'
     2D scores, and everything else): the same figures, sooner at 240 cameras (docs/metrics.md, "Speed").
     None: where the machine has more than one core; True: wherever fork exists.
+
+    from_s: the warm-up left out, seconds after the recording's first truth sample (`crossview.scoring.score`).
     """
     from tqdm import tqdm
 
@@ -433,12 +436,13 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
         here = {c.name for c in cameras[::SCORED_HERE]}
         beside = processes.Worker(_camera_2d_worker, (truth, rec.skeleton.num_joints,
                                                       [c for c in cameras if c.name not in here],
-                                                      Path(tracks_path)), "crossview-score-2d", _SCORE_WORKER)
+                                                      Path(tracks_path), from_s), "crossview-score-2d",
+                                   _SCORE_WORKER)
     try:
         if beside is not None:
             beside.start()
         report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
-                               skeleton=rec.skeleton, projected=here, truth_head=truth_head(rec))
+                               skeleton=rec.skeleton, projected=here, truth_head=truth_head(rec), from_s=from_s)
         if beside is not None:
             there = beside.receive()[1]
             report.camera_2d = {c.name: report.camera_2d[c.name] if c.name in here else there[c.name]
@@ -473,8 +477,9 @@ the cameras here about evens them. Over 30 s of it (format 4), every 3rd, 4th or
 54.0, 52.5 and 53.7 s: the split is not critical."""
 
 
-def _camera_2d_worker(truth, num_joints: int, cameras, tracks_path: Path, sender) -> None:
-    """The second process of `score` (`processes.Worker`): the per-camera 2D scores of `cameras`."""
+def _camera_2d_worker(truth, num_joints: int, cameras, tracks_path: Path, from_s: float, sender) -> None:
+    """The second process of `score` (`processes.Worker`): the per-camera 2D scores of `cameras`, leaving out
+    the outputs of the warm-up as `crossview.scoring.score` does."""
     from crossview import recording
     from crossview.scoring import TruthTimeline
     from crossview.scoring.per_camera import projected_2d_scores
@@ -482,7 +487,9 @@ def _camera_2d_worker(truth, num_joints: int, cameras, tracks_path: Path, sender
     timeline = TruthTimeline(truth)
     timeline.num_joints = num_joints
     names = {c.name for c in cameras}
-    outputs = (out for out in recording.open_tracks(tracks_path).outputs() if out.camera in names)
+    cutoff = timeline.span[0] + from_s - 1e-9
+    outputs = (out for out in recording.open_tracks(tracks_path).outputs()
+               if out.camera in names and out.stamp_s >= cutoff)
     sender.send(("result", projected_2d_scores(outputs, cameras, timeline.at)))
 
 
@@ -510,6 +517,23 @@ def check_tracks_match(rec, tracks) -> None:
             f"(digest {tracks.header.scenario_digest[:12]}), not from {rec.path} "
             f"({rec.header.scenario_name!r} seed {rec.header.seed}, digest {rec.header.scenario_digest[:12]})"
         )
+
+
+def write_score_map(result: dict, rec_path: Path, path: Path, inputs: tuple = ()) -> None:
+    """Draws a score JSON's floor grid and time line over its recording's store (`crossview score --map`) and
+    writes the PNG atomically."""
+    from crossview import recording
+    from crossview.pictures.score_map import score_map_png
+
+    rec = recording.open_recording(rec_path)
+    title = (f"{rec.header.scenario_name} seed {rec.header.seed}, {len(rec.cameras)} cameras: PCP "
+             f"{_figure(result.get('pcp'))}, IDF1 {_figure(result.get('idf1'))}, {result.get('id_switches')} "
+             f"ID switches, {result.get('false_positives')} false positives, scored from {result['from_s']:g} s")
+    outputs.write_bytes(score_map_png(result, rec.boxes, title), path, inputs)
+
+
+def _figure(value) -> str:
+    return "-" if value is None else f"{value:.3f}"
 
 
 def write_json(result: dict, path: Path, inputs: tuple = ()) -> None:

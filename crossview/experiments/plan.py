@@ -252,6 +252,7 @@ def confirm(path, result: Plan, out: Path, *, people: int | None = None, seeds: 
     """
     from crossview import pipeline
     from crossview.experiments import sweep
+    from crossview.experiments.sweep_report import t_interval
 
     scenario = pipeline.load_scenario(path)
     rec = result.recommended
@@ -259,26 +260,16 @@ def confirm(path, result: Plan, out: Path, *, people: int | None = None, seeds: 
     if people is not None:
         fixed["crowd.people"] = people
     axes = tuple(sweep.Axis(key, (value,)) for key, value in fixed.items())
-    spec = sweep.SweepSpec(scenario=str(path), axes=axes, seeds=tuple(seeds), duration_s=duration_s)
+    spec = sweep.SweepSpec(scenario=str(path), axes=axes, seeds=tuple(seeds), duration_s=duration_s,
+                           warm_up_s=None)  # (each cell leaves out the default warm-up, as `crossview sweep`'s)
     summary = sweep.run_sweep(spec, out, executor=sweep.Executor.POOL, workers=workers, progress=progress)
     failed = [r for r in summary.rows if r["status"] != "ok"]
     if failed:
         raise CrossviewError(f"--confirm: {len(failed)} of {len(summary.rows)} cells failed: {failed[0]['status']} "
                              f"({out})")
     pcp = [float(r["score"]["pcp"]) for r in summary.rows]
-    mean, low, high = _mean_interval(pcp)
+    mean = sum(pcp) / len(pcp)
+    low, high = t_interval(pcp)
     return {"cameras": rec.cameras, "grid": list(rec.grid), "seeds": list(seeds), "duration_s": duration_s,
             "pcp": [round(p, 4) for p in pcp], "pcp_mean": round(mean, 4), "pcp_ci95": [round(low, 4), round(high, 4)],
             "meets_target": mean >= result.target_pcp, "sweep": str(out)}
-
-
-def _mean_interval(values: list[float]) -> tuple[float, float, float]:
-    """The mean and its 95 % interval (Student's t over the values; the mean alone for one value)."""
-    import numpy as np
-    from scipy import stats
-
-    mean = float(np.mean(values))
-    if len(values) < 2:
-        return mean, mean, mean
-    low, high = stats.t.interval(0.95, len(values) - 1, loc=mean, scale=stats.sem(values))
-    return mean, float(low), float(high)

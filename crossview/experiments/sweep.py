@@ -107,6 +107,8 @@ class SweepSpec:
             or `LABEL=METHOD` to name it LABEL in the results and the report (`split_method`).
         presets: tracker presets (`tracker.config.PRESETS`).
         duration_s: simulated seconds per cell; None keeps the scenario's.
+        warm_up_s: seconds at the start of each cell left out of its score (`crossview.scoring.score`'s
+            `from_s`); None: the default rule, `crossview.scoring.default_from_s` of the cell's duration.
     """
 
     scenario: str
@@ -115,6 +117,7 @@ class SweepSpec:
     methods: tuple[str, ...] = ("crossview",)
     presets: tuple[str, ...] = ("store",)
     duration_s: float | None = None
+    warm_up_s: float | None = 0.0
 
 
 @dataclass(frozen=True)
@@ -142,6 +145,7 @@ class Cell:
         worker_process: simulate, and compute the per-camera 2D scores, in a second process
             (`crossview.pipeline.generate`, `crossview.pipeline.score`); False where cells already run side by
             side.
+        from_s: the warm-up left out of the cell's score, seconds.
     """
 
     index: int
@@ -161,6 +165,7 @@ class Cell:
     worker_process: bool = False
     tracker_overrides: dict = field(default_factory=dict)
     method_label: str | None = None  # the method's name in the results (`--method LABEL=METHOD`); None: `method`
+    from_s: float = 0.0
 
     def load_scenario(self, folder: Path) -> scenario_mod.Scenario:
         """The cell's resolved scenario, loaded from a copy of its file and the files it refers to in `folder`
@@ -396,9 +401,11 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
     floor holds) fails when it runs.
 
     Raises:
-        CrossviewError: the base scenario cannot be loaded, or a `tracker.*` value suits none of the presets.
+        CrossviewError: the base scenario cannot be loaded, a `tracker.*` value suits none of the presets, or the
+            warm-up is longer than a cell.
     """
     from crossview.recording import software_version
+    from crossview.scoring import default_from_s
 
     version = software_version()
     base = pipeline.load_scenario(spec.scenario, duration_s=spec.duration_s)
@@ -417,9 +424,14 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
         overrides = {k: v for k, v in values if k != CAMERAS_AXIS and not k.startswith(TRACKER_PREFIX)}
         cameras = dict(values).get(CAMERAS_AXIS)
         error = None
+        from_s = spec.warm_up_s or 0.0
         try:
             scenario = pipeline.load_scenario(path, seed=seed, duration_s=spec.duration_s, cameras=cameras,
                                               overrides=overrides)
+            from_s = default_from_s(scenario.duration_s) if spec.warm_up_s is None else spec.warm_up_s
+            if from_s > scenario.duration_s:
+                raise CrossviewError(f"--from {from_s:g}: the warm-up reaches past the end of the cells, which "
+                                     f"simulate {scenario.duration_s:g} s; give at most {scenario.duration_s:g}")
             resolved = _applied_overrides(scenario, overrides, seed, spec.duration_s, cameras)
             files = referenced_files(scenario)
             identity = resolved_digest(scenario)
@@ -440,13 +452,13 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
         # (A cell without tracker axes or a plug-in keeps the key it had before they were keyed: finished cells
         # stay found. The method as given, label included: a method without a label keeps its key.)
         identity_parts = (identity, seed, method_text, preset, version) + ((tracker,) if tracker else ()) + (
-            (sources[method_text],) if sources[method_text] else ())
+            (sources[method_text],) if sources[method_text] else ()) + ((("from_s", from_s),) if from_s else ())
         cells.append(Cell(
             index=index, key=_key(*identity_parts), label=_label(values, seed, label, preset),
             values=values, seed=seed, method=method, preset=preset, scenario_name=base.name, scenario_text=text,
             files=files, overrides=resolved, version=version, error=error, keep_recording=keep_recordings,
             worker_process=worker_process, tracker_overrides=tracker,
-            method_label=label if label != method else None,
+            method_label=label if label != method else None, from_s=from_s,
         ))
     return cells
 
@@ -521,7 +533,8 @@ def run_cell(cell: Cell) -> dict:
             trk = pipeline.track(rec, tracks, method=cell.method, preset=cell.preset,
                                  overrides=cell.tracker_overrides or None, progress=False)
             t1 = time.perf_counter()
-            _, score = pipeline.score(rec, tracks, progress=False, worker_process=cell.worker_process)
+            _, score = pipeline.score(rec, tracks, progress=False, worker_process=cell.worker_process,
+                                      from_s=cell.from_s)
             timings.update(generate_s=gen.wall_s, generate_realtime_factor=gen.realtime_factor, track_s=t1 - t0,
                            score_s=time.perf_counter() - t1, tracker_fps=trk.tracker_fps,
                            camera_frames_per_s=trk.camera_frames_per_s)
@@ -834,19 +847,21 @@ def definition(spec: SweepSpec, cells: list[Cell]) -> dict:
         "methods": list(spec.methods),
         "presets": list(spec.presets),
         "duration_s": base.duration_s,
+        "warm_up_s": spec.warm_up_s,  # (None: the default rule, `crossview.scoring.default_from_s`)
         "version": cells[0].version if cells else None,
         "cells": len(cells),
     }
 
 
-IDENTITY = ("format", "version", "scenario", "axis_keys", "duration_s", "scenario_resolved_sha256")
+IDENTITY = ("format", "version", "scenario", "axis_keys", "duration_s", "warm_up_s", "scenario_resolved_sha256")
 """What must match between a sweep and the one whose results a folder holds: the base scenario, the axes'
-keys, the duration and the version. The values of the axes, the seeds, methods and presets may differ (a
+keys, the duration, the warm-up and the version. The values of the axes, the seeds, methods and presets may differ (a
 smaller or a larger grid of the same sweep): a cell's key says whether it is already there."""
 
 
 def _identity(definition: dict) -> dict:
     identity = {k: definition.get(k) for k in IDENTITY if k != "axis_keys"}
+    identity["warm_up_s"] = definition.get("warm_up_s", 0.0)  # (a folder from before warm-ups scored from 0)
     identity["axis_keys"] = [a.get("key") if isinstance(a, dict) else a for a in definition.get("axes") or []]
     return identity
 
@@ -1038,18 +1053,22 @@ def result_row(stored: dict) -> dict:
     row = {"key": stored["key"], **{k: v for k, v in stored["values"]}, "seed": stored["seed"],
            "method": stored["method"], "preset": stored["preset"], "status": stored["status"]}
     for name, value in (stored["score"] or {}).items():
-        if name not in TIMING_FIELDS and not isinstance(value, dict) and name not in row:
+        if name not in TIMING_FIELDS and not isinstance(value, dict | list) and name not in row:
             row[name] = value
     return row
 
 
 def write_results(out: Path, wanted: dict, rows: list[dict]) -> None:
-    """results.json (deterministic: the same grid gives the same bytes anywhere), timings.json (the speeds,
+    """results.json (deterministic: the same grid gives the same bytes anywhere; with "means", each grid point's
+    means over seeds and 95 % intervals, `sweep_report.means`), timings.json (the speeds,
     wall times and peak memory of each cell) and results.csv (both, one row per cell, for spreadsheets)."""
     result_rows = [result_row(r) for r in rows]
     columns = list(dict.fromkeys(k for row in result_rows for k in row))
     result_rows = [{c: row.get(c) for c in columns} for row in result_rows]  # a failed cell's scores are null
-    pipeline.write_json({"sweep": wanted, "cells": result_rows}, Path(out) / "results.json")
+    from crossview.experiments.sweep_report import means
+
+    pipeline.write_json({"sweep": wanted, "cells": result_rows, "means": means(wanted, rows)},
+                        Path(out) / "results.json")
     timings = [{"key": r["key"], **r["timings"]} for r in rows]
     pipeline.write_json({"cells": timings}, Path(out) / "timings.json")
     timing_columns = list(dict.fromkeys(k for t in timings for k in t if k != "key"))

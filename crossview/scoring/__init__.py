@@ -14,7 +14,14 @@
   stamps the later one delivered), and its targets are compared with the truth interpolated at that
   output's stamp (a tracker output stamped at t is compared with the truth at t);
 - a tick with no output yet, or whose latest output is older than `OUTPUT_MAX_AGE_S`, is compared
-  with the truth at the tick and no targets (every person missed).
+  with the truth at the tick and no targets (every person missed);
+- warm-up (`from_s`): ticks before t_0 + from_s are not scored, nor are the outputs and camera frames stamped
+  before it (association accuracy, per-camera 2D scores); the first scored tick takes the latest output as
+  any tick does.
+
+Besides the totals, the report says when and where the tracker failed: a per-person time line (per time bin
+the ticks matched and missed on the ground plane, and the share of correct PCP bones) and a floor grid of the
+true person-instants, misses, false positives and identity switches (`ScoreReport.timeline`, `.floor_grid`).
 
 The grid makes the MOT counts comparable across camera counts: a 12-camera rig produces many more
 outputs per second than a 3-camera one, but both are scored eval_rate_hz times per second.
@@ -26,6 +33,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Collection, Iterable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -36,18 +44,36 @@ from core.truth import truth_between
 from core.types import COCO17, Camera, Skeleton
 from crossview.scoring.association import SCORED_STATES, AssociationAccumulator, scored_targets
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
-from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, body_roots
+from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, IdEvent, body_roots
 from crossview.scoring.per_camera import Projected2DAccumulator
 from crossview.scoring.pose import PoseAccumulator
 from crossview.scoring.report import JSON_KEYS, ScoreReport
 from tracker.types import TrackerOutput
 
-__all__ = ["JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TruthTimeline", "score"]
+__all__ = ["FLOOR_CELL_M", "JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TIMELINE_BIN_S",
+           "TruthTimeline", "WARM_UP_S", "default_from_s", "score"]
 
 logger = logging.getLogger(__name__)
 
 OUTPUT_MAX_AGE_S = 1.0
 """A tracker output older than this at a grid tick no longer stands for the tracker's belief, seconds."""
+
+
+TIMELINE_BIN_S = 1.0
+"""Width of a time bin of the per-person time line, seconds."""
+
+FLOOR_CELL_M = 1.0
+"""Side of a cell of the floor grid of misses, false positives and identity switches, metres."""
+
+
+WARM_UP_S = 5.0
+"""The default warm-up of `run` and `sweep` cells, seconds (`default_from_s`; measured in docs/metrics.md)."""
+
+
+def default_from_s(duration_s: float) -> float:
+    """The warm-up `run` and a sweep's cells leave out unless told: `WARM_UP_S`, but at most half the run, so that
+    a short run still scores its second half (docs/metrics.md, "Warm-up")."""
+    return min(WARM_UP_S, duration_s / 2)
 
 
 class ScoringError(CrossviewError):
@@ -136,6 +162,82 @@ def _in_area(g_ids, g_poses, t_ids, t_poses, area, reach_m, skeleton: Skeleton):
     return g_ids[g_in], g_poses[g_in], t_ids[t_keep], t_poses[t_keep]
 
 
+class _Compared(NamedTuple):
+    """One scored tick: its time, the instant compared (the output's stamp), the people's ids, body roots and
+    shares of correct PCP bones, and the targets' ids and body roots."""
+
+    tick_s: float
+    at_s: float
+    truth_ids: np.ndarray
+    truth_roots: np.ndarray
+    pcp_shares: np.ndarray
+    target_ids: np.ndarray
+    target_roots: np.ndarray
+
+
+def _over_time_and_place(compared: list[_Compared], events: list[IdEvent], switches, start_s: float, bin_s: float,
+                         cell_m: float, area) -> tuple[dict, dict]:
+    """The per-person time line and the floor grid of `ScoreReport` from the scored ticks and py-motmetrics'
+    events (the same matches, misses and false positives that MOTA and IDF1 count)."""
+    num_bins = int(np.floor((compared[-1].tick_s - start_s) / bin_s + 1e-9)) + 1 if compared else 0
+    if area is not None:
+        x0, y0, x1, y1 = area
+    else:
+        xy = np.concatenate([np.zeros((0, 2))] + [c.truth_roots for c in compared] + [c.target_roots for c in compared])
+        xy = xy[np.isfinite(xy).all(axis=1)]
+        x0, y0 = (np.floor(xy.min(axis=0) / cell_m) * cell_m) if len(xy) else (0.0, 0.0)
+        x1, y1 = xy.max(axis=0) if len(xy) else (cell_m, cell_m)
+    cols = max(1, int(np.ceil((x1 - x0) / cell_m - 1e-9)))
+    rows = max(1, int(np.ceil((y1 - y0) / cell_m - 1e-9)))
+    grids = {name: np.zeros((rows, cols), dtype=np.int64) for name in ("truth", "misses", "false_positives",
+                                                                         "id_switches")}
+
+    def add(grid: str, xy) -> None:
+        if np.isfinite(xy).all():
+            col = min(max(int(np.floor((xy[0] - x0) / cell_m)), 0), cols - 1)
+            row = min(max(int(np.floor((xy[1] - y0) / cell_m)), 0), rows - 1)
+            grids[grid][row, col] += 1
+
+    people: dict[int, dict] = {}
+    pcp_sum = np.zeros((0, num_bins))
+    index: dict[int, int] = {}
+
+    def person(pid: int) -> dict:
+        nonlocal pcp_sum
+        if pid not in people:
+            index[pid] = len(index)
+            people[pid] = {"matched": [0] * num_bins, "missed": [0] * num_bins, "pcp": [], "switches": []}
+            pcp_sum = np.vstack([pcp_sum, np.zeros(num_bins)])
+        return people[pid]
+
+    bins = [int(np.floor((c.tick_s - start_s) / bin_s + 1e-9)) for c in compared]
+    for c, b in zip(compared, bins):
+        for pid, root, share in zip(c.truth_ids.tolist(), c.truth_roots, c.pcp_shares):
+            person(pid)
+            pcp_sum[index[pid], b] += share
+            add("truth", root)
+    for e in events:
+        c, b = compared[e.update], bins[e.update]
+        if e.kind == "FP":
+            add("false_positives", c.target_roots[list(c.target_ids).index(e.target_id)])
+            continue
+        row = person(e.person_id)
+        row["missed" if e.kind == "MISS" else "matched"][b] += 1
+        if e.kind == "MISS":
+            add("misses", c.truth_roots[list(c.truth_ids).index(e.person_id)])
+    for t, pid, target, x, y in switches:
+        person(pid)["switches"].append({"t_s": t, "target_id": target, "x_m": x, "y_m": y})
+        add("id_switches", np.array([x, y]))
+    for pid, row in people.items():
+        ticks = np.array(row["matched"]) + np.array(row["missed"])
+        row["pcp"] = [float(s / n) if n else None for s, n in zip(pcp_sum[index[pid]], ticks)]
+    timeline = {"start_s": float(start_s), "bin_s": float(bin_s), "bins": num_bins,
+                "people": {pid: people[pid] for pid in sorted(people)}}
+    floor = {"origin_m": [float(x0), float(y0)], "cell_m": float(cell_m), "shape": [rows, cols],
+             **{name: grid.tolist() for name, grid in grids.items()}}
+    return timeline, floor
+
+
 def score(
     truth: Sequence[PoseTruth],
     outputs: Iterable[TrackerOutput],
@@ -149,6 +251,9 @@ def score(
     skeleton: Skeleton = COCO17,
     projected: bool | Collection[str] = True,
     truth_head: HeadPoints | None = None,
+    from_s: float = 0.0,
+    timeline_bin_s: float = TIMELINE_BIN_S,
+    floor_cell_m: float = FLOOR_CELL_M,
 ) -> ScoreReport:
     """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
 
@@ -170,23 +275,35 @@ def score(
             `projected_2d_scores`).
         truth_head: with a COCO-17 truth, PCP's true head joints as points of the true head (the scenario's
             `scoring.truth_head` "annotated", `crossview.pipeline.truth_head`); None: mapped as the estimate's.
+        from_s: warm-up left out, seconds after the first truth sample (see the module docstring).
+        timeline_bin_s: width of the time line's bins, seconds.
+        floor_cell_m: side of the floor grid's cells, metres.
 
     Returns:
         the report; metrics that cannot be measured are None.
 
     Raises:
-        ScoringError: tracks that do not belong to the truth, or poses not in `skeleton`'s layout.
+        ScoringError: tracks that do not belong to the truth, poses not in `skeleton`'s layout, or a warm-up
+            past the end of the truth.
     """
     if not eval_rate_hz > 0:
         raise ValueError(f"eval_rate_hz={eval_rate_hz}: must be > 0")
     if not hota_zero_distance_m > 0:
         raise ValueError(f"hota_zero_distance_m={hota_zero_distance_m}: must be > 0 metres")
+    if not (timeline_bin_s > 0 and floor_cell_m > 0):
+        raise ValueError(f"timeline_bin_s={timeline_bin_s}, floor_cell_m={floor_cell_m}: must be > 0")
+    if not (np.isfinite(from_s) and from_s >= 0):
+        raise ScoringError(f"--from {from_s}: the warm-up must be a number of seconds >= 0")
     timeline = TruthTimeline(truth)
     if timeline.num_joints not in (None, skeleton.num_joints):
         raise ScoringError(f"truth poses have {timeline.num_joints} joints, expected {skeleton.num_joints} "
                            f"({skeleton.name})")
     timeline.num_joints = skeleton.num_joints
     t_start, t_end = timeline.span
+    if len(timeline.times) and from_s > t_end - t_start + 1e-9:
+        raise ScoringError(f"--from {from_s:g}: the warm-up reaches past the end of the recording, which holds "
+                           f"{t_end - t_start:.2f} s of truth; give at most {t_end - t_start:.2f}")
+    cutoff = t_start + from_s - 1e-9  # (ticks are t_0 + k / rate: a tick at the warm-up's end is scored)
     num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
     ticks = t_start + np.arange(num_ticks) / eval_rate_hz  # the same floats as t_start + k / eval_rate_hz
 
@@ -204,7 +321,7 @@ def score(
     projected_names = {c.name for c in projected_cameras}
     camera_2d = Projected2DAccumulator(projected_cameras, timeline.at) if projected_cameras else None
     association = AssociationAccumulator() if camera_frames is not None else None
-    frames = iter(camera_frames) if camera_frames is not None else iter(())
+    frames = iter(cf for cf in camera_frames if cf.frame.stamp_s >= cutoff) if camera_frames is not None else iter(())
     for out in outputs:
         num_outputs += 1
         if names is not None and out.camera not in names:
@@ -215,6 +332,8 @@ def score(
         # An output stamped before t_0 predates every person of the recording (see the module docstring).
         if out.stamp_s >= t_start and k < num_ticks and (k not in latest or out.stamp_s >= latest[k].stamp_s):
             latest[k] = out
+        if out.stamp_s < cutoff:
+            continue  # in the warm-up: it may still be the latest output at the first scored tick
         if out.camera in projected_names:
             camera_2d.add(out)
         if association is not None:
@@ -238,12 +357,14 @@ def score(
                          truth_head=(HeadConvention.EVALUATE if evaluated else HeadConvention.ANNOTATED).value)
     scored_ticks = 0
     chosen: TrackerOutput | None = None
-    compared: list[tuple[float, np.ndarray, np.ndarray]] = []  # per identity update: time, person ids, roots
+    compared: list[_Compared] = []  # per identity update
     for k in range(num_ticks):
         tick = t_start + k / eval_rate_hz
         chosen = latest.pop(k, chosen)  # the latest output stamped at or before the tick
         if chosen is None and num_outputs:
             continue  # nothing delivered yet: no tracker could know anything
+        if tick < cutoff:
+            continue  # the warm-up
         scored_ticks += 1
         if chosen is not None and tick - chosen.stamp_s <= OUTPUT_MAX_AGE_S:
             t_ids, t_poses = _targets(chosen, skeleton)
@@ -255,9 +376,10 @@ def score(
         if scored_area is not None:
             g_ids, g_poses, t_ids, t_poses = _in_area(g_ids, g_poses, t_ids, t_poses, scored_area,
                                                           root_threshold_m, skeleton)
-        pose_acc.update(g_ids, g_poses, t_poses)
+        shares = pose_acc.update(g_ids, g_poses, t_poses)
         id_acc.update(g_ids, g_poses, t_ids, t_poses)
-        compared.append((float(at), g_ids, body_roots(g_poses, skeleton)))
+        compared.append(_Compared(float(tick), float(at), g_ids, body_roots(g_poses, skeleton), shares, t_ids,
+                                  body_roots(t_poses, skeleton)))
         hota_truth.append(g_ids)
         hota_targets.append(t_ids)
         hota_sims.append(ground_similarity(body_roots(g_poses, skeleton), body_roots(t_poses, skeleton),
@@ -277,9 +399,13 @@ def score(
     report.id_switches, report.false_positives = ident.id_switches, ident.false_positives
     report.false_negatives = ident.false_negatives
     for switch in id_acc.switches():
-        at, g_ids, roots = compared[switch.update]
-        x, y = roots[list(g_ids).index(switch.person_id), :2]
-        report.id_switch_events.append((at, switch.person_id, switch.target_id, float(x), float(y)))
+        c = compared[switch.update]
+        x, y = c.truth_roots[list(c.truth_ids).index(switch.person_id), :2]
+        report.id_switch_events.append((c.at_s, switch.person_id, switch.target_id, float(x), float(y)))
+    report.from_s = float(from_s)
+    report.timeline, report.floor_grid = _over_time_and_place(
+        compared, id_acc.events(), report.id_switch_events, t_start + from_s, timeline_bin_s, floor_cell_m,
+        scored_area)
     if ident.num_truth == 0 and ident.num_predictions == 0:
         report.idf1 = None  # nothing to identify: undefined rather than 0
 

@@ -89,6 +89,16 @@ class IdSwitch(NamedTuple):
     target_id: int
 
 
+class IdEvent(NamedTuple):
+    """One py-motmetrics event: at `update`, `kind` "MATCH", "SWITCH" (a match to another target than before),
+    "MISS" (person `person_id` unmatched) or "FP" (target `target_id` unmatched); the other id None."""
+
+    update: int
+    kind: str
+    person_id: int | None
+    target_id: int | None
+
+
 class IdentityAccumulator:
     """Feeds ground-plane comparisons into a py-motmetrics accumulator.
 
@@ -124,6 +134,19 @@ class IdentityAccumulator:
         frames = rows.index.get_level_values("FrameId")
         # (auto_id numbers the updates from 0.)
         return [IdSwitch(int(f), int(o), int(h)) for f, o, h in zip(frames, rows["OId"], rows["HId"])]
+
+    def events(self) -> list[IdEvent]:
+        """Every match, switch, miss and false positive counted so far, in update order (the rows of
+        py-motmetrics' `mot_events` that its counts are made of)."""
+        events = self.acc.mot_events
+        rows = events[events["Type"].isin(("MATCH", "SWITCH", "MISS", "FP"))]
+        frames = rows.index.get_level_values("FrameId")
+
+        def as_id(value):
+            return None if value is None or value != value else int(value)  # (NaN: no such side)
+
+        return [IdEvent(int(f), str(k), as_id(o), as_id(h))
+                for f, k, o, h in zip(frames, rows["Type"], rows["OId"], rows["HId"])]
 
     def result(self) -> IdentityScores:
         """Scores over everything added so far."""

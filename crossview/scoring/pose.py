@@ -207,13 +207,16 @@ class PoseAccumulator:
         self._matched = 0
         self._nan_joints = 0
 
-    def update(self, truth_ids: np.ndarray, truth_poses: np.ndarray, estimates: np.ndarray) -> None:
+    def update(self, truth_ids: np.ndarray, truth_poses: np.ndarray, estimates: np.ndarray) -> np.ndarray:
         """Scores one instant.
 
         Args:
             truth_ids: (G,) int ids of the true persons.
             truth_poses: (G, J, 3) true poses, metres.
             estimates: (H, J, 3) estimated poses, metres, NaN for unknown joints.
+
+        Returns:
+            (G,) each true person's share of correct PCP bones at this instant (0 when missed).
         """
         J = self.skeleton.num_joints
         truth_poses = np.asarray(truth_poses, dtype=np.float64).reshape(-1, J, 3)
@@ -224,13 +227,16 @@ class PoseAccumulator:
         truth14 = to_campus14(truth_poses, self.skeleton, self.truth_head)
         est14 = to_campus14(estimates, self.skeleton)
         idx = match_nearest(truth14, est14)
+        shares = np.zeros(len(truth_ids))
         for g, pid in enumerate(np.asarray(truth_ids).tolist()):
             self._instants += 1
             self._pck_total += 1
             if idx[g] < 0:
                 self._bones.setdefault(int(pid), []).append(np.zeros(NUM_PCP_BONES, dtype=bool))
                 continue
-            self._bones.setdefault(int(pid), []).append(pcp_bones(est14[idx[g]], truth14[g], self.alpha))
+            bones = pcp_bones(est14[idx[g]], truth14[g], self.alpha)
+            self._bones.setdefault(int(pid), []).append(bones)
+            shares[g] = bones.mean()
             err = np.linalg.norm(estimates[idx[g]] - truth_poses[g], axis=1)  # (J,), NaN for unknown
             known = np.isfinite(err)
             for k, thr in enumerate(self.pck_thresholds_m):
@@ -240,6 +246,7 @@ class PoseAccumulator:
                 self._nan_joints += int((~known).sum())
                 self._joint_err_sum += np.where(known, err, 0.0)
                 self._joint_err_count += known
+        return shares
 
     def result(self) -> PoseScores:
         """The scores over everything accumulated so far."""

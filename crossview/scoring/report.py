@@ -61,6 +61,10 @@ class ScoreReport:
     # Each switch: (time s, person id, the target it switched to, person's root x, y in metres) at the compared
     # instant (the tracker output's stamp).
     id_switch_events: list[tuple[float, int, int, float, float]] = field(default_factory=list)
+    # When and where (`crossview.scoring.score`, docs/metrics.md "Over time and place"): per person the time
+    # bins' matched and missed ticks, PCP share and switches; the floor grid's counts.
+    timeline: dict = field(default_factory=dict)
+    floor_grid: dict = field(default_factory=dict)
     hota: float | None = None
     deta: float | None = None
     assa: float | None = None
@@ -76,6 +80,7 @@ class ScoreReport:
     # Bookkeeping.
     eval_rate_hz: float = 10.0
     eval_instants: int = 0
+    from_s: float = 0.0  # the warm-up left out, seconds after the truth's start
     truth_person_instants: int = 0
     root_threshold_m: float = 1.0
     hota_zero_distance_m: float = 2.0
@@ -138,10 +143,15 @@ class ScoreReport:
             "camera_2d": {name: vars(s) for name, s in self.camera_2d.items()},
             "eval_rate_hz": self.eval_rate_hz,
             "eval_instants": self.eval_instants,
+            "from_s": self.from_s,
             "truth_person_instants": self.truth_person_instants,
             "root_threshold_m": self.root_threshold_m,
             "hota_zero_distance_m": self.hota_zero_distance_m,
             "truth_head": self.truth_head,
+            "id_switch_events": [{"t_s": t, "person_id": p, "target_id": h, "x_m": x, "y_m": y}
+                                 for t, p, h, x, y in self.id_switch_events],
+            "timeline": self.timeline,
+            "floor_grid": self.floor_grid,
         }
         return _clean({**head, **extra})
 
@@ -160,6 +170,7 @@ class ScoreReport:
             ("  MPJPE", num(self.mpjpe_mm, "{:.1f} mm")),
             ("  PCK 50 / 100 / 150 mm", " / ".join(pct(v) for v in (self.pck_50mm, self.pck_100mm, self.pck_150mm))),
             ("  NaN joints in matched estimates", str(self.nan_joints)),
+            ("Scored from", f"{self.from_s:g} s (warm-up left out)" if self.from_s else "the start"),
             (f"Identity (ground plane, {self.root_threshold_m:g} m, {self.eval_rate_hz:g} Hz grid)", ""),
             ("  MOTA", pct(self.mota)),
             ("  MOTP", num(self.motp_m, "{:.3f} m")),

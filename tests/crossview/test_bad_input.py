@@ -93,6 +93,9 @@ OPTION_CASES = [
      "is more than the 100,000 images a clip may hold"),
     ("time-nan", ["render", "OUT/r.mcap", "--camera", "cam00", "--time", "nan", "-o", "OUT/x.png"],
      "--time: nan is not a finite number of seconds"),
+    ("from-negative", ["score", "OUT/r.mcap", "OUT/t.mcap", "--from", "-1"], "'-1' must be a number of seconds >= 0"),
+    ("sweep-from-past-the-cells", ["sweep", "store_layout1", "--duration", "2", "--from", "3", "-o", "OUT/s"],
+     "--from 3: the warm-up reaches past the end of the cells, which simulate 2 s; give at most 2"),
 ]
 
 

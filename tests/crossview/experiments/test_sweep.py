@@ -75,7 +75,14 @@ def test_serial_sweep_writes_one_row_per_cell_with_scores_and_timings(serial):
     # One small score file per cell, the report and its plots.
     assert len(list((serial / "cells").glob("*.json"))) == len(cells)
     report = (serial / "report.md").read_text()
-    assert "## Breaking points" in report and "cameras=6:" in report
+    assert "## Where the bar holds" in report and "cameras=6:" in report
+    # Each cell leaves out the default warm-up, half of its second; the report says so.
+    assert {c["from_s"] for c in cells} == {0.5} and "scored from 0.5 s on" in report
+    # Per grid point, the means over the two seeds with their 95 % intervals.
+    first = results["means"][0]
+    assert (first["line"], first["crowd.people"], first["cells"], first["ok"]) == ("cameras=6", 2, 2, 2)
+    pcps = [c["pcp"] for c in cells[:2]]
+    assert first["pcp"]["mean"] == pytest.approx(sum(pcps) / 2) and first["pcp"]["n"] == 2
     assert all((serial / "plots" / f"{m}.png").read_bytes()[:4] == b"\x89PNG" for m, _, _ in sweep_report.METRICS)
     assert not list(serial.rglob("*.tmp"))
 
@@ -376,13 +383,27 @@ def _report_row(people: int, pcp: float, idf1: float = 1.0) -> dict:
             "method": "crossview", "preset": "store"}
 
 
-def test_a_line_below_the_bar_at_its_first_value_is_not_said_to_break_there():
+def test_the_report_says_from_or_up_to_which_value_the_bar_holds_in_either_direction():
     wanted = {"axes": [{"key": "crowd.people", "values": [4, 8, 12]}], "methods": ["crossview"], "presets": ["store"]}
     breaks_later = [_report_row(4, 0.99), _report_row(8, 0.95), _report_row(12, 0.5)]
     below_first = [_report_row(4, 0.5), _report_row(8, 0.4), _report_row(12, 0.3)]
-    assert sweep_report.breaking_points(wanted, breaks_later)[0].startswith("all: breaks at crowd.people = 12 (PCP")
-    assert sweep_report.breaking_points(wanted, below_first)[0].startswith(
-        "all: already below the bar at the first value, crowd.people = 4 (PCP 0.500")
+    holds_later = [_report_row(4, 0.909), _report_row(8, 0.948), _report_row(12, 0.962)]  # (the cameras)
+    bar = "PCP >= 0.95 and IDF1 >= 0.9"
+    assert sweep_report.breaking_points(wanted, breaks_later) == [
+        f"all: meets {bar} up to crowd.people = 8; breaks at crowd.people = 12 (PCP 0.500 < 0.95)"]
+    assert sweep_report.breaking_points(wanted, below_first) == [
+        f"all: below the bar ({bar}) at every value, crowd.people = 4 to 12 (crowd.people = 12: PCP 0.300 < 0.95)"]
+    assert sweep_report.breaking_points(wanted, holds_later) == [
+        f"all: meets {bar} from crowd.people = 12 (PCP 0.962, IDF1 1.000); below at crowd.people = 8 "
+        "(PCP 0.948 < 0.95)"]
+    # Values given out of order are read in rising order; a bar met, lost and met again names each.
+    wanted["axes"][0]["values"] = [12, 4, 8]
+    assert sweep_report.breaking_points(wanted, holds_later)[0].startswith(f"all: meets {bar} from crowd.people = 12")
+    bumpy = [_report_row(4, 0.96), _report_row(8, 0.9), _report_row(12, 0.97, idf1=0.95)]
+    assert sweep_report.breaking_points(wanted, bumpy) == [
+        f"all: meets {bar} at crowd.people = 4, 12; below at 8 (not monotonic along crowd.people)"]
+    assert sweep_report.breaking_points(wanted, [_report_row(4, 0.96), _report_row(8, 0.99, idf1=0.8)]) == [
+        f"all: meets {bar} up to crowd.people = 4; breaks at crowd.people = 8 (IDF1 0.800 < 0.9)"]
 
 
 def test_a_cells_key_covers_an_absolute_calibrations_content_and_a_plugins_code(tmp_path, monkeypatch):
