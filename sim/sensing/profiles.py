@@ -69,6 +69,16 @@ class DetectorParams(NamedTuple):
         score_visible: mean score of a visible joint.
         score_occluded: mean score of an occluded joint.
         score_std: std of the joint scores.
+        difficult_rate: the share of people the detector keeps getting wrong (sleeves, bags, an object in hand,
+            an unusual build), drawn systematically over the people in the order they enter (person k is one
+            when floor(rate (k + 1) + phase) > floor(rate k + phase), the phase drawn from the seed): any N
+            people in a row hold floor or ceil of rate x N of them, whatever the seed.
+        difficult_offset_scale: such a person's offsets (`offset_m`) are this many times larger.
+        difficult_error_m: such a person has one chosen arm the detector gets grossly wrong: its wrist sits this
+            far (metres, a direction drawn per person in the forearm's frame, the same in every camera) from
+            the truth's, its elbow half as far, whenever the arm is in a bad episode.
+        difficult_share: the share of the person's visit the chosen arm is in a bad episode (episodes come and
+            go with the offsets' correlation time `offset_time_s`; the arm and direction hold for the visit).
     """
 
     noise_frac: float
@@ -97,6 +107,10 @@ class DetectorParams(NamedTuple):
     score_visible: float
     score_occluded: float
     score_std: float
+    difficult_rate: float = 0.0
+    difficult_offset_scale: float = 1.0
+    difficult_error_m: float = 0.0
+    difficult_share: float = 0.0
 
 
 _NONE = (0.0,) * len(JOINT_GROUPS)
@@ -144,6 +158,10 @@ PROFILES: dict[DetectorProfile, DetectorParams] = {
 
 MAX_PHANTOM_RATE = 100.0  # phantom skeletons per frame, on average
 MAX_TIME_S = 3600.0  # correlation times: an hour is already "constant over any recording"
+MIN_OFFSET_TAIL_DOF = 1.0
+"""The heaviest tail a person's offsets may have: a Cauchy's (1 degree of freedom). The offsets' Student-t is a
+scale mixture per person and joint (`sim.sensing.offsets`), which needs no finite variance; real OpenPose's p99
+on Shelf (0.374 of the person's size against a median of 0.028) needs tails heavier than 2 degrees of freedom."""
 
 
 @dataclass(frozen=True)
@@ -168,7 +186,7 @@ class DetectorConfig:
     occluded_noise_scale: float | None = bounded(None, 1.0, 100.0, unit="times")
     self_occluded_noise_scale: float | None = bounded(None, 1.0, 100.0, unit="times")
     offset_m: Groups | None = bounded(None, 0.0, 1.0)
-    offset_tail_dof: float | None = bounded(None, 2.0, low_open=True, finite=False, unit="degrees of freedom")
+    offset_tail_dof: float | None = bounded(None, MIN_OFFSET_TAIL_DOF, finite=False, unit="degrees of freedom")
     offset_time_s: float | None = bounded(None, 0.0, MAX_TIME_S)
     lift_m: Groups | None = bounded(None, -1.0, 1.0)
     gross_error_prob: float | None = bounded(None, 0.0, 1.0)
@@ -188,6 +206,10 @@ class DetectorConfig:
     score_visible: float | None = bounded(None, 0.0, 1.0, unit="score")
     score_occluded: float | None = bounded(None, 0.0, 1.0, unit="score")
     score_std: float | None = bounded(None, 0.0, 1.0, unit="score")
+    difficult_rate: float | None = bounded(None, 0.0, 1.0, unit="share of people")
+    difficult_offset_scale: float | None = bounded(None, 1.0, 100.0, unit="times")
+    difficult_error_m: float | None = bounded(None, 0.0, 2.0)
+    difficult_share: float | None = bounded(None, 0.0, 1.0)
     self_hit_margin_m: float = bounded(0.2, 0.0, 2.0)
     occlusion: bool = True
 
