@@ -66,6 +66,8 @@ def test_a_fit_moves_toward_a_changed_profile_and_writes_a_profile_scenarios_acc
     profile.write_text('base = "typical"\njoint_miss_prob = [0.08, 0.0653, 0.134, 0.45, 0.0337, 0.04, 0.06]\n'
                        "phantom_rate = 0.9\n")
     shelf = scenario_mod.resolve_path("shelf").read_text().replace('profile = "typical"', f'profile = "{profile}"')
+    rig = scenario_mod.SCENARIO_DIR / "calibrations" / "shelf_calibration.json"  # (the copy is elsewhere)
+    shelf = shelf.replace('"calibrations/shelf_calibration.json"', f'"{rig}"')
     (tmp_path / "s.toml").write_text(shelf)
     rec, fitted = tmp_path / "p.mcap", tmp_path / "fitted.toml"
     assert main(["--no-progress", "generate", str(tmp_path / "s.toml"), "-o", str(rec), "--duration", "4"]) == 0

@@ -286,8 +286,10 @@ def test_coco17_detections_beside_the_published_14_joint_truth_are_measured_alik
 
 def test_the_ideal_detector_measures_no_error_in_a_generated_recording(tmp_path):
     out = tmp_path / "shelf.mcap"
-    pipeline.generate(scenario_mod.load("shelf", {"duration_s": 1.0, "seed": 0, "detector.profile": "ideal"}), out,
-                      progress=False)
+    # (No occlusion: on the Shelf rig a person behind the shelf unit or another person is hidden from a camera
+    # now and then, and even the ideal detector misses whom it cannot see.)
+    pipeline.generate(scenario_mod.load("shelf", {"duration_s": 1.0, "seed": 0, "detector.profile": "ideal",
+                                                  "detector.occlusion": False}), out, progress=False)
     stats = recording_detector_stats(out)
     assert stats["matched_detections"] > 100
     assert 350 < stats["person_size_px_median"] < 450  # px: the shelf rig sees people at about Shelf's size
