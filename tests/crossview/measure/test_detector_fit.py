@@ -55,6 +55,17 @@ def test_each_fitted_parameter_moves_toward_its_statistic():
     # No statistic for the head: its parameters stay.
     head = JOINT_GROUPS.index("head")
     assert moved.offset_m[head] == TYPICAL.offset_m[head] and moved.lift_m[head] == TYPICAL.lift_m[head]
+    # What occlusion misses is lowered only once a group's (or the person-view's) own miss probability is 0.
+    assert moved.occluded_drop_prob == TYPICAL.occluded_drop_prob
+    hips = JOINT_GROUPS.index("hips")
+    floor = TYPICAL._replace(joint_miss_prob=tuple(0.0 if g == hips else p for g, p in
+                                                   enumerate(TYPICAL.joint_miss_prob)), miss_prob=0.0)
+    too_many = copy.deepcopy(target)
+    too_many["per_group"]["hips"]["miss_rate"] = 2 * target["per_group"]["hips"]["miss_rate"]
+    too_many["missed_person_view_rate"] = 2 * target["missed_person_view_rate"]
+    lowered = detector_fit.update(floor, too_many, target)
+    assert lowered.occluded_drop_prob < TYPICAL.occluded_drop_prob
+    assert lowered.miss_occlusion_gain < TYPICAL.miss_occlusion_gain
     # A table that meets the target changes nothing.
     assert detector_fit.update(TYPICAL, target, target) == TYPICAL
     assert max(abs(d) for d in detector_fit.deviations(target, target).values()) == 0.0
