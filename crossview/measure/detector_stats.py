@@ -548,6 +548,12 @@ def _fmt(value, kind: str) -> str:
     return f"{value:.3f}"
 
 
+def _people(spread: dict) -> str:
+    """The per-person spread for the table: the share and how many people it is of."""
+    share = spread.get("bad_limb_person_share")
+    return "-" if share is None else f"{100 * share:.0f} % of {spread['people_measured']}"
+
+
 def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
                           reference_label: str = SHELF_OPENPOSE_LABEL) -> str:
     """The statistics table: the measured figures beside `reference` (by default real OpenPose on Shelf), whose
@@ -591,6 +597,9 @@ def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
             lines.append(label)
             continue
         lines.append(f"{label:<56}{_fmt(measured.get(key), kind):>12}{_fmt(ref.get(key), kind):>24}")
+    spread, ref_spread = stats.get("per_person") or {}, reference.get("per_person") or {}
+    lines.append(f"{f'people with a limb error > {BAD_LIMB_FACTOR:g} x the median (of people measured)':<56}"
+                 f"{_people(spread):>12}{_people(ref_spread):>24}")
     if stats["per_camera"]:
         lines += ["", f"{'camera':<16}{'frames':>8}{'matched':>9}{'error/size':>12}{'joint miss':>12}"
                       f"{'missed views':>14}{'FP / frame':>12}"]

@@ -219,6 +219,8 @@ def test_the_per_person_spread_names_the_share_of_people_with_a_bad_limb():
     assert spread["limb_error_median"] == pytest.approx(0.02)
     assert 0.15 > BAD_LIMB_FACTOR * 0.02
     assert spread["bad_limb_person_share"] == pytest.approx(1 / 3)
+    table = format_detector_stats(detector_stats(frames, [CAM], COCO17))
+    assert "people with a limb error > 2 x the median" in table and "33 % of 3" in table
     # Seen in fewer than MIN_PERSON_JOINT_VIEWS frames, nobody is measured.
     assert detector_stats(frames[:10], [CAM], COCO17)["per_person"]["people_measured"] == 0
 
