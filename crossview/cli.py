@@ -679,7 +679,8 @@ def _cmd_fit_detector(args) -> None:
             scenario = pipeline.load_scenario(args.scenario)
     else:
         if target_file is None:
-            # Its false-positive people count a person the annotation leaves out: no target (data/README.md).
+            # Its false-positive people count a person the annotation leaves out: no target
+            # (crossview/measure/data/README.md).
             target = {k: v for k, v in SHELF_OPENPOSE.items() if k not in NOT_TARGETS}
             where, label = "real OpenPose on the Shelf dataset (shelf-openpose)", SHELF_OPENPOSE_LABEL
         else:
