@@ -65,6 +65,14 @@ MAX_SPEED_M_S = 2.0
 MAX_TURN_RAD_S = 3.0
 # A walker who has not moved for this long gives up on the current goal (a stop on the way is shorter).
 STUCK_S = 4.0
+# Small steps of someone standing (at a shelf, a place, the counter): now and then (exponential gaps of mean
+# SHUFFLE_GAP_S) a step of SHUFFLE_S toward a point within SHUFFLE_RADIUS_M of where they started to stand, as
+# people shift their feet, turn a little or edge along a shelf. Set from real actors standing at Shelf's shelf
+# (25 fps): their hips move a median 0.087 m/s over one second, p95 0.32 (`crossview world-stats` reports the
+# same figures, `hip_speed_standing_1s_*`; docs/scenarios.md).
+SHUFFLE_GAP_S = 1.0
+SHUFFLE_S = (0.8, 1.6)
+SHUFFLE_RADIUS_M = 0.3
 # A walker's pace is redrawn after this long (seconds, min and max).
 PACE_HOLD_S = (2.0, 6.0)
 # Walkers stop on the way only with at least this much path left, and turn this far (radians) to look.
@@ -168,7 +176,7 @@ class _Agent:
 
     __slots__ = ("activity", "path", "rest", "goal_kind", "goal", "goal_heading", "goal_top", "until", "depart_at",
                  "stuck", "leaving", "in_door", "checked_out", "pace", "pace_until", "next_pause", "pause_until",
-                 "pause_heading")
+                 "pause_heading", "anchor", "shuffle_vel", "shuffle_until", "next_shuffle")
 
     def __init__(self):
         self.activity = Activity.WALK
@@ -189,6 +197,10 @@ class _Agent:
         self.leaving = False
         self.in_door = False
         self.checked_out = False
+        self.anchor = (0.0, 0.0)  # where a standing person started to stand
+        self.shuffle_vel = (0.0, 0.0)  # the wished velocity of a small step
+        self.shuffle_until = -math.inf
+        self.next_shuffle = math.inf
 
 
 class Crowd:
@@ -233,6 +245,9 @@ class Crowd:
         # The same arrays as the gait kernel takes them (written in place, never replaced).
         self._gait = Gait(self.phase, self.stride, self.feet, self.liftoff, self.swing_len)
         self.gestures = Gestures(S, rng, config)
+        # The standing people's small steps draw from a stream of their own (spawned: the crowd's stream is
+        # not advanced), so that they do not change where anybody goes.
+        self._shuffle_rng = rng.spawn(1)[0]
         self.arrivals = 0
         self.departures = 0
         self.agents = [_Agent() for _ in range(S)]
@@ -407,6 +422,9 @@ class Crowd:
         agent.activity = kind
         agent.path = []
         agent.rest = []
+        agent.anchor = tuple(self.pos[s].tolist())
+        agent.shuffle_until = -math.inf
+        agent.next_shuffle = self.time_s + self._shuffle_rng.exponential(SHUFFLE_GAP_S)
         if kind == Activity.STAND:
             agent.until = self.time_s + rng.uniform(*cfg.stand_s)
         elif kind in (Activity.BROWSE, Activity.CHECKOUT):
@@ -474,6 +492,10 @@ class Crowd:
             if agent.activity != _WALK:
                 if agent.goal_heading is not None:
                     want_heading[s] = agent.goal_heading
+                if t >= agent.next_shuffle:
+                    self._shuffle(agent, px, py, t)
+                if t < agent.shuffle_until:
+                    want[s] = agent.shuffle_vel
                 if t >= agent.until:
                     self._choose_goal(s)
         # 3. Local avoidance against predicted close passes; near a shelf, no steering into it and a gentle
@@ -493,6 +515,17 @@ class Crowd:
         _turn_and_gait_kernel(old, new, want_heading, active, self.height, self.vel, self.heading, self.omega,
                               self._gait)
         self.gestures.update(t, dt, self.person_id, self.activities(), self.height)
+
+    def _shuffle(self, agent: _Agent, px: float, py: float, t: float) -> None:
+        """A standing person's next small step (`SHUFFLE_GAP_S`): toward a point within SHUFFLE_RADIUS_M of
+        where they started to stand, over a duration drawn from SHUFFLE_S."""
+        rng = self._shuffle_rng
+        r, angle, duration = (SHUFFLE_RADIUS_M * math.sqrt(rng.random()), rng.uniform(0.0, 2.0 * math.pi),
+                              rng.uniform(*SHUFFLE_S))
+        tx, ty = agent.anchor[0] + r * math.cos(angle), agent.anchor[1] + r * math.sin(angle)
+        agent.shuffle_vel = ((tx - px) / duration, (ty - py) / duration)
+        agent.shuffle_until = t + duration
+        agent.next_shuffle = t + duration + rng.exponential(SHUFFLE_GAP_S)
 
     def _pausing(self, s: int, agent: _Agent, t: float, left_m: float) -> bool:
         """Whether a walker stands still on the way now (stopping to look at something, turned to one side),

@@ -75,7 +75,7 @@ FIDGET_HOLD_S = (0.0, 0.4)
 # The second sinusoid's frequency ratio (irrational: the figure never closes).
 GOLDEN = (1 + 5 ** 0.5) / 2
 # Liveliness: each person's amplitudes are scaled by a factor drawn from this range.
-LIVELINESS = (0.7, 1.7)
+LIVELINESS = (0.25, 0.7)
 
 # Reaching: the wrist goes this far in front of the pelvis (people stand `StoreGeometry.browse_spots`'s 0.5 m
 # from a shelf face; the fingers reach about 0.15 m beyond the wrist), plus up to REACH_DEPTH_M into the shelf.
@@ -126,9 +126,9 @@ GLANCE_HOLD_S = (0.5, 2.0)
 # Weight shifts of someone standing: the pelvis moves this far toward one foot in SHIFT_MOVE_S and stays
 # SHIFT_HOLD_S: slowly and most of the time, as standing people sway (their hips then move a median 0.006-0.008
 # m/s, within the 0.5-1 cm/s that a quietly standing body's centre of mass sways at).
-SHIFT_M = (0.01, 0.04)
-SHIFT_MOVE_S = (1.5, 4.0)
-SHIFT_HOLD_S = (0.0, 1.5)
+SHIFT_M = (0.02, 0.06)
+SHIFT_MOVE_S = (0.8, 2.0)
+SHIFT_HOLD_S = (0.0, 1.0)
 
 
 

@@ -18,6 +18,10 @@ a real one (`crossview convert` of a dataset folder with 3D truth) give comparab
   without a matched detection is a missed person-view.
 - **Joint miss**: a matched detection lacks a joint that is inside the image. Persistence and the lag-1
   correlation pair the same person, joint and camera in consecutive frames of that camera.
+- **Per person**: each true person's limb error is the worst of the mean errors / size of its elbows, wrists,
+  knees and ankles over all its matched views (`LIMB_JOINTS`, each measured in at least
+  `MIN_PERSON_JOINT_VIEWS` views); `per_person` gives them, their median over the people and the share of
+  people above `BAD_LIMB_FACTOR` x that median: the people a detector keeps getting wrong.
 - **Cross-view agreement**: the matched detections of one person in the frames of different cameras
   captured within half a frame interval (`CROSS_VIEW_WINDOW_FRAC`) of each other are triangulated per joint
   (DLT, at least `CROSS_VIEW_MIN_VIEWS` views): how far the detections lie from the point they agree on
@@ -29,9 +33,12 @@ empty, so such a frame says nothing about the detector (a synthetic store that i
 
 from __future__ import annotations
 
+import json
+import math
 from collections import defaultdict
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -68,30 +75,76 @@ MIN_MATCHED_DETECTIONS = 20
 CROSS_VIEW_WINDOW_FRAC = 0.5
 """Frames of different cameras captured within this fraction of the rig's median frame interval of the first
 frame of a group are taken as one instant for the cross-view figures."""
+BAD_LIMB_FACTOR = 2.0
+"""A person whose limb error (`per_person`) is above this many times the crowd's median is one the detector
+keeps getting wrong."""
+LIMB_JOINTS = ("elbow", "wrist", "knee", "ankle")
+"""The joints of a person's limb error: the worst of their mean errors."""
+MIN_PERSON_JOINT_VIEWS = 25
+"""A person's joint measured in fewer matched views than this (a second at 25 fps) is left out of its limb error."""
 CROSS_VIEW_MIN_VIEWS = 3
 """A joint is triangulated for the cross-view figures from at least this many views (two views always agree
 up to the epipolar constraint)."""
 
-# OpenPose (BODY25) on the Shelf dataset (Belagiannis et al., CVPR 2014; 5 cameras, 1032 x 776, 301 frames),
-# against its annotated 3D joints projected into each camera, person size about 400 px; measured for this
-# project on 2026-11-27 by the definitions of this module. A pair is a range over the joints of the group.
-SHELF_OPENPOSE: dict = {
-    "error_over_size_median": 0.027, "error_over_size_p90": 0.060, "error_over_size_p99": 0.162,
-    "lag1_error_correlation": (0.83, 0.94), "gross_error_rate": 0.0073, "miss_rate": 0.104,
-    "miss_persistence": 0.86, "missed_person_view_rate": 0.038, "false_positive_people_per_frame": 0.29,
-    "false_positive_people_ge6_per_frame": 0.18, "cross_view_reprojection_px_at_400": 5.0,
-    "per_group": {
-        "wrists": {"error_over_size_median": 0.036, "vertical_offset_px_at_400": (-8.0, -6.0),
-                   "miss_rate": (0.19, 0.23), "cross_view_error_m": (0.05, 0.08)},
-        "hips": {"error_over_size_median": 0.044, "vertical_offset_px_at_400": (-12.0, -11.0), "miss_rate": 0.05,
-                 "cross_view_error_m": (0.05, 0.08)},
-        "shoulders": {"error_over_size_median": 0.028, "vertical_offset_px_at_400": -7.0, "miss_rate": 0.075},
-        "elbows": {"error_over_size_median": 0.023, "vertical_offset_px_at_400": (-4.0, -3.0),
-                   "miss_rate": (0.14, 0.16)},
-        "ankles": {"error_over_size_median": 0.020},
-        "knees": {},
-    },
-}
+SHELF_OPENPOSE_FILE = Path(__file__).with_name("data") / "shelf-openpose-detector-stats.json"
+"""Real OpenPose (BODY25) on the Shelf dataset (Belagiannis et al., CVPR 2014; 5 cameras, 1032 x 776, 25 fps),
+measured by this module (`crossview detector-stats -o`) against the dataset's annotated 3D joints; source and
+licence in crossview/measure/data/README.md."""
+SHELF_OPENPOSE_LABEL = "real OpenPose, Shelf"
+
+FIGURE_KEYS = (
+    "error_over_size_median", "error_over_size_p90", "error_over_size_p99", "gross_error_rate",
+    "vertical_offset_px_at_400", "lag1_error_correlation", "miss_rate", "miss_persistence",
+    "cross_view_reprojection_px_at_400", "cross_view_error_m",
+)
+"""The figures a statistics file holds for all joints and for each joint group (`per_group`)."""
+TOTAL_KEYS = ("missed_person_view_rate", "false_positive_people_per_frame", "false_positive_people_ge6_per_frame")
+"""The figures a statistics file holds for all joints only."""
+
+
+def read_stats_file(path) -> dict:
+    """A statistics table written by `crossview detector-stats -o`, checked: a JSON object with every key of
+    `FIGURE_KEYS` and `TOTAL_KEYS` at the top and `FIGURE_KEYS` for each of `GROUPS` under `per_group`, each a
+    finite number or null (nothing measured).
+
+    Raises:
+        CrossviewError: the file is unreadable or is not such a table; the message names the file and the key.
+    """
+    try:
+        stats = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise CrossviewError(f"{path}: no such file (a detector statistics file: `crossview detector-stats REC "
+                             "-o FILE.json`)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise CrossviewError(f"{path}: cannot read it: {e}") from None
+    except json.JSONDecodeError as e:
+        raise CrossviewError(f"{path}: not JSON ({e}); a detector statistics file is what `crossview "
+                             "detector-stats REC -o FILE.json` writes") from None
+    if not isinstance(stats, dict) or not isinstance(stats.get("per_group"), dict):
+        raise CrossviewError(f"{path}: per_group: missing; not a detector statistics file (what `crossview "
+                             "detector-stats REC -o FILE.json` writes)")
+    tables = [("", stats, FIGURE_KEYS + TOTAL_KEYS)]
+    for g in GROUPS:
+        table = stats["per_group"].get(g)
+        if not isinstance(table, dict):
+            raise CrossviewError(f"{path}: per_group.{g}: missing; a detector statistics file has the groups "
+                                 f"{', '.join(GROUPS)}")
+        tables.append((f"per_group.{g}.", table, FIGURE_KEYS))
+    for prefix, table, keys in tables:
+        for key in keys:
+            if key not in table:
+                raise CrossviewError(f"{path}: {prefix}{key}: missing; a detector statistics file has every key "
+                                     "`crossview detector-stats -o` writes")
+            v = table[key]
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
+                raise CrossviewError(f"{path}: {prefix}{key}: {v!r} is not a finite number (nor null, nothing "
+                                     "measured)")
+    return stats
+
+
+SHELF_OPENPOSE: dict = read_stats_file(SHELF_OPENPOSE_FILE)
+"""`SHELF_OPENPOSE_FILE`'s table: the reference beside which `format_detector_stats` prints, and the target of
+`crossview fit-detector --target shelf-openpose`."""
 
 
 def joint_indices(skeleton: Skeleton) -> np.ndarray:
@@ -201,6 +254,7 @@ class DetectorStatsAccumulator:
         """The figures (see the module docstring); None where nothing was measured."""
         records = self._records
         views = [(r.camera, v) for r in records for v in r.views.values()]
+        person_of = np.array([pid for r in records for pid in r.views], dtype=np.int64)
         frames_measured = sum(c["frames"] for c in self._counts)
         members = group_members()
         err = np.array([v.error for _, v in views], dtype=np.float64).reshape(-1, 12, 2)
@@ -248,6 +302,7 @@ class DetectorStatsAccumulator:
             "per_joint": {name: figures([j]) for j, name in enumerate(JOINTS_12)},
             "per_group": {g: figures(js) for g, js in members.items()},
             "per_camera": {},
+            "per_person": _per_person(person_of, norm),
         })
         for c, cam in enumerate(self.cameras):
             counts = self._counts[c]
@@ -264,6 +319,32 @@ class DetectorStatsAccumulator:
                 "false_positive_people_per_frame": _ratio(counts["false_positive_people"], counts["frames"]),
             }
         return stats
+
+
+def _per_person(person_of: np.ndarray, norm: np.ndarray) -> dict:
+    """The per-person spread (module docstring, "Per person").
+
+    Args:
+        person_of: (N,) the true person of each matched view; norm: (N, 12) its joints' error / size (NaN: not
+            measured).
+    """
+    limbs = [i for i, name in enumerate(JOINTS_12) if name.split("_", 1)[1] in LIMB_JOINTS]
+    by_person = {}
+    for pid in np.unique(person_of).tolist():
+        e = norm[person_of == pid][:, limbs]
+        counts = np.isfinite(e).sum(axis=0)
+        if not (counts >= MIN_PERSON_JOINT_VIEWS).any():
+            continue
+        with np.errstate(invalid="ignore"):
+            means = np.nansum(e, axis=0) / np.maximum(counts, 1)
+        by_person[str(pid)] = float(means[counts >= MIN_PERSON_JOINT_VIEWS].max())
+    values = np.array(list(by_person.values()))
+    median = float(np.median(values)) if values.size else None
+    return {
+        "people_measured": len(by_person), "limb_error_median": median, "bad_limb_factor": BAD_LIMB_FACTOR,
+        "bad_limb_person_share": None if median is None else float(np.mean(values > BAD_LIMB_FACTOR * median)),
+        "limb_error_by_person": by_person,
+    }
 
 
 def _match(truth_px: np.ndarray, size_px: np.ndarray, detections_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -467,8 +548,16 @@ def _fmt(value, kind: str) -> str:
     return f"{value:.3f}"
 
 
-def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE) -> str:
-    """The statistics table: the measured figures beside `reference` (real OpenPose on Shelf)."""
+def _people(spread: dict) -> str:
+    """The per-person spread for the table: the share and how many people it is of."""
+    share = spread.get("bad_limb_person_share")
+    return "-" if share is None else f"{100 * share:.0f} % of {spread['people_measured']}"
+
+
+def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
+                          reference_label: str = SHELF_OPENPOSE_LABEL) -> str:
+    """The statistics table: the measured figures beside `reference` (by default real OpenPose on Shelf), whose
+    column is headed `reference_label`."""
     groups, ref_groups = stats["per_group"], reference.get("per_group", {})
     rows = [("joint error / person size: median", stats, reference, "error_over_size_median", ""),
             ("  p90", stats, reference, "error_over_size_p90", ""),
@@ -502,12 +591,15 @@ def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE) -> str:
              f"time), {stats['matched_detections']} matched detections, {stats['person_views']} person-views, "
              f"person size median {'-' if size is None else f'{size:.0f}'} px, "
              f"{stats['cross_view_joints']} joints triangulated across views",
-             f"{'statistic':<56}{'measured':>12}{'real OpenPose, Shelf':>24}"]
+             f"{'statistic':<56}{'measured':>12}{reference_label[:22]:>24}"]
     for label, measured, ref, key, kind in rows:
         if measured is None:
             lines.append(label)
             continue
         lines.append(f"{label:<56}{_fmt(measured.get(key), kind):>12}{_fmt(ref.get(key), kind):>24}")
+    spread, ref_spread = stats.get("per_person") or {}, reference.get("per_person") or {}
+    lines.append(f"{f'people with a limb error > {BAD_LIMB_FACTOR:g} x the median (of people measured)':<56}"
+                 f"{_people(spread):>12}{_people(ref_spread):>24}")
     if stats["per_camera"]:
         lines += ["", f"{'camera':<16}{'frames':>8}{'matched':>9}{'error/size':>12}{'joint miss':>12}"
                       f"{'missed views':>14}{'FP / frame':>12}"]

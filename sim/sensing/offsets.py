@@ -12,8 +12,16 @@ joint j carries an offset
 with g the joint's group, B_j the frame of the joint's body segment (the limb from its parent joint, or the
 torso), s_j a Student-t scale per axis (heavy tails across people and joints), u_j(t) a unit-variance random
 process with correlation exp(-|Δt| / offset_time_s) per axis (random Fourier features of that kernel) and z
-the world's up. Everything about a person is drawn from the person's id and the detector's seed alone, so the
-offsets do not depend on which camera asks, in which process, or in which order.
+the world's up.
+
+People a detector keeps getting wrong (`difficult_rate` of them, drawn systematically over the people in the
+order they enter, so that any N people in a row hold floor or ceil of rate x N of them whatever the seed:
+`is_difficult`) have their offsets scaled by `difficult_offset_scale` and one arm, chosen per person, grossly
+wrong during bad episodes: its wrist `difficult_error_m` from the truth's (its elbow half that), in a direction
+drawn per person in the forearm's frame, the same for every camera (so a tracker cannot vote it away), the
+arm in a bad episode while a second unit-variance process of the same kind is above the level it exceeds a
+share `difficult_share` of the time. Everything about a person is drawn from the person's id and the
+detector's seed alone, so the offsets do not depend on which camera asks, in which process, or in which order.
 
 The offsets live on the truth's ticks (`core.truth.TRUTH_RATE_HZ`): one per person and tick, shared by every
 camera capturing in it. Each feature's cos(ω_k t + φ_k) is a phasor turned by ω_k / TRUTH_RATE_HZ from tick to
@@ -28,6 +36,7 @@ the first 30 s, 1e-8 an hour in (under a nanometre of offset).
 from __future__ import annotations
 
 import math
+from statistics import NormalDist
 
 import numpy as np
 
@@ -41,6 +50,16 @@ _FEATURES = 6  # random Fourier features per axis: enough for a near-Gaussian ma
 ANCHOR_TICKS = 32  # the features' phasors are evaluated directly at every ANCHOR_TICKS-th tick, turned between
 _SIDES = ("left_", "right_")
 _PARENT = {"elbow": "shoulder", "wrist": "elbow", "knee": "hip", "ankle": "knee"}
+_PHASE_KEY = 0x0D1FF1C  # the detector seed's stream for the phase of the difficult people's systematic draw
+_DIFFICULT_KEY = 1  # a person's stream for its difficulty's draws: [seed, person id, _DIFFICULT_KEY]
+
+
+def is_difficult(person_ids: np.ndarray, rate: float, phase: float) -> np.ndarray:
+    """(N,) bool: person k is one the detector keeps getting wrong when floor(rate (k + 1) + phase) >
+    floor(rate k + phase) (a systematic draw at `rate` with a random start `phase` in [0, 1)): any N consecutive
+    ids hold floor or ceil of rate x N such people."""
+    k = np.asarray(person_ids, dtype=np.float64)
+    return np.floor(rate * (k + 1.0) + phase) > np.floor(rate * k + phase)
 
 
 class JointOffsets:
@@ -56,7 +75,17 @@ class JointOffsets:
         group = joint_groups(skeleton)
         self.std_m = np.asarray(params.offset_m, dtype=np.float64)[group]  # (J,)
         self.lift_m = np.asarray(params.lift_m, dtype=np.float64)[group]  # (J,)
-        self.active = bool(self.std_m.any() or self.lift_m.any())
+        self._rate = float(params.difficult_rate)
+        self._difficult_scale = float(params.difficult_offset_scale)
+        self._difficult_m = float(params.difficult_error_m)
+        share = float(params.difficult_share)
+        # The level a unit-variance (near-Gaussian) process exceeds the share `difficult_share` of the time.
+        self._episode_level = math.inf if share <= 0.0 else -math.inf if share >= 1.0 else \
+            NormalDist().inv_cdf(1.0 - share)
+        self._phase = float(np.random.default_rng([int(seed), _PHASE_KEY]).random())
+        self._difficulty = self._rate > 0.0 and (self._difficult_scale != 1.0 or (
+            self._difficult_m > 0.0 and share > 0.0))
+        self.active = bool(self.std_m.any() or self.lift_m.any() or self._difficulty)
         self._dof = float(params.offset_tail_dof)
         self._time_s = float(params.offset_time_s)
         self._seed = int(seed)
@@ -72,12 +101,19 @@ class JointOffsets:
                         self._parent[i] = index[side + parent]
         self._torso = np.array([index.get(n, -1) for n in ("left_hip", "right_hip", "left_shoulder", "right_shoulder")],
                                dtype=np.int64)
+        # Each side's arm (elbow, wrist) for a difficult person's gross error (-1: the layout lacks it).
+        self._arms = [(index.get(side + "elbow", -1), index.get(side + "wrist", -1)) for side in _SIDES]
         self._slot_of: dict[int, int] = {}
         # Per person (a row each): the features' angular frequencies (rad/s), phases and turn per tick
         # (cos, sin of ω / TRUTH_RATE_HZ), (S, J, 3, 4, K), and each axis's amplitude (S, J, 3): offset_m x the
         # person's Student-t scale x sqrt(2 / K).
         self._fourier = np.empty((0, self._J, 3, 4, _FEATURES))
         self._amplitude_m = np.empty((0, self._J, 3))
+        # Per person: the bad episodes' process (S, 1, 3, 4, K; its first axis is used) and the gross error of the
+        # chosen arm in the segment frames (S, J, 3), zero for people who are not difficult.
+        self._episode = np.empty((0, 1, 3, 4, _FEATURES))
+        self._gross_m = np.empty((0, self._J, 3))
+        self._any_difficult = False
 
     def offsets(self, person_ids: np.ndarray, ticks: np.ndarray, poses: np.ndarray) -> np.ndarray:
         """(N, J, 3) where the detector's joints lie relative to the truth's, metres (world frame).
@@ -97,6 +133,12 @@ class JointOffsets:
         local = np.empty((N, self._J, 3))
         fourier_sums(slots, ticks, np.lexsort((ticks, slots)), self._fourier, ANCHOR_TICKS, TRUTH_RATE_HZ, local)
         local *= self._amplitude_m[slots]  # (N, J, 3)
+        if self._any_difficult:
+            episode = np.empty((N, 1, 3))
+            fourier_sums(slots, ticks, np.lexsort((ticks, slots)), self._episode, ANCHOR_TICKS, TRUTH_RATE_HZ,
+                         episode)
+            bad = episode[:, 0, 0] * math.sqrt(2.0 / _FEATURES) > self._episode_level  # (N,)
+            local += self._gross_m[slots] * bad[:, None, None]
         world = np.empty((N, self._J, 3))
         segment_frames_to_world(np.ascontiguousarray(poses, dtype=np.float64), self._parent, self._torso, local,
                                 self.lift_m, world)
@@ -109,6 +151,9 @@ class JointOffsets:
         if new:
             J = self._J
             fourier, scale = np.empty((len(new), J, 3, 4, _FEATURES)), np.empty((len(new), J, 3))
+            episode, gross = np.zeros((len(new), 1, 3, 4, _FEATURES)), np.zeros((len(new), J, 3))
+            difficult = is_difficult(np.array(new), self._rate, self._phase) if self._difficulty \
+                else np.zeros(len(new), dtype=bool)
             for i, pid in enumerate(new):
                 rng = np.random.default_rng([self._seed, pid])
                 omega = rng.standard_cauchy((J, 3, _FEATURES))
@@ -118,11 +163,35 @@ class JointOffsets:
                 fourier[i, :, :, 3] = np.sin(fourier[i, :, :, 0] / TRUTH_RATE_HZ)
                 # Student-t scale mixture: N(0, 1) x sqrt(dof / chi2(dof)) is Student-t.
                 scale[i] = np.sqrt(self._dof / rng.chisquare(self._dof, (J, 3))) if math.isfinite(self._dof) else 1.0
+                if difficult[i]:
+                    scale[i] *= self._difficult_scale
+                    self._draw_difficulty(np.random.default_rng([self._seed, pid, _DIFFICULT_KEY]), episode[i],
+                                          gross[i])
                 slot_of[pid] = len(self._fourier) + i
             self._fourier = np.concatenate([self._fourier, fourier])
+            self._episode = np.concatenate([self._episode, episode])
+            self._gross_m = np.concatenate([self._gross_m, gross])
+            self._any_difficult = self._any_difficult or bool(difficult.any())
             amplitude = self.std_m[None, :, None] * scale * math.sqrt(2.0 / _FEATURES)
             self._amplitude_m = np.concatenate([self._amplitude_m, amplitude])
         return np.array([slot_of[pid] for pid in person_ids.tolist()], dtype=np.int64)
+
+    def _draw_difficulty(self, rng: np.random.Generator, episode: np.ndarray, gross: np.ndarray) -> None:
+        """A difficult person's bad episodes' process (written into `episode`, (1, 3, 4, K)) and its chosen
+        arm's gross error in the segment frames (into `gross`, (J, 3)): the wrist `difficult_error_m` away in a
+        uniformly drawn direction, the elbow half as far in the same one."""
+        omega = rng.standard_cauchy(_FEATURES)
+        episode[0, 0, 0] = omega / self._time_s if self._time_s > 0 else 0.0
+        episode[0, 0, 1] = rng.uniform(0.0, 2.0 * np.pi, _FEATURES)
+        episode[0, 0, 2] = np.cos(episode[0, 0, 0] / TRUTH_RATE_HZ)
+        episode[0, 0, 3] = np.sin(episode[0, 0, 0] / TRUTH_RATE_HZ)
+        elbow, wrist = self._arms[int(rng.integers(2))]
+        direction = rng.standard_normal(3)
+        direction /= max(float(np.linalg.norm(direction)), 1e-12)
+        if wrist >= 0:
+            gross[wrist] = self._difficult_m * direction
+        if elbow >= 0:
+            gross[elbow] = 0.5 * self._difficult_m * direction
 
 
 @jit

@@ -2,10 +2,12 @@
 
 Usage (from the repository root):
 
-    python tests/data/cut_fixtures.py --campus DIR --panoptic FILE
+    python tests/data/cut_fixtures.py --campus DIR --panoptic FILE [--shelf SHELF_FILE]
 
 DIR is a Campus dataset in the crossview layout (calibration.json, annotation_2d.json, annotation_3d.json and
-the paper authors' result_3d.json); FILE is the Panoptic dome calibration `calibration_160906_band1.json`.
+the paper authors' result_3d.json); FILE is the Panoptic dome calibration `calibration_160906_band1.json`;
+SHELF_FILE is the Shelf rig's calibration as the 4D Association code publishes it
+(zhangyux15/4d_association, `data/shelf/calibration.json`).
 Sources and licences: tests/data/README.md
 and scenarios/calibrations/README.md. The cut is deterministic: the same inputs give the same bytes.
 """
@@ -75,14 +77,42 @@ def cut_panoptic(source: Path, out: Path) -> None:
            "cameras": [c for c in calibration["cameras"] if c["type"] == PANOPTIC_KIND]}, out)
 
 
+def cut_shelf_rig(source: Path, out: Path) -> None:
+    """The Shelf rig's 5 cameras from 4D Association's calibration (per camera "K" 3x3 in pixels, "RT" the 3x4
+    world-to-camera [R | t] in metres, "imgSize") in the dataset layout `calibration_format = "dataset"` reads:
+    K normalised by the image size, Tw the camera-to-world 4x4 in centimetres, no distortion (none is given),
+    `image_wh` the image size."""
+    import numpy as np
+
+    calibration = json.loads(source.read_text())
+    cameras, sizes = {}, set()
+    for name in sorted(calibration, key=int):
+        c = calibration[name]
+        w, h = c["imgSize"]
+        sizes.add((w, h))
+        K = np.array(c["K"], dtype=float).reshape(3, 3)
+        K[0] /= w
+        K[1] /= h
+        world_to_camera = np.eye(4)
+        world_to_camera[:3] = np.array(c["RT"], dtype=float).reshape(3, 4)
+        Tw = np.linalg.inv(world_to_camera)
+        Tw[:3, 3] *= 100.0  # m -> cm
+        cameras[f"Camera{name}"] = {"K": K.tolist(), "Tw": Tw.tolist(), "dist_coeffs": [0.0, 0.0, 0.0, 0.0]}
+    (image_wh,) = sizes
+    _dump({"image_wh": list(image_wh), "cameras": cameras}, out)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--campus", type=Path, required=True, help="the Campus dataset folder (crossview layout)")
     parser.add_argument("--panoptic", type=Path, required=True, help="calibration_160906_band1.json")
+    parser.add_argument("--shelf", type=Path, help="4d_association's data/shelf/calibration.json (optional)")
     args = parser.parse_args()
     cut_campus(args.campus, HERE / "campus")
     cut_campus_rig(args.campus, REPO / "scenarios" / "calibrations" / "campus_calibration.json")
     cut_panoptic(args.panoptic, REPO / "scenarios" / "calibrations" / "panoptic_160906_hd.json")
+    if args.shelf is not None:
+        cut_shelf_rig(args.shelf, REPO / "scenarios" / "calibrations" / "shelf_calibration.json")
 
 
 if __name__ == "__main__":

@@ -414,3 +414,50 @@ def test_in_image_many_kernel_agrees_with_in_image_on_single_skeletons():
             assert px[0].tobytes() == ref_px.tobytes() and inside[0].tobytes() == ref_inside.tobytes()
             seen += int(ref_inside.sum())
         assert seen > 300  # plenty of the joints land in the image
+
+
+# Camera "0" of the Shelf calibration as its source publishes it (zhangyux15/4d_association,
+# data/shelf/calibration.json): K in pixels and the world-to-camera [R | t] in metres.
+SHELF_SOURCE_K0 = [[1063.5121, 0.0, 511.73825], [0.0, 1071.8636, 350.08829], [0.0, 0.0, 1.0]]
+SHELF_SOURCE_RT0 = [[0.65097713, -0.7587173, 0.02402735, -0.5942785],
+                    [-0.01886197, -0.04781039, -0.99867845, 0.9719739],
+                    [0.758863, 0.649664, -0.045434, 2.624511]]
+
+
+def test_shipped_shelf_scenario_is_the_real_shelf_rig_and_every_person_is_seen_by_three_cameras():
+    from core.types import COCO17
+    from crossview.measure.detector_stats import JOINTS_12
+    from sim.rng import child_rng
+    from sim.world import World
+
+    shelf = scenario_mod.load("shelf")
+    assert shelf.cameras.calibration_format is CalibrationFormat.DATASET
+    cams = build_rig(shelf, np.random.default_rng(0))
+    origin = np.array(shelf.cameras.calibration_origin_m)
+    assert [c.name for c in cams] == [f"Camera{i}" for i in range(5)]
+    assert all((c.width_px, c.height_px) == (1032, 776) for c in cams)
+    # Camera 0 projects as the source's K [R | t] does (OpenCV's projection, the points in the source's frame).
+    rt = np.array(SHELF_SOURCE_RT0)
+    points = np.array([[0.0, 0.0, 1.0], [0.5, -0.5, 0.2], [-0.3, 0.6, 1.6]])
+    expected, _ = cv2.projectPoints(points, cv2.Rodrigues(rt[:, :3])[0], rt[:, 3], np.array(SHELF_SOURCE_K0), None)
+    got, _ = in_image(cams[0], points + origin)
+    np.testing.assert_allclose(got, expected.reshape(-1, 2), atol=1e-3)  # px
+    # Over 20 s (two seeds), every person's 12 limb joints: at least half inside the images of 3 or more
+    # cameras nearly all the time, at about Shelf's person size (398 px).
+    joints = [COCO17.index(n) for n in JOINTS_12]
+    for seed in (0, 1):
+        world = World(shelf, child_rng(seed, "crowd"))
+        seen, sizes = {}, []
+        for k in range(20 * 5 + 1):
+            truth = world.advance(k / 5)
+            for i, pid in enumerate(truth.person_ids.tolist()):
+                views = 0
+                for cam in cams:
+                    px, inside = in_image(cam, truth.poses[i, joints])
+                    if inside.mean() >= 0.5:
+                        views += 1
+                        sizes.append(np.ptp(px[inside], axis=0).max())
+                seen.setdefault(pid, []).append(views)
+        assert len(seen) == shelf.crowd.people
+        assert all(np.mean(np.array(v) >= 3) >= 0.9 for v in seen.values()), seen
+        assert 300 < np.median(sizes) < 500  # px

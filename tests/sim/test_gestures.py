@@ -80,10 +80,13 @@ def test_standing_people_move_their_hands_and_walkers_swing_them(store_minute):
     assert out["wrist_speed_standing_frame_median_m_s"] >= 0.1
     assert 0.07 < out["wrist_speed_standing_1s_median_m_s"] < 0.3
     assert out["wrist_speed_walking_1s_median_m_s"] > 2 * out["wrist_speed_standing_1s_median_m_s"]
-    # Standing feet stay put and the hips sway slowly; walking moves both.
-    assert out["ankle_speed_standing_1s_median_m_s"] < 0.01
-    assert out["hip_speed_standing_1s_median_m_s"] < 0.05
-    assert out["hip_speed_walking_1s_median_m_s"] > 0.4
+    # Standing people shift their weight and take small steps (real actors at Shelf's shelf: hips at a median
+    # 0.087 m/s over one second, p95 0.32; the issue asks for a median of at least 0.05 and a p95 of at most
+    # 0.4); walking moves hips and feet far more.
+    assert out["hip_speed_standing_1s_median_m_s"] >= 0.05
+    assert out["hip_speed_standing_1s_p95_m_s"] <= 0.4
+    assert out["hip_speed_walking_1s_median_m_s"] > 0.4 > out["hip_speed_standing_1s_p95_m_s"] / 2
+    assert out["ankle_speed_walking_1s_median_m_s"] > 2 * out["ankle_speed_standing_1s_median_m_s"]
 
 
 def test_standing_people_reach_look_and_shift_their_weight(store_minute):

@@ -191,10 +191,13 @@ def _typical_detector(frames, cams, seed):
 def test_campus_pcp_with_typical_detector_noise(campus, tmp_path):
     root, cams, frames = campus
     result = _campus_pcp(root, cams, _typical_detector(frames, cams, seed=0), tmp_path)
-    # The paper's tracker scored 0.966 on Campus with a real detector. `typical`'s 2D errors alone (fitted to
-    # OpenPose on Shelf; without the detector's own joints, which need 3D poses) on the annotated joints score
-    # 0.988 on the full data and 0.959 on the fixture's short cut: not more than about a point below it.
-    assert result["average"] >= 0.95
+    # The paper's tracker scored 0.966 on Campus with a real detector. `typical`'s 2D errors alone (without the
+    # detector's own joints, which need 3D poses) on the annotated joints: fitted to a table of OpenPose on Shelf
+    # measured by another script (gross errors 0.73 %), they scored 0.959 on the fixture's short cut; refitted
+    # to OpenPose as detector-stats measures it (gross errors 2.27 %, lasting about 0.8 s) they score 0.884:
+    # a lasting gross error in one of Campus's three views costs the limb. Not more than about 8 points below
+    # the paper's real-detector figure (docs/sensor-model.md, "Calibration of typical").
+    assert result["average"] >= 0.87
 
 
 # ---------------------------------------------------------------------------------------------- export

@@ -179,3 +179,63 @@ def test_the_ideal_detector_finds_the_true_joints():
     assert not detector.offsets.active
     truth = PoseTruth(0.0, np.array([0]), TEMPLATE_COCO17[None] + [2.0, 1.5, 0.0])
     assert not detector.offsets.offsets(truth.person_ids, np.zeros(1), truth.poses).any()
+
+
+def _bad_arm(offsets: JointOffsets, ids: np.ndarray, ticks: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(N, 2) the offsets' length at each pose's left and right wrist (metres)."""
+    wrists = [COCO17.index("left_wrist"), COCO17.index("right_wrist")]
+    return np.linalg.norm(offsets.offsets(ids, ticks, poses)[:, wrists], axis=-1)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_a_crowd_holds_rate_times_n_difficult_people_whatever_the_seed(seed):
+    # Offsets of the difficult people's bad arm only, always in a bad episode: who has one is who is difficult.
+    offsets = _offsets(seed=seed, difficult_rate=0.25, difficult_error_m=0.4, difficult_share=1.0,
+                       offset_time_s=2.0)
+    n = 40
+    lengths = _bad_arm(offsets, np.arange(n), np.zeros(n, dtype=np.int64), _crowd(n))
+    difficult = (lengths > 0).any(axis=1)
+    assert difficult.sum() == 10  # 0.25 x 40, not a binomial's 10 +- 3
+    assert difficult[:4].sum() == 1 and difficult[:8].sum() == 2  # any 4 in a row hold one
+    # One arm each, its wrist difficult_error_m off (the elbow half that); everybody else's joints untouched.
+    np.testing.assert_allclose(np.sort(lengths[difficult], axis=1)[:, 1], 0.4)
+    assert (np.sort(lengths[difficult], axis=1)[:, 0] == 0).all()
+    assert (lengths[~difficult] == 0).all()
+
+
+def test_which_people_are_difficult_changes_with_the_seed_and_an_arm_is_bad_for_the_whole_visit():
+    n, poses = 40, _crowd(40)
+    who = [(_bad_arm(_offsets(seed=s, difficult_rate=0.25, difficult_error_m=0.4, difficult_share=1.0),
+                     np.arange(n), np.zeros(n, dtype=np.int64), poses) > 0).any(axis=1) for s in range(6)]
+    assert len({w.tobytes() for w in who}) > 1
+    # The share of the time the chosen arm is in a bad episode, and it is always the same arm.
+    offsets = _offsets(difficult_rate=1.0, difficult_error_m=0.4, difficult_share=0.3, offset_time_s=1.0)
+    ticks = np.arange(0, 400 * int(TRUTH_RATE_HZ), 7)  # 400 s
+    bad_share, arms = [], []
+    for pid in range(8):
+        lengths = _bad_arm(offsets, np.full(len(ticks), pid), ticks, np.repeat(_crowd(1), len(ticks), axis=0))
+        bad = (lengths > 0).any(axis=1)
+        bad_share.append(bad.mean())
+        arms.append(set(np.argmax(lengths[bad], axis=1).tolist()))
+    assert np.mean(bad_share) == pytest.approx(0.3, abs=0.06)
+    assert all(len(a) == 1 for a in arms)
+
+
+def test_a_difficult_persons_offsets_are_scaled_and_nobody_elses():
+    poses, ids, t = _crowd(12), np.arange(12), np.zeros(12, dtype=np.int64)
+    plain = _offsets(offset_m=(0.03,) * 7, offset_tail_dof=1.5).offsets(ids, t, poses)
+    scaled = _offsets(offset_m=(0.03,) * 7, offset_tail_dof=1.5, difficult_rate=0.25,
+                      difficult_offset_scale=3.0).offsets(ids, t, poses)
+    ratio = np.linalg.norm(scaled, axis=(1, 2)) / np.linalg.norm(plain, axis=(1, 2))
+    np.testing.assert_allclose(np.sort(ratio), [1.0] * 9 + [3.0] * 3, rtol=1e-9)
+
+
+@pytest.mark.parametrize(("knob", "value", "message"), [
+    ("difficult_rate", 1.5, r"difficult_rate: 1\.5 must be in \[0, 1\]"),
+    ("difficult_rate", -0.1, r"difficult_rate: -0\.1 must be in \[0, 1\]"),
+    ("offset_tail_dof", 0.5, r"offset_tail_dof: 0\.5 must be"),
+])
+def test_a_difficulty_rate_outside_0_1_and_a_tail_below_a_cauchys_are_refused(knob, value, message):
+    with pytest.raises(ValueError, match=message):
+        DetectorConfig(**{knob: value})
+    assert DetectorConfig(offset_tail_dof=1.0).params().offset_tail_dof == 1.0  # a Cauchy's tail is allowed
