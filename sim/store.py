@@ -12,7 +12,7 @@ from __future__ import annotations
 import enum
 import heapq
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -182,6 +182,8 @@ class StoreConfig:
     door_width_m: float = bounded(1.0, 0.7, 5.0)
     checkout_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
     checkout_size_m: tuple[float, float, float] = bounded((1.4, 0.6, 0.9), 0.0, MAX_FLOOR_M, low_open=True)
+    # Index of the first shelf that `aisles` expanded to (None: all written by hand), for error messages only.
+    first_expanded: int | None = field(default=None, init=False, compare=False, repr=False)
 
     def __post_init__(self):
         check_ranges(self)
@@ -191,6 +193,7 @@ class StoreConfig:
             # One layout path: the expanded shelves are what a hand-written layout lists, and the config is then
             # one (so that `dataclasses.replace` does not expand it twice).
             expanded = self.aisles.shelves(self.width_m, self.depth_m, self.ceiling_m)
+            object.__setattr__(self, "first_expanded", len(self.shelves))
             object.__setattr__(self, "shelves", self.shelves + expanded)
             object.__setattr__(self, "aisles", None)
         for i, shelf in enumerate(self.shelves):
@@ -335,9 +338,10 @@ class StoreGeometry:
         W, D = config.width_m, config.depth_m
         obstacles = []
         for i, shelf in enumerate(config.shelves):
-            obstacles.append(Obstacle(f"store.shelves[{i}]", np.array(shelf.center_m, float),
-                                      np.array(shelf.size_m[:2], float) / 2, math.radians(shelf.yaw_deg),
-                                      shelf.size_m[2]))
+            expanded = config.first_expanded is not None and i >= config.first_expanded
+            key = f"store.shelves[{i}]{' (of store.aisles)' if expanded else ''}"
+            obstacles.append(Obstacle(key, np.array(shelf.center_m, float), np.array(shelf.size_m[:2], float) / 2,
+                                      math.radians(shelf.yaw_deg), shelf.size_m[2]))
         if config.checkout_m is not None:
             obstacles.append(Obstacle("store.checkout_m", np.array(config.checkout_m, float),
                                       np.array(config.checkout_size_m[:2], float) / 2, 0.0, config.checkout_size_m[2]))

@@ -191,6 +191,10 @@ def test_the_convenience_store_expands_to_the_shelves_written_by_hand():
     again = sc._from_text(sc.resolved_toml(loaded), {}, "shown.toml", "shown")
     assert again.store == loaded.store and "[store.aisles]" not in sc.resolved_toml(loaded)
     assert dataclasses.replace(loaded.store, ceiling_m=3.0).shelves == by_hand
+    # An override (or a sweep's axis) of the layout's keys expands anew: 5 aisles on a 20 m floor are
+    # (20 - 4 x 1.2) / 5 = 3.04 m wide.
+    wider = sc.load("convenience", {"store.aisles.count": 5, "store.width_m": 20.0}).store
+    assert [s.center_m for s in wider.shelves] == [(3.64, 5.7), (7.88, 5.7), (12.12, 5.7), (16.36, 5.7), (10.0, 11.7)]
 
 
 def test_aisles_along_x_are_the_layout_along_y_transposed():
@@ -227,6 +231,15 @@ def test_an_aisles_layout_that_does_not_fit_the_floor_names_the_key(aisles, expe
     # The widest that fits is accepted (8 aisles; 9.4 m gondolas).
     StoreConfig(width_m=18.0, depth_m=12.0, aisles=AislesConfig(count=8))
     StoreConfig(width_m=18.0, depth_m=12.0, aisles=AislesConfig(gondola_length_m=9.4))
+
+
+def test_a_shelf_the_aisles_expanded_to_is_named_as_theirs():
+    # Side wall shelves against the default doors on the x = 0 wall: the shelf is one the user did not write.
+    config = StoreConfig(width_m=18.0, depth_m=12.0, shelves=(ShelfConfig((9.0, 0.5), (2.0, 0.4, 1.0)),),
+                         aisles=AislesConfig(side_wall_shelves=True))
+    assert config.first_expanded == 1 and len(config.shelves) == 1 + 3 + 1 + 2
+    with pytest.raises(ScenarioError, match=r"store.entrance_m: .* against store.shelves\[5\] \(of store.aisles\)$"):
+        StoreGeometry(config)
 
 
 def test_the_wall_to_wall_shelf_trapping_the_back_half_is_refused_at_load_naming_it():
