@@ -126,6 +126,9 @@ class AislesConfig:
                              f"across the floor's {across:g} m{' between the side wall shelves' if side else ''} "
                              f"({aisle:.2f} m each; an aisle needs >= {MIN_AISLE_M:g} m, so at most {most} aisles)")
         room = length - back  # from the front wall to the back wall shelf
+        if room < MIN_AISLE_M:
+            raise ValueError(f"aisles.wall_shelf_depth_m: a back wall shelf {back:g} m deep leaves {room:.2f} m of the "
+                             f"floor's {length:g} m along {self.along.value}, need >= {MIN_AISLE_M:g} m")
         if gondolas and gl > room - 2 * MIN_AISLE_M:
             raise ValueError(f"aisles.gondola_length_m: {gl:g} m gondolas leave less than {MIN_AISLE_M:g} m of cross "
                              f"aisle at an end of the floor's {length:g} m along {self.along.value}"
@@ -144,9 +147,13 @@ class AislesConfig:
         if side:
             units += [(room / 2, c, room, side, self.wall_shelf_height_m) for c in (side / 2, across - side / 2)]
 
+        def tidy(v: float) -> float:  # 4.2, not 4.200000000000001; a value the floor's own digits make stays exact
+            short = round(v, 9)
+            return short if abs(short - v) < 1e-12 else v
+
         def shelf(a: float, c: float, size_a: float, size_c: float, height: float) -> ShelfConfig:
             xy, size = ((c, a), (size_c, size_a)) if self.along is AisleAxis.Y else ((a, c), (size_a, size_c))
-            return ShelfConfig(tuple(round(v, 6) for v in xy), (*(round(v, 6) for v in size), height))
+            return ShelfConfig(tuple(tidy(v) for v in xy), (*(tidy(v) for v in size), height))
 
         return tuple(shelf(*unit) for unit in units)
 
