@@ -527,7 +527,9 @@ def resolved_toml(scenario: Scenario) -> str:
             if value is None:  # an optional table left out ([store.aisles], expanded into the shelves at load)
                 continue
             if isinstance(value, tuple):
-                for item in value:
+                for i, item in enumerate(value):
+                    if isinstance(obj, StoreConfig) and f.name == "shelves" and i == obj.first_expanded:
+                        lines.extend(["", f"# store.shelves[{i}] on: the file's [store.aisles], expanded"])
                     table(item, f"{section}{f.name}.", f"[[{section}{f.name}]]")
             else:
                 table(value, f"{section}{f.name}.", f"[{section}{f.name}]")

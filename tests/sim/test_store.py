@@ -189,7 +189,10 @@ def test_the_convenience_store_expands_to_the_shelves_written_by_hand():
     assert built.boxes == StoreGeometry(StoreConfig(width_m=18.0, depth_m=12.0, ceiling_m=3.2, shelves=by_hand)).boxes
     # Written out by `scenarios --show`, it loads back as the same store, with no [store.aisles] left to expand twice.
     again = sc._from_text(sc.resolved_toml(loaded), {}, "shown.toml", "shown")
-    assert again.store == loaded.store and "[store.aisles]" not in sc.resolved_toml(loaded)
+    shown = sc.resolved_toml(loaded)
+    assert again.store == loaded.store and "\n[store.aisles]" not in shown
+    assert ("# store.shelves[0] on: the file's [store.aisles], expanded\n\n[[store.shelves]]\n"
+            "center_m = [4.2, 5.7]") in shown
     assert dataclasses.replace(loaded.store, ceiling_m=3.0).shelves == by_hand
     # An override (or a sweep's axis) of the layout's keys expands anew: 5 aisles on a 20 m floor are
     # (20 - 4 x 1.2) / 5 = 3.04 m wide.
