@@ -505,20 +505,28 @@ class StoreGeometry:
         c = self.wall_clearance_m
         free = (P[..., 0] >= c) & (P[..., 0] <= W - c) & (P[..., 1] >= c) & (P[..., 1] <= D - c)
         near = np.zeros(P.shape[:2], dtype=bool)  # within the clearance of an obstacle
-        reach = self.nav_clearance_m + GRID_CELL_M  # (only cells this close to a footprint's box can be)
+
+        def window(points: np.ndarray, margin: float) -> tuple[slice, slice]:
+            """The cells whose centres may lie within `margin` of the box around `points` (k, 2): the rest of the
+            grid cannot change, so only these are computed."""
+            i0, j0 = np.maximum(np.floor((points.min(axis=0) - margin) / GRID_CELL_M - 1).astype(int), 0)
+            i1, j1 = np.ceil((points.max(axis=0) + margin) / GRID_CELL_M + 1).astype(int)
+            return slice(i0, i1), slice(j0, j1)
+
         for ob in obstacles:
-            corners = ob.corners()
-            i0, j0 = np.maximum(np.floor((corners.min(axis=0) - reach) / GRID_CELL_M).astype(int), 0)
-            i1, j1 = np.ceil((corners.max(axis=0) + reach) / GRID_CELL_M).astype(int)
-            window = (slice(i0, i1), slice(j0, j1))
-            near[window] |= rect_distance(P[window], ob.center, ob.half, ob.yaw) < self.nav_clearance_m
+            w = window(ob.corners(), self.nav_clearance_m)
+            near[w] |= rect_distance(P[w], ob.center, ob.half, ob.yaw) < self.nav_clearance_m
         free &= ~near
         # Doors: let the approach corridor through the wall clearance.
         for door in (self.entrance, self.exit):
-            rel = P - door.center
-            along = np.abs(rel @ np.array([-door.inward[1], door.inward[0]]))
+            tangent = np.array([-door.inward[1], door.inward[0]])
+            deep = INSIDE_DOOR_M + 0.1
+            w = window(door.center + np.array([-1.0, 1.0])[:, None] * tangent * door.width / 2 + np.array(
+                [[0.0], [deep]]) * door.inward, 0.0)
+            rel = P[w] - door.center
+            along = np.abs(rel @ tangent)
             depth = rel @ door.inward
-            free |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= INSIDE_DOOR_M + 0.1) & ~near
+            free[w] |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= deep) & ~near[w]
         return free
 
     def cell_of(self, point) -> tuple[int, int]:
