@@ -265,6 +265,12 @@ def test_an_area_two_shelves_close_together_names_both():
         StoreGeometry(_store(shelves=shelves, entrance_m=(2.0, 0.0), exit_m=(6.0, 0.0)))
 
 
+@pytest.mark.parametrize("name", [*SHIPPED, "convenience"])
+def test_the_grid_computed_in_windows_is_the_plain_grid_of_every_cell(name):
+    store = StoreGeometry(sc.load(name).store, name=name)
+    np.testing.assert_array_equal(store.free, store_reference.free_grid(store, store.obstacles))
+
+
 def test_refused_exactly_where_scipys_labels_find_floor_no_door_reaches():
     """Random shelves across an 8 m x 6 m floor with both doors in front: refused iff scipy.ndimage.label (8-connected)
     finds free cells outside the entrance's component of the plain grid, and the named shelf's removal joins them."""
