@@ -265,7 +265,7 @@ def test_an_area_two_shelves_close_together_names_both():
         StoreGeometry(_store(shelves=shelves, entrance_m=(2.0, 0.0), exit_m=(6.0, 0.0)))
 
 
-@pytest.mark.parametrize("name", [*SHIPPED, "convenience"])
+@pytest.mark.parametrize("name", [*SHIPPED, "hypermarket", "convenience"])
 def test_the_grid_computed_in_windows_is_the_plain_grid_of_every_cell(name):
     store = StoreGeometry(sc.load(name).store, name=name)
     np.testing.assert_array_equal(store.free, store_reference.free_grid(store, store.obstacles))
