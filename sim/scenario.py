@@ -29,7 +29,7 @@ from sim.clock import ClockConfig
 from sim.config import bounded, check_ranges, field_range, field_unit
 from sim.crowd import CrowdConfig
 from sim.sensing.profiles import PROFILES, DetectorConfig, DetectorParams, DetectorProfile
-from sim.store import StoreConfig
+from sim.store import StoreConfig, StoreGeometry
 
 MAX_DURATION_S = 86400.0  # a day of simulated time
 MAX_SEED = 2**63 - 1
@@ -161,6 +161,7 @@ def _from_text(text: str, overrides: dict, where: str, name: str, folder: Path |
         table[leaf] = value
     tree.setdefault("name", name)
     scenario = from_dict(Scenario, tree, where, "")
+    StoreGeometry(scenario.store, name=where)  # the layout checked at load: fixtures apart, doors free, all reachable
     # Overrides are part of what was simulated, so they are part of the recorded description.
     note = "".join(f"{_OVERRIDE_NOTE}{k} = {v!r}" for k, v in sorted(overrides.items()))
     return dataclasses.replace(scenario, source_text=text + note)
@@ -288,9 +289,9 @@ def check_override(dotted: str, value, file: str = "override") -> None:
             raise ScenarioError(f"{file}: unknown key '{prefix}{name}' (valid keys: {', '.join(sorted(fields))})")
         hint = typing.get_type_hints(cls)[name]
         if depth < len(names) - 1:
-            if not dataclasses.is_dataclass(hint):
+            if _table_class(hint) is None:
                 raise ScenarioError(f"{file}: '{prefix}{name}' is not a table, so '{dotted}' is not a key")
-            cls, prefix = hint, f"{prefix}{name}."
+            cls, prefix = _table_class(hint), f"{prefix}{name}."
     if _is_table(hint):
         raise ScenarioError(f"{file}: '{dotted}' is a table; name one of its keys")
     _convert(hint, value, file, dotted)
@@ -394,8 +395,8 @@ def _sections(cls=Scenario, prefix: str = ""):
     hints = typing.get_type_hints(cls)
     for f in _keys(cls):
         hint = hints[f.name]
-        if dataclasses.is_dataclass(hint):
-            yield from _sections(hint, f"{prefix}{f.name}.")
+        if _table_class(hint) is not None:
+            yield from _sections(_table_class(hint), f"{prefix}{f.name}.")
         elif typing.get_origin(hint) is tuple and dataclasses.is_dataclass(typing.get_args(hint)[0]):
             yield from ((name, sub, True) for name, sub, _ in _sections(typing.get_args(hint)[0], f"{prefix}{f.name}."))
 
@@ -404,8 +405,16 @@ def _keys(cls) -> list[dataclasses.Field]:
     return [f for f in dataclasses.fields(cls) if f.init and f.name not in ("source_text", "source_path")]
 
 
+def _table_class(hint):
+    """The dataclass of a table-valued field (`Section` or `Section | None`), else None."""
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        hint = args[0] if len(args) == 1 else None
+    return hint if dataclasses.is_dataclass(hint) else None
+
+
 def _is_table(hint) -> bool:
-    return dataclasses.is_dataclass(hint) or (
+    return _table_class(hint) is not None or (
         typing.get_origin(hint) is tuple and dataclasses.is_dataclass(typing.get_args(hint)[0]))
 
 
@@ -515,8 +524,12 @@ def resolved_toml(scenario: Scenario) -> str:
             elif value is not None and (obj is not scenario or f.name != "name" or explicit_name):
                 lines.append(f"{f.name} = {_toml_value(value)}")
         for f, value in nested:
+            if value is None:  # an optional table left out ([store.aisles], expanded into the shelves at load)
+                continue
             if isinstance(value, tuple):
-                for item in value:
+                for i, item in enumerate(value):
+                    if isinstance(obj, StoreConfig) and f.name == "shelves" and i == obj.first_expanded:
+                        lines.extend(["", f"# store.shelves[{i}] on: the file's [store.aisles], expanded"])
                     table(item, f"{section}{f.name}.", f"[[{section}{f.name}]]")
             else:
                 table(value, f"{section}{f.name}.", f"[{section}{f.name}]")

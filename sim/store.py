@@ -1,15 +1,18 @@
 """Store layouts: floor, walls, shelf rows, entrance, exit and checkout, built as MuJoCo geometry.
 
-`StoreConfig` is the `[store]` section of a scenario. `StoreGeometry` checks it against itself (shelves
-inside the floor and apart, doors on a wall and not blocked) and holds what the crowd needs: the
-obstacle rectangles, the doors, and a navigation grid with distance fields to named goals.
+`StoreConfig` is the `[store]` section of a scenario; a regular layout written as `[store.aisles]`
+(`AislesConfig`) expands there into the shelves a hand-written layout lists. `StoreGeometry` checks it against
+itself (shelves inside the floor and apart, doors on a wall and not blocked, every walkable area reachable from
+the doors) and holds what the crowd needs: the obstacle rectangles, the doors, and a navigation grid with
+distance fields to named goals.
 """
 
 from __future__ import annotations
 
+import enum
 import heapq
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import cv2
 import numpy as np
@@ -31,6 +34,9 @@ DOOR_MAT_HEIGHT_M = 0.005
 OUTSIDE_DOOR_M = 0.5
 # Distance from the wall of the point just inside a door where paths start and end.
 INSIDE_DOOR_M = 0.8
+# The narrowest aisle (and cross aisle) a `[store.aisles]` layout may leave: planned paths keep 0.45 m from each
+# shelf face, so an aisle needs 0.9 m and a grid cell for anyone to walk it.
+MIN_AISLE_M = 1.0
 
 
 @dataclass(frozen=True)
@@ -51,6 +57,107 @@ class ShelfConfig:
         check_ranges(self)
 
 
+class AisleAxis(enum.Enum):
+    """The floor axis a `[store.aisles]` layout's gondolas run along."""
+
+    X = "x"
+    Y = "y"
+
+
+@dataclass(frozen=True)
+class AislesConfig:
+    """[store.aisles]: a regular layout, expanded at load into [[store.shelves]] (after those written by hand).
+
+    The gondolas (double-sided shelf runs) stand side by side from the front wall toward the back wall, with
+    `count` aisles of one width between them and the side walls (or the side wall shelves); the cross aisles
+    at both ends of the gondolas keep the rest of the floor's length. A layout that leaves an aisle or a cross
+    aisle narrower than 1 m is refused, naming the key. `crossview scenarios --show` prints the expanded shelves.
+
+    Attributes:
+        count: aisles across the floor; count - 1 gondolas stand between them (1: wall shelves only).
+        along: the axis the gondolas run along: "y" from the front wall y = 0 toward the back wall y = depth, "x"
+            from the front wall x = 0 toward the back wall x = width.
+        gondola_length_m: length of each gondola along `along`.
+        gondola_width_m: width of each gondola (both of its faces hold goods).
+        gondola_height_m: height of the gondolas, at most the ceiling.
+        front_aisle_m: clear floor between the front wall and the gondolas' near ends; left out, the gondolas
+            stand in the middle between the front wall and the back wall shelf (or the back wall).
+        back_wall_shelf: a wall shelf along the whole back wall.
+        side_wall_shelves: wall shelves along both side walls (the walls the gondolas run along), from the front
+            wall to the back wall shelf; a door on a side wall then needs a gap, so place the doors on the front
+            wall.
+        wall_shelf_depth_m: depth of the wall shelves from the wall.
+        wall_shelf_height_m: height of the wall shelves, at most the ceiling.
+    """
+
+    count: int = bounded(4, 1, 100, unit="aisles")
+    along: AisleAxis = AisleAxis.Y
+    gondola_length_m: float = bounded(6.0, 0.0, MAX_FLOOR_M, low_open=True)
+    gondola_width_m: float = bounded(1.2, 0.0, MAX_FLOOR_M, low_open=True)
+    gondola_height_m: float = bounded(1.6, 0.0, 20.0, low_open=True)
+    front_aisle_m: float | None = bounded(None, MIN_AISLE_M, MAX_FLOOR_M)
+    back_wall_shelf: bool = True
+    side_wall_shelves: bool = False
+    wall_shelf_depth_m: float = bounded(0.6, 0.0, MAX_FLOOR_M, low_open=True)
+    wall_shelf_height_m: float = bounded(2.0, 0.0, 20.0, low_open=True)
+
+    def __post_init__(self):
+        check_ranges(self)
+
+    def shelves(self, width_m: float, depth_m: float, ceiling_m: float) -> tuple[ShelfConfig, ...]:
+        """The shelf units of this layout on a [0, width] x [0, depth] floor: the gondolas across the floor, then
+        the back wall shelf, then the side wall shelves.
+
+        Raises:
+            ValueError: the layout does not fit the floor or the ceiling; the message names the key (`aisles.`...)
+                and what would fit.
+        """
+        for key in ("gondola_height_m", "wall_shelf_height_m"):
+            if getattr(self, key) > ceiling_m:
+                raise ValueError(f"aisles.{key}: {getattr(self, key):g} m is above ceiling_m = {ceiling_m:g}")
+        length, across = (depth_m, width_m) if self.along is AisleAxis.Y else (width_m, depth_m)
+        side = self.wall_shelf_depth_m if self.side_wall_shelves else 0.0
+        back = self.wall_shelf_depth_m if self.back_wall_shelf else 0.0
+        gondolas, gw, gl = self.count - 1, self.gondola_width_m, self.gondola_length_m
+        aisle = (across - 2 * side - gondolas * gw) / self.count
+        if aisle < MIN_AISLE_M:
+            most = max(0, int((across - 2 * side + gw) // (MIN_AISLE_M + gw)))
+            raise ValueError(f"aisles.count: {self.count} aisles between {gondolas} gondolas {gw:g} m wide do not fit "
+                             f"across the floor's {across:g} m{' between the side wall shelves' if side else ''} "
+                             f"({aisle:.2f} m each; an aisle needs >= {MIN_AISLE_M:g} m, so at most {most} aisles)")
+        room = length - back  # from the front wall to the back wall shelf
+        if room < MIN_AISLE_M:
+            raise ValueError(f"aisles.wall_shelf_depth_m: a back wall shelf {back:g} m deep leaves {room:.2f} m of the "
+                             f"floor's {length:g} m along {self.along.value}, need >= {MIN_AISLE_M:g} m")
+        if gondolas and gl > room - 2 * MIN_AISLE_M:
+            raise ValueError(f"aisles.gondola_length_m: {gl:g} m gondolas leave less than {MIN_AISLE_M:g} m of cross "
+                             f"aisle at an end of the floor's {length:g} m along {self.along.value}"
+                             f"{' before the back wall shelf' if back else ''} (at most "
+                             f"{room - 2 * MIN_AISLE_M:.2f} m)")
+        front = (room - gl) / 2 if self.front_aisle_m is None else self.front_aisle_m
+        if gondolas and room - front - gl < MIN_AISLE_M:
+            raise ValueError(f"aisles.front_aisle_m: {front:g} m leaves {room - front - gl:.2f} m of cross aisle "
+                             f"behind the gondolas, need >= {MIN_AISLE_M:g} m (at most "
+                             f"{room - gl - MIN_AISLE_M:.2f} m)")
+        # (centre along `along`, centre across, size along, size across, height) of each unit
+        units = [(front + gl / 2, side + k * aisle + (k - 1) * gw + gw / 2, gl, gw, self.gondola_height_m)
+                 for k in range(1, gondolas + 1)]
+        if back:
+            units.append((length - back / 2, across / 2, back, across, self.wall_shelf_height_m))
+        if side:
+            units += [(room / 2, c, room, side, self.wall_shelf_height_m) for c in (side / 2, across - side / 2)]
+
+        def tidy(v: float) -> float:  # 4.2, not 4.200000000000001; a value the floor's own digits make stays exact
+            short = round(v, 9)
+            return short if abs(short - v) < 1e-12 else v
+
+        def shelf(a: float, c: float, size_a: float, size_c: float, height: float) -> ShelfConfig:
+            xy, size = ((c, a), (size_c, size_a)) if self.along is AisleAxis.Y else ((a, c), (size_a, size_c))
+            return ShelfConfig(tuple(tidy(v) for v in xy), (*(tidy(v) for v in size), height))
+
+        return tuple(shelf(*unit) for unit in units)
+
+
 @dataclass(frozen=True)
 class StoreConfig:
     """[store]: the floor rectangle [0, width] x [0, depth], ceiling height and fixtures.
@@ -61,6 +168,8 @@ class StoreConfig:
         ceiling_m: ceiling height; cameras hang below it.
         wall_height_m: height of the walls around the floor, at most the ceiling.
         shelves: shelf units ([[store.shelves]] tables).
+        aisles: a regular layout of gondolas and wall shelves ([store.aisles]), expanded into `shelves` after those
+            written by hand (the loaded scenario holds the expanded shelves, and no `aisles`).
         entrance_m: (x, y) centre of the entrance, on a wall; left out, it is on the x = 0 wall at a quarter
             of the depth.
         exit_m: (x, y) centre of the exit, on a wall; left out, on the x = 0 wall at three quarters of the depth.
@@ -74,16 +183,26 @@ class StoreConfig:
     ceiling_m: float = bounded(3.0, 2.0, 20.0)  # people are up to 1.95 m tall
     wall_height_m: float = bounded(2.2, 0.5, 20.0)
     shelves: tuple[ShelfConfig, ...] = ()
+    aisles: AislesConfig | None = None
     entrance_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
     exit_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
     door_width_m: float = bounded(1.0, 0.7, 5.0)
     checkout_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
     checkout_size_m: tuple[float, float, float] = bounded((1.4, 0.6, 0.9), 0.0, MAX_FLOOR_M, low_open=True)
+    # Index of the first shelf that `aisles` expanded to (None: all written by hand), for error messages only.
+    first_expanded: int | None = field(default=None, init=False, compare=False, repr=False)
 
     def __post_init__(self):
         check_ranges(self)
         if self.wall_height_m > self.ceiling_m:
             raise ValueError(f"wall_height_m: {self.wall_height_m} must be <= ceiling_m = {self.ceiling_m}")
+        if self.aisles is not None:
+            # One layout path: the expanded shelves are what a hand-written layout lists, and the config is then
+            # one (so that `dataclasses.replace` does not expand it twice).
+            expanded = self.aisles.shelves(self.width_m, self.depth_m, self.ceiling_m)
+            object.__setattr__(self, "first_expanded", len(self.shelves))
+            object.__setattr__(self, "shelves", self.shelves + expanded)
+            object.__setattr__(self, "aisles", None)
         for i, shelf in enumerate(self.shelves):
             if shelf.size_m[2] > self.ceiling_m:
                 raise ValueError(f"shelves[{i}].size_m: height {shelf.size_m[2]} is above ceiling_m = {self.ceiling_m}")
@@ -218,16 +337,18 @@ class StoreGeometry:
             name: scenario name for error messages.
 
         Raises:
-            ScenarioError: shelves outside the floor or overlapping, a door off the walls or blocked.
+            ScenarioError: shelves outside the floor or overlapping, a door off the walls or blocked, walkable
+                floor that no door reaches (naming the shelf that closes it off).
         """
         self.config = config
         self.name = name
         W, D = config.width_m, config.depth_m
         obstacles = []
         for i, shelf in enumerate(config.shelves):
-            obstacles.append(Obstacle(f"store.shelves[{i}]", np.array(shelf.center_m, float),
-                                      np.array(shelf.size_m[:2], float) / 2, math.radians(shelf.yaw_deg),
-                                      shelf.size_m[2]))
+            expanded = config.first_expanded is not None and i >= config.first_expanded
+            key = f"store.shelves[{i}]{' (of store.aisles)' if expanded else ''}"
+            obstacles.append(Obstacle(key, np.array(shelf.center_m, float), np.array(shelf.size_m[:2], float) / 2,
+                                      math.radians(shelf.yaw_deg), shelf.size_m[2]))
         if config.checkout_m is not None:
             obstacles.append(Obstacle("store.checkout_m", np.array(config.checkout_m, float),
                                       np.array(config.checkout_size_m[:2], float) / 2, 0.0, config.checkout_size_m[2]))
@@ -260,8 +381,50 @@ class StoreGeometry:
                 raise self._err(door.key, f"door at {_xy(door.center)} is blocked by {blocker} "
                                           f"(keep {INSIDE_DOOR_M + nav_clearance_m:.2f} m in front of a door clear)")
         if not self.connected(self.entrance.inside, self.exit.inside):
-            raise self._err("store.exit_m", "cannot be reached from store.entrance_m around the shelves")
+            closing = self._closing(self._components == self._components[self.cell_of(self.exit.inside)])
+            raise self._err("store.exit_m", f"cannot be reached from store.entrance_m around the shelves "
+                                            f"({closing} closes it off)")
+        self._check_reachable()
         self.boxes = self._boxes()
+
+    def _check_reachable(self) -> None:
+        """Raises ScenarioError naming the obstacle that closes off walkable floor no door reaches."""
+        reached = self._components[self.cell_of(self.entrance.inside)]
+        labels, counts = np.unique(self._components[(self._components != 0) & (self._components != reached)],
+                                   return_counts=True)
+        if not len(labels):
+            return
+        cut_off = self._components == labels[int(np.argmax(counts))]
+        cells = self.cell_centers[cut_off]
+        low, high = cells.min(axis=0) - GRID_CELL_M / 2, cells.max(axis=0) + GRID_CELL_M / 2
+        raise self._err(self._closing(cut_off), f"closes off {cut_off.sum() * GRID_CELL_M**2:.1f} m² of walkable "
+                                                f"floor in x [{low[0]:.1f}, {high[0]:.1f}] x y [{low[1]:.1f}, "
+                                                f"{high[1]:.1f}] m from the doors (people must reach every walkable "
+                                                f"area: leave a passage >= {MIN_AISLE_M:g} m wide)")
+
+    def _closing(self, cut_off: np.ndarray) -> str:
+        """The key of the obstacle whose removal joins the cells `cut_off` (nx, ny) to the entrance's, trying those
+        nearest to them first. Where no one obstacle does, the obstacles that do together (`a and b together`):
+        the nearest bordering obstacle is taken away and the search repeated from the larger area it opens."""
+        start, cell = self.cell_of(self.entrance.inside), tuple(int(v[0]) for v in np.nonzero(cut_off))
+        removed: list[int] = []
+        while True:
+            cells = self.cell_centers[cut_off]
+            gap = {k: float(rect_distance(cells, o.center, o.half, o.yaw).min()) for k, o in enumerate(self.obstacles)
+                   if k not in removed}
+            near = [k for k in sorted(gap, key=gap.get) if gap[k] < self.nav_clearance_m + 2 * GRID_CELL_M]
+            if not near:
+                return " and ".join(self.obstacles[k].key for k in removed) + " together" if removed else "the walls"
+            for k in near:
+                kept = [o for i, o in enumerate(self.obstacles) if i != k and i not in removed]
+                labels = self._components_of(self._free_grid(kept))
+                if labels[start] != 0 and labels[start] == labels[cell]:
+                    keys = [self.obstacles[i].key for i in (*removed, k)]
+                    return keys[0] if len(keys) == 1 else " and ".join(keys) + " together"
+            removed.append(near[0])
+            kept = [o for i, o in enumerate(self.obstacles) if i not in removed]
+            labels = self._components_of(self._free_grid(kept))
+            cut_off = labels == labels[cell]
 
     def _err(self, key: str, message: str):
         return _error(f"{self.name}: {key}", message)
@@ -327,26 +490,44 @@ class StoreGeometry:
         xs = (np.arange(self.nx) + 0.5) * GRID_CELL_M
         ys = (np.arange(self.ny) + 0.5) * GRID_CELL_M
         self.cell_centers = np.stack(np.meshgrid(xs, ys, indexing="ij"), axis=-1)  # (nx, ny, 2)
-        P = self.cell_centers
-        c = self.wall_clearance_m
-        free = (P[..., 0] >= c) & (P[..., 0] <= W - c) & (P[..., 1] >= c) & (P[..., 1] <= D - c)
-        self.shelf_distance = np.full(P.shape[:2], np.inf)
-        for ob in self.obstacles:
-            self.shelf_distance = np.minimum(self.shelf_distance, rect_distance(P, ob.center, ob.half, ob.yaw))
-        free &= self.shelf_distance >= self.nav_clearance_m
-        # Doors: let the approach corridor through the wall clearance.
-        for door in (self.entrance, self.exit):
-            rel = P - door.center
-            along = np.abs(rel @ np.array([-door.inward[1], door.inward[0]]))
-            depth = rel @ door.inward
-            free |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= INSIDE_DOOR_M + 0.1) & (
-                self.shelf_distance >= self.nav_clearance_m)
-        self.free = free
+        self.free = free = self._free_grid(self.obstacles)
         # The free cells' 8-connected components (0: blocked): which doors and goals reach each other.
         self._components = self._components_of(free)
         self.free_area_m2 = float(free.sum()) * GRID_CELL_M**2
         # Distance from every cell to the nearest blocked cell: used to smooth paths away from corners.
         self.clearance = _distance_to_blocked(free) * GRID_CELL_M
+
+    def _free_grid(self, obstacles) -> np.ndarray:
+        """(nx, ny) bool: the cells a pelvis may plan to be with these obstacles (`free`): clear of the walls, except
+        in front of the doors, and `nav_clearance_m` from every obstacle."""
+        W, D = self.config.width_m, self.config.depth_m
+        P = self.cell_centers
+        c = self.wall_clearance_m
+        free = (P[..., 0] >= c) & (P[..., 0] <= W - c) & (P[..., 1] >= c) & (P[..., 1] <= D - c)
+        near = np.zeros(P.shape[:2], dtype=bool)  # within the clearance of an obstacle
+
+        def window(points: np.ndarray, margin: float) -> tuple[slice, slice]:
+            """The cells whose centres may lie within `margin` of the box around `points` (k, 2): the rest of the
+            grid cannot change, so only these are computed."""
+            i0, j0 = np.maximum(np.floor((points.min(axis=0) - margin) / GRID_CELL_M - 1).astype(int), 0)
+            i1, j1 = np.ceil((points.max(axis=0) + margin) / GRID_CELL_M + 1).astype(int)
+            return slice(i0, i1), slice(j0, j1)
+
+        for ob in obstacles:
+            w = window(ob.corners(), self.nav_clearance_m)
+            near[w] |= rect_distance(P[w], ob.center, ob.half, ob.yaw) < self.nav_clearance_m
+        free &= ~near
+        # Doors: let the approach corridor through the wall clearance.
+        for door in (self.entrance, self.exit):
+            tangent = np.array([-door.inward[1], door.inward[0]])
+            deep = INSIDE_DOOR_M + 0.1
+            w = window(door.center + np.array([-1.0, 1.0])[:, None] * tangent * door.width / 2 + np.array(
+                [[0.0], [deep]]) * door.inward, 0.0)
+            rel = P[w] - door.center
+            along = np.abs(rel @ tangent)
+            depth = rel @ door.inward
+            free[w] |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= deep) & ~near[w]
+        return free
 
     def cell_of(self, point) -> tuple[int, int]:
         """Grid cell (i, j) containing a point (clamped to the grid)."""

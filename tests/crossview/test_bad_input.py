@@ -59,6 +59,12 @@ SCENARIO_CASES = [
      "most 12 people"),
     ("too-many-camera-frames", None, ["--duration", "86400"],
      "schedules 10,368,000 camera frames, more than the 5,000,000 one recording may hold"),
+    ("aisles-do-not-fit", "[store]\nwidth_m = 18.0\ndepth_m = 12.0\n[store.aisles]\ncount = 10\n", [],
+     "s.toml: [store] aisles.count: 10 aisles between 9 gondolas 1.2 m wide do not fit across the floor's 18 m"),
+    ("aisles-too-long", "[store]\nwidth_m = 18.0\ndepth_m = 12.0\n[store.aisles]\ngondola_length_m = 11.0\n", [],
+     "s.toml: [store] aisles.gondola_length_m: 11 m gondolas leave less than 1 m of cross aisle"),
+    ("trapped-back-half", (Path(__file__).resolve().parents[1] / "sim" / "data" / "trapped_back_half.toml").read_text(),
+     [], "s.toml: store.shelves[0]: closes off 14.8 m² of walkable floor"),
 ]
 
 

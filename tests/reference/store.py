@@ -1,5 +1,6 @@
-"""Points pushed out of the store's obstacle footprints, as plain numpy: the rule `sim.crowd`'s compiled hard
-constraint applies (the footprint grown by a clearance), checked here against the plain rectangle distance."""
+"""Plain numpy versions of the store's rules: points pushed out of the obstacle footprints (the rule
+`sim.crowd`'s compiled hard constraint applies, the footprint grown by a clearance, checked against the plain
+rectangle distance), and the navigation grid computed over every cell."""
 
 from __future__ import annotations
 
@@ -31,3 +32,24 @@ def push_out(store: StoreGeometry, points: np.ndarray, clearance_m: float) -> np
     ny = np.where(core & ~use_x, np.where(ly >= 0, hy + clearance_m, -hy - clearance_m), np.where(core, ly, ny))
     dx, dy = np.where(hit, nx - lx, 0.0), np.where(hit, ny - ly, 0.0)
     return points + np.stack([(dx * c - dy * s).sum(axis=1), (dx * s + dy * c).sum(axis=1)], axis=-1)
+
+
+def free_grid(store: StoreGeometry, obstacles) -> np.ndarray:
+    """(nx, ny) the navigation grid of `store`'s floor and doors with these obstacles, plainly: every cell's
+    distance to every footprint (no windows), the wall clearance, the door corridors (`StoreGeometry.free`'s rule)."""
+    from sim.store import INSIDE_DOOR_M, rect_distance
+
+    P, W, D = store.cell_centers, store.config.width_m, store.config.depth_m
+    c = store.wall_clearance_m
+    free = (P[..., 0] >= c) & (P[..., 0] <= W - c) & (P[..., 1] >= c) & (P[..., 1] <= D - c)
+    distance = np.full(P.shape[:2], np.inf)
+    for ob in obstacles:
+        distance = np.minimum(distance, rect_distance(P, ob.center, ob.half, ob.yaw))
+    clear = distance >= store.nav_clearance_m
+    free &= clear
+    for door in (store.entrance, store.exit):
+        rel = P - door.center
+        along = np.abs(rel @ np.array([-door.inward[1], door.inward[0]]))
+        depth = rel @ door.inward
+        free |= (along <= door.width / 2 - 0.2) & (depth >= 0) & (depth <= INSIDE_DOOR_M + 0.1) & clear
+    return free

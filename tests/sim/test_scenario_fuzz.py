@@ -78,3 +78,31 @@ def test_fuzz_any_scenario_file_loads_valid_or_is_refused_naming_the_file(tree):
         again = Path(folder) / "s.toml"
         again.write_text(scenario_mod.resolved_toml(scenario), encoding="utf-8")
         assert scenario_mod.load(again) == scenario
+
+
+@FUZZ
+@given(st.floats(2.0, 25.0), st.floats(2.0, 25.0), st.integers(1, 12), st.sampled_from(["x", "y"]),
+       st.floats(0.2, 20.0), st.floats(0.2, 2.0), st.one_of(st.none(), st.floats(1.0, 5.0)), st.booleans(),
+       st.booleans(), st.floats(0.2, 1.5))
+def test_fuzz_an_aisles_layout_that_fits_is_a_store_people_can_walk(width, depth, count, along, length, gondola,
+                                                                   front, back, sides, wall_depth):
+    """Any [store.aisles] layout on any floor is refused naming an `aisles.` key, or expands to shelves inside
+    the floor, apart, and leaving no floor cut off (at worst a door lands against one: the doors are [store]'s)."""
+    from sim.store import AisleAxis, AislesConfig, StoreConfig, StoreGeometry
+
+    aisles = AislesConfig(count=count, along=AisleAxis(along), gondola_length_m=length, gondola_width_m=gondola,
+                          front_aisle_m=front, back_wall_shelf=back, side_wall_shelves=sides,
+                          wall_shelf_depth_m=wall_depth)
+    try:
+        store = StoreConfig(width_m=width, depth_m=depth, ceiling_m=3.0, aisles=aisles)
+    except ValueError as e:
+        assert str(e).startswith("aisles."), e
+        event("refused: does not fit")
+        return
+    try:
+        StoreGeometry(store)
+    except ScenarioError as e:
+        assert str(e).startswith(("store: store.entrance_m: ", "store: store.exit_m: door")), e
+        event("refused: a door against a shelf")
+        return
+    event("built")

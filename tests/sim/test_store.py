@@ -1,6 +1,9 @@
 """Store layouts: checks of the scenario's fixtures, obstacle geometry against a plain reference, paths."""
 
+import dataclasses
 import math
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,10 +14,22 @@ import scipy.sparse.csgraph
 from core.errors import ScenarioError
 from core.records import BoxKind
 from sim import scenario as sc
-from sim.store import ShelfConfig, StoreConfig, StoreGeometry, _distance_to_blocked, rect_distance
+from sim.store import (
+    AisleAxis,
+    AislesConfig,
+    Obstacle,
+    ShelfConfig,
+    StoreConfig,
+    StoreGeometry,
+    _distance_to_blocked,
+    rect_distance,
+)
 from tests.reference import store as store_reference
 
 SHIPPED = ("store_layout1", "store_layout2", "supermarket")
+TRAPPED = Path(__file__).resolve().parent / "data" / "trapped_back_half.toml"
+# 8-connected, as the planner moves.
+EIGHT = np.ones((3, 3), dtype=int)
 
 
 def _store(**kw) -> StoreConfig:
@@ -157,3 +172,142 @@ def test_paths_go_around_the_shelves(name):
             samples = p + np.linspace(0, 1, 50)[:, None] * (q - p)
             # Straight legs stay on the free grid, which keeps the planning clearance to within a cell.
             assert store.obstacle_distance(samples).min() >= store.nav_clearance_m - 0.1
+
+
+# ---------------------------------------------------------------- the store builder: [store.aisles] and reachability
+
+
+def test_the_convenience_store_expands_to_the_shelves_written_by_hand():
+    # Issue 44's store worked out by hand: 18 m - 3 gondolas x 1.2 m leaves 14.4 m, 4 aisles of 3.6 m; the
+    # gondolas 9 m long stand in the middle of the 12 m - 0.6 m before the back wall shelf (1.2 m cross aisles).
+    by_hand = (ShelfConfig((4.2, 5.7), (1.2, 9.0, 1.6)), ShelfConfig((9.0, 5.7), (1.2, 9.0, 1.6)),
+               ShelfConfig((13.8, 5.7), (1.2, 9.0, 1.6)), ShelfConfig((9.0, 11.7), (18.0, 0.6, 2.0)))
+    loaded = sc.load("convenience")
+    assert loaded.store == StoreConfig(width_m=18.0, depth_m=12.0, ceiling_m=3.2, shelves=by_hand)
+    assert (loaded.crowd.people, loaded.store.ceiling_m, loaded.detector.profile.value) == (30, 3.2, "typical")
+    built = StoreGeometry(loaded.store, name="convenience")
+    assert built.boxes == StoreGeometry(StoreConfig(width_m=18.0, depth_m=12.0, ceiling_m=3.2, shelves=by_hand)).boxes
+    # Written out by `scenarios --show`, it loads back as the same store, with no [store.aisles] left to expand twice.
+    again = sc._from_text(sc.resolved_toml(loaded), {}, "shown.toml", "shown")
+    shown = sc.resolved_toml(loaded)
+    assert again.store == loaded.store and "\n[store.aisles]" not in shown
+    assert ("# store.shelves[0] on: the file's [store.aisles], expanded\n\n[[store.shelves]]\n"
+            "center_m = [4.2, 5.7]") in shown
+    assert dataclasses.replace(loaded.store, ceiling_m=3.0).shelves == by_hand
+    # An override (or a sweep's axis) of the layout's keys expands anew: 5 aisles on a 20 m floor are
+    # (20 - 4 x 1.2) / 5 = 3.04 m wide.
+    wider = sc.load("convenience", {"store.aisles.count": 5, "store.width_m": 20.0}).store
+    assert [s.center_m for s in wider.shelves] == [(3.64, 5.7), (7.88, 5.7), (12.12, 5.7), (16.36, 5.7), (10.0, 11.7)]
+
+
+def test_aisles_along_x_are_the_layout_along_y_transposed():
+    rng = np.random.default_rng(5)
+    for _ in range(12):
+        aisles = AislesConfig(count=int(rng.integers(1, 6)), gondola_length_m=float(rng.uniform(2.0, 6.0)),
+                              gondola_width_m=float(rng.uniform(0.6, 1.5)), back_wall_shelf=bool(rng.integers(2)),
+                              side_wall_shelves=bool(rng.integers(2)),
+                              front_aisle_m=None if rng.integers(2) else float(rng.uniform(1.0, 1.5)))
+        w, d = float(rng.uniform(16.0, 22.0)), float(rng.uniform(9.0, 12.0))
+        along_y = aisles.shelves(w, d, 3.0)
+        along_x = dataclasses.replace(aisles, along=AisleAxis.X).shelves(d, w, 3.0)
+        assert [(s.center_m[::-1], (*s.size_m[1::-1], s.size_m[2])) for s in along_y] == [
+            (s.center_m, s.size_m) for s in along_x]
+        # Every aisle between neighbouring units across the floor is equally wide, and at least 1 m.
+        side = aisles.wall_shelf_depth_m if aisles.side_wall_shelves else 0.0
+        gondolas = sorted(s.center_m[0] for s in along_y[:aisles.count - 1])
+        edges = [side] + [e for c in gondolas for e in (c - aisles.gondola_width_m / 2, c + aisles.gondola_width_m / 2)]
+        widths = np.diff(edges + [w - side])[::2]
+        np.testing.assert_allclose(widths, widths[0], atol=1e-5)
+        assert len(widths) == aisles.count and widths[0] >= 1.0
+
+
+@pytest.mark.parametrize(("aisles", "expected"), [
+    (AislesConfig(count=10), r"aisles.count: 10 aisles between 9 gondolas 1.2 m wide do not fit across the floor's "
+                             r"18 m \(0.72 m each; an aisle needs >= 1 m, so at most 8 aisles\)"),
+    (AislesConfig(gondola_length_m=10.0), r"aisles.gondola_length_m: 10 m gondolas .* \(at most 9.40 m\)"),
+    (AislesConfig(gondola_length_m=9.0, front_aisle_m=2.0), r"aisles.front_aisle_m: 2 m leaves 0.40 m"),
+    (AislesConfig(gondola_height_m=3.5), r"aisles.gondola_height_m: 3.5 m is above ceiling_m = 3"),
+])
+def test_an_aisles_layout_that_does_not_fit_the_floor_names_the_key(aisles, expected):
+    with pytest.raises(ValueError, match=expected):
+        StoreConfig(width_m=18.0, depth_m=12.0, aisles=aisles)
+    # The widest that fits is accepted (8 aisles; 9.4 m gondolas).
+    StoreConfig(width_m=18.0, depth_m=12.0, aisles=AislesConfig(count=8))
+    StoreConfig(width_m=18.0, depth_m=12.0, aisles=AislesConfig(gondola_length_m=9.4))
+
+
+def test_a_shelf_the_aisles_expanded_to_is_named_as_theirs():
+    # Side wall shelves against the default doors on the x = 0 wall: the shelf is one the user did not write.
+    config = StoreConfig(width_m=18.0, depth_m=12.0, shelves=(ShelfConfig((9.0, 0.5), (2.0, 0.4, 1.0)),),
+                         aisles=AislesConfig(side_wall_shelves=True))
+    assert config.first_expanded == 1 and len(config.shelves) == 1 + 3 + 1 + 2
+    with pytest.raises(ScenarioError, match=r"store.entrance_m: .* against store.shelves\[5\] \(of store.aisles\)$"):
+        StoreGeometry(config)
+
+
+def test_the_wall_to_wall_shelf_trapping_the_back_half_is_refused_at_load_naming_it():
+    with pytest.raises(ScenarioError, match=r"trapped_back_half.toml: store.shelves\[0\]: closes off 14.8 m² of "
+                                            r"walkable floor in x \[0.3, 7.7\] x y \[3.7, 5.7\] m from the doors"):
+        sc.load(TRAPPED)
+
+
+def test_an_exit_walled_off_names_the_shelf_that_closes_it():
+    shelves = (ShelfConfig((1.5, 1.0), (1.0, 0.5, 1.8)), ShelfConfig((4.0, 3.0), (0.6, 6.0, 1.8)))
+    with pytest.raises(ScenarioError, match=r"store.exit_m: cannot be reached .* \(store.shelves\[1\] closes it off\)"):
+        StoreGeometry(_store(shelves=shelves, entrance_m=(0.0, 3.0), exit_m=(8.0, 3.0)))
+
+
+def test_an_area_two_shelves_close_together_names_both():
+    # Two shelves from wall to wall, one behind the other: taking either away leaves the back still closed.
+    shelves = (ShelfConfig((4.0, 2.5), (8.0, 0.4, 1.8)), ShelfConfig((4.0, 4.0), (8.0, 0.4, 1.8)))
+    with pytest.raises(ScenarioError, match=r": store.shelves\[1\] and store.shelves\[0\] together: closes off "
+                                            r"8.1 m² of walkable floor in x \[0.3, 7.7\] x y \[4.6, 5.7\] m"):
+        StoreGeometry(_store(shelves=shelves, entrance_m=(2.0, 0.0), exit_m=(6.0, 0.0)))
+
+
+@pytest.mark.parametrize("name", [*SHIPPED, "hypermarket", "convenience"])
+def test_the_grid_computed_in_windows_is_the_plain_grid_of_every_cell(name):
+    store = StoreGeometry(sc.load(name).store, name=name)
+    np.testing.assert_array_equal(store.free, store_reference.free_grid(store, store.obstacles))
+
+
+def test_refused_exactly_where_scipys_labels_find_floor_no_door_reaches():
+    """Random shelves across an 8 m x 6 m floor with both doors in front: refused iff scipy.ndimage.label (8-connected)
+    finds free cells outside the entrance's component of the plain grid, and the named shelf's removal joins them."""
+    rng = np.random.default_rng(8)
+    refused = accepted = 0
+    for _ in range(40):
+        shelves = []
+        for _ in range(int(rng.integers(1, 4))):
+            length = float(rng.choice([8.0, rng.uniform(5.0, 8.0)]))
+            x = float(rng.uniform(length / 2, 8.0 - length / 2))
+            shelves.append(ShelfConfig((x, float(rng.uniform(2.0, 5.4))), (length, 0.4, 1.6)))
+        config = _store(shelves=tuple(shelves), entrance_m=(2.0, 0.0), exit_m=(6.0, 0.0))
+        try:
+            store = StoreGeometry(config)
+        except ScenarioError as e:
+            if "closes" not in str(e):
+                continue  # (overlapping shelves)
+            error = str(e)
+        else:
+            error = None
+        bare = StoreGeometry(dataclasses.replace(config, shelves=()))
+        obstacles = [Obstacle(f"store.shelves[{i}]", np.array(s.center_m), np.array(s.size_m[:2]) / 2, 0.0, s.size_m[2])
+                     for i, s in enumerate(shelves)]
+        free = store_reference.free_grid(bare, obstacles)
+        labels, _ = scipy.ndimage.label(free, structure=EIGHT)
+        start = labels[bare.cell_of(bare.entrance.inside)]
+        cut_off = (labels != 0) & (labels != start)
+        assert (error is not None) == bool(cut_off.any()), error
+        if error is None:
+            accepted += 1
+            np.testing.assert_array_equal(store.free, free)
+            continue
+        refused += 1
+        # The named shelves (one, or several "together") are the ones whose removal reaches the largest cut-off area.
+        named = {int(k) for k in re.findall(r"store.shelves\[(\d+)\]", error.split(": closes off")[0])}
+        largest = labels == int(np.argmax(np.bincount(labels[cut_off])))
+        kept = [ob for i, ob in enumerate(obstacles) if i not in named]
+        without, _ = scipy.ndimage.label(store_reference.free_grid(bare, kept), structure=EIGHT)
+        assert (without[largest] == without[bare.cell_of(bare.entrance.inside)]).all(), error
+    assert refused >= 5 and accepted >= 5, (refused, accepted)
