@@ -122,6 +122,17 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _frame_rate(text: str) -> float:
+    """A frame rate, as a scenario's clock.fps: in (0, 1000] frames per second (an infinite one stamped every
+    frame 0)."""
+    from sim.clock import MAX_FPS
+
+    value = _positive_float(text)
+    if not value <= MAX_FPS:
+        raise argparse.ArgumentTypeError(f"{text} must be in (0, {MAX_FPS:g}] frames per second")
+    return value
+
+
 def _world_stats_s(text: str) -> float:
     value = _positive_float(text)
     if not value <= MAX_WORLD_STATS_S:
@@ -367,7 +378,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
                    "one folder of OpenPose *_keypoints.json per camera")
     add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
-    p.add_argument("--fps", type=_positive_float, help="OpenPose folders: frame rate for the stamps that "
+    p.add_argument("--fps", type=_frame_rate, help="OpenPose folders: frame rate for the stamps that "
                    "timestamps.json does not give (stamp = frame number / fps)")
 
     p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
@@ -684,6 +695,7 @@ def _cmd_fit_detector(args) -> None:
     if (args.recording is None) == (args.target is None):
         raise CrossviewError("fit-detector: give a recording to fit, or --target shelf-openpose (not both)")
     pipeline.check_writable(args.output)  # (not one of the command's inputs, `_command_inputs`)
+    start = scenario_mod.profile_params(args.start)  # (a bad --start refused before any measuring)
     seed = args.seed
     if args.recording is not None:
         target = recording_detector_stats(args.recording)
@@ -701,7 +713,6 @@ def _cmd_fit_detector(args) -> None:
         target, where = SHELF_OPENPOSE, "real OpenPose on the Shelf dataset"
         scenario = pipeline.load_scenario(args.scenario or "shelf")
     seed = scenario.seed if seed is None else seed
-    start = scenario_mod.profile_params(args.start)
 
     def report(k, result):
         (key, group), worst = max(deviations(result.stats, target).items(), key=lambda kv: abs(kv[1]))
@@ -782,13 +793,16 @@ def _cmd_per_camera(args) -> None:
 def _cmd_compare(args) -> None:
     from crossview import pipeline
     from crossview.experiments import compare
+    from crossview.outputs import kept_together
 
     contenders = [compare.Contender.parse(text) for text in args.tracker]
     compare.check(contenders, args.recordings)
     for name in ("compare.md", "compare.csv", *(f"{m.key}.png" for m in compare.METRICS)):
         pipeline.check_writable(args.output / name, inputs=tuple(args.recordings))
-    rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks", progress=not args.no_progress)
-    written = compare.write_report(rows, args.output)
+    with kept_together(args.output):  # the tracks, the table and the charts: all of them, or none
+        rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks",
+                                    progress=not args.no_progress)
+        written = compare.write_report(rows, args.output)
     print(compare.markdown(rows), end="")
     print(f"written: {', '.join(str(p) for p in written)}")
 

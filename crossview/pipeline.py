@@ -76,15 +76,14 @@ def scenario_files(name_or_path) -> tuple[Path, ...]:
     and the calibration file and detector profile file it names (relative to its folder), read from the TOML
     without validating it (the command does that, and names what is wrong); an unreadable file names none beyond
     itself."""
-    import tomllib
-
+    from core import tomlfile
     from crossview.formats.json_input import check_input_file
 
     path = scenario_mod.resolve_path(name_or_path)
     check_input_file(path, scenario_mod.ScenarioError)
     try:
         with open(path, "rb") as f:
-            tree = tomllib.load(f)
+            tree = tomlfile.load(f)
     except (OSError, ValueError):
         return (path,)
     named = []

@@ -35,7 +35,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
-from core import processes
+from core import processes, tomlfile
 from core.errors import CrossviewError, ScenarioError
 from crossview import outputs, pipeline
 from sim import scenario as scenario_mod
@@ -273,7 +273,7 @@ def parse_values(option: str, text: str) -> tuple:
     values = []
     for part in parts:
         try:
-            values.append(tomllib.loads(f"v = {part}")["v"])
+            values.append(tomlfile.loads(f"v = {part}")["v"])
         except tomllib.TOMLDecodeError:
             values.append(part)
     if len(set(map(repr, values))) != len(values):

@@ -57,6 +57,10 @@ SCENARIO_CASES = [
     ("crowd-above-the-floor", None, ["--people", "400"],
      "crowd.people: 400 people need 400 m² of walkable floor (1.0 m² each) but the store has 12.8 m²; use at "
      "most 12 people"),
+    ("nested-2000-deep", "a = " + "[" * 2000 + "]" * 2000 + "\n", [],  # (was a RecursionError)
+     "s.toml: malformed TOML: tables or arrays nested more than 32 deep"),
+    ("nested-40-deep", "a = " + "[" * 40 + "]" * 40 + "\n", [],
+     "s.toml: malformed TOML: tables or arrays nested more than 32 deep"),
     ("too-many-camera-frames", None, ["--duration", "86400"],
      "schedules 10,368,000 camera frames, more than the 5,000,000 one recording may hold"),
 ]
@@ -68,6 +72,29 @@ def test_a_bad_scenario_is_refused_in_one_line(text, options, expected, tmp_path
     scenario = "store_layout1" if text is None else _file(tmp_path, "s.toml", text)
     err = _refused(capsys, ["generate", scenario, "-o", tmp_path / "out" / "r.mcap", *options], tmp_path)
     assert expected in err, err
+
+
+DEEP_TOML = "a = " + "[" * 100000 + "]" * 100000 + "\n"
+
+
+# Every command that reads a TOML file reads it through core.tomlfile: nested 100,000 deep it is refused in
+# one line naming the file (was a RecursionError): (id, the command with DEEP for the deep file).
+DEEP_TOML_COMMANDS = [
+    ("scenarios-show", ["scenarios", "--show", "DEEP"]),
+    ("track-config", ["track", "REC", "-o", "OUT/t.mcap", "--config", "DEEP"]),
+    ("fit-detector-start", ["fit-detector", "REC", "--start", "DEEP", "-o", "OUT/p.toml"]),
+    ("profile-named-by-a-scenario", ["generate", "SCENARIO", "-o", "OUT/r.mcap"]),
+]
+
+
+@pytest.mark.parametrize("argv", [c[1] for c in DEEP_TOML_COMMANDS], ids=[c[0] for c in DEEP_TOML_COMMANDS])
+def test_a_toml_file_nested_too_deep_is_refused_in_one_line(argv, campus_recording, tmp_path, capsys):
+    deep = _file(tmp_path, "deep.toml", DEEP_TOML)
+    scenario = _file(tmp_path, "s.toml", '[detector]\nprofile = "deep.toml"\n')
+    names = {"DEEP": deep, "REC": campus_recording, "SCENARIO": scenario}
+    argv = [str(tmp_path / "out") + a[3:] if a.startswith("OUT") else names.get(a, a) for a in argv]
+    err = _refused(capsys, argv, tmp_path)
+    assert f"{deep}: " in err and "nested more than 32 deep" in err, err
 
 
 # Command-line values outside their type or bound.
@@ -91,6 +118,10 @@ OPTION_CASES = [
                          "OUT/x.png"], "--tile-width: 100000 must be in [1, 4096] pixels"),
     ("clip-too-long", ["render", "OUT/r.mcap", "--camera", "cam00", "--from", "0", "--to", "1e6", "-o", "OUT/x.gif"],
      "is more than the 100,000 images a clip may hold"),
+    ("convert-fps-infinite", ["convert", "OUT/op", "-o", "OUT/r.mcap", "--fps", "inf"],
+     "argument --fps: inf must be in (0, 1000] frames per second"),
+    ("convert-fps-huge", ["convert", "OUT/op", "-o", "OUT/r.mcap", "--fps", "1e300"],
+     "argument --fps: 1e300 must be in (0, 1000] frames per second"),
     ("time-nan", ["render", "OUT/r.mcap", "--camera", "cam00", "--time", "nan", "-o", "OUT/x.png"],
      "--time: nan is not a finite number of seconds"),
     ("from-negative", ["score", "OUT/r.mcap", "OUT/t.mcap", "--from", "-1"], "'-1' must be a number of seconds >= 0"),
@@ -198,7 +229,21 @@ DATASET_CASES = [
     ("truth-pose-empty", "annotation_3d.json", lambda d: d[0]["poses"][0].update(points_3d=[]) if d[0]["poses"]
      else d[0].update(poses=[{"id": 1, "points_3d": []}]), "points_3d must be 14x3 for each pose"),
     ("missing-calibration", "calibration.json", None, "calibration.json: file not found"),
+    ("infinite-pixel", "annotation_2d.json", lambda d: _with_1e400(d, "points_2d"),
+     "pose 0: points_2d holds inf; expected pixels finite, within 1e6"),
+    ("infinite-score", "annotation_2d.json", lambda d: _with_1e400(d, "scores"),
+     "pose 0: scores holds inf; expected scores finite"),
 ]
+
+
+def _with_1e400(d, key):
+    """The 2D file's text with its first pose's first value of `key` written 1e400 (which JSON reads as inf)."""
+    pose = _first_frame_with_poses(d)["poses"][0]
+    if key == "points_2d":
+        pose[key][0][0] = 123456.789
+    else:
+        pose[key][0] = 123456.789
+    return json.dumps(d).replace("123456.789", "1e400")
 
 
 def _dataset(tmp_path: Path, name: str, change) -> Path:
