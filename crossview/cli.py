@@ -19,7 +19,9 @@ from core.errors import CrossviewError, Interrupted
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
 _ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
-MAX_WORLD_STATS_S = 86400.0  # world-stats' simulated seconds: a day, as a scenario's duration_s
+MAX_DURATION_S = 86400.0
+"""Every `--duration` (simulated seconds): a day, as a scenario's duration_s (`sim.scenario.MAX_DURATION_S`),
+checked as the option is read so that the line names the option, not the scenario file."""
 
 
 class _Ended(BaseException):
@@ -133,18 +135,19 @@ def _frame_rate(text: str) -> float:
     return value
 
 
-def _world_stats_s(text: str) -> float:
+def _duration_s(text: str) -> float:
     value = _positive_float(text)
-    if not value <= MAX_WORLD_STATS_S:
-        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_WORLD_STATS_S:g} s (a day)")
+    if not value <= MAX_DURATION_S:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_DURATION_S:g} s (a day), as a scenario's "
+                                         "duration_s")
     return value
 
 
 def _minutes_as_s(text: str) -> float:
     """world-stats' old --minutes, in seconds."""
     value = _positive_float(text)
-    if not value <= MAX_WORLD_STATS_S / 60:
-        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_WORLD_STATS_S / 60:g} minutes (a day)")
+    if not value <= MAX_DURATION_S / 60:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_DURATION_S / 60:g} minutes (a day)")
     return 60.0 * value
 
 
@@ -205,7 +208,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     def scenario_options(p):
         p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
-        p.add_argument("--duration", type=_positive_float, help="simulated seconds (default: the scenario's)")
+        p.add_argument("--duration", type=_duration_s, help="simulated seconds (default: the scenario's)")
         p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
         p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
 
@@ -341,7 +344,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated tracker methods, each a --method of track (a plug-in as pkg.module:Class), "
                    "optionally LABEL=METHOD to name it in the results (default crossview)")
     p.add_argument("--preset", default="store", help="comma-separated tracker presets (default store)")
-    p.add_argument("--duration", type=_positive_float, help="simulated seconds per cell (default: the scenario's)")
+    p.add_argument("--duration", type=_duration_s, help="simulated seconds per cell (default: the scenario's)")
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="leave the first S seconds "
                    "of each cell out of its score (default: the warm-up rule of docs/metrics.md, min(5 s, half a "
                    "cell))")
@@ -411,22 +414,22 @@ def build_parser() -> argparse.ArgumentParser:
                    "file (default typical)")
     p.add_argument("--seed", type=_non_negative_int, help="seed of every round (default: the recording's, else the "
                    "scenario's)")
-    p.add_argument("--duration", type=_positive_float, default=20.0, help="simulated seconds per round (default 20)")
+    p.add_argument("--duration", type=_duration_s, default=20.0, help="simulated seconds per round (default 20)")
     p.add_argument("--rounds", type=_positive_int, default=8, help="rounds of simulate, measure, update (default 8)")
 
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
     duration = p.add_mutually_exclusive_group()
-    duration.add_argument("--duration", type=_world_stats_s, default=600.0, help="simulated seconds (default 600, "
-                          f"at most {MAX_WORLD_STATS_S:g})")
+    duration.add_argument("--duration", type=_duration_s, default=600.0, help="simulated seconds (default 600, "
+                          f"at most {MAX_DURATION_S:g})")
     duration.add_argument("--minutes", dest="duration", type=_minutes_as_s, default=argparse.SUPPRESS,
                           help=argparse.SUPPRESS)  # (the old spelling, for one version)
 
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
     add_output(p, "write the figures as JSON here", required=False, old=("--json",))
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
-    p.add_argument("--duration", type=_positive_float, help="simulated seconds per case (default 20; 10 with --scale)")
+    p.add_argument("--duration", type=_duration_s, help="simulated seconds per case (default 20; 10 with --scale)")
     p.add_argument("--scale", action="store_true", help="the tracker at crowd scale instead (28/16 to 240/200 "
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
     p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "

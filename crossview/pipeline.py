@@ -27,7 +27,8 @@ from sim import scenario as scenario_mod
 log = logging.getLogger(__name__)
 
 def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
-    """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor.
+    """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor, of those with at
+    most `sim.cameras.MAX_GRID` rows and columns.
 
     Args:
         count: number of cameras, >= 1.
@@ -41,10 +42,12 @@ def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
         raise CrossviewError(f"--cameras: {count} is more than the {MAX_GRID * MAX_GRID} cameras a grid may hold "
                              f"(cameras.rows and cameras.cols at most {MAX_GRID} each)")
     aspect = width_m / depth_m
-    rows = min(
-        (r for r in range(1, count + 1) if count % r == 0),
-        key=lambda r: abs(math.log((count // r) / r / aspect)),
-    )
+    shapes = [r for r in range(1, count + 1) if count % r == 0 and max(r, count // r) <= MAX_GRID]
+    if not shapes:  # (else the scenario's check would blame the file for a shape the option made)
+        raise CrossviewError(f"--cameras: {count} cameras make no grid of at most {MAX_GRID} rows and {MAX_GRID} "
+                             "columns; give a count that does (a product of two numbers up to "
+                             f"{MAX_GRID})")
+    rows = min(shapes, key=lambda r: abs(math.log((count // r) / r / aspect)))
     return rows, count // rows
 
 

@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from crossview import cli
 from crossview.cli import EXIT_BAD_INPUT, main
+from sim import scenario
 
 CAMPUS = Path(__file__).resolve().parents[1] / "data" / "campus"
 
@@ -110,8 +112,16 @@ OPTION_CASES = [
      "argument -o/--output: not allowed with argument --json"),
     ("duration-nan", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--duration", "nan"], "nan must be > 0"),
     ("duration-not-a-number", ["run", "--duration", "ten", "-o", "OUT"], "'ten' is not a number"),
-    ("bench-duration-huge", ["bench", "--duration", "1e9", "-o", "OUT/b.json"],
-     "duration_s: 1000000000.0 must be in (0, 86400] s"),
+    ("bench-duration-huge", ["bench", "--duration", "1e9", "-o", "OUT/b.json"],  # (blamed store_layout1.toml)
+     "argument --duration: 1e9 must be at most 86400 s (a day)"),
+    ("fit-detector-duration-infinite", ["fit-detector", "OUT/r.mcap", "--duration", "inf", "-o", "OUT/p.toml"],
+     "argument --duration: inf must be at most 86400 s (a day)"),  # (was an OverflowError)
+    ("fit-detector-duration-huge", ["fit-detector", "OUT/r.mcap", "--duration", "1e9", "-o", "OUT/p.toml"],
+     "argument --duration: 1e9 must be at most 86400 s (a day)"),  # (allocated 74.5 GiB)
+    ("sweep-duration-huge", ["sweep", "store_layout1", "--duration", "1e9", "-o", "OUT/s"],
+     "argument --duration: 1e9 must be at most 86400 s (a day)"),
+    ("cameras-no-grid", ["coverage", "hypermarket", "--cameras", "9973", "-o", "OUT/c.png"],  # (a prime)
+     "--cameras: 9973 cameras make no grid of at most 100 rows and 100 columns"),
     ("cameras-huge", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--cameras", "1000000000"],
      "--cameras: 1000000000 is more than the 10000 cameras a grid may hold"),
     ("tile-width-huge", ["render", "OUT/r.mcap", "--contact-sheet", "--time", "1", "--tile-width", "100000", "-o",
@@ -128,6 +138,10 @@ OPTION_CASES = [
     ("sweep-from-past-the-cells", ["sweep", "store_layout1", "--duration", "2", "--from", "3", "-o", "OUT/s"],
      "--from 3: the warm-up reaches past the end of the cells, which simulate 2 s; give at most 2"),
 ]
+
+
+def test_every_duration_option_has_a_scenario_s_bound():
+    assert cli.MAX_DURATION_S == scenario.MAX_DURATION_S
 
 
 @pytest.mark.parametrize(("argv", "expected"), [c[1:] for c in OPTION_CASES], ids=[c[0] for c in OPTION_CASES])
@@ -229,6 +243,8 @@ DATASET_CASES = [
     ("truth-pose-empty", "annotation_3d.json", lambda d: d[0]["poses"][0].update(points_3d=[]) if d[0]["poses"]
      else d[0].update(poses=[{"id": 1, "points_3d": []}]), "points_3d must be 14x3 for each pose"),
     ("missing-calibration", "calibration.json", None, "calibration.json: file not found"),
+    ("too-many-cameras", "calibration.json", lambda d: {"cameras": {f"c{i}": _cam0(d) for i in range(10_001)}},
+     "key 'cameras' holds 10,001 cameras, more than the 10,000 one recording may hold"),  # (was a struct.error)
     ("infinite-pixel", "annotation_2d.json", lambda d: _with_1e400(d, "points_2d"),
      "pose 0: points_2d holds inf; expected pixels finite, within 1e6"),
     ("infinite-score", "annotation_2d.json", lambda d: _with_1e400(d, "scores"),
