@@ -22,6 +22,8 @@ _ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 MAX_DURATION_S = 86400.0
 """Every `--duration` (simulated seconds): a day, as a scenario's duration_s (`sim.scenario.MAX_DURATION_S`),
 checked as the option is read so that the line names the option, not the scenario file."""
+MAX_SEED = 2**63 - 1
+"""Every `--seed`: a scenario's seed (`sim.scenario.MAX_SEED`), which seeds numpy's generators."""
 
 
 class _Ended(BaseException):
@@ -171,6 +173,13 @@ def _non_negative_int(text: str) -> int:
     return value
 
 
+def _seed(text: str) -> int:
+    value = _non_negative_int(text)
+    if value > MAX_SEED:
+        raise argparse.ArgumentTypeError(f"{text} must be in [0, 2^63 - 1], as a scenario's seed")
+    return value
+
+
 def _positive_int(text: str) -> int:
     value = _non_negative_int(text)
     if value == 0:
@@ -207,7 +216,7 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
 
     def scenario_options(p):
-        p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
+        p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
         p.add_argument("--duration", type=_duration_s, help="simulated seconds (default: the scenario's)")
         p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
         p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
@@ -254,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario file or shipped name")
     add_output(p, "the map to write (.png; default: the shares only)", required=False, metavar="MAP.png")
     p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
-    p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
+    p.add_argument("--seed", type=_seed, help="seed of the cameras' position jitter (default: the "
                    "scenario's)")
     p.add_argument("--people", type=_non_negative_int, help="the crowd whose occlusion to predict (default: the "
                    "scenario's [crowd] people)")
@@ -412,14 +421,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "shelf)")
     p.add_argument("--start", default="typical", help="the profile the fit starts from: a shipped name or a profile "
                    "file (default typical)")
-    p.add_argument("--seed", type=_non_negative_int, help="seed of every round (default: the recording's, else the "
+    p.add_argument("--seed", type=_seed, help="seed of every round (default: the recording's, else the "
                    "scenario's)")
     p.add_argument("--duration", type=_duration_s, default=20.0, help="simulated seconds per round (default 20)")
     p.add_argument("--rounds", type=_positive_int, default=8, help="rounds of simulate, measure, update (default 8)")
 
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
-    p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
+    p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
     duration = p.add_mutually_exclusive_group()
     duration.add_argument("--duration", type=_duration_s, default=600.0, help="simulated seconds (default 600, "
                           f"at most {MAX_DURATION_S:g})")
@@ -525,7 +534,7 @@ def _cmd_run(args) -> None:
     trk = pipeline.track(
         rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config, progress=progress
     )
-    print(f"tracked   {trk.path}: {trk.updates} updates at {trk.tracker_fps:.1f} FPS (all cameras once)")
+    print(f"tracked   {trk.path}: {_updates_and_speed(trk, 'at {fps:.1f} FPS (all cameras once)')}")
     from_s = scoring.default_from_s(scenario.duration_s) if args.from_s is None else args.from_s
     report, result = pipeline.score(rec_path, tracks_path, progress=progress, from_s=from_s)
     pipeline.write_json(result, json_path, inputs=(rec_path, tracks_path))
@@ -648,8 +657,16 @@ def _cmd_track(args) -> None:
         args.recording, args.output, method=args.method, preset=args.preset, config_path=args.config,
         progress=not args.no_progress,
     )
-    print(f"{trk.path}: {trk.updates} updates, {trk.tracker_fps:.1f} FPS (all cameras once), "
-          f"{trk.camera_frames_per_s:.0f} camera frames/s")
+    print(f"{trk.path}: {_updates_and_speed(trk, ', {fps:.1f} FPS (all cameras once), {frames:.0f} camera frames/s')}")
+
+
+def _updates_and_speed(trk, template: str) -> str:
+    """`N updates` and the speed as `template` words it, or, when no camera frame was tracked (a stream too
+    short to hold one), that no speed was measured (was "0 updates at nan FPS")."""
+    if trk.updates == 0 or not trk.tracker_s > 0:
+        return f"{trk.updates} updates (no camera frame in the stream: no speed measured)"
+    return f"{trk.updates} updates" + (" " if template.startswith("at") else "") + template.format(
+        fps=trk.tracker_fps, frames=trk.camera_frames_per_s)
 
 
 def _cmd_score(args) -> None:

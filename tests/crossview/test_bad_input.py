@@ -42,7 +42,7 @@ SCENARIO_CASES = [
     ("not-utf8", b'description = "\xff"\n', [], "cannot read scenario: 'utf-8' codec can't decode byte 0xff"),
     ("million-cameras", None, ["--cameras", "1000000"],
      "--cameras: 1000000 is more than the 10000 cameras a grid may hold"),
-    ("huge-seed", None, ["--seed", str(10**30)], f"seed: {10**30} must be in [0, 9223372036854775807]"),
+    ("huge-seed", None, ["--seed", str(10**30)], f"argument --seed: {10**30} must be in [0, 2^63 - 1]"),
     ("huge-crowd", None, ["--people", "100000000"], "people: 100000000 must be in [0, 500] people"),
     ("calibration-missing", '[cameras]\ncalibration = "nowhere.json"\ncalibration_format = "dataset"\n', [],
      "s.toml: cameras.calibration: 'nowhere.json': no such file"),
@@ -120,6 +120,10 @@ OPTION_CASES = [
      "argument --duration: 1e9 must be at most 86400 s (a day)"),  # (allocated 74.5 GiB)
     ("sweep-duration-huge", ["sweep", "store_layout1", "--duration", "1e9", "-o", "OUT/s"],
      "argument --duration: 1e9 must be at most 86400 s (a day)"),
+    ("fit-detector-seed-huge", ["fit-detector", "OUT/r.mcap", "--seed", str(2**64), "-o", "OUT/p.toml"],
+     f"argument --seed: {2**64} must be in [0, 2^63 - 1]"),  # (was accepted)
+    ("coverage-seed-huge", ["coverage", "hypermarket", "--seed", str(2**63), "-o", "OUT/c.png"],
+     f"argument --seed: {2**63} must be in [0, 2^63 - 1]"),
     ("cameras-no-grid", ["coverage", "hypermarket", "--cameras", "9973", "-o", "OUT/c.png"],  # (a prime)
      "--cameras: 9973 cameras make no grid of at most 100 rows and 100 columns"),
     ("cameras-huge", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--cameras", "1000000000"],
@@ -140,8 +144,8 @@ OPTION_CASES = [
 ]
 
 
-def test_every_duration_option_has_a_scenario_s_bound():
-    assert cli.MAX_DURATION_S == scenario.MAX_DURATION_S
+def test_every_duration_and_seed_option_has_a_scenario_s_bound():
+    assert cli.MAX_DURATION_S == scenario.MAX_DURATION_S and cli.MAX_SEED == scenario.MAX_SEED
 
 
 @pytest.mark.parametrize(("argv", "expected"), [c[1:] for c in OPTION_CASES], ids=[c[0] for c in OPTION_CASES])
