@@ -986,8 +986,23 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run() -> None:
-    """The `crossview` command."""
-    sys.exit(main())
+    """The `crossview` command. It ends when its command has: a thread that is no daemon and still runs then
+    (a plug-in tracker's, left running) would keep the interpreter waiting on it for ever, so the process
+    ends without waiting, after one warning line naming the threads (docs/plugins.md)."""
+    status = main()
+    lingering = [t.name for t in threading.enumerate()
+                 if t is not threading.main_thread() and not t.daemon and t.is_alive()]
+    if lingering:
+        print(f"crossview: warning: thread(s) {', '.join(map(repr, lingering))} still running when the command "
+              "ended (a plug-in's, not a daemon); ending without them", file=sys.stderr)
+        logging.shutdown()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(status)  # (sys.exit would join them first: for ever)
+    sys.exit(status)
 
 
 if __name__ == "__main__":
