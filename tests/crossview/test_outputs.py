@@ -72,7 +72,7 @@ def test_a_failed_output_leaves_neither_file_nor_the_folders_made_for_it(tmp_pat
     assert (tmp_path / "kept.bin").read_bytes() == b"old"
 
 
-@pytest.mark.parametrize("failure", [KeyboardInterrupt, RuntimeError])
+@pytest.mark.parametrize("failure", [KeyboardInterrupt, RuntimeError], ids=["interrupt", "error"])
 def test_outputs_kept_together_are_all_removed_when_a_later_step_fails(tmp_path, failure):
     # `compare`'s case: the first tracker's tracks committed, then the second fails or a signal arrives.
     # What was there before stays; what the group wrote goes, with the folders made for it.
