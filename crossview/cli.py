@@ -286,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--confirm", action="store_true", help="measure the recommended rig: a sweep (--seeds x "
                    "--duration) into PLAN.confirm/ beside the plan, and say whether the tracker agrees")
     p.add_argument("--seeds", default="0,1,2", help="with --confirm: comma-separated seeds (default 0,1,2)")
-    p.add_argument("--duration", type=_positive_float, default=30.0, help="with --confirm: simulated seconds per "
+    p.add_argument("--duration", type=_duration_s, default=30.0, help="with --confirm: simulated seconds per "
                    "seed (default 30)")
     p.add_argument("--workers", type=_positive_int, help="with --confirm: local worker processes (default: the "
                    "cores)")

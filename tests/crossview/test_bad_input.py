@@ -124,6 +124,8 @@ OPTION_CASES = [
      f"argument --seed: {2**64} must be in [0, 2^63 - 1]"),  # (was accepted)
     ("coverage-seed-huge", ["coverage", "hypermarket", "--seed", str(2**63), "-o", "OUT/c.png"],
      f"argument --seed: {2**63} must be in [0, 2^63 - 1]"),
+    ("plan-duration-huge", ["plan", "store_layout1", "--target-pcp", "0.9", "--confirm", "--duration", "1e9", "-o",
+                            "OUT/plan.json"], "argument --duration: 1e9 must be at most 86400 s (a day)"),
     ("cameras-no-grid", ["coverage", "hypermarket", "--cameras", "9973", "-o", "OUT/c.png"],  # (a prime)
      "--cameras: 9973 cameras make no grid of at most 100 rows and 100 columns"),
     ("cameras-huge", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--cameras", "1000000000"],
