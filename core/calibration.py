@@ -28,6 +28,11 @@ def calibration_image_wh(value) -> tuple[int, int]:
 MAX_ABS_CM = 1e9  # the largest number a dataset layout camera pose may hold, centimetres (10,000 km)
 
 
+MAX_CAMERAS = 10_000
+"""Most cameras of one calibration: a scenario's largest grid (100 x 100, `crossview.pipeline.camera_grid`); a
+recording numbers its channels in 16 bits, a few per camera."""
+
+
 def dataset_entries(calibration) -> dict:
     """The `cameras` object (camera name -> {K, Tw, dist_coeffs}) of a dataset layout calibration.json."""
     if not isinstance(calibration, dict):
@@ -35,6 +40,9 @@ def dataset_entries(calibration) -> dict:
     entries = calibration.get("cameras")
     if not isinstance(entries, dict):
         raise ValueError(f"key 'cameras' (camera name -> {{K, Tw}}) must be an object, got {type(entries).__name__}")
+    if len(entries) > MAX_CAMERAS:
+        raise ValueError(f"key 'cameras' holds {len(entries):,} cameras, more than the {MAX_CAMERAS:,} one recording "
+                         "may hold")
     return entries
 
 

@@ -19,7 +19,11 @@ from core.errors import CrossviewError, Interrupted
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
 _ENDING_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
-MAX_WORLD_STATS_S = 86400.0  # world-stats' simulated seconds: a day, as a scenario's duration_s
+MAX_DURATION_S = 86400.0
+"""Every `--duration` (simulated seconds): a day, as a scenario's duration_s (`sim.scenario.MAX_DURATION_S`),
+checked as the option is read so that the line names the option, not the scenario file."""
+MAX_SEED = 2**63 - 1
+"""Every `--seed`: a scenario's seed (`sim.scenario.MAX_SEED`), which seeds numpy's generators."""
 
 
 class _Ended(BaseException):
@@ -122,18 +126,30 @@ def _positive_float(text: str) -> float:
     return value
 
 
-def _world_stats_s(text: str) -> float:
+def _frame_rate(text: str) -> float:
+    """A frame rate, as a scenario's clock.fps: in (0, 1000] frames per second (an infinite one stamped every
+    frame 0)."""
+    from sim.clock import MAX_FPS
+
     value = _positive_float(text)
-    if not value <= MAX_WORLD_STATS_S:
-        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_WORLD_STATS_S:g} s (a day)")
+    if not value <= MAX_FPS:
+        raise argparse.ArgumentTypeError(f"{text} must be in (0, {MAX_FPS:g}] frames per second")
+    return value
+
+
+def _duration_s(text: str) -> float:
+    value = _positive_float(text)
+    if not value <= MAX_DURATION_S:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_DURATION_S:g} s (a day), as a scenario's "
+                                         "duration_s")
     return value
 
 
 def _minutes_as_s(text: str) -> float:
     """world-stats' old --minutes, in seconds."""
     value = _positive_float(text)
-    if not value <= MAX_WORLD_STATS_S / 60:
-        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_WORLD_STATS_S / 60:g} minutes (a day)")
+    if not value <= MAX_DURATION_S / 60:
+        raise argparse.ArgumentTypeError(f"{text} must be at most {MAX_DURATION_S / 60:g} minutes (a day)")
     return 60.0 * value
 
 
@@ -154,6 +170,13 @@ def _non_negative_int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
     if value < 0:
         raise argparse.ArgumentTypeError(f"{text} must be >= 0")
+    return value
+
+
+def _seed(text: str) -> int:
+    value = _non_negative_int(text)
+    if value > MAX_SEED:
+        raise argparse.ArgumentTypeError(f"{text} must be in [0, 2^63 - 1], as a scenario's seed")
     return value
 
 
@@ -193,8 +216,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
 
     def scenario_options(p):
-        p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
-        p.add_argument("--duration", type=_positive_float, help="simulated seconds (default: the scenario's)")
+        p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
+        p.add_argument("--duration", type=_duration_s, help="simulated seconds (default: the scenario's)")
         p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
         p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
 
@@ -240,7 +263,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help="scenario file or shipped name")
     add_output(p, "the map to write (.png; default: the shares only)", required=False, metavar="MAP.png")
     p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
-    p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
+    p.add_argument("--seed", type=_seed, help="seed of the cameras' position jitter (default: the "
                    "scenario's)")
     p.add_argument("--people", type=_non_negative_int, help="the crowd whose occlusion to predict (default: the "
                    "scenario's [crowd] people)")
@@ -263,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--confirm", action="store_true", help="measure the recommended rig: a sweep (--seeds x "
                    "--duration) into PLAN.confirm/ beside the plan, and say whether the tracker agrees")
     p.add_argument("--seeds", default="0,1,2", help="with --confirm: comma-separated seeds (default 0,1,2)")
-    p.add_argument("--duration", type=_positive_float, default=30.0, help="with --confirm: simulated seconds per "
+    p.add_argument("--duration", type=_duration_s, default=30.0, help="with --confirm: simulated seconds per "
                    "seed (default 30)")
     p.add_argument("--workers", type=_positive_int, help="with --confirm: local worker processes (default: the "
                    "cores)")
@@ -330,7 +353,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="comma-separated tracker methods, each a --method of track (a plug-in as pkg.module:Class), "
                    "optionally LABEL=METHOD to name it in the results (default crossview)")
     p.add_argument("--preset", default="store", help="comma-separated tracker presets (default store)")
-    p.add_argument("--duration", type=_positive_float, help="simulated seconds per cell (default: the scenario's)")
+    p.add_argument("--duration", type=_duration_s, help="simulated seconds per cell (default: the scenario's)")
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="leave the first S seconds "
                    "of each cell out of its score (default: the warm-up rule of docs/metrics.md, min(5 s, half a "
                    "cell))")
@@ -367,7 +390,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
                    "one folder of OpenPose *_keypoints.json per camera")
     add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
-    p.add_argument("--fps", type=_positive_float, help="OpenPose folders: frame rate for the stamps that "
+    p.add_argument("--fps", type=_frame_rate, help="OpenPose folders: frame rate for the stamps that "
                    "timestamps.json does not give (stamp = frame number / fps)")
 
     p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
@@ -399,24 +422,24 @@ def build_parser() -> argparse.ArgumentParser:
                    "shelf)")
     p.add_argument("--start", default="typical", help="the profile the fit starts from: a shipped name or a profile "
                    "file (default typical)")
-    p.add_argument("--seed", type=_non_negative_int, help="seed of every round (default: the recording's, else the "
+    p.add_argument("--seed", type=_seed, help="seed of every round (default: the recording's, else the "
                    "scenario's)")
-    p.add_argument("--duration", type=_positive_float, default=20.0, help="simulated seconds per round (default 20)")
+    p.add_argument("--duration", type=_duration_s, default=20.0, help="simulated seconds per round (default 20)")
     p.add_argument("--rounds", type=_positive_int, default=8, help="rounds of simulate, measure, update (default 8)")
 
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
-    p.add_argument("--seed", type=_non_negative_int, help="seed (default: the scenario's)")
+    p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
     duration = p.add_mutually_exclusive_group()
-    duration.add_argument("--duration", type=_world_stats_s, default=600.0, help="simulated seconds (default 600, "
-                          f"at most {MAX_WORLD_STATS_S:g})")
+    duration.add_argument("--duration", type=_duration_s, default=600.0, help="simulated seconds (default 600, "
+                          f"at most {MAX_DURATION_S:g})")
     duration.add_argument("--minutes", dest="duration", type=_minutes_as_s, default=argparse.SUPPRESS,
                           help=argparse.SUPPRESS)  # (the old spelling, for one version)
 
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
     add_output(p, "write the figures as JSON here", required=False, old=("--json",))
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
-    p.add_argument("--duration", type=_positive_float, help="simulated seconds per case (default 20; 10 with --scale)")
+    p.add_argument("--duration", type=_duration_s, help="simulated seconds per case (default 20; 10 with --scale)")
     p.add_argument("--scale", action="store_true", help="the tracker at crowd scale instead (28/16 to 240/200 "
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
     p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
@@ -512,7 +535,7 @@ def _cmd_run(args) -> None:
     trk = pipeline.track(
         rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config, progress=progress
     )
-    print(f"tracked   {trk.path}: {trk.updates} updates at {trk.tracker_fps:.1f} FPS (all cameras once)")
+    print(f"tracked   {trk.path}: {_updates_and_speed(trk, 'at {fps:.1f} FPS (all cameras once)')}")
     from_s = scoring.default_from_s(scenario.duration_s) if args.from_s is None else args.from_s
     report, result = pipeline.score(rec_path, tracks_path, progress=progress, from_s=from_s)
     pipeline.write_json(result, json_path, inputs=(rec_path, tracks_path))
@@ -635,8 +658,16 @@ def _cmd_track(args) -> None:
         args.recording, args.output, method=args.method, preset=args.preset, config_path=args.config,
         progress=not args.no_progress,
     )
-    print(f"{trk.path}: {trk.updates} updates, {trk.tracker_fps:.1f} FPS (all cameras once), "
-          f"{trk.camera_frames_per_s:.0f} camera frames/s")
+    print(f"{trk.path}: {_updates_and_speed(trk, ', {fps:.1f} FPS (all cameras once), {frames:.0f} camera frames/s')}")
+
+
+def _updates_and_speed(trk, template: str) -> str:
+    """`N updates` and the speed as `template` words it, or, when no camera frame was tracked (a stream too
+    short to hold one), that no speed was measured (was "0 updates at nan FPS")."""
+    if trk.updates == 0 or not trk.tracker_s > 0:
+        return f"{trk.updates} updates (no camera frame in the stream: no speed measured)"
+    return f"{trk.updates} updates" + (" " if template.startswith("at") else "") + template.format(
+        fps=trk.tracker_fps, frames=trk.camera_frames_per_s)
 
 
 def _cmd_score(args) -> None:
@@ -692,6 +723,7 @@ def _cmd_fit_detector(args) -> None:
         raise CrossviewError("fit-detector: give a recording to fit, or --target FILE.json|shelf-openpose (not both)")
     target_file = None if args.target in (None, "shelf-openpose") else Path(args.target)
     pipeline.check_writable(args.output, inputs=() if target_file is None else (target_file,))
+    start = scenario_mod.profile_params(args.start)  # (a bad --start refused before any measuring)
     seed = args.seed
     if args.recording is not None:
         target = recording_detector_stats(args.recording)
@@ -715,7 +747,6 @@ def _cmd_fit_detector(args) -> None:
             target, where, label = read_stats_file(target_file), f"{target_file}", target_file.name
         scenario = pipeline.load_scenario(args.scenario or "shelf")
     seed = scenario.seed if seed is None else seed
-    start = scenario_mod.profile_params(args.start)
 
     def report(k, result):
         (key, group), worst = max(deviations(result.stats, target).items(), key=lambda kv: abs(kv[1]))
@@ -800,13 +831,16 @@ def _cmd_per_camera(args) -> None:
 def _cmd_compare(args) -> None:
     from crossview import pipeline
     from crossview.experiments import compare
+    from crossview.outputs import kept_together
 
     contenders = [compare.Contender.parse(text) for text in args.tracker]
     compare.check(contenders, args.recordings)
     for name in ("compare.md", "compare.csv", *(f"{m.key}.png" for m in compare.METRICS)):
         pipeline.check_writable(args.output / name, inputs=tuple(args.recordings))
-    rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks", progress=not args.no_progress)
-    written = compare.write_report(rows, args.output)
+    with kept_together(args.output):  # the tracks, the table and the charts: all of them, or none
+        rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks",
+                                    progress=not args.no_progress)
+        written = compare.write_report(rows, args.output)
     print(compare.markdown(rows), end="")
     print(f"written: {', '.join(str(p) for p in written)}")
 
@@ -972,8 +1006,23 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def run() -> None:
-    """The `crossview` command."""
-    sys.exit(main())
+    """The `crossview` command. It ends when its command has: a thread that is no daemon and still runs then
+    (a plug-in tracker's, left running) would keep the interpreter waiting on it for ever, so the process
+    ends without waiting, after one warning line naming the threads (docs/plugins.md)."""
+    status = main()
+    lingering = [t.name for t in threading.enumerate()
+                 if t is not threading.main_thread() and not t.daemon and t.is_alive()]
+    if lingering:
+        print(f"crossview: warning: thread(s) {', '.join(map(repr, lingering))} still running when the command "
+              "ended (a plug-in's, not a daemon); ending without them", file=sys.stderr)
+        logging.shutdown()
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(status)  # (sys.exit would join them first: for ever)
+    sys.exit(status)
 
 
 if __name__ == "__main__":

@@ -29,6 +29,8 @@ class OutputError(CrossviewError):
 
 
 _COMMAND_INPUTS: list[tuple] = [()]  # the running command's inputs (`command_inputs`), innermost last
+_KEPT_TOGETHER: list[list[Path]] = []  # per `kept_together`, innermost last: the outputs committed inside and
+# the folders made for them, in the order made
 
 
 @contextlib.contextmanager
@@ -42,6 +44,35 @@ def command_inputs(paths):
         yield
     finally:
         _COMMAND_INPUTS.pop()
+
+
+@contextlib.contextmanager
+def kept_together(folder):
+    """Outputs written inside are kept only all together: on any exception (an error, Ctrl-C or a terminating
+    signal) every output committed meanwhile is removed again, with the folders made for them, and so are
+    `folder` and the folders above it that did not exist on entry (each only when empty). For a command whose
+    step writes a file that a later step may fail after (`compare`'s tracks of one tracker, then another's
+    failure): nothing is kept, as it says."""
+    folder = Path(folder)
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    _KEPT_TOGETHER.append([])
+    try:
+        yield
+    except BaseException:
+        for path in reversed(_KEPT_TOGETHER[-1]):  # each file, then the folders made for it, innermost first
+            with contextlib.suppress(OSError):  # (a folder that is not empty: something else was put there)
+                path.rmdir() if path.is_dir() else path.unlink()
+        for made in missing:
+            with contextlib.suppress(OSError):
+                made.rmdir()
+        raise
+    finally:
+        done = _KEPT_TOGETHER.pop()
+        if _KEPT_TOGETHER:  # an enclosing group answers for them too
+            _KEPT_TOGETHER[-1].extend(done)
 
 
 def same_file(a, b) -> bool:
@@ -160,6 +191,8 @@ class AtomicOutput:
             self._file.close()
             os.replace(self.tmp, self.path)
         self._done = True
+        if _KEPT_TOGETHER:
+            _KEPT_TOGETHER[-1].extend([*self._made, self.path])
         _fsync_folder(self.path.parent)
 
     def abort(self) -> None:

@@ -27,7 +27,8 @@ from sim import scenario as scenario_mod
 log = logging.getLogger(__name__)
 
 def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
-    """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor.
+    """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor, of those with at
+    most `sim.cameras.MAX_GRID` rows and columns.
 
     Args:
         count: number of cameras, >= 1.
@@ -41,10 +42,12 @@ def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
         raise CrossviewError(f"--cameras: {count} is more than the {MAX_GRID * MAX_GRID} cameras a grid may hold "
                              f"(cameras.rows and cameras.cols at most {MAX_GRID} each)")
     aspect = width_m / depth_m
-    rows = min(
-        (r for r in range(1, count + 1) if count % r == 0),
-        key=lambda r: abs(math.log((count // r) / r / aspect)),
-    )
+    shapes = [r for r in range(1, count + 1) if count % r == 0 and max(r, count // r) <= MAX_GRID]
+    if not shapes:  # (else the scenario's check would blame the file for a shape the option made)
+        raise CrossviewError(f"--cameras: {count} cameras make no grid of at most {MAX_GRID} rows and {MAX_GRID} "
+                             "columns; give a count that does (a product of two numbers up to "
+                             f"{MAX_GRID})")
+    rows = min(shapes, key=lambda r: abs(math.log((count // r) / r / aspect)))
     return rows, count // rows
 
 
@@ -76,15 +79,14 @@ def scenario_files(name_or_path) -> tuple[Path, ...]:
     and the calibration file and detector profile file it names (relative to its folder), read from the TOML
     without validating it (the command does that, and names what is wrong); an unreadable file names none beyond
     itself."""
-    import tomllib
-
+    from core import tomlfile
     from crossview.formats.json_input import check_input_file
 
     path = scenario_mod.resolve_path(name_or_path)
     check_input_file(path, scenario_mod.ScenarioError)
     try:
         with open(path, "rb") as f:
-            tree = tomllib.load(f)
+            tree = tomlfile.load(f)
     except (OSError, ValueError):
         return (path,)
     named = []

@@ -108,6 +108,10 @@ class Method:
         return self.builtin or hasattr(tracker, "last_output")
 
 
+MAX_POSE_M = 1e6
+"""Largest magnitude of a plug-in's joint coordinate, metres (as the tracker's other lengths are bounded, and far
+inside float32, the tracks file's type)."""
+
 PLUGIN_FAILURES = (Exception, SystemExit, KeyboardInterrupt)
 """What a plug-in's code may raise that is its failure: an error, and also `sys.exit` or a KeyboardInterrupt
 it raises itself, which would otherwise end the command with the plug-in's status and no word."""
@@ -169,6 +173,10 @@ def check_targets(targets, stamp_s: float, skeleton: Skeleton, where: str) -> li
                               f"{skeleton.name} skeleton of the recording")
         if np.isinf(pose).any():
             raise PluginError(f"{where}: {name}: pose holds infinite values")
+        huge = np.abs(pose) > MAX_POSE_M  # (NaN compares False: a missing joint is checked below)
+        if huge.any():
+            raise PluginError(f"{where}: {name}: pose holds {float(pose[huge][0])!r} m; joints must be within "
+                              f"{MAX_POSE_M:g} m (tracks files store float32, which holds 1e300 as infinity)")
         missing = np.isnan(pose)
         partial = missing.any(axis=1) & ~missing.all(axis=1)
         if partial.any():

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import scenarios
+from core import tomlfile
 from core.errors import ScenarioError
 from core.head import HeadConvention
 from sim.cameras import CameraRigConfig
@@ -147,7 +148,7 @@ def _from_text(text: str, overrides: dict, where: str, name: str, folder: Path |
     scenario file's; one an override names, against the working folder), and its parameters become overrides
     too, so that the recorded text simulates the same without the file."""
     try:
-        tree = tomllib.loads(text)
+        tree = tomlfile.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{where}: malformed TOML: {e}") from None
     overrides = _with_profile_file(tree, overrides, folder)
@@ -187,7 +188,7 @@ def load_profile_file(path: Path) -> dict:
             message names the file and the key.
     """
     try:
-        tree = tomllib.loads(Path(path).read_text(encoding="utf-8"))
+        tree = tomlfile.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ScenarioError(f"{path}: no such detector profile file (detector.profile names a shipped profile, "
                             f"{', '.join(p.value for p in DetectorProfile)}, or a profile file)") from None
@@ -264,7 +265,7 @@ def from_source_text(source_text: str, name: str, where: str) -> Scenario:
             overrides[key] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
             try:  # an infinite number (a profile's Gaussian tails): repr wrote TOML's `inf`
-                overrides[key] = tomllib.loads(f"v = {value}")["v"]
+                overrides[key] = tomlfile.loads(f"v = {value}")["v"]
             except tomllib.TOMLDecodeError:
                 raise ScenarioError(f"{where}: unreadable override note {note!r} in the scenario text") from None
     scenario = _from_text(text, overrides, where, name)

@@ -9,6 +9,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
+from core import tomlfile
 from core.errors import ConfigError
 
 
@@ -309,7 +310,7 @@ class TrackerConfig:
         path = Path(path)
         try:
             with path.open("rb") as f:
-                data = tomllib.load(f)
+                data = tomlfile.load(f)
         except (OSError, tomllib.TOMLDecodeError) as exc:
             raise ConfigError(f"{path}: cannot read tracker config: {exc}") from exc
         except UnicodeDecodeError as exc:

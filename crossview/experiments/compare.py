@@ -125,10 +125,17 @@ def compare_rows(contenders: Sequence[Contender], recordings: Sequence[Path], wo
         One row per (recording, contender), recordings outer: `recording`, `tracker`, `spec`, then every key
         of the score JSON (`docs/metrics.md`).
     """
-    from crossview import pipeline
+    from crossview.outputs import kept_together
 
     recordings = [Path(r) for r in recordings]
     check(contenders, recordings)
+    with kept_together(work_dir):  # one contender failing (or a signal) keeps none of the others' tracks
+        return _rows(contenders, recordings, work_dir, progress)
+
+
+def _rows(contenders, recordings, work_dir, progress) -> list[dict]:
+    from crossview import pipeline
+
     rows = []
     for recording in recordings:
         for contender in contenders:

@@ -35,7 +35,7 @@ from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
-from core import processes
+from core import processes, tomlfile
 from core.errors import CrossviewError, ScenarioError
 from crossview import outputs, pipeline
 from sim import scenario as scenario_mod
@@ -273,12 +273,17 @@ def parse_values(option: str, text: str) -> tuple:
     values = []
     for part in parts:
         try:
-            values.append(tomllib.loads(f"v = {part}")["v"])
+            values.append(tomlfile.loads(f"v = {part}")["v"])
         except tomllib.TOMLDecodeError:
             values.append(part)
     if len(set(map(repr, values))) != len(values):
         raise CrossviewError(f"{option}: {text!r} repeats a value")
     return tuple(values)
+
+
+PROFILE_KEY = "detector.profile"
+"""The key whose value may name a profile file (`sim.scenario.load_profile_file`), relative to the working
+folder as an override's is."""
 
 
 def parse_axis(key: str, text: str) -> Axis:
@@ -295,6 +300,11 @@ def parse_axis(key: str, text: str) -> Axis:
         if key == CAMERAS_AXIS:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise CrossviewError(f"--cameras: {value!r} is not a camera count (an integer >= 1)")
+        elif key == PROFILE_KEY and scenario_mod.is_profile_file(value):  # a fitted profile, as in a scenario
+            try:
+                scenario_mod.load_profile_file(Path(value))
+            except ScenarioError as e:
+                raise CrossviewError(f"{option}: {e}") from None
         elif not key.startswith(TRACKER_PREFIX):  # (tracker values are checked together, by `plan`)
             scenario_mod.check_override(key, value, option)
     return Axis(key, values)

@@ -150,9 +150,15 @@ def _read_frames(dataset_dir: Path, source: str) -> list[_FrameItem]:
         except (KeyError, TypeError, ValueError) as exc:
             raise DatasetError(f"{path}: frame {key!r}: key {exc} missing or malformed "
                                "(expected camera, timestamp, poses[points_2d, scores])") from exc
-        for p, sc in zip(points, scores):
+        for k, (p, sc) in enumerate(zip(points, scores)):
             if p.ndim != 2 or p.shape[1] != 2 or sc.shape != p.shape[:1]:
                 raise DatasetError(f"{path}: frame {key!r}: points_2d {p.shape} / scores {sc.shape} do not match")
+            for name, values, bound, valid in (("points_2d", p, openpose.MAX_PIXEL, "pixels finite, within 1e6"),
+                                               ("scores", sc, np.inf, "scores finite")):
+                bad = ~(np.isfinite(values) & (np.abs(values) <= bound))  # (1e400 reads as inf, not a JSON error)
+                if bad.any():
+                    raise DatasetError(f"{path}: frame {key!r}: pose {k}: {name} holds {float(values[bad][0])!r}; "
+                                       f"expected {valid}")
             if num_joints is None:
                 num_joints = p.shape[0]
             elif p.shape[0] != num_joints:

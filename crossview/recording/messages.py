@@ -3,9 +3,9 @@ one decoder per message type (protobuf's parser, then arrays).
 
 Every message is what protobuf serialises for it. Two kinds are written by compiled encoders
 (`crossview.recording.wire`): the camera frames with their 2D annotations, and the skeleton scenes (the
-truth's at every truth tick, the tracker's at every update); protobuf's own serialisation of them, one object
-per point, made `crossview generate` 1.3 to 1.5 times slower and `crossview track` 1.2 times
-(docs/recording-format.md). The others are protobuf's `SerializeToString`."""
+truth's and the tracker's, each at 20 Hz at most); protobuf's own serialisation of them, one object per point,
+made `crossview generate` 1.3 to 1.5 times slower and `crossview track` 1.38 times (the figures and how they
+were measured: docs/recording-format.md). The others are protobuf's `SerializeToString`."""
 
 from __future__ import annotations
 

@@ -1,7 +1,8 @@
 """The synthetic 2D detector: projection, visibility, occlusion, noise, misses and false positives.
 
-One call of `Detector.detect` turns the true 3D poses at a camera's capture time into the frame a
-bottom-up 2D pose detector (OpenPose-like) would deliver, plus the truth behind every row:
+For a block of captures (`sim.simulate`), `Detector.block_visibility` (steps 1-2), `Detector.detection_rows_of`
+(step 3) and `Detector.frames_from_rows` turn the true 3D poses at each camera's capture time into the frame
+a bottom-up 2D pose detector (OpenPose-like) would deliver, plus the truth behind every row:
 
 1. project every keypoint with the camera's lens model; joints behind the camera or outside the
    image are not detectable;

@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
+from crossview import cli
 from crossview.cli import EXIT_BAD_INPUT, main
+from sim import scenario
 
 CAMPUS = Path(__file__).resolve().parents[1] / "data" / "campus"
 
@@ -40,7 +42,7 @@ SCENARIO_CASES = [
     ("not-utf8", b'description = "\xff"\n', [], "cannot read scenario: 'utf-8' codec can't decode byte 0xff"),
     ("million-cameras", None, ["--cameras", "1000000"],
      "--cameras: 1000000 is more than the 10000 cameras a grid may hold"),
-    ("huge-seed", None, ["--seed", str(10**30)], f"seed: {10**30} must be in [0, 9223372036854775807]"),
+    ("huge-seed", None, ["--seed", str(10**30)], f"argument --seed: {10**30} must be in [0, 2^63 - 1]"),
     ("huge-crowd", None, ["--people", "100000000"], "people: 100000000 must be in [0, 500] people"),
     ("calibration-missing", '[cameras]\ncalibration = "nowhere.json"\ncalibration_format = "dataset"\n', [],
      "s.toml: cameras.calibration: 'nowhere.json': no such file"),
@@ -57,6 +59,10 @@ SCENARIO_CASES = [
     ("crowd-above-the-floor", None, ["--people", "400"],
      "crowd.people: 400 people need 400 m² of walkable floor (1.0 m² each) but the store has 12.8 m²; use at "
      "most 12 people"),
+    ("nested-2000-deep", "a = " + "[" * 2000 + "]" * 2000 + "\n", [],  # (was a RecursionError)
+     "s.toml: malformed TOML: tables or arrays nested more than 32 deep"),
+    ("nested-40-deep", "a = " + "[" * 40 + "]" * 40 + "\n", [],
+     "s.toml: malformed TOML: tables or arrays nested more than 32 deep"),
     ("too-many-camera-frames", None, ["--duration", "86400"],
      "schedules 10,368,000 camera frames, more than the 5,000,000 one recording may hold"),
     ("aisles-do-not-fit", "[store]\nwidth_m = 18.0\ndepth_m = 12.0\n[store.aisles]\ncount = 10\n", [],
@@ -76,6 +82,29 @@ def test_a_bad_scenario_is_refused_in_one_line(text, options, expected, tmp_path
     assert expected in err, err
 
 
+DEEP_TOML = "a = " + "[" * 100000 + "]" * 100000 + "\n"
+
+
+# Every command that reads a TOML file reads it through core.tomlfile: nested 100,000 deep it is refused in
+# one line naming the file (was a RecursionError): (id, the command with DEEP for the deep file).
+DEEP_TOML_COMMANDS = [
+    ("scenarios-show", ["scenarios", "--show", "DEEP"]),
+    ("track-config", ["track", "REC", "-o", "OUT/t.mcap", "--config", "DEEP"]),
+    ("fit-detector-start", ["fit-detector", "REC", "--start", "DEEP", "-o", "OUT/p.toml"]),
+    ("profile-named-by-a-scenario", ["generate", "SCENARIO", "-o", "OUT/r.mcap"]),
+]
+
+
+@pytest.mark.parametrize("argv", [c[1] for c in DEEP_TOML_COMMANDS], ids=[c[0] for c in DEEP_TOML_COMMANDS])
+def test_a_toml_file_nested_too_deep_is_refused_in_one_line(argv, campus_recording, tmp_path, capsys):
+    deep = _file(tmp_path, "deep.toml", DEEP_TOML)
+    scenario = _file(tmp_path, "s.toml", '[detector]\nprofile = "deep.toml"\n')
+    names = {"DEEP": deep, "REC": campus_recording, "SCENARIO": scenario}
+    argv = [str(tmp_path / "out") + a[3:] if a.startswith("OUT") else names.get(a, a) for a in argv]
+    err = _refused(capsys, argv, tmp_path)
+    assert f"{deep}: " in err and "nested more than 32 deep" in err, err
+
+
 # Command-line values outside their type or bound.
 OPTION_CASES = [
     ("world-stats-infinite", ["world-stats", "store_layout1", "--duration", "inf"], "inf must be at most 86400 s"),
@@ -89,20 +118,42 @@ OPTION_CASES = [
      "argument -o/--output: not allowed with argument --json"),
     ("duration-nan", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--duration", "nan"], "nan must be > 0"),
     ("duration-not-a-number", ["run", "--duration", "ten", "-o", "OUT"], "'ten' is not a number"),
-    ("bench-duration-huge", ["bench", "--duration", "1e9", "-o", "OUT/b.json"],
-     "duration_s: 1000000000.0 must be in (0, 86400] s"),
+    ("bench-duration-huge", ["bench", "--duration", "1e9", "-o", "OUT/b.json"],  # (blamed store_layout1.toml)
+     "argument --duration: 1e9 must be at most 86400 s (a day)"),
+    ("fit-detector-duration-infinite", ["fit-detector", "OUT/r.mcap", "--duration", "inf", "-o", "OUT/p.toml"],
+     "argument --duration: inf must be at most 86400 s (a day)"),  # (was an OverflowError)
+    ("fit-detector-duration-huge", ["fit-detector", "OUT/r.mcap", "--duration", "1e9", "-o", "OUT/p.toml"],
+     "argument --duration: 1e9 must be at most 86400 s (a day)"),  # (allocated 74.5 GiB)
+    ("sweep-duration-huge", ["sweep", "store_layout1", "--duration", "1e9", "-o", "OUT/s"],
+     "argument --duration: 1e9 must be at most 86400 s (a day)"),
+    ("fit-detector-seed-huge", ["fit-detector", "OUT/r.mcap", "--seed", str(2**64), "-o", "OUT/p.toml"],
+     f"argument --seed: {2**64} must be in [0, 2^63 - 1]"),  # (was accepted)
+    ("coverage-seed-huge", ["coverage", "hypermarket", "--seed", str(2**63), "-o", "OUT/c.png"],
+     f"argument --seed: {2**63} must be in [0, 2^63 - 1]"),
+    ("plan-duration-huge", ["plan", "store_layout1", "--target-pcp", "0.9", "--confirm", "--duration", "1e9", "-o",
+                            "OUT/plan.json"], "argument --duration: 1e9 must be at most 86400 s (a day)"),
+    ("cameras-no-grid", ["coverage", "hypermarket", "--cameras", "9973", "-o", "OUT/c.png"],  # (a prime)
+     "--cameras: 9973 cameras make no grid of at most 100 rows and 100 columns"),
     ("cameras-huge", ["generate", "store_layout1", "-o", "OUT/r.mcap", "--cameras", "1000000000"],
      "--cameras: 1000000000 is more than the 10000 cameras a grid may hold"),
     ("tile-width-huge", ["render", "OUT/r.mcap", "--contact-sheet", "--time", "1", "--tile-width", "100000", "-o",
                          "OUT/x.png"], "--tile-width: 100000 must be in [1, 4096] pixels"),
     ("clip-too-long", ["render", "OUT/r.mcap", "--camera", "cam00", "--from", "0", "--to", "1e6", "-o", "OUT/x.gif"],
      "is more than the 100,000 images a clip may hold"),
+    ("convert-fps-infinite", ["convert", "OUT/op", "-o", "OUT/r.mcap", "--fps", "inf"],
+     "argument --fps: inf must be in (0, 1000] frames per second"),
+    ("convert-fps-huge", ["convert", "OUT/op", "-o", "OUT/r.mcap", "--fps", "1e300"],
+     "argument --fps: 1e300 must be in (0, 1000] frames per second"),
     ("time-nan", ["render", "OUT/r.mcap", "--camera", "cam00", "--time", "nan", "-o", "OUT/x.png"],
      "--time: nan is not a finite number of seconds"),
     ("from-negative", ["score", "OUT/r.mcap", "OUT/t.mcap", "--from", "-1"], "'-1' must be a number of seconds >= 0"),
     ("sweep-from-past-the-cells", ["sweep", "store_layout1", "--duration", "2", "--from", "3", "-o", "OUT/s"],
      "--from 3: the warm-up reaches past the end of the cells, which simulate 2 s; give at most 2"),
 ]
+
+
+def test_every_duration_and_seed_option_has_a_scenario_s_bound():
+    assert cli.MAX_DURATION_S == scenario.MAX_DURATION_S and cli.MAX_SEED == scenario.MAX_SEED
 
 
 @pytest.mark.parametrize(("argv", "expected"), [c[1:] for c in OPTION_CASES], ids=[c[0] for c in OPTION_CASES])
@@ -204,7 +255,23 @@ DATASET_CASES = [
     ("truth-pose-empty", "annotation_3d.json", lambda d: d[0]["poses"][0].update(points_3d=[]) if d[0]["poses"]
      else d[0].update(poses=[{"id": 1, "points_3d": []}]), "points_3d must be 14x3 for each pose"),
     ("missing-calibration", "calibration.json", None, "calibration.json: file not found"),
+    ("too-many-cameras", "calibration.json", lambda d: {"cameras": {f"c{i}": _cam0(d) for i in range(10_001)}},
+     "key 'cameras' holds 10,001 cameras, more than the 10,000 one recording may hold"),  # (was a struct.error)
+    ("infinite-pixel", "annotation_2d.json", lambda d: _with_1e400(d, "points_2d"),
+     "pose 0: points_2d holds inf; expected pixels finite, within 1e6"),
+    ("infinite-score", "annotation_2d.json", lambda d: _with_1e400(d, "scores"),
+     "pose 0: scores holds inf; expected scores finite"),
 ]
+
+
+def _with_1e400(d, key):
+    """The 2D file's text with its first pose's first value of `key` written 1e400 (which JSON reads as inf)."""
+    pose = _first_frame_with_poses(d)["poses"][0]
+    if key == "points_2d":
+        pose[key][0][0] = 123456.789
+    else:
+        pose[key][0] = 123456.789
+    return json.dumps(d).replace("123456.789", "1e400")
 
 
 def _dataset(tmp_path: Path, name: str, change) -> Path:

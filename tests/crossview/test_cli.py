@@ -284,3 +284,11 @@ def test_a_closed_stdout_ends_quietly_with_every_output_written(tmp_path):
     assert process.wait(timeout=600) == 0, err
     assert err == ""
     assert (tmp_path / "store_layout1.score.json").is_file()
+
+
+def test_an_empty_stream_is_tracked_and_said_to_have_no_speed(tmp_path, capsys):
+    # A millionth of a second holds no camera frame: `run` printed "0 updates at nan FPS" (issue 49).
+    assert main(["--no-progress", "run", "--duration", "1e-6", "-o", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "tracks.mcap: 0 updates (no camera frame in the stream: no speed measured)" in out, out
+    assert "nan FPS" not in out, out

@@ -72,6 +72,24 @@ def test_a_failed_output_leaves_neither_file_nor_the_folders_made_for_it(tmp_pat
     assert (tmp_path / "kept.bin").read_bytes() == b"old"
 
 
+@pytest.mark.parametrize("failure", [KeyboardInterrupt, RuntimeError], ids=["interrupt", "error"])
+def test_outputs_kept_together_are_all_removed_when_a_later_step_fails(tmp_path, failure):
+    # `compare`'s case: the first tracker's tracks committed, then the second fails or a signal arrives.
+    # What was there before stays; what the group wrote goes, with the folders made for it.
+    (tmp_path / "old.bin").write_bytes(b"old")
+    with pytest.raises(failure):
+        with outputs.kept_together(tmp_path / "cmp"):
+            outputs.write_bytes(b"first", tmp_path / "cmp" / "tracks" / "a.bin")
+            with outputs.kept_together(tmp_path / "cmp" / "tracks"):
+                outputs.write_bytes(b"second", tmp_path / "cmp" / "tracks" / "b.bin")
+            assert (tmp_path / "cmp" / "tracks" / "b.bin").read_bytes() == b"second"
+            raise failure
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["old.bin"]
+    with outputs.kept_together(tmp_path / "cmp"):  # a clean exit keeps them
+        outputs.write_bytes(b"first", tmp_path / "cmp" / "a.bin")
+    assert (tmp_path / "cmp" / "a.bin").read_bytes() == b"first"
+
+
 def test_checking_an_output_makes_no_folder(tmp_path):
     pipeline.check_writable(tmp_path / "a" / "b" / "c.json")
     assert list(tmp_path.iterdir()) == []

@@ -105,6 +105,12 @@ def test_camera_grid_fits_the_floor(count, expected):
     assert pipeline.camera_grid(count, width_m=8.0, depth_m=6.0) == expected
 
 
+def test_camera_grid_keeps_to_the_largest_grid_a_scenario_takes():
+    # 10,000 on a long floor fitted best as 80 x 125, which the scenario then refused blaming its own file.
+    assert pipeline.camera_grid(10_000, width_m=100.0, depth_m=64.0) == (100, 100)
+    assert pipeline.camera_grid(200, width_m=1000.0, depth_m=1.0) == (2, 100)  # (unbounded: 1 x 200)
+
+
 def test_the_watched_floor_is_the_floor_box_footprint_walls_included():
     import numpy as np
 

@@ -1,7 +1,9 @@
 """Plug-in trackers: resolving `--method`, checking their outputs every frame, and the example run and scored."""
 
 import json
+import subprocess
 import sys
+import threading
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -45,6 +47,19 @@ class NaNPose(_Broken):
         pose = np.full((17, 3), 1.0)
         pose[3, 1] = np.nan
         return [Target(id=0, pose=pose, stamp_s=frame.stamp_s)]
+
+
+class HugePose(_Broken):
+    def bad(self, frame):  # (finite in float64, infinity in the tracks file's float32: exported as null)
+        return [Target(id=0, pose=np.full((17, 3), 1e300), stamp_s=frame.stamp_s)]
+
+
+class LeavesAThread(GreedyTriangulationTracker):
+    """The example with a thread that is no daemon and never ends (it kept the command alive for ever)."""
+
+    def __init__(self, cameras, config, skeleton):
+        super().__init__(cameras, config, skeleton)
+        threading.Thread(target=threading.Event().wait, name="plugin-forever").start()
 
 
 class WrongJoints(_Broken):
@@ -189,11 +204,12 @@ def test_a_missing_joint_nan_in_all_three_coordinates_is_allowed():
 @pytest.mark.parametrize("plugin, message", [
     ("NaNPose", "target 0 (id 0): joint left_ear is NaN in some coordinates only"),
     ("WrongJoints", "target 0 (id 0): pose has shape (14, 3), expected (17, 3)"),
+    ("HugePose", "target 0 (id 0): pose holds 1e+300 m; joints must be within 1e+06 m"),
     ("StringIds", "target 0 has id 'person-1' of type str; ids must be ints"),
     ("Raises", "update raised RuntimeError: the model file is missing"),
     ("Exits", "update raised SystemExit: 3"),
     ("Interrupts", "update raised KeyboardInterrupt"),
-], ids=["NaNPose", "WrongJoints", "StringIds", "Raises", "Exits", "Interrupts"])
+], ids=["NaNPose", "WrongJoints", "HugePose", "StringIds", "Raises", "Exits", "Interrupts"])
 def test_a_plugin_going_wrong_stops_the_run_naming_the_frame_and_leaves_nothing(
         plugin, message, short_recording, tmp_path, capsys):
     out = tmp_path / "t.mcap"
@@ -202,6 +218,17 @@ def test_a_plugin_going_wrong_stops_the_run_naming_the_frame_and_leaves_nothing(
     assert status == EXIT_BAD_INPUT
     assert len(err.splitlines()) == 1 and f"frame {_Broken.BAD_FRAME} (camera " in err and message in err, err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_plugins_thread_left_running_does_not_keep_the_command_alive(short_recording, tmp_path):
+    out = tmp_path / "t.mcap"
+    done = subprocess.run([sys.executable, "-c", "from crossview.cli import run; run()", "--no-progress", "track",
+                           str(short_recording), "-o", str(out), "--method", f"{HERE}:LeavesAThread"],
+                          cwd=Path(__file__).parents[2], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert done.stderr.strip().endswith("'plugin-forever' still running when the command ended (a plug-in's, not a "
+                                        "daemon); ending without them"), done.stderr
+    assert recording.open_tracks(out).header.method == f"{HERE}:LeavesAThread"
 
 
 def test_verbose_shows_the_plugins_own_traceback(short_recording, tmp_path):

@@ -106,3 +106,22 @@ def test_fuzz_an_aisles_layout_that_fits_is_a_store_people_can_walk(width, depth
         event("refused: a door against a shelf")
         return
     event("built")
+
+
+@FUZZ
+@given(st.integers(1, 3000), st.sampled_from([("[", "]"), ("{ a = ", " }")]),
+       st.sampled_from(["duration_s", "crowd.people", "detector.offset_m"]))
+def test_fuzz_a_value_nested_to_any_depth_is_refused_naming_the_file(depth, brackets, key):
+    """Arrays or inline tables nested 1 to 3,000 deep (a RecursionError from 1,000 on, before core.tomlfile)."""
+    opener, closer = brackets
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "s.toml"
+        path.write_text(f"{key} = {opener * depth}1.0{closer * depth}\n", encoding="utf-8")
+        try:
+            scenario_mod.load(path)
+        except ScenarioError as e:
+            assert str(e).startswith(f"{path}: ") and "\n" not in str(e), e
+            if depth >= 32 or depth <= 29:  # (a dotted key's tables count too: from 30 to 31 it depends on the key)
+                assert ("nested more than 32 deep" in str(e)) == (depth >= 32), e
+            return
+        raise AssertionError(f"{key} nested {depth} deep was loaded")

@@ -91,3 +91,15 @@ def test_a_bad_tracker_is_refused_before_any_work(store_recording, tmp_path, cap
     err = capsys.readouterr().err.strip()
     assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1 and message in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_tracker_failing_after_another_keeps_none_of_their_tracks(store_recording, tmp_path, capsys):
+    # The built-in tracker's tracks are written, then the plug-in fails at its 6th frame: the command said
+    # "nothing kept" but left the first tracks file (issue 49).
+    out = tmp_path / "cmp"
+    status = main(["--no-progress", "compare", str(store_recording), "-o", str(out), "--tracker", "a=crossview",
+                   "--tracker", "b=tests.crossview.test_plugins:Raises"])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1, err
+    assert "update raised RuntimeError: the model file is missing" in err, err
+    assert not out.exists() and list(tmp_path.iterdir()) == []

@@ -378,6 +378,23 @@ def test_tracker_axes_valid_only_together_are_planned_not_refused():
                                    presets=("shelf",), duration_s=1.0))
 
 
+def test_a_profile_file_is_an_axis_value_and_a_broken_one_is_named_with_the_key(tmp_path):
+    """docs/sweeps.md: any scenario key can be an axis, detector.profile with a profile file among its values
+    (was refused as "not one of ['ideal', 'typical', 'harsh']"); a broken file is named with the key."""
+    fitted = tmp_path / "fitted.toml"
+    fitted.write_text('base = "ideal"\nnoise_frac = 0.02\n')
+    axis = sweep.parse_axis("detector.profile", f"{fitted},typical")
+    assert axis.values == (str(fitted), "typical")
+    cells = sweep.plan(sweep.SweepSpec("store_layout1", axes=(axis,), seeds=(0,), methods=("crossview",),
+                                       presets=("store",), duration_s=1.0))
+    assert [c.error for c in cells] == [None, None]
+    broken = tmp_path / "broken.toml"
+    broken.write_text("noise_frac = -1\n")
+    with pytest.raises(sweep.CrossviewError) as info:
+        sweep.parse_axis("detector.profile", f"typical,{broken}")
+    assert str(info.value) == f"--set detector.profile: {broken}: noise_frac: -1.0 must be in [0, 1]"
+
+
 def _report_row(people: int, pcp: float, idf1: float = 1.0) -> dict:
     return {"values": [["crowd.people", people]], "status": "ok", "score": {"pcp": pcp, "idf1": idf1},
             "method": "crossview", "preset": "store"}
