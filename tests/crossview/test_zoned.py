@@ -3,7 +3,12 @@ ordinary tracks file that scores, and bad input refused in one line with nothing
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import os
+import signal
+import subprocess
+import time
 
 import numpy as np
 import pytest
@@ -11,6 +16,7 @@ import pytest
 from core import tracks
 from crossview import parallel, pipeline, recording, zoned
 from crossview.cli import EXIT_BAD_INPUT, main
+from tests.crossview.signalling import CROSSVIEW
 
 
 def outputs_digest(path) -> str:
@@ -98,3 +104,58 @@ def test_zones_prints_the_cut_and_draws_it(tmp_path, capsys):
     assert "hypermarket: 4 zones, 240 cameras" in printed and printed.count("  zone ") == 4
     image = cv2.imread(str(picture))
     assert image is not None and image.shape[0] > 500
+
+
+def _children(pid: int) -> list[int]:
+    found = []
+    for task in os.listdir(f"/proc/{pid}/task") if os.path.isdir(f"/proc/{pid}/task") else []:
+        with contextlib.suppress(OSError), open(f"/proc/{pid}/task/{task}/children") as f:
+            found += [int(c) for c in f.read().split()]
+    return found
+
+
+def _cmdline(pid: int) -> str:
+    with contextlib.suppress(OSError), open(f"/proc/{pid}/cmdline", "rb") as f:
+        return f.read().replace(b"\0", b" ").decode(errors="replace")
+    return ""
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="finds the workers in /proc (Linux)")
+def test_a_zone_worker_killed_mid_run_ends_the_command_in_one_line_with_nothing_left(store_recording, tmp_path):
+    """kill -9 of a zone worker while it tracks: exit 2, the one line naming it, no tracks file, and none of the
+    command's processes (fork server, workers) left."""
+    out = tmp_path / "t.mcap"
+    process = subprocess.Popen([*CROSSVIEW, "track", str(store_recording), "--zones", "2", "--workers", "2", "-o",
+                                str(out)], stderr=subprocess.PIPE, text=True, start_new_session=True)
+    workers: list[int] = []
+    try:
+        deadline = time.monotonic() + 120
+        while len(workers) < 2 and process.poll() is None and time.monotonic() < deadline:
+            servers = [c for c in _children(process.pid) if "forkserver" in _cmdline(c)]
+            workers = [w for s in servers for w in _children(s)]
+            time.sleep(0.05)
+        assert len(workers) == 2, f"no zone workers seen (exit {process.poll()})"
+        os.kill(workers[1], signal.SIGKILL)
+        _, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == EXIT_BAD_INPUT, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "zone worker" in lines[0] and "ended unexpectedly (killed by signal 9)" in lines[0]
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == []
+    deadline = time.monotonic() + 30  # (the fork server and the resource tracker end a moment after the command)
+    while _session(process.pid) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _session(process.pid) == []
+
+
+def _session(sid: int) -> list[int]:
+    """The live processes of session `sid` (the command's: it started one)."""
+    found = []
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            with contextlib.suppress(OSError):
+                if os.getsid(int(name)) == sid:
+                    found.append(int(name))
+    return found
