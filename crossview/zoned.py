@@ -140,6 +140,18 @@ class ZonedResult:
         return self.updates / total if total > 0 else float("nan")
 
 
+def batches(frames):
+    """The camera frames in delivery order, `BATCH_S` of stamps at a time."""
+    batch: list = []
+    for cf in frames:
+        if batch and cf.frame.stamp_s - batch[0].frame.stamp_s > BATCH_S:
+            yield batch
+            batch = []
+        batch.append(cf)
+    if batch:
+        yield batch
+
+
 def track_zoned(rec_path: Path, out: Path, *, zones_text: str, overlap_m: float, executor: parallel.Executor,
                 workers: int, method: str = "crossview", preset: str = "store", config_path: Path | None = None,
                 overrides: dict | None = None, progress: bool = True) -> ZonedResult:
@@ -183,13 +195,14 @@ def track_zoned(rec_path: Path, out: Path, *, zones_text: str, overlap_m: float,
         group.call("warm_up", [([warm[z] for z in g],) for g in groups])
         start = time.perf_counter()
         with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path)) as writer:
-            batch: list = []
             bar = tqdm(unit="frame", desc="track", disable=not progress, leave=False)
 
-            def flush() -> None:
-                nonlocal updates
+            def submit(batch: list) -> list:
                 per_zone = [[cf.frame for cf in batch if z.index in zones_of[cf.frame.camera]] for z in zones]
-                answers = group.call("update", [([per_zone[z] for z in g],) for g in groups])
+                return group.submit("update", [([per_zone[z] for z in g],) for g in groups])
+
+            def merge(batch: list, answers: list) -> None:
+                nonlocal updates
                 results: list = [None] * len(zones)
                 for g, answer in zip(groups, answers, strict=True):
                     for z, result in zip(g, answer, strict=True):
@@ -206,14 +219,17 @@ def track_zoned(rec_path: Path, out: Path, *, zones_text: str, overlap_m: float,
                         writer.write(merger.add(outputs, len(cf.frame.scores)))
                         updates += 1
                 bar.update(len(batch))
-                batch.clear()
 
-            for cf in rec.frames():
-                if batch and cf.frame.stamp_s - batch[0].frame.stamp_s > BATCH_S:
-                    flush()
-                batch.append(cf)
-            if batch:
-                flush()
+            # Pipelined: while the zones track one batch, the driver merges the one before and reads the next.
+            pending = None
+            for batch in batches(rec.frames()):
+                answers = group.gather(pending[1]) if pending else None
+                handles = submit(batch)
+                if pending:
+                    merge(pending[0], answers)
+                pending = (batch, handles)
+            if pending:
+                merge(pending[0], group.gather(pending[1]))
             bar.close()
             writer.finish({"tracker_s": sum(spent), "updates": updates, "num_cameras": len(cameras),
                            pipeline.ASSIGNMENTS_KEY: resolved.builtin,

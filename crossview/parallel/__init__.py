@@ -113,9 +113,18 @@ class Actors:
     def call(self, method: str, args: list[tuple]) -> list:
         """Calls `method(*args[i])` on actor i for every i at once; their results in the actors' order. An
         actor's exception is raised here (the first actor's first); a lost worker raises `WorkerLost`."""
+        return self.gather(self.submit(method, args))
+
+    def submit(self, method: str, args: list[tuple]) -> list:
+        """Starts `call` without waiting: the actors work while the caller does something else; `gather` gives
+        the results. Gather one submission before the next is submitted (a pipe's results are read before more
+        work is written into it)."""
         if len(args) != len(self.hosts):
             raise ValueError(f"{len(args)} argument tuples for {len(self.hosts)} actors")
-        pending = [host.send(method, a) for host, a in zip(self.hosts, args, strict=True)]
+        return [host.send(method, a) for host, a in zip(self.hosts, args, strict=True)]
+
+    def gather(self, pending: list) -> list:
+        """The results of a `submit`, in the actors' order (errors as `call` raises them)."""
         results, errors = [], []
         for host, p in zip(self.hosts, pending, strict=True):  # (every answer read: none left for the next call)
             try:

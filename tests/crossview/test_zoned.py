@@ -85,7 +85,8 @@ def test_zoned_tracks_on_ray_are_the_pool_s(zoned_serial, store_recording, tmp_p
     (["--workers", "2"], "--workers: only with --zones"),
     (["--zones", "2", "--workers", "0"], "--workers: 0 must be >= 1"),
     (["--zones", "2", "--ray", "127.0.0.1:1"], "--ray 127.0.0.1:1: unreachable"),
-])
+], ids=["zones-0", "zones-word", "zones-too-many", "overlap-small", "overlap-wide", "workers-alone", "workers-0",
+        "ray-unreachable"])
 def test_bad_zoned_tracking_is_refused_in_one_line_and_writes_nothing(options, expected, store_recording, tmp_path,
                                                                       capsys):
     out = tmp_path / "out" / "t.mcap"
