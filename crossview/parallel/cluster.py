@@ -205,7 +205,8 @@ def tasks(fn, items: list, setup, cancel_left: bool):
 
     from crossview.parallel import run_task
 
-    task = ray.remote(num_cpus=1, max_retries=0)(run_task)
+    # (named after fn, not the wrapper: its worker's process title is ray::FN, e.g. ray::run_cell)
+    task = ray.remote(num_cpus=1, max_retries=0)(run_task).options(name=getattr(fn, "__name__", "task"))
     refs: dict = {}
     finished = False
     try:
