@@ -28,3 +28,9 @@ class RecordingError(CrossviewError):
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C (SIGINT) as the command line's signal handler raises it: told apart from a KeyboardInterrupt that
     code raises itself (a plug-in's, which is the plug-in's failure, not the user's Ctrl-C)."""
+
+
+def one_line(error: BaseException) -> str:
+    """An error's first line, for a one-line message (its class name when it says nothing)."""
+    text = str(error).splitlines()[0] if str(error) else ""
+    return text or type(error).__name__

@@ -295,6 +295,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate or convert")
     add_output(p, "tracks file to write (.mcap)", metavar="TRACKS.mcap")
     tracker_options(p)
+    p.add_argument("--zones", metavar="auto|N", help="track the store as N zones, each by its own tracker, "
+                   "identities handed over at their borders (auto: one zone per 60 cameras; docs/zones.md)")
+    p.add_argument("--overlap", type=_positive_float, default=2.0, metavar="M", help="with --zones: how far "
+                   "neighbouring zones overlap, metres (at least 2; default 2)")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=_positive_int, help="with --zones: local worker processes holding the "
+                       "zones (default: the cores, at most one per zone; 1 tracks every zone in this process)")
+    where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS", help="with --zones: the zones as Ray "
+                       "actors: alone, on a local instance; with ADDRESS, on that cluster (pip install '.[ray]')")
+
+    p = sub.add_parser("zones", help="cut a store's floor into zones for `track --zones`: each zone's cell and "
+                       "cameras, and a top-down map")
+    p.add_argument("scenario", help="scenario file or shipped name")
+    p.add_argument("--zones", default="auto", metavar="auto|N", help="number of zones (default auto: one per 60 "
+                   "cameras)")
+    p.add_argument("--overlap", type=_positive_float, default=2.0, metavar="M", help="how far neighbouring zones "
+                   "overlap, metres (at least 2; default 2)")
+    p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
+    p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
+                   "scenario's)")
+    add_output(p, "the map to write (.png; default: the table only)", required=False, metavar="MAP.png")
 
     p = sub.add_parser("score", help="score a tracks file or a result file against its recording")
     p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
@@ -654,6 +675,12 @@ def _speed(gen) -> str:
 def _cmd_track(args) -> None:
     from crossview import pipeline
 
+    if args.zones is None and (args.workers is not None or args.ray is not None):
+        raise CrossviewError(f"{'--workers' if args.workers is not None else '--ray'}: only with --zones (one "
+                             "tracker runs in this process)")
+    if args.zones is not None:
+        _track_zoned(args)
+        return
     trk = pipeline.track(
         args.recording, args.output, method=args.method, preset=args.preset, config_path=args.config,
         progress=not args.no_progress,
@@ -668,6 +695,50 @@ def _updates_and_speed(trk, template: str) -> str:
         return f"{trk.updates} updates (no camera frame in the stream: no speed measured)"
     return f"{trk.updates} updates" + (" " if template.startswith("at") else "") + template.format(
         fps=trk.tracker_fps, frames=trk.camera_frames_per_s)
+
+
+def _track_zoned(args) -> None:
+    from core import processes
+    from crossview import zoned
+    from crossview.parallel import Executor, cluster
+
+    if args.ray is not None:
+        executor, workers = Executor.RAY, args.workers or processes.usable_cores()
+    else:
+        workers = args.workers or processes.usable_cores()
+        executor = Executor.SERIAL if workers == 1 else Executor.POOL
+    with cluster.session(args.ray or None, connect=executor is Executor.RAY):
+        result = zoned.track_zoned(args.recording, args.output, zones_text=args.zones, overlap_m=args.overlap,
+                                   executor=executor, workers=workers, method=args.method, preset=args.preset,
+                                   config_path=args.config, progress=not args.no_progress)
+    summed = sum(result.zone_tracker_s)
+    print(f"{result.path}: {result.updates} camera frames, {len(result.zone_cameras)} zones (cameras "
+          f"{', '.join(map(str, result.zone_cameras))}) on {result.workers} worker(s), {result.handovers} hand-overs; "
+          f"{result.camera_frames_per_s:.0f} camera frames/s wall-clock, {result.tracker_fps_wall:.1f} FPS (all "
+          f"cameras once); zones' update time {summed:.1f} s in all ({result.summed_frames_per_s:.0f} camera "
+          "frames/s on one core)")
+
+
+def _cmd_zones(args) -> None:
+    from crossview import pipeline, zoned
+    from sim.cameras import build_rig
+    from sim.rng import child_rng
+    from sim.store import StoreGeometry
+
+    scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
+    if args.output:
+        pipeline.check_writable(args.output)
+    cameras = build_rig(scenario, child_rng(scenario.seed, "cameras"))
+    boxes = StoreGeometry(scenario.store, name=scenario.where).boxes
+    cut = zoned.cut(cameras, boxes, args.zones, args.overlap)
+    memberships = sum(len(z.cameras) for z in cut)
+    print(f"{scenario.name}: {len(cut)} zones, {len(cameras)} cameras, {memberships} zone cameras "
+          f"({memberships / len(cameras):.2f} per camera: the overlap's cost)")
+    for z in cut:
+        x0, y0, x1, y1 = z.cell
+        print(f"  zone {z.index}: x {x0:.1f}..{x1:.1f} m, y {y0:.1f}..{y1:.1f} m, {len(z.cameras)} cameras")
+    if args.output:
+        print(f"map: {zoned.write_map(scenario.name, boxes, cameras, cut, args.overlap, args.output)}")
 
 
 def _cmd_score(args) -> None:
@@ -929,6 +1000,7 @@ COMMANDS = {
     "coverage": _cmd_coverage,
     "plan": _cmd_plan,
     "track": _cmd_track,
+    "zones": _cmd_zones,
     "score": _cmd_score,
     "info": _cmd_info,
     "detector-stats": _cmd_detector_stats,

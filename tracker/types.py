@@ -108,3 +108,27 @@ class TrackerOutput:
     camera: str
     targets: Sequence[Target]
     detection_target_ids: np.ndarray
+
+
+STANDING_STATES = (TargetState.CONFIRMED, TargetState.LOST)
+"""Target states that stand for a person (a tracker reports confirmed targets; tentative and removed ones never
+count): what scoring scores and the zones' merger hands over."""
+
+
+def target_arrays(targets: Sequence[Target], num_joints: int) -> tuple[np.ndarray, np.ndarray]:
+    """A tracker output's targets in the one shape every reader uses: ids (T,) int64 and poses (T, J, 3) float64
+    of the targets in `STANDING_STATES`, in their order; a `TargetArrays` gives its own arrays without making a
+    `Target` each. With none, poses is (0, num_joints, 3).
+
+    Raises:
+        ValueError: poses of different shapes.
+    """
+    if isinstance(targets, TargetArrays):
+        if targets.state in STANDING_STATES:
+            return np.asarray(targets.ids, dtype=np.int64), np.asarray(targets.poses, dtype=np.float64)
+        return np.zeros(0, dtype=np.int64), np.zeros((0, num_joints, 3))
+    kept = [t for t in targets if t.state in STANDING_STATES]
+    if not kept:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, num_joints, 3))
+    return (np.array([t.id for t in kept], dtype=np.int64),
+            np.array([np.asarray(t.pose, dtype=np.float64) for t in kept]))

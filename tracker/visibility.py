@@ -303,3 +303,21 @@ def count_sightings(planes, hips, targets, stamp_s, matched, confirmed, sight_ma
         expected[r] = expected[r] * decay + rate
         sighted[r] = sighted[r] * decay + (1.0 if matched[r] else 0.0)
         evidence_s[r] = stamp_s
+
+
+HIP_HEIGHT_M = 0.9
+"""Height of a standing adult's hips, metres: where a camera's view of the floor is measured (zones, coverage)."""
+
+
+def floor_sight(cameras: Sequence[Camera], xy: np.ndarray, height_m: float = HIP_HEIGHT_M) -> np.ndarray:
+    """(C, N) bool: whether camera c sees the point above floor position xy[n] (N, 2) at `height_m`: in front
+    of it and inside its image (`core.projection.in_image`, the lens's model). The one geometry of camera
+    overlap on the floor: a point's camera count is its column's sum (coverage), and a camera's cells its row's
+    (`tracker.zones`)."""
+    from core.projection import in_image
+
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    points = np.column_stack([xy, np.full(len(xy), float(height_m))])
+    if not len(cameras):
+        return np.zeros((0, len(xy)), dtype=bool)
+    return np.stack([in_image(camera, points)[1] for camera in cameras])

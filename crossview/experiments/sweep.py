@@ -1,5 +1,5 @@
-"""Grids of generate → track → score cells (`crossview sweep`): the plan, the cell's work, the executors
-(serial, a local process pool, Ray), resuming, the result files and `crossview verify`.
+"""Grids of generate → track → score cells (`crossview sweep`): the plan, the cell's work, resuming, the result
+files and `crossview verify`. The cells run on `crossview.parallel`'s executors (serial, a local process pool, Ray).
 
 A cell is one resolved scenario (the base scenario with the cell's axis values), one seed, one tracker method
 and preset. Its work (`run_cell`) runs anywhere and returns a plain dict; only the driver writes into the
@@ -9,35 +9,28 @@ the cell, so the serial, pool and Ray executors give the same `results.json`, by
 
 from __future__ import annotations
 
-import atexit
 import contextlib
 import csv
 import dataclasses
-import enum
 import hashlib
 import io
 import itertools
 import json
 import logging
-import multiprocessing
 import os
 import random
 import resource
-import signal
 import socket
-import sys
 import tempfile
-import threading
 import time
 import tomllib
-from collections.abc import Callable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 from core import processes, tomlfile
-from core.errors import CrossviewError, ScenarioError
-from crossview import outputs, pipeline
+from core.errors import CrossviewError, ScenarioError, one_line
+from crossview import outputs, parallel, pipeline
+from crossview.parallel import Executor, cluster
 from sim import scenario as scenario_mod
 
 log = logging.getLogger(__name__)
@@ -55,30 +48,9 @@ TIMING_FIELDS = ("tracker_fps", "camera_frames_per_s")
 SWEEP_FORMAT = 1
 """Version of the layout of sweep.json, the cell files and results.json."""
 
-# Environment of Ray workers on a cluster (local workers inherit the driver's, which the CLI sets): one BLAS
-# thread per process, and no MuJoCo rendering back-end to look for.
-RAY_WORKER_ENV = {"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MUJOCO_GL": "disable"}
-
-# Ray's authentication mode (its environment variable) for a local instance the sweep starts: token, Ray's own
-# default for a new local instance (`connect_ray`).
-RAY_AUTH_MODE_ENV = "RAY_AUTH_MODE"
-RAY_LOCAL_AUTH_MODE = "token"
-
-# Ray's switch (its environment variable, read when Ray is imported) that keeps its C++ failure-signal handler out
-# of a Python process: set for the sweep's driver and its local instance (`connect_ray`).
-RAY_NO_FAILURE_HANDLER_ENV = ("RAY_DISABLE_FAILURE_SIGNAL_HANDLER", "1")
-
 # Modules a pool's fork server imports once, so that each worker it forks starts with them loaded.
-_PRELOAD = ["crossview.experiments.sweep", "crossview.recording", "crossview.scoring", "sim.simulate",
-            "tracker.tracker"]
-
-
-class Executor(enum.Enum):
-    """Where the cells run."""
-
-    SERIAL = "serial"  # one after another in this process
-    POOL = "pool"  # a local process pool
-    RAY = "ray"  # Ray tasks, on a local instance or a cluster
+_SETUP = parallel.Setup(preload=("crossview.experiments.sweep", "crossview.recording", "crossview.scoring",
+                                 "sim.simulate", "tracker.tracker"))
 
 
 @dataclass(frozen=True)
@@ -446,7 +418,7 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
             files = referenced_files(scenario)
             identity = resolved_digest(scenario)
         except ScenarioError as e:
-            error = portable(_one_line(e), folder)
+            error = portable(one_line(e), folder)
             resolved = {**overrides, "seed": seed}
             files = ()
             identity = _key(base.name, resolved, spec.duration_s, cameras)
@@ -458,7 +430,7 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
             try:
                 pipeline.tracker_config(preset, None, tracker)
             except CrossviewError as e:
-                error = portable(_one_line(e), folder)
+                error = portable(one_line(e), folder)
         # (A cell without tracker axes or a plug-in keeps the key it had before they were keyed: finished cells
         # stay found. The method as given, label included: a method without a label keeps its key.)
         identity_parts = (identity, seed, method_text, preset, version) + ((tracker,) if tracker else ()) + (
@@ -484,11 +456,6 @@ def _applied_overrides(scenario, overrides: dict, seed: int, duration_s, cameras
         resolved["cameras.rows"] = scenario.cameras.rows
         resolved["cameras.cols"] = scenario.cameras.cols
     return resolved
-
-
-def _one_line(error: BaseException) -> str:
-    text = str(error).splitlines()[0] if str(error) else ""
-    return text or type(error).__name__
 
 
 # ---------------------------------------------------------------- the work of one cell (runs in a worker)
@@ -552,7 +519,7 @@ def run_cell(cell: Cell) -> dict:
                 recording = rec.read_bytes()
         status = "ok"
     except CrossviewError as e:
-        status = _one_line(e) if home is None else portable(_one_line(e), home)
+        status = one_line(e) if home is None else portable(one_line(e), home)
         transient = getattr(e, "errno", None) is not None  # (an output that failed to be written: a full disk)
     except OSError as e:  # the environment's (a full disk, the file-size limit, a permission), not the cell's
         status = f"{type(e).__name__}: {e.strerror or e}"
@@ -583,249 +550,11 @@ def _crashed(cell: Cell, error: BaseException) -> dict:
     """The outcome of a cell whose work raised something other than bad input (a bug, a lost worker): failed,
     and not stored, so that a rerun tries it again."""
     log.error("cell %s (%s) raised %s: %s", cell.key, cell.label, type(error).__name__, error)
-    return {"key": cell.key, "status": f"{type(error).__name__}: {_one_line(error)}", "score": None,
+    return {"key": cell.key, "status": f"{type(error).__name__}: {one_line(error)}", "score": None,
             "timings": {}, "recording": None, "crashed": True}
 
 
 # ---------------------------------------------------------------- executors
-
-
-@contextlib.contextmanager
-def _serial(cells: list[Cell], started: Callable[[Cell], None]) -> Iterator[Iterator[tuple[Cell, dict]]]:
-    """One cell after another in this process (`started` is told of each as it starts)."""
-
-    def outcomes():
-        for cell in cells:
-            started(cell)
-            try:
-                yield cell, run_cell(cell)
-            except Exception as e:  # noqa: BLE001 - recorded as the cell's failure, the sweep goes on
-                yield cell, _crashed(cell, e)
-
-    yield outcomes()
-
-
-@contextlib.contextmanager
-def _pool(cells: list[Cell], workers: int) -> Iterator[Iterator[tuple[Cell, dict]]]:
-    """A local process pool. Its workers are forked from a fork server that has the heavy modules loaded
-    (not from this process, whose threads a fork would copy in an unknown state). On Ctrl-C or SIGTERM the
-    queued cells are dropped and the running workers terminated."""
-    context = multiprocessing.get_context("forkserver")
-    context.set_forkserver_preload(_PRELOAD)
-    pool = ProcessPoolExecutor(max_workers=workers, mp_context=context, initializer=_pool_worker_started,
-                               initargs=(os.getpid(),))
-    finished = False
-    try:
-        futures = {pool.submit(run_cell, cell): cell for cell in cells}
-
-        def outcomes():
-            for future in as_completed(futures):
-                cell = futures[future]
-                try:
-                    yield cell, future.result()
-                except Exception as e:  # noqa: BLE001 - recorded as the cell's failure, the sweep goes on
-                    yield cell, _crashed(cell, e)
-
-        yield outcomes()
-        finished = True
-    finally:
-        if not finished:
-            pool.shutdown(wait=False, cancel_futures=True)
-            for process in multiprocessing.active_children():  # the pool's workers, still running a cell
-                process.terminate()
-        pool.shutdown(wait=True)  # (the workers gone, the pool's own thread and queues end and are released)
-
-
-def _pool_worker_started(driver_pid: int) -> None:
-    """Gives tqdm a thread lock in a pool worker. Its progress bars (disabled in a cell) otherwise share a
-    named semaphore, registered with multiprocessing's resource tracker, that a worker terminated on Ctrl-C or
-    SIGTERM never releases: the tracker then warns of leaked semaphores. A worker runs one cell at a time, in
-    one thread, and shows no bar, so a thread lock is enough.
-
-    The worker also ends when the sweep does, even one killed with SIGKILL (`processes.exit_with`): it
-    would otherwise wait for cells forever, and the fork server (which ends when the last holder of the
-    sweep's end of its pipe does, a worker among them) and the resource tracker with it."""
-    from tqdm import tqdm
-
-    processes.exit_with(driver_pid)
-
-    tqdm.set_lock(threading.RLock())
-
-
-def connect_ray(address: str | None, reaper: processes.Reaper | None = None) -> bool:
-    """Starts or joins Ray before any cell runs: `address` None starts a local instance (or joins the one
-    $RAY_ADDRESS names); an address, once something answers there, joins that cluster. Where this process
-    is already connected (a program that called `ray.init` itself), that connection is used.
-
-    Args:
-        address: the cluster to join, None for a local instance.
-        reaper: started just before a local instance is (never for a cluster given by an address or
-            $RAY_ADDRESS, whose processes are not the sweep's): once this process has ended, even killed with
-            SIGKILL, it ends the processes the instance started (its raylet and GCS end with this process, but
-            its agents and workers only ~90 s later, polling for their parent). The caller stops it. (Where
-            `ray.init` joins an instance that `ray start` left running instead, the reaper ends none of it:
-            its processes neither descend from this one nor carry the reaper's mark.)
-
-    Returns:
-        whether this call connected (and the sweep should disconnect at its end).
-
-    Raises:
-        CrossviewError: Ray is not installed, or the address cannot be reached.
-    """
-    if "ray" not in sys.modules:  # (Ray reads both settings below when it is first imported, so only before that)
-        if not address and not os.environ.get("RAY_ADDRESS"):
-            # The local instance this starts keeps Ray's default, token authentication, said explicitly: Ray warns
-            # on every start where the mode is left unset (and only there). A mode the user set is kept; a cluster
-            # joined decides its own.
-            os.environ.setdefault(RAY_AUTH_MODE_ENV, RAY_LOCAL_AUTH_MODE)
-        # Ray's failure-signal handler (a stack dump of its core) takes SIGTERM in this process from ray.init on,
-        # and ray.shutdown sets SIGTERM back to the default before it stops the local instance: a SIGTERM in that
-        # second then killed the sweep silently (exit -15) instead of ending it as the command's handler does.
-        # Without it, SIGTERM stays the command's, or held, throughout (`_signals_held_in_ray`).
-        os.environ.setdefault(*RAY_NO_FAILURE_HANDLER_ENV)
-    try:
-        import ray
-    except ImportError:
-        raise CrossviewError("--ray: Ray is not installed; install the extra: pip install "
-                             "'crossview-testbed[ray]' (or pip install -e '.[ray]' in a checkout)") from None
-    if address and address != "auto":
-        _check_reachable(address)
-    if ray.is_initialized():  # (a program that calls `run_sweep` connected already)
-        return False
-    if not address and reaper is not None and not os.environ.get("RAY_ADDRESS"):
-        reaper.start()
-    try:
-        try:
-            with _signals_held_in_ray():
-                if address:
-                    ray.init(address=address, runtime_env={"env_vars": RAY_WORKER_ENV}, log_to_driver=False,
-                             logging_level=logging.WARNING)
-                else:
-                    ray.init(log_to_driver=False, logging_level=logging.WARNING)
-        except BaseException:
-            # A connection half made (a SIGTERM inside ray.init), or made just before a held signal, is undone:
-            # left to the interpreter's exit, it crashed it.
-            with _signals_held_in_ray():
-                ray.shutdown()
-            raise
-    except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
-        raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({_one_line(e)})".replace("  ", " ")
-                             ) from None
-    return True
-
-
-@contextlib.contextmanager
-def _signals_held_in_ray():
-    """Runs a call into Ray (ray.init, ray.shutdown) with the ending signals held: one that comes meanwhile is raised
-    once the call has returned and the command's handlers are back, as the command's handler raises it (one line,
-    128 + the signal). A signal raised inside the call would leave Ray half connected or half stopped (the
-    interpreter's exit then crashed). ray.init puts its own SIGTERM handler over the holding one, which ends the
-    process by sys.exit (exit 15 before the driver connects; 1 once a local head stopped its processes): a
-    SystemExit out of the call is that SIGTERM. Outside the main thread (where handlers cannot be set) the call
-    just runs."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    held: list[int] = []
-
-    def hold(signum, frame):
-        held.append(signum)
-
-    handlers = {s: signal.signal(s, hold) for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
-    try:
-        yield
-    except SystemExit:
-        if not callable(handlers[signal.SIGTERM]):  # (a program's own handling: Ray's exit stands)
-            raise
-        held.append(signal.SIGTERM)
-        # What Ray's handler leaves half made when it exits while ray.init connects (a core worker whose threads run
-        # on, out of reach of ray.shutdown) crashes the interpreter's exit (SIGSEGV). The command unwinds and cleans
-        # up as on any signal; the process then ends at the first step of that exit, with the signal's status.
-        atexit.register(_exit_at_once, 128 + signal.SIGTERM)
-    finally:
-        for signum, handler in handlers.items():
-            signal.signal(signum, signal.SIG_DFL if handler is None else handler)  # (None: one set outside Python)
-        if held:
-            handler = handlers[held[0]]
-            if callable(handler):
-                handler(held[0], None)
-            elif handler in (signal.SIG_DFL, None):
-                signal.raise_signal(held[0])
-
-
-def _exit_at_once(status: int) -> None:
-    """Ends the process at once (no finalization: Ray's exit handlers, C++ destructors) once its output is out."""
-    for stream in (sys.stdout, sys.stderr, sys.__stdout__, sys.__stderr__):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    os._exit(status)
-
-
-RAY_CONNECT_TIMEOUT_S = 5.0
-"""How long the check that a Ray address answers waits (`ray.init` itself retries an unreachable one forever)."""
-
-
-def _check_reachable(address: str) -> None:
-    """Fails unless something listens at a Ray address (`HOST:PORT` or `ray://HOST:PORT`)."""
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    if not sep or not host or not port.isdigit():
-        raise CrossviewError(f"--ray {address}: not an address of the form HOST:PORT (e.g. 10.0.0.5:6379) "
-                             "or ray://HOST:PORT")
-    try:
-        socket.create_connection((host, int(port)), timeout=RAY_CONNECT_TIMEOUT_S).close()
-    except OSError as e:
-        raise CrossviewError(f"--ray {address}: unreachable ({e.strerror or e}); is `ray start --head` running "
-                             "there, and the port open?") from None
-
-
-def _ray_wait(ray, waiting: list) -> tuple[list, list]:
-    """`ray.wait` for one task. A signal's exception (Ctrl-C, the command line's SIGTERM) raised while Ray's
-    compiled core waits comes out of it as a SystemError ("returned a result with an exception set") caused by
-    it: it is raised as itself, so that the sweep ends as on a signal anywhere else (one line, 128 + signal)."""
-    try:
-        return ray.wait(waiting, num_returns=1)
-    except SystemError as e:
-        if isinstance(e.__cause__, BaseException) and not isinstance(e.__cause__, Exception):
-            raise e.__cause__ from None
-        raise
-
-
-@contextlib.contextmanager
-def _ray(cells: list[Cell], cancel_left: bool) -> Iterator[Iterator[tuple[Cell, dict]]]:
-    """Ray tasks, one CPU each, never retried (a cell that fails is recorded as failed).
-
-    Left early (Ctrl-C, SIGTERM, an error), with `cancel_left` the tasks not yet finished are cancelled
-    (running ones force-stopped): for a connection the caller keeps, whose job goes on. Without it the sweep
-    disconnects itself (`ray.shutdown`), and Ray ends the job's tasks with the job, on a local instance and on a
-    joined cluster alike (measured: the running cells gone 1-3 s after SIGTERM, as with the cancel). Cancelling
-    first there raced inside Ray with the tasks' replies: its driver aborted ("Tried to complete task that was
-    not pending"), exit 1 and a stack dump instead of the command's one line, about one SIGTERM in eight."""
-    import ray
-
-    task = ray.remote(num_cpus=1, max_retries=0)(run_cell)
-    refs: dict = {}
-    finished = False
-    try:
-        refs = {task.remote(cell): cell for cell in cells}
-
-        def outcomes():
-            waiting = list(refs)
-            while waiting:
-                ready, waiting = _ray_wait(ray, waiting)
-                for ref in ready:
-                    cell = refs[ref]
-                    try:
-                        yield cell, ray.get(ref)
-                    except Exception as e:  # noqa: BLE001 - recorded as the cell's failure, the sweep goes on
-                        yield cell, _crashed(cell, e)
-
-        yield outcomes()
-        finished = True
-    finally:
-        if not finished and cancel_left:
-            for ref in refs:
-                with contextlib.suppress(Exception):
-                    ray.cancel(ref, force=True)
 
 
 # ---------------------------------------------------------------- the driver
@@ -889,7 +618,7 @@ def check_output(out: Path, wanted: dict) -> None:
             held = json.loads(found.read_text(encoding="utf-8"))
             held_identity = _identity(held)
         except (OSError, ValueError, UnicodeDecodeError, AttributeError) as e:
-            raise CrossviewError(f"{found}: unreadable ({_one_line(e)}); choose another --output") from None
+            raise CrossviewError(f"{found}: unreadable ({one_line(e)}); choose another --output") from None
         identity = _identity(wanted)
         differing = [k for k in IDENTITY if held_identity[k] != identity[k]]
         if differing:
@@ -927,7 +656,7 @@ def _finished(out: Path, cell: Cell, keep_recordings: bool) -> dict | None:
         stored = json.loads(path.read_text(encoding="utf-8"))
         malformed = _malformed_cell(stored)
     except (OSError, ValueError, UnicodeDecodeError) as e:
-        malformed = _one_line(e)
+        malformed = one_line(e)
     if malformed:
         log.warning("%s: not a cell file of this sweep (%s): running the cell again", path, malformed)
         return None
@@ -1017,33 +746,23 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
         log.info("%d of %d cells already finished in %s: skipped", len(stored), len(cells), out)
     # Nothing to run starts nothing: no Ray, no pool. (Ray is joined before anything is written: a bad
     # address leaves no folder.)
-    reaper, disconnect = processes.Reaper(), False
-    try:
-        disconnect = connect_ray(ray_address, reaper) if executor is Executor.RAY and pending else False
+    with cluster.session(ray_address, connect=executor is Executor.RAY and bool(pending)) as disconnect:
         pipeline.write_json(wanted, out / "sweep.json")  # (checks that the folder can be written)
         with tqdm(total=len(cells), initial=len(stored), unit="cell", desc="sweep", disable=not progress) as bar:
             def started(cell: Cell) -> None:
                 bar.set_postfix_str(cell.label)
 
-            runner = {Executor.SERIAL: lambda: _serial(pending, started),
-                      Executor.POOL: lambda: _pool(pending, workers),
-                      Executor.RAY: lambda: _ray(pending, cancel_left=not disconnect)}[executor]
-            with runner() if pending else contextlib.nullcontext(iter(())) as outcomes:
-                for cell, outcome in outcomes:
+            runner = parallel.tasks(run_cell, pending, executor=executor, workers=workers, setup=_SETUP,
+                                    started=started, cancel_left=not disconnect)
+            with runner if pending else contextlib.nullcontext(iter(())) as outcomes:
+                for cell, outcome, error in outcomes:
+                    if error is not None:
+                        outcome = _crashed(cell, error)
                     stored[cell.key] = _record(out, cell, outcome)
                     if outcome["status"] != "ok":
                         log.warning("cell %s failed: %s", cell.label, outcome["status"])
                     bar.set_postfix_str(cell.label)
                     bar.update()
-    finally:
-        try:
-            if disconnect:
-                import ray
-
-                with _signals_held_in_ray():
-                    ray.shutdown()
-        finally:
-            reaper.stop()
     rows = [stored[c.key] for c in cells]
     write_results(out, wanted, rows)
     sweep_report.write_report(out, wanted, rows)
@@ -1179,7 +898,7 @@ def verify(folder: Path, *, cells: int | None = None, progress: bool = True) -> 
     except FileNotFoundError:
         raise CrossviewError(f"{path}: no manifest; verify needs a sweep run with --keep-recordings") from None
     except (OSError, ValueError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as e:
-        raise CrossviewError(f"{path}: not a sweep manifest ({_one_line(e)})") from None
+        raise CrossviewError(f"{path}: not a sweep manifest ({one_line(e)})") from None
     for digest, text in texts.items():
         if not isinstance(text, str) or hashlib.sha256(text.encode()).hexdigest() != digest:
             raise CrossviewError(f"{path}: a file it carries does not match its sha256 {digest[:16]}")

@@ -53,6 +53,7 @@ def draw_layout(
     tracked: dict[int, np.ndarray] | None = None,
     switches: list[tuple[float, int, int, float, float]] | None = None,
     seen_by: tuple[np.ndarray, np.ndarray, float] | None = None,
+    zones: list[tuple[tuple, tuple, str]] | None = None,
 ) -> np.ndarray:
     """Draws a store seen from above (x to the right, y up).
 
@@ -67,6 +68,8 @@ def draw_layout(
         switches: identity switches (time s, person id, new target id, x m, y m): a red ring, labelled.
         seen_by: (cells (N, 2) centres in metres, counts (N,), cell side in metres): paint each cell by how many
             cameras see it (0, 1, 2, 3 or more; `crossview.measure.coverage`), with a legend.
+        zones: (cell, region, label) per zone (`tracker.zones`; boxes x0, y0, x1, y1 in metres): the cell outlined
+            in the zone's colour and labelled, the region it tracks (the cell widened into its neighbours) thin.
 
     Returns:
         (H, W, 3) uint8 BGR image.
@@ -125,6 +128,14 @@ def draw_layout(
         cv2.circle(image, centre, 9, (0, 0, 220), 2, lineType=cv2.LINE_AA)
         cv2.putText(image, f"P{pid}->#{tid} {t_s:.1f}s", (centre[0] + 11, centre[1] + 4), cv2.FONT_HERSHEY_SIMPLEX,
                     0.35, (0, 0, 220), 1, lineType=cv2.LINE_AA)
+    for index, (cell, region, label) in enumerate(zones or []):
+        colour = track_bgr(index)
+        r = px(np.array([region[:2], region[2:]]))
+        cv2.rectangle(image, tuple(int(v) for v in r[0]), tuple(int(v) for v in r[1]), colour, 1)
+        c = px(np.array([cell[:2], cell[2:]]))
+        cv2.rectangle(image, tuple(int(v) for v in c[0]), tuple(int(v) for v in c[1]), colour, 3)
+        cv2.putText(image, label, (int(c[0][0]) + 6, int(c[1][1]) + 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, colour, 1,
+                    lineType=cv2.LINE_AA)
     for cam in cameras or []:
         centre = cam.center_world
         axis = cam.R_cam_from_world[2]  # optical axis in the world frame

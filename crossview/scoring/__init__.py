@@ -40,24 +40,21 @@ import numpy as np
 from core.errors import CrossviewError
 from core.head import HeadConvention, HeadPoints
 from core.records import CameraFrame, PoseTruth
+from core.tracks import OUTPUT_MAX_AGE_S, LatestPerTick, stands
 from core.truth import truth_between
 from core.types import COCO17, Camera, Skeleton
-from crossview.scoring.association import SCORED_STATES, AssociationAccumulator, scored_targets
+from crossview.scoring.association import AssociationAccumulator
 from crossview.scoring.hota import HOTA_ZERO_DISTANCE_M, ground_similarity, hota
 from crossview.scoring.identity import ROOT_MATCH_THRESHOLD_M, IdentityAccumulator, IdEvent, body_roots
 from crossview.scoring.per_camera import Projected2DAccumulator
 from crossview.scoring.pose import PoseAccumulator
 from crossview.scoring.report import JSON_KEYS, ScoreReport
-from tracker.types import TrackerOutput
+from tracker.types import STANDING_STATES, TrackerOutput, target_arrays
 
 __all__ = ["FLOOR_CELL_M", "JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TIMELINE_BIN_S",
            "TruthTimeline", "WARM_UP_S", "default_from_s", "score"]
 
 logger = logging.getLogger(__name__)
-
-OUTPUT_MAX_AGE_S = 1.0
-"""A tracker output older than this at a grid tick no longer stands for the tracker's belief, seconds."""
-
 
 TIMELINE_BIN_S = 1.0
 """Width of a time bin of the per-person time line, seconds."""
@@ -126,11 +123,11 @@ class TruthTimeline:
 def _targets(out: TrackerOutput, skeleton: Skeleton) -> tuple[np.ndarray, np.ndarray]:
     J = skeleton.num_joints
     try:
-        ids, poses = scored_targets(out.targets, J)
+        ids, poses = target_arrays(out.targets, J)
     except ValueError:
         poses = None
     if poses is None or poses.ndim != 3 or poses.shape[1:] != (J, 3):
-        shapes = sorted({np.shape(t.pose) for t in out.targets if t.state in SCORED_STATES})
+        shapes = sorted({np.shape(t.pose) for t in out.targets if t.state in STANDING_STATES})
         raise ScoringError(f"tracker output {out.camera}@{out.stamp_s}: target poses have shape "
                            f"{', '.join(map(str, shapes))}, expected ({J}, 3) {skeleton.name}")
     return ids, poses
@@ -307,10 +304,9 @@ def score(
     num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
     ticks = t_start + np.arange(num_ticks) / eval_rate_hz  # the same floats as t_start + k / eval_rate_hz
 
-    # One pass over the outputs. The grid needs, per tick, only the latest output stamped at or before it:
-    # `latest[k]` keeps the latest output stamped in (tick k-1, tick k] (on equal stamps the later one
-    # delivered), so at most one output per tick is held.
-    latest: dict[int, TrackerOutput] = {}
+    # One pass over the outputs. The grid needs, per tick, only the latest output stamped at or before it
+    # (`core.tracks.LatestPerTick`: at most one output per tick is held).
+    latest = LatestPerTick(ticks)
     names = None if cameras is None else {c.name for c in cameras}
     foreign: set[str] = set()
     num_outputs = inside = 0
@@ -328,10 +324,8 @@ def score(
             foreign.add(out.camera)
             continue
         inside += t_start - OUTPUT_MAX_AGE_S <= out.stamp_s <= t_end + OUTPUT_MAX_AGE_S
-        k = int(np.searchsorted(ticks, out.stamp_s, side="left"))
-        # An output stamped before t_0 predates every person of the recording (see the module docstring).
-        if out.stamp_s >= t_start and k < num_ticks and (k not in latest or out.stamp_s >= latest[k].stamp_s):
-            latest[k] = out
+        # (An output stamped before t_0 predates every person of the recording: not kept, see the module docstring.)
+        latest.offer(out.stamp_s, out)
         if out.stamp_s < cutoff:
             continue  # in the warm-up: it may still be the latest output at the first scored tick
         if out.camera in projected_names:
@@ -356,17 +350,16 @@ def score(
                          hota_zero_distance_m=hota_zero_distance_m,
                          truth_head=(HeadConvention.EVALUATE if evaluated else HeadConvention.ANNOTATED).value)
     scored_ticks = 0
-    chosen: TrackerOutput | None = None
     compared: list[_Compared] = []  # per identity update
     for k in range(num_ticks):
         tick = t_start + k / eval_rate_hz
-        chosen = latest.pop(k, chosen)  # the latest output stamped at or before the tick
+        chosen = latest.latest(k)  # the latest output stamped at or before the tick
         if chosen is None and num_outputs:
             continue  # nothing delivered yet: no tracker could know anything
         if tick < cutoff:
             continue  # the warm-up
         scored_ticks += 1
-        if chosen is not None and tick - chosen.stamp_s <= OUTPUT_MAX_AGE_S:
+        if chosen is not None and stands(chosen.stamp_s, tick):
             t_ids, t_poses = _targets(chosen, skeleton)
             at = chosen.stamp_s
         else:

@@ -16,7 +16,7 @@ tracking scores that use it (the paper's Table 5) are in `crossview.scoring.per_
 from __future__ import annotations
 
 from collections import Counter, defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -25,34 +25,14 @@ from core.boxes import keypoint_boxes
 from core.projection import in_image
 from core.records import CameraFrame
 from core.types import Camera
-from tracker.types import Target, TargetArrays, TargetState, TrackerOutput
+from tracker.types import TrackerOutput
 from tracker.visibility import poses_in_volume, view_planes
 
 MIN_VISIBLE_FRACTION = 0.5
 """Fraction of a projected box that must lie inside the image for the box to count."""
-SCORED_STATES = (TargetState.CONFIRMED, TargetState.LOST)
-"""Target states that are scored (a tracker reports confirmed targets; tentative and removed ones never count)."""
 _MIN_DEPTH_M = 0.1
 _PROJECTION_MARGIN = 0.5  # fraction of the image size outside which undistorted points are not distorted
 _VOLUME_SLACK_M = 1e-6  # how much wider `projection_volume` is than what `project_points` projects
-
-
-def scored_targets(targets: Sequence[Target], num_joints: int) -> tuple[np.ndarray, np.ndarray]:
-    """ids (T,) int64 and poses (T, J, 3) float64 of the targets in `SCORED_STATES`, in their order; a
-    `TargetArrays` gives its own arrays without making a `Target` each. With none, poses is (0, num_joints, 3).
-
-    Raises:
-        ValueError: poses of different shapes.
-    """
-    if isinstance(targets, TargetArrays):
-        if targets.state in SCORED_STATES:
-            return np.asarray(targets.ids, dtype=np.int64), np.asarray(targets.poses, dtype=np.float64)
-        return np.zeros(0, dtype=np.int64), np.zeros((0, num_joints, 3))
-    kept = [t for t in targets if t.state in SCORED_STATES]
-    if not kept:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, num_joints, 3))
-    return (np.array([t.id for t in kept], dtype=np.int64),
-            np.array([np.asarray(t.pose, dtype=np.float64) for t in kept]))
 
 
 def stamp_key(camera: str, stamp_s: float) -> tuple[str, int]:

@@ -39,11 +39,10 @@ from crossview.scoring.association import (
     project_points,
     projected_boxes,
     projection_volume,
-    scored_targets,
     stamp_key,
 )
 from crossview.scoring.identity import identity_scores
-from tracker.types import TrackerOutput
+from tracker.types import TrackerOutput, target_arrays
 
 logger = logging.getLogger(__name__)
 
@@ -175,7 +174,7 @@ class Projected2DAccumulator:
                              f"{sorted(self._cameras)}")
         ids, poses = self._truth_at(output.stamp_s)
         ids, poses = np.asarray(ids), np.asarray(poses, dtype=np.float64)
-        h_ids, h_poses = scored_targets(output.targets, poses.shape[1])
+        h_ids, h_poses = target_arrays(output.targets, poses.shape[1])
         # Only the poses with a joint the camera could project can have a box in it (`may_project`).
         volume = self._volumes[output.camera]
         near, h_near = may_project(volume, poses), may_project(volume, h_poses)

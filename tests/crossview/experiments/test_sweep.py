@@ -17,9 +17,9 @@ from pathlib import Path
 import pytest
 
 import scenarios
-from core import processes
 from crossview.cli import EXIT_BAD_INPUT, main
 from crossview.experiments import sweep, sweep_report
+from crossview.parallel import cluster, reaper
 from sim import scenario as scenario_mod
 from tests.crossview.signalling import signal_when
 
@@ -49,7 +49,7 @@ def serial(tmp_path_factory):
 def ray_instance():
     """One local Ray instance for the module (its start-up is slow)."""
     ray = pytest.importorskip("ray", reason="Ray is the extra '.[ray]' (CI installs it)")
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": sweep.RAY_WORKER_ENV})
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, runtime_env={"env_vars": cluster.RAY_WORKER_ENV})
     yield ray
     ray.shutdown()
 
@@ -516,13 +516,13 @@ def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_tem
 
 
 def _environ_marks(pids) -> set[str]:
-    """The marks (`processes.MARK_ENV`) the environments of processes `pids` carry."""
+    """The marks (`reaper.MARK_ENV`) the environments of processes `pids` carry."""
     marks = set()
     for pid in pids:
         with contextlib.suppress(OSError):
             for entry in Path(f"/proc/{pid}/environ").read_bytes().split(b"\0"):
                 name, _, value = entry.decode(errors="replace").partition("=")
-                if name == processes.MARK_ENV:
+                if name == reaper.MARK_ENV:
                     marks.add(value)
     return marks
 
@@ -537,7 +537,7 @@ def test_a_ray_sweep_killed_with_sigkill_leaves_no_process_of_its_instance(tmp_p
     command = [sys.executable, "-m", "crossview.cli", "--no-progress", "sweep", "store_layout1", "--people", "2,3",
                "--duration", "4", "--ray", "-o", str(out)]
     process = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    bystander = subprocess.Popen(["sleep", "300"], env={processes.MARK_ENV: f"{process.pid}-{'0' * 16}"})
+    bystander = subprocess.Popen(["sleep", "300"], env={reaper.MARK_ENV: f"{process.pid}-{'0' * 16}"})
     left = marked = []
     try:
         while not (out / "sweep.json").exists() and process.poll() is None:  # (written once Ray is up)
