@@ -316,10 +316,10 @@ def priors_verdict(result: dict) -> tuple[str, str]:
     none, both = rows["none"], rows["all"]
     groups = ("head", "torso", "upper_arms", "lower_arms", "upper_legs", "lower_legs")
     helps = both["pcp"] >= none["pcp"] and all(both[g] >= none[g] for g in groups)
-    return "help" if helps else "do NOT help", (f"{result['scenario']}: PCP {_pct(none['pcp'])} → {_pct(both['pcp'])} %, head "
-                             f"{_pct(none['head'])} → {_pct(both['head'])} %, lower arms {_pct(none['lower_arms'])} "
-                             f"→ {_pct(both['lower_arms'])} %, MPJPE {none['mpjpe_mm']:.1f} → "
-                             f"{both['mpjpe_mm']:.1f} mm")
+    text = (f"{result['scenario']}: PCP {_pct(none['pcp'])} → {_pct(both['pcp'])} %, head {_pct(none['head'])} → "
+            f"{_pct(both['head'])} %, lower arms {_pct(none['lower_arms'])} → {_pct(both['lower_arms'])} %, MPJPE "
+            f"{none['mpjpe_mm']:.1f} → {both['mpjpe_mm']:.1f} mm")
+    return ("help" if helps else "do NOT help"), text
 
 
 def _priors_section(result: dict) -> list[str]:
