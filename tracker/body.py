@@ -85,8 +85,8 @@ def prior_bones(skeleton: Skeleton, head_bones: bool = False) -> tuple[np.ndarra
     return bones, mirror
 
 
-LIMB_END_JOINTS = ("elbow", "wrist", "knee", "ankle")
-"""Name parts of the joints at the far ends of the upper and lower limbs: `limb_velocity_window_s`'s joints."""
+LIMB_END_JOINTS = ("wrist", "ankle")
+"""Name parts of the joints at the ends of the arms and legs: `limb_velocity_window_s`'s joints."""
 
 
 def velocity_windows(skeleton: Skeleton, config) -> np.ndarray:

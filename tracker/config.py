@@ -100,11 +100,12 @@ class TrackerConfig:
             2D error triangulated), metres; beyond the paper.
     A body that keeps its shape, joints that move like joints (beyond the paper; every switch off in the `-paper`
     presets; docs/tracker.md, "Body and joint priors", gives the maths and the measurements):
-        limb_velocity_window_s: the window of eq. (5)'s velocity fit for the elbows, wrists, knees and ankles
+        limb_velocity_window_s: the window of eq. (5)'s velocity fit for the wrists and ankles
             (`tracker.body.LIMB_END_JOINTS`), s; 0 is the paper (`velocity_window_s` for every joint). A linear
             fit's slope is the velocity of its window's middle: half a window late for a joint that
             accelerates, and the limbs' ends accelerate most (a reaching wrist, a swinging ankle), while a
-            short window's noisier velocity costs the head (the nose carries the protocol's head).
+            short window's noisier velocity costs the head (the nose carries the protocol's head) and, on the
+            elbows, the upper arms. 0.2 in `store` (docs/tracker.md, "Body and joint priors").
         velocity_quadratic: eq. (5)'s velocity V is the slope at the newest sample of the least-squares fit of a
             constant acceleration, x = a + b u + c u², over the window, instead of the linear fit's slope (the
             velocity of the window's middle, half a window late when the joint accelerates: a reaching wrist).

@@ -67,12 +67,14 @@ def test_campus_arms_are_oriented_from_the_shoulders():
     assert ("left_hip", "left_knee") in oriented
 
 
-def test_the_limb_window_reaches_only_elbows_wrists_knees_and_ankles():
-    windows = velocity_windows(COCO17, CONFIG.replace(limb_velocity_window_s=0.2))
+def test_the_limb_window_reaches_only_the_wrists_and_ankles():
+    windows = velocity_windows(COCO17, CONFIG.replace(limb_velocity_window_s=0.3))
     for name, w in zip(COCO17.joints, windows):
-        limb = any(part in name for part in ("elbow", "wrist", "knee", "ankle"))
-        assert w == (0.2 if limb else CONFIG.velocity_window_s), name
-    assert (velocity_windows(COCO17, CONFIG) == CONFIG.velocity_window_s).all()
+        limb = name.endswith("_wrist") or name.endswith("_ankle")
+        assert w == (0.3 if limb else CONFIG.velocity_window_s), name
+    paper = TrackerConfig.preset("store-paper")
+    assert (velocity_windows(COCO17, paper) == paper.velocity_window_s).all()
+    assert TrackerConfig.preset("store").limb_velocity_window_s == 0.2
 
 
 @pytest.mark.parametrize("quadratic", [False, True])
