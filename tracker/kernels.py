@@ -343,50 +343,50 @@ def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, q
     u, u², u³, u⁴, x, u x, u² x with u = t_i - t (times relative to now keep the sums well conditioned).
     """
     H, J = hist_s.shape[1], hist_s.shape[2]
-    sx = np.empty(3)
-    sux = np.empty(3)
-    suux = np.empty(3)
     for j in range(J):
         if not update[j]:
             continue
-        n = su = suu = suuu = suuuu = 0.0
-        sx[:] = 0.0
-        sux[:] = 0.0
-        suux[:] = 0.0
+        n = su = suu = suuu = suuuu = sx0 = sx1 = sx2 = sux0 = sux1 = sux2 = suux0 = suux1 = suux2 = 0.0
         first, last = np.inf, -np.inf
         for h in range(H):
             s = hist_s[r, h, j]
             if stamp_s - s <= window_s[j]:  # False for empty slots (NaN)
                 u = s - stamp_s
+                x0, x1, x2 = hist_pos[r, h, j, 0], hist_pos[r, h, j, 1], hist_pos[r, h, j, 2]
                 n += 1.0
                 su += u
                 suu += u * u
-                suuu += u * u * u
-                suuuu += u * u * u * u
-                for k in range(3):
-                    x = hist_pos[r, h, j, k]
-                    sx[k] += x
-                    sux[k] += u * x
-                    suux[k] += u * u * x
+                sx0 += x0
+                sx1 += x1
+                sx2 += x2
+                sux0 += u * x0
+                sux1 += u * x1
+                sux2 += u * x2
+                if quadratic:
+                    suuu += u * u * u
+                    suuuu += u * u * u * u
+                    suux0 += u * u * x0
+                    suux1 += u * u * x1
+                    suux2 += u * u * x2
                 first, last = min(first, s), max(last, s)
         sxx = suu - su * su / max(n, 1.0)  # Σ (u - ū)²
         v0 = v1 = v2 = 0.0
         if n >= 2 and last - first >= MIN_VELOCITY_SPAN_S and sxx > 0.0:
             # Σ (u - ū)(x - x̄) = Σ u x - ū Σ x
-            v0 = (sux[0] - su / n * sx[0]) / sxx
-            v1 = (sux[1] - su / n * sx[1]) / sxx
-            v2 = (sux[2] - su / n * sx[2]) / sxx
+            v0 = (sux0 - su / n * sx0) / sxx
+            v1 = (sux1 - su / n * sx1) / sxx
+            v2 = (sux2 - su / n * sx2) / sxx
             if quadratic and n >= 3:
                 # Normal equations [n su suu; su suu suuu; suu suuu suuuu] (a, b, c) = (Σx, Σux, Σu²x): b by
                 # Cramer's rule, where the determinant is clear of the rounding of its terms.
                 det = (n * (suu * suuuu - suuu * suuu) - su * (su * suuuu - suuu * suu)
                        + suu * (su * suuu - suu * suu))
                 if abs(det) > 1e-9 * n * suu * suuuu:
-                    bs = np.empty(3)
-                    for k in range(3):
-                        bs[k] = (n * (sux[k] * suuuu - suuu * suux[k]) - sx[k] * (su * suuuu - suuu * suu)
-                                 + suu * (su * suux[k] - sux[k] * suu)) / det
-                    v0, v1, v2 = bs[0], bs[1], bs[2]
+                    c0, c1 = n * suuuu - suu * suu, su * suuuu - suuu * suu
+                    c2 = n * suuu - su * suu
+                    v0 = (c0 * sux0 - c1 * sx0 - c2 * suux0) / det
+                    v1 = (c0 * sux1 - c1 * sx1 - c2 * suux1) / det
+                    v2 = (c0 * sux2 - c1 * sx2 - c2 * suux2) / det
         speed = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
         scale = max_speed / max(speed, 1e-12) if speed > max_speed else 1.0
         vel[r, j, 0], vel[r, j, 1], vel[r, j, 2] = v0 * scale, v1 * scale, v2 * scale
