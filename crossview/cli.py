@@ -391,9 +391,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("folder", type=Path, help="a sweep folder with manifest.json (sweep --keep-recordings)")
     p.add_argument("--cells", type=_positive_int, help="check a fixed sample of this many (default: all)")
 
-    p = sub.add_parser("ablate", help="the paper's ablations (Tables S1, 4, 5, Figures 5, 6) into one report")
+    p = sub.add_parser("ablate", help="the paper's ablations (Tables S1, 4, 5, Figures 5, 6) and the tracker's body "
+                       "and joint priors into one report")
     p.add_argument("experiments", nargs="*", metavar="EXPERIMENT",
-                   help="affinity, reconstruction, frame-rate, speed, single-view (default: all)")
+                   help="affinity, reconstruction, frame-rate, speed, single-view, priors (default: all)")
     p.add_argument("--quick", action="store_true", help="one seed, short runs, fewer points (about 2 minutes)")
     p.add_argument("--workers", type=_positive_int, help="local worker processes of the sweeps (default: the "
                    "cores; 1 runs them in this process)")

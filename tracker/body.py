@@ -25,6 +25,9 @@ MEAN_BODY_M = {
     "bottom_head": (0.02, 0.00, 1.52), "top_head": (0.02, 0.00, 1.78),
 }
 
+HEAD_BONES = (("left_shoulder", "nose"), ("right_shoulder", "nose"))
+"""The body prior's extra bones with `TrackerConfig.head_bones`: the person's own neck and head proportions."""
+
 SCALE_RANGE = (0.8, 1.25)
 """The fitted body scale is clipped to this range of the mean body's."""
 
@@ -33,6 +36,65 @@ def mean_body(skeleton: Skeleton) -> np.ndarray:
     """(J, 3) the mean body in the skeleton's joint order, metres; a joint the model lacks sits at the hips'
     height on the body axis."""
     return np.array([MEAN_BODY_M.get(name, (0.0, 0.0, 0.93)) for name in skeleton.joints], dtype=np.float64)
+
+
+def prior_bones(skeleton: Skeleton, head_bones: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The bones of the body prior (`kernels.BodyPrior`), each oriented from the end nearer the hips (its parent)
+    to the other (its child) and ordered outward, and the mirror of each.
+
+    Nearer: fewer bones from a hip over the skeleton's bones (and `HEAD_BONES` with `head_bones`), then from a
+    shoulder for a part the hips do not reach (Campus-14's arms); a part reached from neither (COCO-17's face
+    without `HEAD_BONES`) keeps the skeleton's own order and comes last.
+
+    Returns:
+        (B, 2) int64 (parent, child) joint pairs; (B,) int64 the row of the bone with left and right swapped in
+        both joint names, -1 for none (the bones of the middle).
+    """
+    names = list(skeleton.joints)
+    pairs = [tuple(int(j) for j in bone) for bone in skeleton.bones]
+    if head_bones:
+        pairs += [(names.index(a), names.index(b)) for a, b in HEAD_BONES if a in names and b in names]
+    try:
+        roots = list(skeleton.hips)
+    except ValueError:
+        roots = []
+    depth: dict[int, int] = {}
+    # From the hips; then a part they do not reach from its shoulders (Campus-14's arms), deeper than all before.
+    for seeds in (roots, [j for j, n in enumerate(names) if "shoulder" in n]):
+        start = max(depth.values(), default=-1) + 1
+        frontier = [j for j in seeds if j not in depth]
+        depth.update({j: start for j in frontier})
+        while frontier:
+            nxt = []
+            for j in frontier:
+                for a, b in pairs:
+                    for u, v in ((a, b), (b, a)):
+                        if u == j and v not in depth:
+                            depth[v] = depth[j] + 1
+                            nxt.append(v)
+            frontier = nxt
+    far = len(names) + 1
+    oriented = [(a, b) if depth.get(a, far) <= depth.get(b, far) else (b, a) for a, b in pairs]
+    oriented.sort(key=lambda bone: depth.get(bone[0], far))  # stable: the skeleton's order among equals
+    bones = np.array(oriented, dtype=np.int64).reshape(-1, 2)
+    swap = {n: n.replace("left", "\0").replace("right", "left").replace("\0", "right") for n in names}
+    where = {frozenset((names[a], names[b])): i for i, (a, b) in enumerate(oriented)}
+    mirror = np.array([where.get(frozenset((swap[names[a]], swap[names[b]])), -1) for a, b in oriented],
+                      dtype=np.int64)
+    mirror[mirror == np.arange(mirror.size)] = -1
+    return bones, mirror
+
+
+LIMB_END_JOINTS = ("wrist", "ankle")
+"""Name parts of the joints at the ends of the arms and legs: `limb_velocity_window_s`'s joints."""
+
+
+def velocity_windows(skeleton: Skeleton, config) -> np.ndarray:
+    """(J,) each joint's window of eq. (5)'s velocity fit, s: `config.limb_velocity_window_s` for the joints
+    named with a `LIMB_END_JOINTS` part when it is positive, `config.velocity_window_s` for the others."""
+    limb = float(config.limb_velocity_window_s)
+    return np.array([limb if limb > 0 and any(part in name for part in LIMB_END_JOINTS)
+                     else float(config.velocity_window_s) for name in skeleton.joints], dtype=np.float64)
 
 
 def fill_unknown(pose: np.ndarray, model: np.ndarray, bones: np.ndarray) -> np.ndarray:

@@ -12,6 +12,9 @@ from pathlib import Path
 from core import tomlfile
 from core.errors import ConfigError
 
+BONE_SAMPLES = 25
+"""Confident samples of each bone's length a target keeps (the newest); its length is their median."""
+
 
 class Triangulation(enum.Enum):
     """How a target's joints are re-estimated from the latest point of each camera.
@@ -96,6 +99,37 @@ class TrackerConfig:
         stale_after_s: a joint not updated for this long moves with the body's velocity (beyond the paper), s.
         max_bone_m: a joint update that would make one of its bones longer than this is not taken (a gross
             2D error triangulated), metres; beyond the paper.
+    A body that keeps its shape, joints that move like joints (beyond the paper; every switch off in the `-paper`
+    presets; docs/tracker.md, "Body and joint priors", gives the maths and the measurements):
+        limb_velocity_window_s: the window of eq. (5)'s velocity fit for the wrists and ankles
+            (`tracker.body.LIMB_END_JOINTS`), s; 0 is the paper (`velocity_window_s` for every joint). A linear
+            fit's slope is the velocity of its window's middle: half a window late for a joint that
+            accelerates, and the limbs' ends accelerate most (a reaching wrist, a swinging ankle), while a
+            short window's noisier velocity costs the head (the nose carries the protocol's head) and, on the
+            elbows, the upper arms. 0.2 in `store` (docs/tracker.md, "Body and joint priors").
+        velocity_quadratic: eq. (5)'s velocity V is the slope at the newest sample of the least-squares fit of a
+            constant acceleration, x = a + b u + c u², over the window, instead of the linear fit's slope (the
+            velocity of the window's middle, half a window late when the joint accelerates: a reaching wrist).
+        joint_gate_m: a joint's new estimate farther than this from its constant-velocity prediction
+            X_t' + V_t' (t - t') (eq. 5) is not taken: the joint keeps its predicted path through the jump or
+            the run of misses, metres; 0 is the paper (every estimate taken), else at least 0.01.
+        joint_gate_reset_s: a joint whose estimates were refused for this long (no estimate taken since) takes
+            the next one whatever it is (the person did move), s.
+        bone_prior_tolerance: each target learns its own bone lengths (the median of the lengths measured in
+            its confident frames); a new estimate that makes a bone differ from the person's length by more than
+            this fraction is pulled onto the nearest length within it, along the bone's measured direction, from
+            the end nearer the hips; 0 is the paper (no bone prior), else in (0, 1). A target without enough
+            confident frames keeps the paper's estimates.
+        bone_prior_min_views: a frame is confident for a bone when both its joints were triangulated from at
+            least this many views.
+        bone_prior_min_samples: confident samples a bone needs before its length is used, at most
+            `BONE_SAMPLES` (the samples kept per bone, the newest).
+        bone_prior_sample_s: least time between two samples of a target's bone lengths, s (so the kept samples
+            span `BONE_SAMPLES` times this, poses of several seconds rather than one).
+        bone_symmetry: the left and right bones of a pair share one length, the median of both sides' samples.
+        head_bones: the prior also holds the nose to each shoulder (the person's own neck and head proportions;
+            the Campus protocol places the head on the line from the mid-shoulders to the nose,
+            `core.layouts.coco17_to_campus14`), so that a nose estimate that breaks them is pulled back.
     Triangulation, eq. (6)-(11):
         lambda_t_per_s: time penalty rate λt of eq. (11), 1/s.
         triangulation: PAPER (eq. 6-11), VELOCITY (stale points moved forward with the joint velocity), or the
@@ -170,7 +204,8 @@ class TrackerConfig:
 
     Upper bounds (beyond the lower bounds above): every real value is finite and at most 86400 s, 1000 m,
     1000 m/s, 1e6 px, 1e6 px per frame or 1e6 /s by its unit, 1e6 without one; counts at most 1000, but
-    velocity_history 10000, milp_max_nodes 200 and confirm_min_updates 100000. `check_fits` refuses counts
+    velocity_history 10000, milp_max_nodes 200, confirm_min_updates 100000 and bone_prior_min_samples
+    BONE_SAMPLES. `check_fits` refuses counts
     of cameras or joints the input lacks.
     """
 
@@ -190,6 +225,16 @@ class TrackerConfig:
     max_predict_s: float = 0.5
     max_bone_m: float = 0.8
     stale_after_s: float = 0.3
+    limb_velocity_window_s: float = 0.0
+    velocity_quadratic: bool = False
+    joint_gate_m: float = 0.0
+    joint_gate_reset_s: float = 0.3
+    bone_prior_tolerance: float = 0.0
+    bone_prior_min_views: int = 3
+    bone_prior_min_samples: int = 5
+    bone_prior_sample_s: float = 0.2
+    bone_symmetry: bool = False
+    head_bones: bool = False
     lambda_t_per_s: float = 10.0
     triangulation: Triangulation = Triangulation.PAPER
     row_norm: RowNorm = RowNorm.ROW
@@ -239,9 +284,10 @@ class TrackerConfig:
         nonneg = ("w_2d", "w_3d", "lambda_a_per_s", "alpha_2d_floor_px", "alpha_2d_floor_px_per_s", "lambda_t_per_s",
                   "max_predict_s", "init_window_s", "confirm_min_age_s", "max_lateness_s", "reid_max_m",
                   "reid_speed_m_per_s", "reject_factor", "ghost_inside_m", "ghost_min_expected", "ghost_cell_m",
-                  "ghost_map_prior_count")
-        positive = ("ghost_window_s", "implausible_after_s", "alpha_2d_px_per_frame", "alpha_3d_m", "view_margin_m",
-                    "velocity_window_s", "max_speed_m_per_s",
+                  "ghost_map_prior_count", "joint_gate_m", "bone_prior_tolerance", "bone_prior_sample_s",
+                  "limb_velocity_window_s")
+        positive = ("ghost_window_s", "joint_gate_reset_s", "implausible_after_s", "alpha_2d_px_per_frame",
+                    "alpha_3d_m", "view_margin_m", "velocity_window_s", "max_speed_m_per_s",
                     "max_observation_age_s", "alpha_epipolar_px", "reject_floor_px", "max_bone_m", "stale_after_s",
                     "init_max_reprojection_px", "init_max_bone_m", "init_consensus_m",
                     "tentative_timeout_s", "lost_after_s", "remove_after_s")
@@ -266,17 +312,24 @@ class TrackerConfig:
         if 0.0 < self.reject_factor < 1.0:
             raise ConfigError(f"TrackerConfig.reject_factor: {self.reject_factor} must be 0 (no rejection) or at least "
                               "1 (a view is dropped when its error exceeds this many times the median)")
+        if 0.0 < self.joint_gate_m < 0.01:
+            raise ConfigError(f"TrackerConfig.joint_gate_m: {self.joint_gate_m} must be 0 (no gate) or at least 0.01 m")
+        if not self.bone_prior_tolerance < 1.0:
+            raise ConfigError(f"TrackerConfig.bone_prior_tolerance: {self.bone_prior_tolerance} must be 0 (no bone "
+                              "prior) or in (0, 1), a fraction of the person's bone length")
         if not 0.0 <= self.score_threshold <= 1.0:
             raise ConfigError(f"TrackerConfig.score_threshold: {self.score_threshold} must be in [0, 1]")
         ints = {"velocity_history": 2, "min_views": 2, "init_min_joints": 1, "init_min_common_joints": 1,
-                "milp_max_nodes": 2, "init_min_joints_3d": 1, "confirm_min_updates": 1}
+                "milp_max_nodes": 2, "init_min_joints_3d": 1, "confirm_min_updates": 1, "bone_prior_min_views": 2,
+                "bone_prior_min_samples": 1}
         for name, low in ints.items():
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ConfigError(f"TrackerConfig.{name}: {value!r} must be an integer >= {low}")
         _check_upper_bounds(self)
-        if not isinstance(self.normalize_affinity, bool):
-            raise ConfigError(f"TrackerConfig.normalize_affinity: {self.normalize_affinity!r} must be true or false")
+        for name in ("normalize_affinity", "velocity_quadratic", "bone_symmetry", "head_bones"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(f"TrackerConfig.{name}: {getattr(self, name)!r} must be true or false")
         if self.init_min_top_m >= self.init_max_top_m:
             raise ConfigError(f"TrackerConfig.init_min_top_m: {self.init_min_top_m} must be below "
                               f"init_max_top_m {self.init_max_top_m}")
@@ -361,7 +414,8 @@ _RENAMED = {"alpha_2d_px_per_s": "'alpha_2d_px_per_frame', pixels per frame of t
 _MAX_BY_SUFFIX = (("_m_per_s", 1e3), ("_px_per_frame", 1e6), ("_per_s", 1e6), ("_px", 1e6), ("_s", 86400.0),
                   ("_m", 1e3))
 _MAX_UNITLESS = 1e6
-_MAX_COUNT = {"velocity_history": 10_000, "milp_max_nodes": 200, "confirm_min_updates": 100_000}
+_MAX_COUNT = {"velocity_history": 10_000, "milp_max_nodes": 200, "confirm_min_updates": 100_000,
+              "bone_prior_min_samples": BONE_SAMPLES}
 _MAX_OTHER_COUNT = 1_000
 
 
@@ -423,11 +477,17 @@ _COMMON: dict[str, dict] = {
 # The robust pass after eq. (6)-(11) (reject_factor), in the measured presets where it was measured to help.
 _MEASURED_REJECT_FACTOR = {"campus": 0.0, "shelf": 0.0, "store": 3.0}
 
+# The body and joint priors (beyond the paper) in the measured presets where they were measured to help
+# (docs/tracker.md, "Body and joint priors"): the limbs' shorter velocity window on the stores; the temporal
+# gate, the constant-acceleration fit and the bone prior cost more than they gave there, so no preset has them;
+# no Shelf data to measure on.
+_MEASURED_PRIORS: dict[str, dict] = {"campus": {}, "shelf": {}, "store": {"limb_velocity_window_s": 0.2}}
+
 PRESETS: dict[str, dict] = {}
 for _name, _row in TABLE_S2.items():
     _common = {**_COMMON[_name], "alpha_epipolar_px": _row["alpha_2d_px_per_frame"]}
     PRESETS[_name] = {**_common, **_row, "alpha_2d_px_per_frame": _MEASURED_ALPHA_2D[_name],
                       "alpha_2d_floor_px_per_s": _MEASURED_SPEED_PX_PER_S[_name],
                       "alpha_2d_floor_px": _MEASURED_FLOOR_PX[_name], "row_norm": RowNorm.PLANE,
-                      "reject_factor": _MEASURED_REJECT_FACTOR[_name]}
+                      "reject_factor": _MEASURED_REJECT_FACTOR[_name], **_MEASURED_PRIORS[_name]}
     PRESETS[f"{_name}-paper"] = {**_common, **_row, "triangulation": Triangulation.PAPER}

@@ -19,6 +19,38 @@ from tracker.triangulation import Observations, TriangulationParams, triangulate
 MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
 
 
+class Priors(NamedTuple):
+    """The temporal gate and the body prior of a matched target's update (`TrackerConfig`'s switches of the
+    same names; docs/tracker.md, "Body and joint priors").
+
+    Attributes:
+        gate_m: a joint estimate farther than this from its eq. (5) prediction is refused, m; 0 off.
+        gate_reset_s: a joint refused for this long takes the next estimate, s.
+        tolerance: fraction by which a bone may differ from the person's length; 0 off.
+        min_views: views both joints of a bone need for a confident sample of its length.
+        min_samples: samples a bone needs before its length is used.
+        sample_s: least time between two samples of a target's bones, s.
+        symmetric: whether a bone's length pools its mirror's samples.
+        bones: (B, 2) int64 (parent, child) joint pairs ordered outward; mirror: (B,) int64 each one's mirror
+            bone, -1 none (`body.prior_bones`).
+        quadratic: eq. (5)'s velocity from a constant-acceleration fit (`_fit_velocities`).
+        window_s: (J,) each joint's window of eq. (5)'s velocity fit, s (`velocity_window_s`, or
+            `limb_velocity_window_s` for the joints of the forearms and shanks).
+    """
+
+    gate_m: float
+    gate_reset_s: float
+    tolerance: float
+    min_views: int
+    min_samples: int
+    sample_s: float
+    symmetric: bool
+    bones: np.ndarray
+    mirror: np.ndarray
+    quadratic: bool
+    window_s: np.ndarray
+
+
 class UpdateParams(NamedTuple):
     """The `TrackerConfig` fields of a matched target's update (`update_matched`) and of the output poses.
 
@@ -31,6 +63,7 @@ class UpdateParams(NamedTuple):
         max_speed_m_per_s: a joint speed beyond this is clipped, m/s.
         stale_after_s: a joint not seen for this long moves with the body, s.
         max_predict_s: the longest horizon of eq. (5)'s prediction, s.
+        prior: the `Priors` (beyond the paper).
     """
 
     max_observation_age_s: float
@@ -40,6 +73,7 @@ class UpdateParams(NamedTuple):
     max_speed_m_per_s: float
     stale_after_s: float
     max_predict_s: float
+    prior: Priors
 
 
 class BodyLimits(NamedTuple):
@@ -111,6 +145,9 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
     update = np.empty(J, dtype=np.bool_)
     hit = np.empty(J, dtype=np.bool_)
     values = np.empty(J)
+    num_views = np.zeros(J, dtype=np.int64)
+    prior = params.prior
+    lengths = np.empty(2 * prior.bones.shape[0] * targets.bone_samples.shape[1] + 1)
     fresh = np.empty(C, dtype=np.int64)
     observations = Observations(cams, points, dts, decays)  # refilled per joint
     for m in range(rows.size):
@@ -149,10 +186,17 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
             V[0], V[1], V[2] = vel[r, j, 0], vel[r, j, 1], vel[r, j, 2]
             triangulate_point(P, observations, num, V, triangulation, plain, compensated, work, scratch)
             update[j] = np.isfinite(plain[0])
+            num_views[j] = num
             use_compensated = use_velocity and np.isfinite(compensated[0])
             for k in range(3):
                 samples[j, k] = plain[k]
                 X[j, k] = compensated[k] if use_compensated else plain[k]
+        # 2b. The temporal gate and the body prior (beyond the paper).
+        if prior.gate_m > 0.0:
+            _gate_jumps(pos, vel, joint_s, seen_s, r, stamp_s, params.max_predict_s, prior, X, update)
+        if prior.tolerance > 0.0:
+            _sample_bones(targets, r, stamp_s, X, update, num_views, prior, lengths)
+            _bound_bones(pos, targets.bone_len, r, X, samples, update, prior)
         # 3. The bone gate (beyond the paper).
         for j in range(J):
             hit[j] = False
@@ -184,12 +228,98 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
             for k in range(3):
                 hist_pos[r, slot, j, k] = samples[j, k] if update[j] else np.nan
         hist_next[r] = (slot + 1) % H
-        _fit_velocities(hist_pos, hist_s, r, update, stamp_s, params.velocity_window_s, params.max_speed_m_per_s,
-                        vel)
+        _fit_velocities(hist_pos, hist_s, r, update, stamp_s, prior.window_s, params.max_speed_m_per_s,
+                        prior.quadratic, vel)
         # 5. Joints nobody has seen for `stale_after_s` move with the body (beyond the paper).
         _carry_stale(pos, vel, joint_s, seen_s, r, stamp_s, params.stale_after_s, params.max_predict_s, values)
         targets.last_update_s[r] = stamp_s
         targets.num_updates[r] += 1
+
+
+@jit
+def _gate_jumps(pos, vel, joint_s, seen_s, r, stamp_s, max_predict_s, prior, X, update):
+    """Refuses (update[j] = False) each new estimate X[j] farther than `prior.gate_m` from the joint's eq. (5)
+    prediction X_t' + V_t' (t - t'), the horizon clipped to [0, max_predict_s], unless the joint has taken no
+    estimate for `prior.gate_reset_s` (or has none): the refused joint keeps its predicted path."""
+    for j in range(X.shape[0]):
+        if not update[j] or not stamp_s - seen_s[r, j] <= prior.gate_reset_s or not np.isfinite(pos[r, j, 0]):
+            continue
+        horizon = min(max(stamp_s - joint_s[r, j], 0.0), max_predict_s)
+        sq = 0.0
+        for k in range(3):
+            d = X[j, k] - (pos[r, j, k] + vel[r, j, k] * horizon)
+            sq += d * d
+        if sq > prior.gate_m * prior.gate_m:
+            update[j] = False
+
+
+@jit
+def _sample_bones(targets, r, stamp_s, X, update, num_views, prior, lengths):
+    """Adds the lengths of the bones whose both joints this update triangulated from `prior.min_views` views or
+    more to target r's ring of samples (at most once per `prior.sample_s`), and sets its bone lengths to the
+    medians of their samples (pooled with the mirror bone's when `prior.symmetric`; NaN with fewer than
+    `prior.min_samples`)."""
+    if stamp_s - targets.bone_sampled_s[r] < prior.sample_s:
+        return
+    bones, samples = prior.bones, targets.bone_samples
+    B, K = bones.shape[0], samples.shape[1]
+    slot = targets.bone_next[r]
+    any_sample = False
+    for b in range(B):
+        a, e = bones[b, 0], bones[b, 1]
+        samples[r, slot, b] = np.nan
+        if update[a] and update[e] and num_views[a] >= prior.min_views and num_views[e] >= prior.min_views:
+            sq = 0.0
+            for k in range(3):
+                sq += (X[a, k] - X[e, k]) * (X[a, k] - X[e, k])
+            samples[r, slot, b] = np.sqrt(sq)
+            any_sample = True
+    if not any_sample:
+        return
+    targets.bone_next[r] = (slot + 1) % K
+    targets.bone_sampled_s[r] = stamp_s
+    for b in range(B):
+        n = 0
+        for side in range(2):
+            o = b if side == 0 else prior.mirror[b]
+            if side == 1 and not (prior.symmetric and o >= 0):
+                continue
+            for h in range(K):
+                if np.isfinite(samples[r, h, o]):
+                    lengths[n] = samples[r, h, o]
+                    n += 1
+        if n < prior.min_samples * (2 if prior.symmetric and prior.mirror[b] >= 0 else 1):
+            targets.bone_len[r, b] = np.nan
+        else:
+            sort_prefix(lengths, n)
+            targets.bone_len[r, b] = (lengths[(n - 1) // 2] + lengths[n // 2]) / 2.0
+
+
+@jit
+def _bound_bones(pos, bone_len, r, X, samples, update, prior):
+    """Bounds each bone of target r that a new estimate of its child joint makes longer or shorter than the
+    person's length L by more than `prior.tolerance` L: the child moves along the bone's measured direction
+    onto the nearer bound, from its parent's new estimate (or its held one), parents before children (the
+    prior's bones are ordered outward). The velocity sample (`samples`) moves with it."""
+    bones, tol = prior.bones, prior.tolerance
+    for b in range(bones.shape[0]):
+        p, c = bones[b, 0], bones[b, 1]
+        L = bone_len[r, b]
+        if not update[c] or not np.isfinite(L):
+            continue
+        sq = 0.0
+        for k in range(3):
+            parent = X[p, k] if update[p] else pos[r, p, k]
+            sq += (X[c, k] - parent) * (X[c, k] - parent)
+        length = np.sqrt(sq)  # NaN when the parent is unknown: no bound
+        bound = min(max(length, L * (1.0 - tol)), L * (1.0 + tol))
+        if not np.isfinite(length) or bound == length or length < 1e-9:
+            continue
+        for k in range(3):
+            parent = X[p, k] if update[p] else pos[r, p, k]
+            moved = parent + (X[c, k] - parent) * (bound / length)
+            samples[c, k] += moved - X[c, k]
+            X[c, k] = moved
 
 
 @jit
@@ -202,22 +332,25 @@ def _distance(pos, r, a, e):
 
 
 @jit
-def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, vel):
+def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, quadratic, vel):
     """vel[r, j] of each updated joint j = slope of the linear least-squares fit of position on time over the
-    history samples of the last `window_s`, clipped to `max_speed` (eq. 5's V).
+    history samples of the joint's last `window_s[j]`, clipped to `max_speed` (eq. 5's V); with `quadratic` (beyond the
+    paper) the slope at the newest time of the least-squares fit x = a + b u + c u² (the joint's acceleration
+    in the window: the linear slope is the velocity of the window's middle, half a window late), the linear
+    slope where that fit is not determined (fewer than 3 samples, a singular system).
 
     One pass over the joint's history accumulates the count, the first and last sample time and the sums of
-    u, u², x, u x with u = t_i - t (times relative to now keep the sums well conditioned).
+    u, u², u³, u⁴, x, u x, u² x with u = t_i - t (times relative to now keep the sums well conditioned).
     """
     H, J = hist_s.shape[1], hist_s.shape[2]
     for j in range(J):
         if not update[j]:
             continue
-        n = su = suu = sx0 = sx1 = sx2 = sux0 = sux1 = sux2 = 0.0
+        n = su = suu = suuu = suuuu = sx0 = sx1 = sx2 = sux0 = sux1 = sux2 = suux0 = suux1 = suux2 = 0.0
         first, last = np.inf, -np.inf
         for h in range(H):
             s = hist_s[r, h, j]
-            if stamp_s - s <= window_s:  # False for empty slots (NaN)
+            if stamp_s - s <= window_s[j]:  # False for empty slots (NaN)
                 u = s - stamp_s
                 x0, x1, x2 = hist_pos[r, h, j, 0], hist_pos[r, h, j, 1], hist_pos[r, h, j, 2]
                 n += 1.0
@@ -229,6 +362,12 @@ def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, v
                 sux0 += u * x0
                 sux1 += u * x1
                 sux2 += u * x2
+                if quadratic:
+                    suuu += u * u * u
+                    suuuu += u * u * u * u
+                    suux0 += u * u * x0
+                    suux1 += u * u * x1
+                    suux2 += u * u * x2
                 first, last = min(first, s), max(last, s)
         sxx = suu - su * su / max(n, 1.0)  # Σ (u - ū)²
         v0 = v1 = v2 = 0.0
@@ -237,6 +376,17 @@ def _fit_velocities(hist_pos, hist_s, r, update, stamp_s, window_s, max_speed, v
             v0 = (sux0 - su / n * sx0) / sxx
             v1 = (sux1 - su / n * sx1) / sxx
             v2 = (sux2 - su / n * sx2) / sxx
+            if quadratic and n >= 3:
+                # Normal equations [n su suu; su suu suuu; suu suuu suuuu] (a, b, c) = (Σx, Σux, Σu²x): b by
+                # Cramer's rule, where the determinant is clear of the rounding of its terms.
+                det = (n * (suu * suuuu - suuu * suuu) - su * (su * suuuu - suuu * suu)
+                       + suu * (su * suuu - suu * suu))
+                if abs(det) > 1e-9 * n * suu * suuuu:
+                    c0, c1 = n * suuuu - suu * suu, su * suuuu - suuu * suu
+                    c2 = n * suuu - su * suu
+                    v0 = (c0 * sux0 - c1 * sx0 - c2 * suux0) / det
+                    v1 = (c0 * sux1 - c1 * sx1 - c2 * suux1) / det
+                    v2 = (c0 * sux2 - c1 * sx2 - c2 * suux2) / det
         speed = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
         scale = max_speed / max(speed, 1e-12) if speed > max_speed else 1.0
         vel[r, j, 0], vel[r, j, 1], vel[r, j, 2] = v0 * scale, v1 * scale, v2 * scale

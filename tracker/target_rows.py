@@ -32,6 +32,12 @@ class TargetRows(NamedTuple):
         expected: (T,) decayed count of frames of cameras that should have seen the target.
         sighted: (T,) of those, decayed count of the frames that matched it.
         evidence_s: (T,) time of the last count, s.
+        bone_samples: (T, K, B) ring buffer of the lengths of the body prior's B bones measured in the target's
+            confident frames (`kernels.Priors`), m (NaN empty).
+        bone_next: (T,) int64 that ring's next slot.
+        bone_sampled_s: (T,) time of the last sample, s (-inf none).
+        bone_len: (T, B) the person's bone lengths, the median of their samples (pooled with the mirror bone's
+            with `bone_symmetry`), m; NaN until `bone_prior_min_samples` samples.
     """
 
     last_update_s: np.ndarray
@@ -49,17 +55,22 @@ class TargetRows(NamedTuple):
     expected: np.ndarray
     sighted: np.ndarray
     evidence_s: np.ndarray
+    bone_samples: np.ndarray
+    bone_next: np.ndarray
+    bone_sampled_s: np.ndarray
+    bone_len: np.ndarray
 
     @staticmethod
-    def empty(T: int, C: int, J: int, H: int) -> TargetRows:
-        """T targets that nothing has been seen of yet."""
+    def empty(T: int, C: int, J: int, H: int, B: int = 0, K: int = 1) -> TargetRows:
+        """T targets that nothing has been seen of yet (B bones of the body prior, K samples of each)."""
         return TargetRows(
             last_update_s=np.zeros(T), num_updates=np.zeros(T, dtype=np.int64), pos=np.full((T, J, 3), np.nan),
             joint_s=np.full((T, J), -np.inf), seen_s=np.full((T, J), -np.inf), vel=np.zeros((T, J, 3)),
             obs_px=np.full((T, C, J, 2), np.nan), obs_s=np.full((T, C, J), np.nan), cam_s=np.full((T, C), np.nan),
             hist_pos=np.full((T, H, J, 3), np.nan), hist_s=np.full((T, H, J), np.nan),
             hist_next=np.zeros(T, dtype=np.int64), expected=np.zeros(T), sighted=np.zeros(T),
-            evidence_s=np.zeros(T))
+            evidence_s=np.zeros(T), bone_samples=np.full((T, K, B), np.nan),
+            bone_next=np.zeros(T, dtype=np.int64), bone_sampled_s=np.full(T, -np.inf), bone_len=np.full((T, B), np.nan))
 
     def copy(self) -> TargetRows:
         """A copy of every array (the kernels write in place)."""

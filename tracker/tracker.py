@@ -30,12 +30,13 @@ from core.types import COCO17, Camera, Frame, Skeleton, camera_index
 from tracker import affinity as aff
 from tracker import lifecycle
 from tracker.association import associate
-from tracker.body import mean_body
-from tracker.config import TrackerConfig, Triangulation
+from tracker.body import mean_body, prior_bones, velocity_windows
+from tracker.config import BONE_SAMPLES, TrackerConfig, Triangulation
 from tracker.geometry import fundamental_matrix, ray_directions, undistort_detections, world_from_pixel_matrix
 from tracker.initialization import PlausibilityLimits, check_plausible, consensus_views, partition_graph, reconstruct
 from tracker.kernels import (
     BodyLimits,
+    Priors,
     UpdateParams,
     has_body,
     implausible_bodies,
@@ -80,12 +81,13 @@ class _Targets(Rows):
             whenever the views are).
     """
 
-    def __init__(self, num_cameras: int, num_joints: int, history: int):
+    def __init__(self, num_cameras: int, num_joints: int, history: int, num_bones: int):
         self.ids = np.zeros(0, dtype=np.int64)
         self.state = np.zeros(0, dtype=np.int8)
         self.born_s = np.zeros(0)
         # The fields of `TargetRows`, which documents them.
-        for name, empty in zip(TargetRows._fields, TargetRows.empty(0, num_cameras, num_joints, history)):
+        for name, empty in zip(TargetRows._fields, TargetRows.empty(0, num_cameras, num_joints, history,
+                                                                                num_bones, BONE_SAMPLES)):
             setattr(self, name, empty)
         self.implausible_s = np.zeros(0)  # since when the observed body is implausible, NaN when it is not
         self._views()
@@ -131,6 +133,16 @@ class Tracker:
             max_predict_s=float(cfg.max_predict_s), normalize=bool(cfg.normalize_affinity))
         mode = cfg.triangulation
         self._reconstruction_row_norm = row_norm_code(cfg, reconstruction=True)
+        # The body prior's bones (docs/tracker.md, "Body and joint priors"), none when it is off.
+        self._prior_bones, mirror = prior_bones(skeleton, bool(cfg.head_bones))
+        if not cfg.bone_prior_tolerance > 0:
+            self._prior_bones, mirror = self._prior_bones[:0], mirror[:0]
+        prior = Priors(
+            gate_m=float(cfg.joint_gate_m), gate_reset_s=float(cfg.joint_gate_reset_s),
+            tolerance=float(cfg.bone_prior_tolerance), min_views=int(cfg.bone_prior_min_views),
+            min_samples=int(cfg.bone_prior_min_samples), sample_s=float(cfg.bone_prior_sample_s),
+            symmetric=bool(cfg.bone_symmetry), bones=self._prior_bones, mirror=mirror,
+            quadratic=bool(cfg.velocity_quadratic), window_s=velocity_windows(skeleton, cfg))
         self._update_params = UpdateParams(
             max_observation_age_s=float(cfg.max_observation_age_s),
             triangulation=TriangulationParams(
@@ -140,7 +152,7 @@ class Tracker:
                 row_norm=row_norm_code(cfg)),
             max_bone_m=float(cfg.max_bone_m),
             velocity_window_s=float(cfg.velocity_window_s), max_speed_m_per_s=float(cfg.max_speed_m_per_s),
-            stale_after_s=float(cfg.stale_after_s), max_predict_s=float(cfg.max_predict_s))
+            stale_after_s=float(cfg.stale_after_s), max_predict_s=float(cfg.max_predict_s), prior=prior)
         self._evidence_params = EvidenceParams(
             max_predict_s=float(cfg.max_predict_s), inside_m=float(cfg.ghost_inside_m),
             window_s=float(cfg.ghost_window_s), prior_count=float(cfg.ghost_map_prior_count))
@@ -160,7 +172,7 @@ class Tracker:
             raise ConfigError(f"TrackerConfig.ghost_cell_m: {config.ghost_cell_m} m makes {C} sight maps of "
                               f"{nx * ny:,} cells (over {MAX_SIGHT_MAP_CELLS:,} in all); raise it, or 0 for no map")
         self._sight_maps = [SightMap(grid, nx, ny, np.zeros(nx * ny + 1), np.zeros(nx * ny + 1)) for _ in range(C)]
-        self._targets = _Targets(C, J, config.velocity_history)
+        self._targets = _Targets(C, J, config.velocity_history, self._prior_bones.shape[0])
         self._next_id = 0
         self._camera_last_s = np.full(C, -np.inf)
         # Each camera's latest stamp intervals (a ring, NaN unfilled) and their median, its frame period (NaN
@@ -470,6 +482,7 @@ class Tracker:
     def _create_target(self, ks: np.ndarray, pts: np.ndarray, stamps: np.ndarray, pose: np.ndarray,
                        t: float) -> int:
         C, J, H = len(self.cameras), self.skeleton.num_joints, self.config.velocity_history
+        B = self._prior_bones.shape[0]
         obs_px = np.full((1, C, J, 2), np.nan)
         obs_s = np.full((1, C, J), np.nan)
         obs_px[0, ks] = pts
@@ -498,7 +511,9 @@ class Tracker:
             joint_s=np.where(known, t, -np.inf)[None], seen_s=np.where(known, t, -np.inf)[None],
             vel=np.zeros((1, J, 3)), obs_px=obs_px, obs_s=obs_s, cam_s=cam_s,
             expected=np.zeros(1), sighted=np.zeros(1), evidence_s=np.array([t]), implausible_s=np.array([np.nan]),
-            hist_pos=hist_pos, hist_s=hist_s, hist_next=np.array([1]))
+            hist_pos=hist_pos, hist_s=hist_s, hist_next=np.array([1]),
+            bone_samples=np.full((1, BONE_SAMPLES, B), np.nan), bone_next=np.zeros(1, np.int64),
+            bone_sampled_s=np.array([-np.inf]), bone_len=np.full((1, B), np.nan))
         tg = self._targets
         last = np.array([len(tg) - 1])
         tg.state[last] = lifecycle.on_match(tg.state[last], tg.born_s[last], tg.num_updates[last], t, self.config,

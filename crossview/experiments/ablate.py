@@ -51,6 +51,8 @@ class Settings:
         speed_windows_s: per method, the stamps [from, to) of the frames timed (the frames before go through
             the tracker untimed), s.
         single_view_scenarios: the stores of Table 5; single_view_s: their simulated seconds.
+        priors_scenario: the store of the body and joint priors' rows; priors_rows: the names of the rows of
+            `PRIORS_ROWS` run (None: all).
     """
 
     seeds: tuple[int, ...]
@@ -66,6 +68,8 @@ class Settings:
     speed_windows_s: dict = field(default_factory=dict)
     single_view_scenarios: tuple[str, ...] = ("store_layout1", "store_layout2")
     single_view_s: float = 60.0
+    priors_scenario: str = "store_layout2"
+    priors_rows: tuple[str, ...] | None = None
 
 
 TABLE_S1_WEIGHTS = ((1.0, 0.0), (0.8, 0.2), (0.6, 0.4), (0.4, 0.6), (0.2, 0.8), (0.0, 1.0))
@@ -82,6 +86,7 @@ QUICK = Settings(
     reconstruction_scenarios=("store_layout1",), frame_rates=(10.0, 5.0, 2.5),
     frame_rate_triangulations=("paper", "conventional"), spread_s=5.0, camera_counts=(6, 16, 31), speed_s=1.5,
     speed_windows_s={"crossview": (0.3, 1.5), "baseline": (0.2, 0.4)}, single_view_s=8.0,
+    priors_scenario="store_layout1", priors_rows=("none", "all"),
 )
 
 
@@ -285,6 +290,48 @@ def single_view(ctx: Context) -> dict:
     return {"duration_s": s.single_view_s, "stores": stores}
 
 
+PRIORS_OFF = {"limb_velocity_window_s": 0.0, "velocity_quadratic": False, "joint_gate_m": 0.0,
+              "bone_prior_tolerance": 0.0, "bone_symmetry": False, "head_bones": False}
+"""The tracker's body and joint priors (docs/tracker.md, "Body and joint priors"), every one off: the paper's
+updates, which each row of the `priors` experiment changes."""
+
+PRIORS_ROWS = (
+    ("none", {}),
+    ("limb_velocity_window_s", {"limb_velocity_window_s": 0.2}),
+    ("velocity_quadratic", {"velocity_quadratic": True}),
+    ("joint_gate_m", {"joint_gate_m": 0.25}),
+    ("bone_prior_tolerance", {"bone_prior_tolerance": 0.15}),
+    ("bone_symmetry", {"bone_prior_tolerance": 0.15, "bone_symmetry": True}),
+    ("head_bones", {"bone_prior_tolerance": 0.15, "head_bones": True}),
+    ("all", {"limb_velocity_window_s": 0.2, "velocity_quadratic": True, "joint_gate_m": 0.25,
+             "bone_prior_tolerance": 0.15, "bone_symmetry": True, "head_bones": True}),
+)
+"""The rows of the `priors` experiment: a name and the switches it turns on over `PRIORS_OFF` (the bone prior's
+own switches, symmetry and head bones, need its tolerance)."""
+
+def priors(ctx: Context) -> dict:
+    """Each body and joint prior alone and all together, over the `store` preset with every prior off: PCP by
+    bone group, MPJPE and IDF1 on the store where the head and the forearms lose most (issue 46)."""
+    s = ctx.settings
+    rows = []
+    for name, changes in PRIORS_ROWS:
+        if s.priors_rows is not None and name not in s.priors_rows:
+            continue
+        values = {**PRIORS_OFF, **changes}
+        spec = sweep.SweepSpec(s.priors_scenario, axes=tuple(sweep.Axis(f"tracker.{k}", (v,))
+                                                             for k, v in values.items()),
+                               seeds=s.seeds, presets=(PRESET,), duration_s=s.duration_s)
+        cells = ctx.sweep(f"priors/{name}", spec)
+        rows.append({"switch": name, "changes": changes, "pcp": _mean(cells, "pcp"),
+                     **{group: _mean(cells, "pcp_per_group", group) for group in PCP_GROUPS},
+                     "mpjpe_mm": _mean(cells, "mpjpe_mm"), "idf1": _mean(cells, "idf1")})
+    return {"scenario": s.priors_scenario, "seeds": list(s.seeds), "duration_s": s.duration_s, "rows": rows}
+
+
+PCP_GROUPS = ("head", "torso", "upper_arms", "lower_arms", "upper_legs", "lower_legs")
+"""The PCP bone groups of the score (`crossview.scoring.pose.PCP_BONE_GROUPS`)."""
+
+
 @dataclass(frozen=True)
 class Experiment:
     """One of the paper's ablations: its name on the command line, its title, and what runs it."""
@@ -300,6 +347,7 @@ EXPERIMENTS = {e.name: e for e in (
     Experiment("frame-rate", "Figure 5: PCP against the cameras' frame rate", frame_rate),
     Experiment("speed", "Figure 6: time per round against the number of cameras", speed),
     Experiment("single-view", "Table 5: single-view against cross-view tracking, per camera", single_view),
+    Experiment("priors", "Beyond the paper: the body and joint priors, each alone and all together", priors),
 )}
 
 

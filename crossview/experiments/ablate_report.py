@@ -307,6 +307,35 @@ def _png(figure) -> bytes:
     return buffer.getvalue()
 
 
+def priors_verdict(result: dict) -> tuple[str, str]:
+    """Whether every prior together beats none on PCP without a bone group losing (not a paper trend: the
+    paper has no priors, so the outcome says whether they help here)."""
+    rows = {r["switch"]: r for r in result["rows"]}
+    if "none" not in rows or "all" not in rows:
+        return "are not measured", "the run left out the rows without and with every prior"
+    none, both = rows["none"], rows["all"]
+    groups = ("head", "torso", "upper_arms", "lower_arms", "upper_legs", "lower_legs")
+    helps = both["pcp"] >= none["pcp"] and all(both[g] >= none[g] for g in groups)
+    text = (f"{result['scenario']}: PCP {_pct(none['pcp'])} → {_pct(both['pcp'])} %, head {_pct(none['head'])} → "
+            f"{_pct(both['head'])} %, lower arms {_pct(none['lower_arms'])} → {_pct(both['lower_arms'])} %, MPJPE "
+            f"{none['mpjpe_mm']:.1f} → {both['mpjpe_mm']:.1f} mm")
+    return ("help" if helps else "do NOT help"), text
+
+
+def _priors_section(result: dict) -> list[str]:
+    lines = [f"Ours: {result['scenario']}, seeds {', '.join(map(str, result['seeds']))}, {result['duration_s']:g} s "
+             "each, the `store` preset with every prior off and the row's switches on (docs/tracker.md, \"Body and "
+             "joint priors\"); means over seeds. The paper has none of them.", "",
+             "| switch | on | PCP | head | torso | upper arms | lower arms | upper legs | lower legs | MPJPE (mm) "
+             "| IDF1 |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in result["rows"]:
+        on = ", ".join(f"`{k} = {str(v).lower() if isinstance(v, bool) else v}`" for k, v in r["changes"].items())
+        lines.append(f"| {r['switch']} | {on or '–'} | {_pct(r['pcp'])} | {_pct(r['head'])} | {_pct(r['torso'])} | "
+                     f"{_pct(r['upper_arms'])} | {_pct(r['lower_arms'])} | {_pct(r['upper_legs'])} | "
+                     f"{_pct(r['lower_legs'])} | {r['mpjpe_mm']:.1f} | {_pct(r['idf1'])} |")
+    return lines
+
+
 def write_report(out: Path, results: dict, timings: dict, *, titles: dict[str, str], quick: bool,
                  command: str) -> Path:
     """Writes `out/report.md` and its plots (`out/plots/`); returns the report's path.
@@ -324,10 +353,11 @@ def write_report(out: Path, results: dict, timings: dict, *, titles: dict[str, s
              "this version (results.json); timings are in timings.json.", "",
              "## Verdicts", ""]
     verdicts = {"affinity": affinity_verdict, "reconstruction": reconstruction_verdict,
-                "frame-rate": frame_rate_verdict, "single-view": single_view_verdict}
+                "frame-rate": frame_rate_verdict, "single-view": single_view_verdict, "priors": priors_verdict}
     for name, result in results.items():
         outcome, text = speed_verdict(result, timings) if name == "speed" else verdicts[name](result)
-        lines.append(f"- **{titles[name]}** — the paper's trend {outcome}: {text}.")
+        lead = "beyond the paper, the priors together" if name == "priors" else "the paper's trend"
+        lines.append(f"- **{titles[name]}** — {lead} {outcome}: {text}.")
     for name, result in results.items():
         lines += ["", f"## {titles[name]}", ""]
         if name == "affinity":
@@ -346,6 +376,8 @@ def write_report(out: Path, results: dict, timings: dict, *, titles: dict[str, s
                 "", "![time per round against cameras](plots/speed.png)"]
         elif name == "single-view":
             lines += _single_view_section(result)
+        elif name == "priors":
+            lines += _priors_section(result)
         lines.append("")
         lines.append(f"Wall time: {timings.get('wall_s', {}).get(name, math.nan):.0f} s.")
     path = out / "report.md"

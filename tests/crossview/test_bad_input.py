@@ -185,6 +185,10 @@ CONFIG_CASES = [
     ("alpha-2d-nan", "alpha_2d_px_per_frame = nan\n", "TrackerConfig.alpha_2d_px_per_frame: nan is not a number"),
     ("alpha-2d-per-second", "alpha_2d_px_per_s = 625.0\n", "key 'alpha_2d_px_per_s' is now 'alpha_2d_px_per_frame'"),
     ("reject-factor-below-1", "reject_factor = 0.5\n", "TrackerConfig.reject_factor: 0.5 must be 0 (no rejection) or"),
+    ("bone-prior-tolerance-1", "bone_prior_tolerance = 1.0\n",
+     "TrackerConfig.bone_prior_tolerance: 1.0 must be 0 (no bone prior) or in (0, 1)"),
+    ("joint-gate-below-1cm", "joint_gate_m = 0.001\n", "TrackerConfig.joint_gate_m: 0.001 must be 0 (no gate) or at"),
+    ("unknown-switch", "bone_prior = true\n", "unknown key 'bone_prior'"),
 ]
 
 

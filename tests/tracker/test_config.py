@@ -32,6 +32,18 @@ def test_the_robust_pass_is_on_where_it_was_measured_to_help():
     assert TrackerConfig.preset("campus").reject_factor == TrackerConfig.preset("shelf").reject_factor == 0.0
 
 
+def test_the_paper_presets_keep_every_body_and_joint_prior_off():
+    # docs/tracker.md, "Body and joint priors": the -paper presets are the paper's method exactly.
+    off = TrackerConfig()
+    for name in ("campus-paper", "shelf-paper", "store-paper"):
+        paper = TrackerConfig.preset(name)
+        for key in ("limb_velocity_window_s", "velocity_quadratic", "joint_gate_m", "bone_prior_tolerance",
+                    "bone_symmetry", "head_bones"):
+            assert getattr(paper, key) == getattr(off, key), (name, key)
+    assert off.limb_velocity_window_s == off.joint_gate_m == off.bone_prior_tolerance == 0.0
+    assert not (off.velocity_quadratic or off.bone_symmetry or off.head_bones)
+
+
 def test_unknown_preset_lists_the_valid_ones():
     with pytest.raises(ValueError, match="campus, campus-paper, shelf"):
         TrackerConfig.preset("nope")
@@ -43,6 +55,10 @@ def test_unknown_preset_lists_the_valid_ones():
     ("w_2d", float("nan")), ("reject_factor", -1.0), ("reject_floor_px", 0.0), ("ghost_cell_m", 0.1),
     ("ghost_cell_m", -1.0), ("ghost_map_prior_count", -1.0), ("alpha_2d_px_per_frame", 0.0),
     ("alpha_2d_px_per_frame", -25.0), ("alpha_2d_px_per_frame", float("nan")), ("reject_factor", 0.5),
+    ("joint_gate_m", 0.005), ("joint_gate_m", -0.1), ("joint_gate_reset_s", 0.0), ("bone_prior_tolerance", 1.0),
+    ("bone_prior_tolerance", -0.1), ("bone_prior_min_views", 1), ("bone_prior_min_samples", 0),
+    ("bone_prior_min_samples", 26), ("bone_prior_sample_s", -1.0), ("limb_velocity_window_s", -0.2),
+    ("velocity_quadratic", 1), ("bone_symmetry", "yes"), ("head_bones", 0),
 ])
 def test_out_of_range_values_name_the_field(field, value):
     with pytest.raises(ConfigError, match=field):

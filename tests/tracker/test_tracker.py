@@ -160,7 +160,11 @@ def test_the_plain_reference_of_the_target_update_calls_no_compiled_kernel():
 
 
 @pytest.mark.parametrize("config", [CONFIG, CONFIG.replace(reject_factor=2.0, reject_floor_px=5.0),
-                                    CONFIG.replace(triangulation=Triangulation.PAPER)])
+                                    CONFIG.replace(triangulation=Triangulation.PAPER),
+                                    CONFIG.replace(limb_velocity_window_s=0.2, velocity_quadratic=True,
+                                                   joint_gate_m=0.3, bone_prior_tolerance=0.15, bone_symmetry=True,
+                                                   head_bones=True, bone_prior_sample_s=0.0,
+                                                   bone_prior_min_samples=1)])
 def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
     cams, _, frames, _ = layout1
     tracker = Tracker(cams, config)

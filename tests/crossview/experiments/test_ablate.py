@@ -18,7 +18,7 @@ TINY = ablate.Settings(
     reconstruction_scenarios=("store_layout1",), frame_rates=(10.0, 5.0),
     frame_rate_triangulations=("paper", "conventional"), spread_s=2.0, camera_counts=(4, 8), speed_s=0.6,
     speed_windows_s={"crossview": (0.2, 0.6), "baseline": (0.2, 0.3)}, single_view_scenarios=("store_layout1",),
-    single_view_s=2.0,
+    single_view_s=2.0, priors_scenario="store_layout1", priors_rows=("none", "all"),
 )
 
 
@@ -50,7 +50,11 @@ def test_every_experiment_writes_its_numbers_verdict_and_plots(tiny):
     report = (out / "report.md").read_text()
     for experiment in ablate.EXPERIMENTS.values():
         assert experiment.title in report
-    assert report.count("the paper's trend ") == len(ablate.EXPERIMENTS)
+    assert report.count("the paper's trend ") == len(ablate.EXPERIMENTS) - 1
+    assert "beyond the paper, the priors together " in report
+    priors = results["priors"]["rows"]
+    assert [r["switch"] for r in priors] == ["none", "all"] and priors[0]["changes"] == {}
+    assert all(0.0 <= r["lower_arms"] <= 1.0 and r["mpjpe_mm"] > 0 for r in priors)
     assert (out / "plots" / "frame_rate.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / "plots" / "speed.png").read_bytes()[:4] == b"\x89PNG"
 
