@@ -15,6 +15,7 @@ import threading
 from pathlib import Path
 
 from core.errors import CrossviewError, Interrupted
+from crossview.live import DEFAULT_PORT, parse_speed
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
@@ -221,6 +222,15 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
         p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
 
+    def live_options(p, what):
+        if what:
+            p.add_argument("--live", action="store_true", help=f"{what} live on a Foxglove WebSocket server as it "
+                           "runs (pip install '.[live]'; docs/recording-format.md)")
+        p.add_argument("--port", type=_non_negative_int, default=DEFAULT_PORT, help="the live server's port (0: any "
+                       f"free port, printed; default {DEFAULT_PORT})")
+        p.add_argument("--speed", type=parse_speed, default=1.0, metavar="FACTOR|max",
+                       help="pace of the live view: times real time, or max for as fast as it runs (default 1)")
+
     def tracker_options(p):
         p.add_argument("--method", default="crossview", metavar="METHOD",
                        help="crossview, baseline, a name registered under the entry-point group crossview.trackers, "
@@ -242,6 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", type=Path, help="score JSON path (default OUTPUT/NAME.score.json)")
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="score from S seconds on, "
                    "leaving out the warm-up before (default: the warm-up rule of docs/metrics.md)")
+    live_options(p, "publish the recording, then the tracks,")
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios, print one resolved, or the key reference")
     show = p.add_mutually_exclusive_group()
@@ -257,6 +268,15 @@ def build_parser() -> argparse.ArgumentParser:
                    "second per camera (at most the frame rate; needs the render extra; docs/rendering.md)")
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend for --images (default: "
                    "$MUJOCO_GL when it names one, else EGL, then OSMesa)")
+    live_options(p, "publish the recording")
+
+    p = sub.add_parser("serve", help="replay a recording (and its tracks) on a Foxglove WebSocket server, with play, "
+                       "pause, seek and speed (pip install '.[live]')")
+    p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
+    p.add_argument("tracks", type=Path, nargs="?", help="tracks file (.mcap) made from the recording")
+    live_options(p, None)
+    p.add_argument("--play", action="store_true", help="start playing at once (default: paused until a client "
+                   "plays)")
 
     p = sub.add_parser("coverage", help="how many cameras see each floor cell: the shares of the walkable floor "
                        "seen by 1, 2, 3 or more cameras, and a top-down map")
@@ -551,12 +571,12 @@ def _cmd_run(args) -> None:
     pipeline.check_writable(json_path, inputs=(rec_path, tracks_path))
     pipeline.tracker_config(args.preset, args.config)  # (a bad tracker config is found before generating)
     progress = not args.no_progress
-    gen = pipeline.generate(scenario, rec_path, progress=progress)
-    print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
-          f"({_speed(gen)})")
-    trk = pipeline.track(
-        rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config, progress=progress
-    )
+    with _live(args) as stream:
+        gen = pipeline.generate(scenario, rec_path, progress=progress, live=stream and stream())
+        print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
+              f"({_speed(gen)})")
+        trk = pipeline.track(rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config,
+                             progress=progress, live=stream and stream())
     print(f"tracked   {trk.path}: {_updates_and_speed(trk, 'at {fps:.1f} FPS (all cameras once)')}")
     from_s = scoring.default_from_s(scenario.duration_s) if args.from_s is None else args.from_s
     report, result = pipeline.score(rec_path, tracks_path, progress=progress, from_s=from_s)
@@ -658,14 +678,30 @@ def _cmd_generate(args) -> None:
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
-    gen = pipeline.generate(scenario, args.output, progress=not args.no_progress, images_per_s=args.images,
-                            gl=args.gl)
+    with _live(args) as stream:
+        gen = pipeline.generate(scenario, args.output, progress=not args.no_progress, images_per_s=args.images,
+                                gl=args.gl, live=stream and stream())
     print(f"{gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
           f"({_speed(gen)})")
     if gen.images:
         print(f"{gen.images} pictures rendered in {gen.images_s:.1f} s ({1000 * gen.images_s / gen.images:.0f} ms "
               "each: render, lens, JPEG)")
     _warn_coverage(scenario)
+
+
+def _live(args):
+    """The live server of `--live` (`crossview.live.live_stream`): a context giving a maker of paced streams, one per
+    file written, or None without --live."""
+    from crossview import live
+
+    return live.live_stream(args.port if args.live else None, args.speed, lambda line: print(line, flush=True))
+
+
+def _cmd_serve(args) -> None:
+    from crossview import live
+
+    files, start_ns, end_ns = live.open_files(args.recording, args.tracks)
+    live.serve(files, args.port, args.speed, start_ns, end_ns, lambda line: print(line, flush=True), play=args.play)
 
 
 def _speed(gen) -> str:
@@ -1015,6 +1051,7 @@ COMMANDS = {
     "compare": _cmd_compare,
     "bench": _cmd_bench,
     "render": _cmd_render,
+    "serve": _cmd_serve,
     "sweep": _cmd_sweep,
     "verify": _cmd_verify,
     "ablate": _cmd_ablate,

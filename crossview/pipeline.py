@@ -137,7 +137,8 @@ _SCHEDULE_BYTES_PER_FRAME = 170  # the clock's schedule, as arrays and the lists
 
 
 def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True,
-             worker_process: bool = True, images_per_s: float | None = None, gl: str | None = None) -> GenerateResult:
+             worker_process: bool = True, images_per_s: float | None = None, gl: str | None = None,
+             live=None) -> GenerateResult:
     """Simulates `scenario` for its duration and writes the recording to `out` atomically.
 
     Args:
@@ -147,6 +148,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             frame rate (`sim.render.FrameImages`); None: none. Rendering needs an offscreen OpenGL
             backend chosen before MuJoCo is imported in this process (`sim.render.choose_backend`).
         gl: that backend ("egl", "osmesa"); None: MUJOCO_GL when it names one, else probed.
+        live: where every message written is also published as it is written (`crossview.live.Paced`), or None.
     """
     check_writable(out, inputs=(scenario.source_path or None,))
     if images_per_s is not None:
@@ -187,7 +189,7 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             format_version=recording.FORMAT_VERSION,
         )
         writer = stack.enter_context(recording.RecordingWriter(out, header, sim.cameras, sim.boxes,
-                                                               inputs=(scenario.source_path or None,)))
+                                                               inputs=(scenario.source_path or None,), live=live))
         bar = stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
                                        disable=not progress, leave=False))
         images = None
@@ -274,9 +276,11 @@ def track(
     config_path: Path | None = None,
     overrides: dict | None = None,
     progress: bool = True,
+    live=None,
 ) -> TrackResult:
     """Runs a tracker over a recording's frames in delivery order and writes the tracks file (configured by
-    `tracker_config(preset, config_path, overrides)`)."""
+    `tracker_config(preset, config_path, overrides)`); with `live`, each message written is also published there
+    (`crossview.live.Paced`)."""
     from tqdm import tqdm
 
     from core.types import SKELETONS
@@ -302,7 +306,7 @@ def track(
     warm_up_tracker(method, rec, preset, config_path, skeleton, overrides)
     updates = 0
     tracker_s = 0.0
-    with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path)) as writer:
+    with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path), live=live) as writer:
         for camera_frame in tqdm(rec.frames(), unit="frame", desc="track", disable=not progress, leave=False):
             frame = camera_frame.frame
             start = time.perf_counter()

@@ -35,6 +35,8 @@ from crossview.recording.schemas import (  # a store box's JSON form, as the hea
     TOPIC_TRUTH,
     TOPIC_TRUTH_SCENE,
     TRACKS_FORMAT_VERSION,
+    ChannelInfo,
+    LiveSink,
     PoseTruthMsg,
     RecordingHeader,
     TracksHeader,
@@ -48,7 +50,7 @@ from crossview.recording.writer import RecordingWriter, TracksWriter
 
 __all__ = [
     "CHUNK_SIZE", "FORMAT_VERSION", "TRACKS_FORMAT_VERSION", "TOPIC_HEADER", "TOPIC_OUTPUTS", "TOPIC_STORE",
-    "TOPIC_TRACK_SCENE", "TOPIC_TRUTH", "CameraImage",
+    "TOPIC_TRACK_SCENE", "TOPIC_TRUTH", "CameraImage", "ChannelInfo", "LiveSink",
     "TOPIC_TRUTH_SCENE", "EncodedFrame", "Encoder", "PoseTruthMsg", "Recording", "RecordingError", "RecordingHeader",
     "RecordingWriter", "Tracks", "TracksHeader", "TracksWriter", "box_from_json", "box_json",
     "camera_topic", "format_info", "info", "open_recording", "open_tracks", "software_version", "to_ns",

@@ -33,6 +33,7 @@ from crossview.recording.schemas import (
     TOPIC_HEADER,
     TRACKS_FORMAT_VERSION,
     CameraFrameMsg,
+    ChannelInfo,
     PoseTruthMsg,
     RecordingHeader,
     TracksHeader,
@@ -224,6 +225,44 @@ class Container:
         except (TypeError, ValueError):
             raise RecordingError(f"{self.path}: unreadable crossview header (format_version {value!r} is not an "
                                  "integer)") from None
+
+    def channel_infos(self) -> list[ChannelInfo]:
+        """Every channel of the file, from its summary section (one seek)."""
+        try:
+            with open(self.path, "rb") as f:
+                summary = make_reader(FileWithinSize(f, self._stream.size)).get_summary()
+        except READ_ERRORS as e:
+            raise RecordingError(f"{self.path}: unreadable summary section ({describe_read_error(e)})") from None
+        if summary is None:
+            raise RecordingError(f"{self.path}: no summary section (a complete crossview file has one)")
+        try:
+            return [ChannelInfo(c.topic, c.message_encoding, summary.schemas[c.schema_id].name,
+                                summary.schemas[c.schema_id].encoding, summary.schemas[c.schema_id].data)
+                    for c in summary.channels.values()]
+        except KeyError as e:
+            raise RecordingError(f"{self.path}: a channel names schema {e}, which the summary does not hold") from None
+
+    def raw(self) -> Iterator[tuple[ChannelInfo, int, bytes]]:
+        """Every message of the file as written: (its channel, log time ns, bytes), in file order (log-time
+        order), CRC-checked; what `crossview serve` publishes."""
+        schemas: dict[int, Schema] = {}
+        channels: dict[int, ChannelInfo] = {}
+        for record in self._stream.records():
+            if isinstance(record, Message):
+                info = channels.get(record.channel_id)
+                if info is None:
+                    raise RecordingError(f"{self.path}: a message on channel {record.channel_id}, which the file does "
+                                         "not declare before it")
+                yield info, record.log_time, record.data
+            elif isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                schema = schemas.get(record.schema_id)
+                if schema is None:
+                    raise RecordingError(f"{self.path}: channel {record.topic} names schema {record.schema_id}, "
+                                         "which the file does not declare before it")
+                channels[record.id] = ChannelInfo(record.topic, record.message_encoding, schema.name,
+                                                  schema.encoding, schema.data)
 
     def _messages(self, schema_names: set[str]) -> Iterator[tuple[str, Message]]:
         """(schema name, message) for the messages whose channel has one of `schema_names`, in file order."""

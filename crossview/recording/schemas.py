@@ -7,6 +7,7 @@ import importlib.metadata
 import json
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple, Protocol
 
 import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
@@ -32,6 +33,26 @@ KIND_RECORDING = "recording"
 KIND_TRACKS = "tracks"
 METADATA_NAME = "crossview"
 SUMMARY_METADATA_NAME = "crossview.summary"
+
+class ChannelInfo(NamedTuple):
+    """A channel as a file declares it: its topic, message encoding and schema (name, encoding, bytes)."""
+
+    topic: str
+    message_encoding: str
+    schema_name: str
+    schema_encoding: str
+    schema_data: bytes
+
+
+class LiveSink(Protocol):
+    """Where a writer also sends each message as it writes it (`crossview.live`): the same channels, times and
+    bytes as the file's. `channel` is called once per channel, before its messages; what it returns is the
+    handle `publish` is given."""
+
+    def channel(self, info: ChannelInfo) -> object: ...
+
+    def publish(self, handle: object, log_time_ns: int, data: bytes) -> None: ...
+
 
 TOPIC_HEADER = "/crossview/header"
 TOPIC_TRUTH = "/truth/poses"

@@ -32,6 +32,8 @@ from crossview.recording.schemas import (
     TRACK_SCENE_PERIOD_S,
     TRUTH_SCENE_PERIOD_S,
     CameraFrameMsg,
+    ChannelInfo,
+    LiveSink,
     PoseTruthMsg,
     RecordingHeader,
     TrackerOutputMsg,
@@ -47,12 +49,15 @@ from tracker.types import TargetArrays, TrackerOutput
 
 
 class _AtomicMcapWriter:
-    """An MCAP writer onto an `AtomicOutput`: the file appears under `path` only when `close` completes."""
+    """An MCAP writer onto an `AtomicOutput`: the file appears under `path` only when `close` completes.
+    With `live`, every message written is also published there (`LiveSink`); the file's bytes are the same."""
 
     def __init__(self, path, kind: str, header_doc: dict, metadata: dict[str, str], chunk_size: int,
-                 inputs: tuple = ()):
+                 inputs: tuple = (), live: LiveSink | None = None):
         self._file = AtomicOutput(path, inputs)
         self.path = self._file.path
+        self._live = live
+        self._live_channels: dict[int, object] = {}
         try:
             self._writer = Writer(
                 self._file, chunk_size=chunk_size, compression=COMPRESSION, enable_data_crcs=True,
@@ -76,7 +81,11 @@ class _AtomicMcapWriter:
     def channel(self, topic: str, message_encoding: str, schema_name: str, schema_encoding: str,
                 schema_data: bytes) -> int:
         schema_id = self.schema(schema_name, schema_encoding, schema_data)
-        return self._writer.register_channel(topic=topic, message_encoding=message_encoding, schema_id=schema_id)
+        channel_id = self._writer.register_channel(topic=topic, message_encoding=message_encoding, schema_id=schema_id)
+        if self._live is not None:
+            self._live_channels[channel_id] = self._live.channel(
+                ChannelInfo(topic, message_encoding, schema_name, schema_encoding, schema_data))
+        return channel_id
 
     def protobuf_channel(self, topic: str, message_class) -> int:
         descriptor = message_class.DESCRIPTOR
@@ -89,12 +98,17 @@ class _AtomicMcapWriter:
 
     def add(self, channel_id: int, log_time_ns: int, data: bytes) -> None:
         self._writer.add_message(channel_id=channel_id, log_time=log_time_ns, data=data, publish_time=log_time_ns)
+        if self._live is not None:
+            self._live.publish(self._live_channels[channel_id], log_time_ns, data)
 
     def add_many(self, messages: Sequence[tuple[int, int, bytes]]) -> None:
         """`add` of each (channel id, log time ns, data) in turn."""
         add = self._writer.add_message
         for channel_id, t, data in messages:
             add(channel_id, t, data, t)
+        if self._live is not None:
+            for channel_id, t, data in messages:
+                self._live.publish(self._live_channels[channel_id], t, data)
 
     def close(self, summary_metadata: dict[str, str]) -> None:
         """Finishes the file, fsyncs it and renames it onto the final path."""
@@ -155,7 +169,7 @@ class RecordingWriter(_WriterContext):
     """
 
     def __init__(self, path, header: RecordingHeader, cameras: Sequence[Camera], boxes: Sequence[Box], *,
-                 chunk_size: int = CHUNK_SIZE, inputs: tuple = ()):
+                 chunk_size: int = CHUNK_SIZE, inputs: tuple = (), live: LiveSink | None = None):
         self.header = header
         self.cameras = list(cameras)
         self.boxes = tuple(boxes)
@@ -179,7 +193,7 @@ class RecordingWriter(_WriterContext):
         self.encoder = Encoder(self.skeleton)
         self.encoder.warm_up()  # (before the file opens: `Encoder.warm_up`)
         self._out = _AtomicMcapWriter(path, KIND_RECORDING, doc, _flat_metadata(KIND_RECORDING, header), chunk_size,
-                                     inputs)
+                                     inputs, live)
         try:
             out = self._out
             self._tf = out.protobuf_channel(TOPIC_TF, foxglove.FrameTransforms)
@@ -307,7 +321,7 @@ class TracksWriter(_WriterContext):
     """
 
     def __init__(self, path, header: TracksHeader, cameras: Sequence[Camera], *, chunk_size: int = CHUNK_SIZE,
-                 inputs: tuple = ()):
+                 inputs: tuple = (), live: LiveSink | None = None):
         self.header = header
         self.cameras = list(cameras)
         self.skeleton = SKELETONS[header.skeleton_name]
@@ -330,7 +344,8 @@ class TracksWriter(_WriterContext):
             raise ValueError(f"TracksHeader.config: must be JSON-serialisable without NaN: {e}") from None
         self.encoder = Encoder(self.skeleton)
         self.encoder.warm_up()  # (before the file opens: `Encoder.warm_up`)
-        self._out = _AtomicMcapWriter(path, KIND_TRACKS, doc, _flat_metadata(KIND_TRACKS, header), chunk_size, inputs)
+        self._out = _AtomicMcapWriter(path, KIND_TRACKS, doc, _flat_metadata(KIND_TRACKS, header), chunk_size, inputs,
+                                      live)
         try:
             self._outputs = self._out.protobuf_channel(TOPIC_OUTPUTS, TrackerOutputMsg)
             self._scene = self._out.protobuf_channel(TOPIC_TRACK_SCENE, foxglove.SceneUpdate)

@@ -1,0 +1,132 @@
+"""The live view (`crossview serve`, `run/generate --live`) seen by an independent client (`live_client`): what it
+receives equals the file's messages, read by the mcap library alone, channel by channel (count and bytes)."""
+
+import collections
+import os
+import re
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from mcap.reader import make_reader
+
+from crossview.cli import EXIT_BAD_INPUT, main
+from crossview.live import parse_speed
+from tests.crossview.live_client import collect
+
+pytest.importorskip("foxglove", reason="the live extra (pip install '.[live]')")
+pytest.importorskip("websockets", reason="the test client's websockets")
+REPO = Path(__file__).resolve().parents[2]
+
+
+def file_messages(*paths) -> dict:
+    """{(topic, schema name): [(log time ns, bytes), ...]} of the files, in file order, by the mcap library."""
+    out = collections.defaultdict(list)
+    for path in paths:
+        with open(path, "rb") as f:
+            for schema, channel, message in make_reader(f).iter_messages(log_time_order=False):
+                out[(channel.topic, schema.name)].append((message.log_time, message.data))
+    return dict(out)
+
+
+def start(*argv) -> tuple[subprocess.Popen, str]:
+    """The command started with --port 0, and the URL it printed."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.Popen([sys.executable, "-m", "crossview.cli", "--no-progress", *argv, "--port", "0"], cwd=REPO,
+                            env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = proc.stdout.readline()
+    found = re.search(r"ws://\S+", line)
+    if not found:
+        proc.kill()
+        raise AssertionError(f"no URL printed: {line!r} {proc.stderr.read()}")
+    return proc, found.group(0).rstrip(";,)")
+
+
+def total(messages: dict) -> int:
+    return sum(len(v) for v in messages.values())
+
+
+def test_generate_live_publishes_the_file_s_messages(store_recording, tmp_path):
+    out = tmp_path / "live.mcap"
+    proc, url = start("generate", "store_layout1", "--duration", "6", "--seed", "0", "-o", str(out), "--live",
+                      "--speed", "4")
+    received = collect(url, quiet_s=5.0, timeout_s=120.0)
+    assert proc.wait(120) == 0, proc.stderr.read()
+    assert out.read_bytes() == store_recording.read_bytes()  # (the live view leaves the file's bytes as they were)
+    expected = file_messages(out)
+    print(f"generate --live --speed 4: {total(received)} of {total(expected)} messages received")
+    assert received == expected
+
+
+def test_serve_replays_recording_and_tracks(store_recording, store_tracks):
+    proc, url = start("serve", str(store_recording), str(store_tracks))
+    try:
+        expected = file_messages(store_recording, store_tracks)
+        received = collect(url, expected=total(expected), play=True, play_speed=8.0, timeout_s=120.0)
+    finally:
+        proc.terminate()
+        proc.wait(30)
+    # The tracks file's header shares its topic with the recording's: served as TOPIC/SCHEMA (crossview.live.Server).
+    header = ("/crossview/header", "crossview.TracksHeader")
+    received[header] = received.pop(("/crossview/header/crossview.TracksHeader", "crossview.TracksHeader"))
+    print(f"serve at 8x: {total(received)} of {total(expected)} messages received")
+    assert received == expected
+
+
+def test_generate_live_at_max_speed_is_not_held_up_by_a_slow_client(store_recording, tmp_path):
+    """A client that reads one message per millisecond: the run goes on at its own speed, the SDK drops the
+    client's oldest messages, and what arrives is the file's, in its order."""
+    out = tmp_path / "max.mcap"
+    proc, url = start("generate", "store_layout1", "--duration", "6", "--seed", "0", "-o", str(out), "--live",
+                      "--speed", "max")
+    received = collect(url, quiet_s=5.0, timeout_s=120.0, read_delay_s=0.001)
+    assert proc.wait(120) == 0, proc.stderr.read()
+    assert out.read_bytes() == store_recording.read_bytes()
+    expected = file_messages(out)
+    for key, messages in received.items():
+        it = iter(expected[key])
+        assert all(m in it for m in messages), key  # (a subsequence: dropped, never altered or reordered)
+    dropped = total(expected) - total(received)
+    print(f"generate --live --speed max, a client reading 1 message/ms: {dropped} of {total(expected)} dropped")
+
+
+def test_port_in_use_is_one_line(tmp_path, capsys):
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        status = main(["generate", "store_layout1", "-o", str(tmp_path / "unused.mcap"), "--live", "--port", str(port)])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1
+    assert f"--port {port}" in err and "in use" in err
+    assert not (tmp_path / "unused.mcap").exists()
+
+
+def test_serve_refuses_a_truncated_recording(store_recording, tmp_path, capsys):
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(store_recording.read_bytes()[: store_recording.stat().st_size // 2])
+    status = main(["serve", str(cut), "--port", "0"])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1
+    assert "cut.mcap: truncated MCAP file" in err
+
+
+def test_missing_extra_names_it(store_recording, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "foxglove", None)  # (import foxglove then raises ImportError)
+    status = main(["serve", str(store_recording), "--port", "0"])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT and len(err.splitlines()) == 1
+    assert "foxglove-sdk" in err and "[live]" in err
+
+
+@pytest.mark.parametrize("text, value", [("1", 1.0), ("2.5", 2.5), ("max", float("inf")), ("MAX", float("inf"))])
+def test_speed(text, value):
+    assert parse_speed(text) == value
+
+
+@pytest.mark.parametrize("text", ["0", "-1", "fast", "inf", "nan"])
+def test_bad_speed_is_refused(text, tmp_path, capsys):
+    assert main(["generate", "store_layout1", "-o", str(tmp_path / "x.mcap"), "--speed", text]) == EXIT_BAD_INPUT
+    assert "--speed" in capsys.readouterr().err
