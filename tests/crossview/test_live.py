@@ -126,7 +126,7 @@ def test_speed(text, value):
     assert parse_speed(text) == value
 
 
-@pytest.mark.parametrize("text", ["0", "-1", "fast", "inf", "nan"])
+@pytest.mark.parametrize("text", ["0", "-1", "fast", "inf", "nan"], ids=["zero", "negative", "word", "inf", "nan"])
 def test_bad_speed_is_refused(text, tmp_path, capsys):
     assert main(["generate", "store_layout1", "-o", str(tmp_path / "x.mcap"), "--speed", text]) == EXIT_BAD_INPUT
     assert "--speed" in capsys.readouterr().err
