@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import gc
 import os
+import sys
+from pathlib import Path
 
 from core.errors import ConfigError
 
@@ -109,6 +111,29 @@ def intrinsic(plain):
         return plain if group_of(typer) in PLAIN else _numba_intrinsic(typer)
 
     return decorate
+
+
+def cold_cache() -> bool:
+    """Whether some compiled group's kernels have no index in numba's on-disk cache (a first run, a fresh clone):
+    the command that calls them then compiles them first, about a minute. Looked up where numba keeps them: the
+    `__pycache__` beside each module, or under $NUMBA_CACHE_DIR (`<module>.<kernel>-<line>.pyXY.nbi`). A changed
+    kernel of an older cache is not seen."""
+    if numba is None:
+        return False
+    root = Path(__file__).resolve().parents[1]
+    tag = f"py{sys.version_info.major}{sys.version_info.minor}.nbi"
+    custom = os.environ.get("NUMBA_CACHE_DIR")
+    for group, modules in GROUPS.items():
+        if group in PLAIN:
+            continue
+        for module in modules:
+            source = root.joinpath(*module.split("."))
+            pattern = f"{source.name}.*.{tag}"
+            found = any(source.parent.joinpath("__pycache__").glob(pattern)) or bool(
+                custom and any(Path(custom).rglob(pattern)))
+            if not found:
+                return True
+    return False
 
 
 def prepare() -> None:

@@ -79,6 +79,42 @@ class _Parser(argparse.ArgumentParser):
         self.exit(EXIT_BAD_INPUT, f"{self.prog}: error: {message}\n")
 
 
+class _TopParser(_Parser):
+    """The `crossview` parser: an unknown option before (or without) a command is named, where argparse would first
+    say that a command is required."""
+
+    def parse_args(self, args=None, namespace=None):
+        self._given = list(sys.argv[1:] if args is None else args)
+        return super().parse_args(args, namespace)
+
+    def error(self, message):
+        if "required: COMMAND" in message:
+            unknown = [a for a in getattr(self, "_given", []) if a.startswith("-")
+                       and a.partition("=")[0] not in self._option_string_actions]
+            if unknown:
+                message = f"unrecognized arguments: {' '.join(unknown)}"
+        super().error(message)
+
+
+class _Version(argparse.Action):
+    """`--version`: the installed package's version (looked up only when asked)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS, help=None):
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        from crossview.recording import software_version
+
+        parser.exit(0, f"crossview {software_version()}\n")
+
+
+GLOBAL_OPTIONS = (
+    (("-v", "--verbose"), "log progress details"),
+    (("--no-progress",), "hide progress bars"),
+)
+"""Options of every command, given before or after its name (`build_parser`)."""
+
+
 class _ReaderGoneStdout:
     """The command's stdout, which a reader that closed it (`crossview run ... | head -1`) cannot end the command
     through: once a write finds the pipe closed (BrokenPipeError), the rest of what it prints goes nowhere
@@ -209,9 +245,10 @@ def add_output(p: argparse.ArgumentParser, help: str, *, required: bool = True, 
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="crossview", description=__doc__.splitlines()[0])
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
-    parser.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    parser = _TopParser(prog="crossview", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action=_Version, help="print the version and exit")
+    for flags, text in GLOBAL_OPTIONS:
+        parser.add_argument(*flags, action="store_true", help=text)
     # The commands in the order a user meets them: a first run, the scenarios, a recording and its cameras'
     # coverage, tracking and scoring it, looking at it, comparing and sweeping, then the dataset tools.
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
@@ -486,6 +523,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
     p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
                    "timed per case (the rest of a slower case's stream is left unscored; default 300)")
+    for command in sub.choices.values():  # (every command, those added above this line included)
+        for flags, text in GLOBAL_OPTIONS:  # (SUPPRESS: not given here, the value before the command stands)
+            command.add_argument(*flags, action="store_true", default=argparse.SUPPRESS, help=text)
     return parser
 
 
@@ -562,6 +602,7 @@ def _cmd_run(args) -> None:
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
+    _say_cameras(args, scenario)
     out = args.output
     rec_path = out / f"{scenario.name}.mcap"
     tracks_path = out / f"{scenario.name}.tracks.mcap"
@@ -601,6 +642,17 @@ def _cmd_scenarios(args) -> None:
         print(f"(in {scenario_mod.SCENARIO_DIR}; `crossview scenarios --show NAME` prints one in full)")
 
 
+def _say_cameras(args, scenario) -> None:
+    """What `--cameras N` chose: the first N of a real rig's cameras, or the grid fitted to the floor."""
+    if getattr(args, "cameras", None) is None:
+        return
+    if scenario.cameras.calibration:
+        print(f"--cameras {args.cameras}: the first {args.cameras} cameras of {scenario.cameras.calibration}")
+    else:
+        print(f"--cameras {args.cameras}: a grid of {scenario.cameras.rows} rows x {scenario.cameras.cols} columns "
+              f"over the {scenario.store.width_m:g} m x {scenario.store.depth_m:g} m floor")
+
+
 def _warn_coverage(scenario) -> None:
     """One line on stderr when the rig sees too little of the floor with two cameras (`crossview.measure.coverage`);
     said once the command has done its work, so that bad input stays the one line on stderr."""
@@ -616,6 +668,7 @@ def _cmd_coverage(args) -> None:
     from crossview.measure import coverage
 
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
+    _say_cameras(args, scenario)
     for path in (args.output, args.figures):
         if path:
             pipeline.check_writable(path)
@@ -678,6 +731,7 @@ def _cmd_generate(args) -> None:
     scenario = pipeline.load_scenario(
         args.scenario, seed=args.seed, duration_s=args.duration, people=args.people, cameras=args.cameras
     )
+    _say_cameras(args, scenario)
     with _live(args) as stream:
         gen = pipeline.generate(scenario, args.output, progress=not args.no_progress, images_per_s=args.images,
                                 gl=args.gl, live=stream and stream())
@@ -790,6 +844,7 @@ def _cmd_score(args) -> None:
     print(report.table())
     if args.output:
         pipeline.write_json(result, args.output, inputs=inputs)
+        print(f"score JSON: {args.output}")
     if args.map:
         pipeline.write_score_map(result, args.recording, args.map, inputs=inputs)
         print(f"map: {args.map}")
@@ -808,10 +863,11 @@ def _cmd_detector_stats(args) -> None:
 
     if args.output:
         pipeline.check_writable(args.output, inputs=(args.recording,))
-    stats = recording_detector_stats(args.recording)
+    stats = recording_detector_stats(args.recording, progress=not args.no_progress)
     print(format_detector_stats(stats))
     if args.output:
         pipeline.write_json(stats, args.output, inputs=(args.recording,))
+        print(f"figures JSON: {args.output}")
 
 
 def _cmd_fit_detector(args) -> None:
@@ -928,12 +984,13 @@ def _cmd_per_camera(args) -> None:
 
     if args.output:
         pipeline.check_writable(args.output, inputs=(args.recording, args.tracks))
-    table = per_camera_table(args.recording, args.tracks)
+    table = per_camera_table(args.recording, args.tracks, progress=not args.no_progress)
     print(table.markdown())
     print()
     print(paper_means_line())
     if args.output:
         pipeline.write_json(table.to_json(), args.output)
+        print(f"table JSON: {args.output}")
 
 
 def _cmd_compare(args) -> None:
@@ -959,11 +1016,14 @@ def _cmd_bench(args) -> None:
 
         bench_scale.main(json_path=args.output, duration_s=args.duration or 10.0, progress=not args.no_progress,
                          markdown_path=args.markdown, budget_s=args.budget)
-        return
-    from crossview.experiments import bench
+    else:
+        from crossview.experiments import bench
 
-    bench.main(json_path=args.output, duration_s=args.duration or 20.0, progress=not args.no_progress,
-               markdown_path=args.markdown)
+        bench.main(json_path=args.output, duration_s=args.duration or 20.0, progress=not args.no_progress,
+                   markdown_path=args.markdown)
+    written = [str(p) for p in (args.output, args.markdown) if p]
+    if written:
+        print(f"written: {', '.join(written)}")
 
 
 def _cmd_render(args) -> None:
@@ -1058,6 +1118,20 @@ COMMANDS = {
 }
 
 
+_NO_KERNELS = frozenset({"scenarios", "info", "serve", "evaluate", "export", "convert"})
+"""The commands that call no compiled kernel (`_say_when_compiling`)."""
+COMPILING_LINE = "crossview: compiling numeric kernels (once, about a minute)"
+
+
+def _say_when_compiling() -> None:
+    """One line on stderr before a command whose kernels are not in numba's cache yet (`core.jit.cold_cache`): a
+    first run is otherwise silent while they compile."""
+    from core.jit import cold_cache
+
+    if cold_cache():
+        print(COMPILING_LINE, file=sys.stderr, flush=True)
+
+
 # The tracker and the simulator work on many tiny matrices: BLAS threads only add contention there, so
 # one thread per process unless the user asked otherwise (set before numpy is first imported).
 _SINGLE_THREAD_ENV = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -1086,6 +1160,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         from crossview.outputs import command_inputs
 
+        if args.command not in _NO_KERNELS:
+            _say_when_compiling()
         with command_inputs(_command_inputs(args)):
             COMMANDS[args.command](args)
         sys.stdout.flush()

@@ -29,6 +29,7 @@ EXTRA = "pip install 'crossview-testbed[live]'"
 DEFAULT_PORT = 8765  # Foxglove's default for a WebSocket connection
 HOST = "127.0.0.1"
 BACKLOG = 1024  # messages a client's queue holds before the SDK drops its oldest (the SDK's default)
+SUBSCRIBE_GRACE_S = 0.2  # a paced stream's first message waits this long for clients to subscribe to its channels
 LINGER_S = 1.0  # after the last message of run/generate --live, how long the server stays up for clients to drain
 _SLICE_S = 0.05  # longest single sleep of the replay loop, so that a pause, seek or Ctrl-C is seen at once
 
@@ -136,8 +137,9 @@ class Server:
 
 class Paced:
     """A writer's live stream (`crossview.recording.LiveSink`): publishes each message on `server` once its log time
-    is due, `speed` times real time from the first message (math.inf: at once). The wait is the writer's, so the run
-    goes at that pace; the clients' queues are the SDK's, so they never hold the run up."""
+    is due, `speed` times real time from the first after log time 0, which waits `SUBSCRIBE_GRACE_S` (math.inf: none).
+    The wait is the writer's, so the run goes at that pace; the clients' queues are the SDK's, so they never hold
+    the run up."""
 
     def __init__(self, server: Server, speed: float):
         self._server = server
@@ -149,10 +151,10 @@ class Paced:
         return self._server.channel(info)
 
     def publish(self, handle, log_time_ns: int, data: bytes) -> None:
-        if math.isfinite(self._speed):
+        if math.isfinite(self._speed) and log_time_ns > 0:  # (log time 0: the file's start, kept for late clients)
             now = time.perf_counter()
-            if self._anchor is None:
-                self._anchor = (now, log_time_ns)
+            if self._anchor is None:  # (the writer has made its channels: clients subscribe on seeing them)
+                self._anchor = (now + SUBSCRIBE_GRACE_S, log_time_ns)
             wait = self._anchor[0] + (log_time_ns - self._anchor[1]) / 1e9 / self._speed - now
             if wait > 0.001:
                 time.sleep(wait)

@@ -100,7 +100,7 @@ class PerCameraTable:
 
 
 def per_camera_table(rec_path: Path, tracks_path: Path, config: SingleViewConfig = _DEFAULT_SINGLE_VIEW,
-                     ) -> PerCameraTable:
+                     progress: bool = False) -> PerCameraTable:
     """Table 5's rows for a recording and a cross-view tracks file made from it (see the module docstring).
 
     Args:
@@ -108,6 +108,7 @@ def per_camera_table(rec_path: Path, tracks_path: Path, config: SingleViewConfig
         tracks_path: a tracks file of the cross-view tracker (or any tracker that reports
             `detection_target_ids` and 3D targets) made from that recording.
         config: the single-view tracker's parameters.
+        progress: show a bar of the frames read and tracked by the single-view tracker.
 
     Raises:
         CrossviewError: unreadable files, or tracks made from another recording.
@@ -118,10 +119,14 @@ def per_camera_table(rec_path: Path, tracks_path: Path, config: SingleViewConfig
     cameras = [c.name for c in rec.cameras]
     outputs = list(tracks.outputs())
     cross_ids = {stamp_key(o.camera, o.stamp_s): o.detection_target_ids for o in outputs}
-    frames = list(rec.frames())  # in delivery order, the order the cross-view tracker saw them
+    from tqdm import tqdm
+
+    # in delivery order, the order the cross-view tracker saw them
+    frames = list(tqdm(rec.frames(), total=len(outputs), unit="frame", desc="per-camera: read", disable=not progress,
+                       leave=False))
     single = SingleViewTracker(rec.cameras, config)
     single_ids = {}
-    for cf in frames:
+    for cf in tqdm(frames, unit="frame", desc="per-camera: single-view", disable=not progress, leave=False):
         single.update(cf.frame)
         single_ids[stamp_key(cf.frame.camera, cf.frame.stamp_s)] = single.last_output.detection_track_ids
     single_scores = detection_2d_scores(frames, single_ids, cameras)

@@ -505,19 +505,23 @@ def detector_stats(camera_frames: Iterable[CameraFrame], cameras: Sequence[Camer
     return acc.result()
 
 
-def recording_detector_stats(path) -> dict:
-    """`detector_stats` of a recording file, refused when it cannot be measured.
+def recording_detector_stats(path, progress: bool = False) -> dict:
+    """`detector_stats` of a recording file, refused when it cannot be measured; `progress` shows a bar of the
+    frames measured.
 
     Raises:
         RecordingError: the file is not a readable recording.
         CrossviewError: it holds no 3D truth at its frames' times, or fewer than `MIN_MATCHED_DETECTIONS`
             detections match a true person; the message names the file.
     """
+    from tqdm import tqdm
+
     from crossview import recording
 
     rec = recording.open_recording(path)
+    frames = tqdm(rec.frames(with_poses=True), unit="frame", desc="detector-stats", disable=not progress, leave=False)
     try:
-        stats = detector_stats(rec.frames(with_poses=True), rec.cameras, rec.skeleton)
+        stats = detector_stats(frames, rec.cameras, rec.skeleton)
     except CrossviewError as e:
         raise CrossviewError(f"{path}: {e}") from None
     if stats["frames_measured"] == 0:

@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import json
+import re
 import struct
 import time
 from collections import defaultdict
@@ -60,6 +61,12 @@ async def _collect(url: str, expected: int | None, quiet_s: float, timeout_s: fl
                 break
             if isinstance(message, str):
                 doc = json.loads(message)
+                unknown = re.fullmatch(r"Unknown channel ID: (\d+)", doc.get("message", "")) if doc["op"] == "status" \
+                    else None
+                if unknown and int(unknown[1]) in channels:  # (foxglove-sdk 0.30 can refuse a subscription to a
+                    await asyncio.sleep(0.05)  # channel it has just advertised; asking again gets it)
+                    await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                        {"id": int(unknown[1]), "channelId": int(unknown[1])}]}))
                 if doc["op"] == "advertise":
                     new = [c for c in doc["channels"] if c["id"] not in channels]
                     for channel in new:
