@@ -105,7 +105,8 @@ class _Version(argparse.Action):
     def __call__(self, parser, namespace, values, option_string=None):
         from crossview.recording import software_version
 
-        parser.exit(0, f"crossview {software_version()}\n")
+        sys.stdout.write(f"crossview {software_version()}\n")
+        parser.exit(0)
 
 
 GLOBAL_OPTIONS = (
@@ -307,14 +308,6 @@ def build_parser() -> argparse.ArgumentParser:
                    "$MUJOCO_GL when it names one, else EGL, then OSMesa)")
     live_options(p, "publish the recording")
 
-    p = sub.add_parser("serve", help="replay a recording (and its tracks) on a Foxglove WebSocket server, with play, "
-                       "pause, seek and speed (pip install '.[live]')")
-    p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
-    p.add_argument("tracks", type=Path, nargs="?", help="tracks file (.mcap) made from the recording")
-    live_options(p, None)
-    p.add_argument("--play", action="store_true", help="start playing at once (default: paused until a client "
-                   "plays)")
-
     p = sub.add_parser("coverage", help="how many cameras see each floor cell: the shares of the walkable floor "
                        "seen by 1, 2, 3 or more cameras, and a top-down map")
     p.add_argument("scenario", help="scenario file or shipped name")
@@ -408,6 +401,14 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default 320)")
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend (default: $MUJOCO_GL when it "
                    "names one, else EGL, then OSMesa)")
+
+    p = sub.add_parser("serve", help="replay a recording (and its tracks) on a Foxglove WebSocket server, with play, "
+                       "pause, seek and speed (pip install '.[live]')")
+    p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
+    p.add_argument("tracks", type=Path, nargs="?", help="tracks file (.mcap) made from the recording")
+    live_options(p, None)
+    p.add_argument("--play", action="store_true", help="start playing at once (default: paused until a client "
+                   "plays)")
 
     p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
     p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")

@@ -281,6 +281,7 @@ def test_the_minimal_plugin_of_the_docs_runs_as_written(short_recording, tmp_pat
     assert main(["--no-progress", "score", str(short_recording), str(tracks), "-o", str(score_json)]) == 0
     score = json.loads(score_json.read_text())
     # Hips only: found on the ground plane by the identity metrics (most of what it reports is somebody), not a
-    # pose. It reports only the people of the latest camera frame, so it misses most people at a scoring tick.
-    assert score["idp"] > 0.5 and score["idf1"] > 0.3, score
+    # pose. It returns everyone it tracks after each frame, so it misses few people at a scoring tick (docs/plugins.md:
+    # MOTA 64 %, IDF1 67 % here; the version that returned only the current camera's people recalled 35 %).
+    assert score["idr"] > 0.7 and score["idp"] > 0.5 and score["idf1"] > 0.5, score
     assert score["pcp"] < 0.5, score

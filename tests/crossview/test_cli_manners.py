@@ -1,0 +1,84 @@
+"""The command line behaves like one: --version, the global flags before or after the command, an unknown flag
+named, a line before the kernels compile, --cameras saying its grid, commands saying where they wrote."""
+
+import json
+
+import pytest
+
+from core import jit
+from crossview.cli import COMPILING_LINE, EXIT_BAD_INPUT, GLOBAL_OPTIONS, build_parser, main
+from crossview.recording import software_version
+
+
+def test_version(capsys):
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out == f"crossview {software_version()}\n"
+
+
+def test_every_command_takes_the_global_flags_after_its_name():
+    parser = build_parser()
+    commands = next(a for a in parser._actions if a.option_strings == [] and a.choices).choices
+    for name, command in commands.items():
+        strings = {s for a in command._actions for s in a.option_strings}
+        assert {s for flags, _ in GLOBAL_OPTIONS for s in flags} <= strings, name
+    before = parser.parse_args(["-v", "--no-progress", "info", "x.mcap"])
+    after = parser.parse_args(["info", "x.mcap", "-v", "--no-progress"])
+    neither = parser.parse_args(["info", "x.mcap"])
+    assert (before.verbose, before.no_progress) == (after.verbose, after.no_progress) == (True, True)
+    assert (neither.verbose, neither.no_progress) == (False, False)
+
+
+def test_global_flags_after_the_command_run_it(capsys):
+    assert main(["scenarios", "--no-progress", "-v"]) == 0
+    assert "store_layout1" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("argv", [["--bogus"], ["--bogus", "info", "x.mcap"], ["info", "x.mcap", "--bogus"]],
+                         ids=["alone", "before", "after"])
+def test_an_unknown_flag_is_named(argv, capsys):
+    assert main(argv) == EXIT_BAD_INPUT
+    err = capsys.readouterr().err.strip()
+    assert err == "crossview: error: unrecognized arguments: --bogus"
+
+
+def test_cold_cache_is_seen(tmp_path, monkeypatch):
+    """A kernel module without an index in numba's cache is cold; one with an index (here under $NUMBA_CACHE_DIR,
+    as numba names it) is not."""
+    if jit.numba is None:
+        pytest.skip("numba is not installed: nothing compiles")
+    monkeypatch.setattr(jit, "GROUPS", {"probe": ("core.errors",)})  # (a module no kernel of which is cached)
+    monkeypatch.setattr(jit, "PLAIN", frozenset())
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    assert jit.cold_cache()
+    (tmp_path / "core").mkdir()
+    (tmp_path / "core" / f"errors.kernel-1.py{jit.sys.version_info.major}{jit.sys.version_info.minor}.nbi").touch()
+    assert not jit.cold_cache()
+    monkeypatch.setattr(jit, "PLAIN", frozenset({"probe"}))  # (a plain group never compiles)
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
+    assert not jit.cold_cache()
+
+
+def test_a_cold_cache_is_said_before_the_command(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(jit, "cold_cache", lambda: True)
+    main(["track", str(tmp_path / "missing.mcap"), "-o", str(tmp_path / "t.mcap")])
+    assert capsys.readouterr().err.splitlines()[0] == COMPILING_LINE
+    main(["scenarios"])  # (no kernel: nothing said)
+    assert COMPILING_LINE not in capsys.readouterr().err
+
+
+def test_cameras_says_its_grid(capsys):
+    from crossview import pipeline
+
+    assert main(["coverage", "store_layout1", "--cameras", "6"]) == 0
+    scenario = pipeline.load_scenario("store_layout1", cameras=6)
+    rows, cols = scenario.cameras.rows, scenario.cameras.cols
+    assert rows * cols == 6
+    assert f"--cameras 6: a grid of {rows} rows x {cols} columns" in capsys.readouterr().out
+
+
+def test_score_says_where_it_wrote(store_recording, store_tracks, tmp_path, capsys):
+    out = tmp_path / "score.json"
+    assert main(["--no-progress", "score", str(store_recording), str(store_tracks), "-o", str(out)]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == f"score JSON: {out}"
+    assert json.loads(out.read_text())
+
