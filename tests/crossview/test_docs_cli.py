@@ -92,9 +92,16 @@ def problems(text: str, parser) -> list[str]:
     return sorted(set(found))
 
 
+BAD_INPUT_TABLE = ROOT / "docs" / "reliability.md"
+"""Its table's rows name bad input on purpose (`crossview --bogus`): they are left out; the rest of the page is not."""
+
+
 @pytest.mark.parametrize("doc", DOCS, ids=[d.name for d in DOCS])
 def test_every_command_and_flag_the_docs_name_exists(doc):
-    assert problems(doc.read_text(encoding="utf-8"), build_parser()) == []
+    text = doc.read_text(encoding="utf-8")
+    if doc == BAD_INPUT_TABLE:
+        text = "\n".join(line for line in text.splitlines() if not line.startswith("| "))
+    assert problems(text, build_parser()) == []
 
 
 def test_the_check_finds_what_does_not_exist():
