@@ -756,7 +756,11 @@ def _cmd_serve(args) -> None:
     from crossview import live
 
     files, start_ns, end_ns = live.open_files(args.recording, args.tracks)
-    live.serve(files, args.port, args.speed, start_ns, end_ns, lambda line: print(line, flush=True), play=args.play)
+    try:
+        live.serve(files, args.port, args.speed, start_ns, end_ns, lambda line: print(line, flush=True),
+                   play=args.play)
+    except Interrupted:  # (Ctrl-C: how a server is ended; it wrote nothing)
+        print("serve: stopped")
 
 
 def _speed(gen) -> str:

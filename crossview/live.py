@@ -137,9 +137,9 @@ class Server:
 
 class Paced:
     """A writer's live stream (`crossview.recording.LiveSink`): publishes each message on `server` once its log time
-    is due, `speed` times real time from the first after log time 0, which waits `SUBSCRIBE_GRACE_S` (math.inf: none).
-    The wait is the writer's, so the run goes at that pace; the clients' queues are the SDK's, so they never hold
-    the run up."""
+    is due, `speed` times real time (math.inf: at once) from the first after log time 0, which waits
+    `SUBSCRIBE_GRACE_S`. The wait is the writer's, so the run goes at that pace; the clients' queues are the SDK's,
+    so they never hold the run up."""
 
     def __init__(self, server: Server, speed: float):
         self._server = server
@@ -151,13 +151,14 @@ class Paced:
         return self._server.channel(info)
 
     def publish(self, handle, log_time_ns: int, data: bytes) -> None:
-        if math.isfinite(self._speed) and log_time_ns > 0:  # (log time 0: the file's start, kept for late clients)
-            now = time.perf_counter()
+        if log_time_ns > 0:  # (log time 0: the file's start, resent to late clients: `Server.log`)
             if self._anchor is None:  # (the writer has made its channels: clients subscribe on seeing them)
-                self._anchor = (now + SUBSCRIBE_GRACE_S, log_time_ns)
-            wait = self._anchor[0] + (log_time_ns - self._anchor[1]) / 1e9 / self._speed - now
-            if wait > 0.001:
-                time.sleep(wait)
+                time.sleep(SUBSCRIBE_GRACE_S)
+                self._anchor = (time.perf_counter(), log_time_ns)
+            if math.isfinite(self._speed):
+                wait = self._anchor[0] + (log_time_ns - self._anchor[1]) / 1e9 / self._speed - time.perf_counter()
+                if wait > 0.001:
+                    time.sleep(wait)
         self._server.log(handle, log_time_ns, data)
         if log_time_ns > self._last_time_ns:
             self._server.broadcast_time(log_time_ns)

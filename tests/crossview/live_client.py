@@ -42,7 +42,7 @@ def play_request(speed: float = 1.0, seek_ns: int | None = None, request_id: str
 
 
 async def _collect(url: str, expected: int | None, quiet_s: float, timeout_s: float, play: bool,
-                   read_delay_s: float, play_speed: float) -> dict:
+                   read_delay_s: float, play_speed: float, seek_ns: int | None) -> dict:
     received: dict[tuple[str, str], list[tuple[int, bytes]]] = defaultdict(list)
     channels: dict[int, dict] = {}
     decoders: dict[int, object] = {}
@@ -75,7 +75,7 @@ async def _collect(url: str, expected: int | None, quiet_s: float, timeout_s: fl
                     await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
                         {"id": c["id"], "channelId": c["id"]} for c in new]}))
                     if play and not played:
-                        await ws.send(play_request(play_speed))
+                        await ws.send(play_request(play_speed, seek_ns))
                         played = True
                 continue
             if message[0] != OP_MESSAGE_DATA:
@@ -92,8 +92,9 @@ async def _collect(url: str, expected: int | None, quiet_s: float, timeout_s: fl
 
 
 def collect(url: str, *, expected: int | None = None, quiet_s: float = 3.0, timeout_s: float = 60.0,
-            play: bool = False, play_speed: float = 1.0, read_delay_s: float = 0.0) -> dict:
+            play: bool = False, play_speed: float = 1.0, seek_ns: int | None = None, read_delay_s: float = 0.0) -> dict:
     """Connects to `url` and returns {(topic, schema name): [(log time ns, bytes), ...]} of what it received, until
     `expected` messages came, none came for `quiet_s` after the first, or `timeout_s`. With `play`, asks a replay
-    server to play at `play_speed` once subscribed; `read_delay_s` after each message makes a slow client."""
-    return asyncio.run(_collect(url, expected, quiet_s, timeout_s, play, read_delay_s, play_speed))
+    server to play at `play_speed` once subscribed, from `seek_ns` when given; `read_delay_s` after each message makes
+    a slow client."""
+    return asyncio.run(_collect(url, expected, quiet_s, timeout_s, play, read_delay_s, play_speed, seek_ns))
