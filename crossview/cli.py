@@ -89,8 +89,8 @@ class _TopParser(_Parser):
 
     def error(self, message):
         if "required: COMMAND" in message:
-            unknown = [a for a in getattr(self, "_given", []) if a.startswith("-")
-                       and a.partition("=")[0] not in self._option_string_actions]
+            known = {"-h", "--help", "--version", *(s for flags, _ in GLOBAL_OPTIONS for s in flags)}
+            unknown = [a for a in getattr(self, "_given", []) if a.startswith("-") and a.partition("=")[0] not in known]
             if unknown:
                 message = f"unrecognized arguments: {' '.join(unknown)}"
         super().error(message)
@@ -524,6 +524,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
     p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
                    "timed per case (the rest of a slower case's stream is left unscored; default 300)")
+    parser.commands = sub.choices  # name -> its parser (the tests compare them with the docs)
     for command in sub.choices.values():  # (every command, those added above this line included)
         for flags, text in GLOBAL_OPTIONS:  # (SUPPRESS: not given here, the value before the command stands)
             command.add_argument(*flags, action="store_true", default=argparse.SUPPRESS, help=text)

@@ -2,10 +2,12 @@
 named, a line before the kernels compile, --cameras saying its grid, commands saying where they wrote."""
 
 import json
+import re
 
 import pytest
 
 from core import jit
+from crossview import cli
 from crossview.cli import COMPILING_LINE, EXIT_BAD_INPUT, GLOBAL_OPTIONS, build_parser, main
 from crossview.recording import software_version
 
@@ -17,10 +19,10 @@ def test_version(capsys):
 
 def test_every_command_takes_the_global_flags_after_its_name():
     parser = build_parser()
-    commands = next(a for a in parser._actions if a.option_strings == [] and a.choices).choices
-    for name, command in commands.items():
-        strings = {s for a in command._actions for s in a.option_strings}
-        assert {s for flags, _ in GLOBAL_OPTIONS for s in flags} <= strings, name
+    assert sorted(parser.commands) == sorted(cli.COMMANDS)
+    for name, command in parser.commands.items():
+        text = command.format_help()
+        assert all(re.search(rf"(^|[ ,]){flag}\b", text, re.M) for flags, _ in GLOBAL_OPTIONS for flag in flags), name
     before = parser.parse_args(["-v", "--no-progress", "info", "x.mcap"])
     after = parser.parse_args(["info", "x.mcap", "-v", "--no-progress"])
     neither = parser.parse_args(["info", "x.mcap"])

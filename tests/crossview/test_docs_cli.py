@@ -21,13 +21,18 @@ _END = {"|", ";", "&&", "||", ">", "2>", "#", "&"}
 
 
 def visible_options(parser: argparse.ArgumentParser) -> set[str]:
-    """The option strings --help shows (the hidden old spellings left out)."""
-    return {s for a in parser._actions if a.help != argparse.SUPPRESS for s in a.option_strings}
+    """The option strings --help shows (the hidden old spellings left out), read from --help itself."""
+    flags = set()
+    for line in parser.format_help().splitlines():
+        if re.match(r"\s{2}-", line):  # "  -o PATH, --output PATH  what it is"
+            invocation = re.split(r"\s{2,}", line.strip())[0]
+            flags.update(re.findall(r"(?:^|, )(--?[A-Za-z][\w-]*)", invocation))
+    return flags
 
 
-def _commands(parser):
-    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    return action.choices
+def every_spelling() -> set[str]:
+    """Every option spelling the command line's source defines, the hidden old ones (--out, --minutes) included."""
+    return set(re.findall(r"[\"'](--?[a-z][\w-]*)[\"']", (ROOT / "crossview" / "cli.py").read_text(encoding="utf-8")))
 
 
 def _code(text: str, spans_only: bool = False) -> list[tuple[str, str]]:
@@ -66,11 +71,10 @@ def lone_flags(text: str) -> list[tuple[str, str]]:
 def problems(text: str, parser) -> list[str]:
     """What a page's text names that the parser does not have. An old spelling the parser still accepts but hides
     from --help may be named only on a line that says it is old (`--out`, the older spelling of -o)."""
-    commands = _commands(parser)
+    commands = parser.commands
     top = visible_options(parser)
     every = top.union(*(visible_options(p) for p in commands.values()))
-    hidden = {s for p in (parser, *commands.values()) for a in p._actions if a.help == argparse.SUPPRESS
-              for s in a.option_strings}
+    hidden = every_spelling() - every
 
     def fine(flag: str, valid: set[str], line: str) -> bool:
         return flag in valid or (flag in hidden and re.search(r"\bold(er)?\b", line) is not None)
