@@ -18,9 +18,12 @@ for checking that and for measuring what compiling a group buys (`tools/kernel_l
 
 from __future__ import annotations
 
+import contextlib
 import gc
+import mmap
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 from core.errors import ConfigError
@@ -134,6 +137,36 @@ def cold_cache() -> bool:
             if not found:
                 return True
     return False
+
+
+@contextlib.contextmanager
+def saying_when_compiling(say: Callable[[], None]):
+    """Within the block, `say()` is called once, as numba starts its first compile (never when every kernel loads
+    from its cache), in this process or a worker forked from it within the block (the flag saying whether it was
+    said is shared memory, so the line comes once). Through numba's event API ("numba:compile")."""
+    if numba is None:
+        yield
+        return
+    from numba.core import event
+
+    said = mmap.mmap(-1, 1)  # (anonymous and shared: a forked worker sees and sets the same byte)
+
+    class _Listener(event.Listener):
+        def on_start(self, ev):
+            if said[0] == 0:
+                said[0] = 1
+                say()
+
+        def on_end(self, ev):
+            pass
+
+    listener = _Listener()
+    event.register("numba:compile", listener)
+    try:
+        yield
+    finally:
+        event.unregister("numba:compile", listener)
+        said.close()
 
 
 def prepare() -> None:

@@ -1124,18 +1124,27 @@ COMMANDS = {
 }
 
 
-_NO_KERNELS = frozenset({"scenarios", "info", "serve", "evaluate", "export", "convert"})
-"""The commands that call no compiled kernel (`_say_when_compiling`)."""
 COMPILING_LINE = "crossview: compiling numeric kernels (once, about a minute)"
 
 
-def _say_when_compiling() -> None:
-    """One line on stderr before a command whose kernels are not in numba's cache yet (`core.jit.cold_cache`): a
-    first run is otherwise silent while they compile."""
-    from core.jit import cold_cache
+def _saying_when_compiling(command: str):
+    """A context in which one line goes to stderr as numba starts compiling the project's kernels, when some are not
+    in its cache yet (`core.jit.cold_cache`: a first run is otherwise silent while they compile); said only once
+    compiling starts, so that bad input found before stays the one line on stderr. Nothing for a command that calls
+    no kernel."""
+    import contextlib
 
-    if cold_cache():
-        print(COMPILING_LINE, file=sys.stderr, flush=True)
+    if command in _NO_KERNELS:
+        return contextlib.nullcontext()
+    from core import jit
+
+    if not jit.cold_cache():
+        return contextlib.nullcontext()
+    return jit.saying_when_compiling(lambda: print(COMPILING_LINE, file=sys.stderr, flush=True))
+
+
+_NO_KERNELS = frozenset({"scenarios", "info", "serve", "evaluate", "export", "convert"})
+"""The commands that call no compiled kernel (`_saying_when_compiling`)."""
 
 
 # The tracker and the simulator work on many tiny matrices: BLAS threads only add contention there, so
@@ -1166,9 +1175,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         from crossview.outputs import command_inputs
 
-        if args.command not in _NO_KERNELS:
-            _say_when_compiling()
-        with command_inputs(_command_inputs(args)):
+        with _saying_when_compiling(args.command), command_inputs(_command_inputs(args)):
             COMMANDS[args.command](args)
         sys.stdout.flush()
     except _Ended as e:

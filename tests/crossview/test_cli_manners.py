@@ -60,10 +60,22 @@ def test_cold_cache_is_seen(tmp_path, monkeypatch):
     assert not jit.cold_cache()
 
 
-def test_a_cold_cache_is_said_before_the_command(tmp_path, monkeypatch, capsys):
+def test_a_cold_cache_is_said_as_compiling_starts_and_bad_input_stays_one_line(tmp_path, monkeypatch, capsys):
+    if jit.numba is None:
+        pytest.skip("numba is not installed: nothing compiles")
     monkeypatch.setattr(jit, "cold_cache", lambda: True)
-    main(["track", str(tmp_path / "missing.mcap"), "-o", str(tmp_path / "t.mcap")])
-    assert capsys.readouterr().err.splitlines()[0] == COMPILING_LINE
+
+    def command(args):  # (a kernel never compiled in this process: numba compiles it here)
+        assert jit.numba.njit(lambda x: x + 1)(1) == 2
+        print("done")
+
+    monkeypatch.setitem(cli.COMMANDS, "world-stats", command)
+    assert main(["world-stats", "store_layout1"]) == 0
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [COMPILING_LINE] and captured.out == "done\n"
+    # Bad input found before anything compiles: the one line of the contract, nothing more.
+    assert main(["track", str(tmp_path / "missing.mcap"), "-o", str(tmp_path / "t.mcap")]) == EXIT_BAD_INPUT
+    assert len(capsys.readouterr().err.splitlines()) == 1
     main(["scenarios"])  # (no kernel: nothing said)
     assert COMPILING_LINE not in capsys.readouterr().err
 
