@@ -240,8 +240,8 @@ def _listener(server: Server, player: Player | None):
     from foxglove.websocket import ServerListener
 
     class Listener(ServerListener):
-        def on_subscribe(self, client, channel):
-            server.subscribed(channel.id)
+        def on_subscribe(self, client, channel):  # (resent from a thread of its own: the SDK's callback returns at
+            threading.Thread(target=server.subscribed, args=(channel.id,), daemon=True).start()  # once, no lock held)
 
         def on_playback_control_request(self, playback_control_request):
             return None if player is None else player.on_playback_control_request(playback_control_request)
