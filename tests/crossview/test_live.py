@@ -137,6 +137,17 @@ def test_generate_live_at_max_speed_is_not_held_up_by_a_slow_client(tmp_path):
     print(f"generate --live --speed max, a client reading 1 message/5 ms: {dropped} of {total(expected)} dropped")
 
 
+def test_a_vanished_client_does_not_stop_the_run(tmp_path):
+    """A client that takes a few messages and goes: the run goes on to its end and writes its file."""
+    out = tmp_path / "gone.mcap"
+    proc, url = start("generate", "store_layout1", "--duration", "2", "--seed", "0", "-o", str(out), "--live",
+                      "--speed", "4")
+    received = collect(url, expected=50, timeout_s=60.0)
+    assert total(received) == 50
+    assert proc.wait(120) == 0, proc.stderr.read()
+    assert total(file_messages(out)) > 50
+
+
 def test_port_in_use_is_one_line(tmp_path, capsys):
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
