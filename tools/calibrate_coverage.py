@@ -1,11 +1,12 @@
-"""The coverage model's calibration: the tracker's PCP beside the model's floor quality, and the line between them.
+"""The coverage model's calibration: the tracker's PCP beside the model's floor quality, and the curve between them.
 
     python tools/calibrate_coverage.py --fit store_layout1:2,3,4,6,8,12 supermarket:6,9,12,20,30,60 \
         --check convenience:4,8,12,20,30@0,1,2 store_layout2:6,12,28 [--seeds 0,1] [--duration 30] \
         [--out calibration/]
 
 Each SCENARIO:COUNTS[@SEEDS] runs `crossview generate` (the scenario with `--cameras N`, `--seed S`, `--duration`),
-`crossview track` (store preset) and `crossview score` per camera count and seed, into OUT as
+`crossview track` (store preset) and `crossview score` (leaving out `crossview run`'s default warm-up) per
+camera count and seed, into OUT as
 NAME-cN-sS.mcap, .tracks.mcap and .score.json (a rerun skips what is there: the runs take minutes each). Then
 it predicts each rig (`crossview.measure.coverage`), fits the calibration curve
 PCP = 1 / (1 + exp(-(a + b ln(q / (1 - q))))) of the floor quality q by least squares on the `--fit` scenarios'
@@ -26,6 +27,7 @@ from scipy import optimize, stats
 
 from crossview import pipeline
 from crossview.measure.coverage import calibrated_pcp, coverage
+from crossview.scoring import default_from_s
 
 
 def parse_spec(text: str, seeds: tuple[int, ...]) -> tuple[str, tuple[int, ...], tuple[int, ...]]:
@@ -36,16 +38,21 @@ def parse_spec(text: str, seeds: tuple[int, ...]) -> tuple[str, tuple[int, ...],
 
 
 def run(out: Path, path: str, count: int, seed: int, duration_s: float) -> dict:
+    """One run's score JSON, scored as `crossview run` scores (leaving out its default warm-up): generated and
+    tracked unless OUT has them, scored again if OUT's score left out another warm-up."""
     scenario = pipeline.load_scenario(path, seed=seed, duration_s=duration_s, cameras=count)
     stem = out / f"{scenario.name}-c{count}-s{seed}"
     score_path = stem.with_suffix(".score.json")
-    if not score_path.exists():
-        rec, tracks = stem.with_suffix(".mcap"), stem.with_suffix(".tracks.mcap")
+    rec, tracks = stem.with_suffix(".mcap"), stem.with_suffix(".tracks.mcap")
+    from_s = default_from_s(duration_s)
+    if score_path.exists() and json.loads(score_path.read_text()).get("from_s", 0.0) == from_s:
+        return json.loads(score_path.read_text())
+    if not tracks.exists():
         pipeline.generate(scenario, rec, progress=False)
         pipeline.track(rec, tracks, progress=False)
-        _, result = pipeline.score(rec, tracks, progress=False)
-        pipeline.write_json(result, score_path)
-    return json.loads(score_path.read_text())
+    _, result = pipeline.score(rec, tracks, progress=False, from_s=from_s)
+    pipeline.write_json(result, score_path)
+    return result
 
 
 def main() -> None:
