@@ -458,13 +458,22 @@ def build_parser() -> argparse.ArgumentParser:
                    "cores; 1 runs them in this process)")
     add_output(p, "output folder (a rerun into it resumes)", old=("--out",), metavar="DIR")
 
-    p = sub.add_parser("export", help="write tracks or a whole recording in the paper's dataset layout")
-    p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl) or recording (dataset, openpose)")
-    p.add_argument("--format", default="crossview-json", choices=("crossview-json", "jsonl", "dataset", "openpose"),
+    p = sub.add_parser("export", help="write tracks or a recording for other tools: the paper's dataset layout, "
+                       "motion (BVH, TRC, C3D), MOTChallenge, COCO keypoints (docs/exports.md)")
+    p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl, bvh, trc, c3d, mot) or recording "
+                   "(dataset, openpose, bvh, trc, c3d, mot, coco)")
+    p.add_argument("--format", default="crossview-json", choices=EXPORT_FORMATS,
                    help="crossview-json: tracks as result_3d.json (default); jsonl: tracks as JSON lines; dataset: "
                    "a recording as a folder of calibration.json, detection.json, annotation_2d.json, "
-                   "annotation_3d.json, scene.json; openpose: the same with OpenPose JSON folders for detection.json")
-    add_output(p, "the file, or a new folder (dataset, openpose)")
+                   "annotation_3d.json, scene.json; openpose: the same with OpenPose JSON folders for detection.json; "
+                   "bvh, trc, c3d: the truth's or the tracks' people, one file per person (BVH: Y up, cm, rotations "
+                   "Zrotation Xrotation Yrotation; TRC: Pose2Sim's, Y up, m; C3D: z up, mm, needs the extra .[c3d]); "
+                   "mot: TrackEval's MOTChallenge folder of the instants `score` compares (tracks need --recording); "
+                   "coco: COCO keypoints per camera, projected truth and detections")
+    p.add_argument("--recording", type=Path, metavar="REC.mcap", help="mot: the recording the tracks were made from")
+    p.add_argument("--rate", type=_positive_float, metavar="HZ", help="bvh, trc, c3d of a tracks file: the rate of "
+                   "the grid the tracks are sampled on (default 30; a recording's truth keeps its own 100 Hz)")
+    add_output(p, "the file, or a new folder (dataset, openpose, bvh, trc, c3d, mot, coco)")
 
     p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
     p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
@@ -953,10 +962,33 @@ def _cmd_evaluate(args) -> None:
     print(format_evaluation(evaluate(args.dataset, args.result)))
 
 
+EXPORT_FORMATS = ("crossview-json", "jsonl", "dataset", "openpose", "bvh", "trc", "c3d", "mot", "coco")
+
+
 def _cmd_export(args) -> None:
     from crossview import pipeline, recording
     from crossview.formats.datasets import export_dataset, export_openpose, write_result_3d
 
+    if args.format != "mot" and args.recording is not None:
+        raise CrossviewError(f"--recording {args.recording}: only --format mot reads a tracks file's recording")
+    if args.format not in ("bvh", "trc", "c3d") and args.rate is not None:
+        raise CrossviewError(f"--rate {args.rate:g}: only --format bvh, trc and c3d resample tracks")
+    if args.format in ("bvh", "trc", "c3d"):
+        from crossview.formats.motion import export_motion
+
+        for line in export_motion(args.file, args.output, args.format, args.rate):
+            print(args.output / line)
+        return
+    if args.format == "mot":
+        from crossview.formats.tracking import export_mot
+
+        print(export_mot(args.file, args.output, args.recording))
+        return
+    if args.format == "coco":
+        from crossview.formats.tracking import export_coco
+
+        print(export_coco(args.file, args.output))
+        return
     if args.format in ("dataset", "openpose"):
         write = export_dataset if args.format == "dataset" else export_openpose
         frames = write(args.file, args.output)

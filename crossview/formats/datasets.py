@@ -447,7 +447,7 @@ def export_dataset(rec_path, out_dir) -> int:
             for i, k, u in zip(cf.truth.person_ids, true_kp, seen)]}
     files["detection.json"] = {"image_wh": [width, height], "frames": detections}
     files["annotation_2d.json"] = {"image_wh": [width, height], "frames": annotations}
-    _write_folder(out_dir, files)
+    write_folder(out_dir, files)
     return len(detections)
 
 
@@ -478,7 +478,7 @@ def export_openpose(rec_path, out_dir) -> int:
         files[f"{camera}/{camera}_{number:012d}_keypoints.json"] = {"version": 1.3, "people": people}
         count += 1
     files[openpose.TIMESTAMPS_FILE] = times
-    _write_folder(out_dir, files)
+    write_folder(out_dir, files)
     return count
 
 
@@ -487,9 +487,7 @@ def _open_export(rec_path, out_dir):
     after checking that `out_dir` is new or empty and that the cameras share one image size."""
     from crossview.recording import box_json, open_recording
 
-    out_dir = Path(out_dir)
-    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
-        raise DatasetError(f"{out_dir}: exists and is not an empty folder; choose a new folder for the dataset")
+    check_new_folder(out_dir)
     rec = open_recording(rec_path)
     sizes = {(c.width_px, c.height_px) for c in rec.cameras}
     if len(sizes) != 1:
@@ -506,9 +504,17 @@ def _open_export(rec_path, out_dir):
     return rec, files
 
 
-def _write_folder(out_dir, files: dict) -> None:
-    """Writes each {relative path: JSON document} under a temporary folder beside `out_dir`, then renames it to
-    `out_dir` (an empty folder of that name is replaced); nothing is left behind on an error or a signal."""
+def check_new_folder(out_dir) -> None:
+    """Fails early, before any work, unless `out_dir` is new or an empty folder (an export's output folder)."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
+        raise DatasetError(f"{out_dir}: exists and is not an empty folder; choose a new folder for the export")
+
+
+def write_folder(out_dir, files: dict) -> None:
+    """Writes each {relative path: JSON document, or bytes as they are} under a temporary folder beside `out_dir`,
+    then renames it to `out_dir` (an empty folder of that name is replaced); nothing is left behind on an error
+    or a signal."""
     import os
     import shutil
 
@@ -522,6 +528,9 @@ def _write_folder(out_dir, files: dict) -> None:
         tmp.mkdir()
         for name, doc in files.items():
             (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+            if isinstance(doc, bytes):
+                (tmp / name).write_bytes(doc)
+                continue
             with open(tmp / name, "w", encoding="utf-8") as f:
                 json.dump(doc, f, separators=(",", ":"), allow_nan=False)
         os.chmod(tmp, 0o755)

@@ -6,7 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from mcap.reader import make_reader
-from mcap.records import Channel, Chunk, Message, Metadata
+from mcap.records import Channel, Chunk, Message
 from mcap.stream_reader import StreamReader
 
 from core.errors import RecordingError
@@ -19,12 +19,11 @@ from crossview.recording.reader import (
     Tracks,
     chunk_records,
     describe_read_error,
+    read_kind,
     read_summary,
 )
 from crossview.recording.schemas import (
     KIND_RECORDING,
-    KIND_TRACKS,
-    METADATA_NAME,
     TOPIC_OUTPUTS,
     TOPIC_TRUTH,
     PoseTruthMsg,
@@ -79,13 +78,7 @@ def info(path, allow_truncated: bool = False, check: bool = True) -> dict:
     by streaming its readable prefix.
     """
     stream = McapStream(path, allow_truncated)
-    kind = None
-    for record in stream.records():
-        if isinstance(record, Metadata) and record.name == METADATA_NAME:
-            kind = record.metadata.get("kind")
-            break
-    if kind not in (KIND_RECORDING, KIND_TRACKS):
-        raise RecordingError(f"{stream.path}: an MCAP file, but not a crossview recording or tracks file")
+    kind = read_kind(path, allow_truncated)
     opener = Recording if kind == KIND_RECORDING else Tracks
     container: Container = opener(path, allow_truncated)
     doc = container.doc

@@ -459,6 +459,19 @@ def read_summary(path: Path) -> dict:
     return {}
 
 
+def read_kind(path, allow_truncated: bool = False) -> str:
+    """The kind of a crossview file (`KIND_RECORDING` or `KIND_TRACKS`) from its metadata record; RecordingError
+    for an MCAP file that is neither (or a file that is not MCAP)."""
+    stream = McapStream(path, allow_truncated)
+    for record in stream.records():
+        if isinstance(record, Metadata) and record.name == METADATA_NAME:
+            kind = record.metadata.get("kind")
+            if kind in (KIND_RECORDING, KIND_TRACKS):
+                return kind
+            break
+    raise RecordingError(f"{stream.path}: an MCAP file, but not a crossview recording or tracks file")
+
+
 def open_recording(path, allow_truncated: bool = False) -> Recording:
     """Opens a recording. Raises RecordingError for a file that is not MCAP, truncated (unless
     `allow_truncated`), corrupt, of a newer format version, or a tracks file."""

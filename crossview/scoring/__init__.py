@@ -52,7 +52,7 @@ from crossview.scoring.report import JSON_KEYS, ScoreReport
 from tracker.types import STANDING_STATES, TrackerOutput, target_arrays
 
 __all__ = ["FLOOR_CELL_M", "JSON_KEYS", "OUTPUT_MAX_AGE_S", "ScoreReport", "ScoringError", "TIMELINE_BIN_S",
-           "TruthTimeline", "WARM_UP_S", "default_from_s", "score"]
+           "TruthTimeline", "WARM_UP_S", "default_from_s", "grid_ticks", "score", "scored_grid"]
 
 logger = logging.getLogger(__name__)
 
@@ -235,6 +235,56 @@ def _over_time_and_place(compared: list[_Compared], events: list[IdEvent], switc
     return timeline, floor
 
 
+def grid_ticks(t_start: float, t_end: float, rate_hz: float) -> np.ndarray:
+    """The evaluation grid: ticks t_start + k / rate_hz from t_start to t_end (the same floats as that sum)."""
+    num_ticks = int(np.floor((t_end - t_start) * rate_hz + 1e-9)) + 1
+    return t_start + np.arange(num_ticks) / rate_hz
+
+
+def _compared(timeline: TruthTimeline, latest: LatestPerTick, any_output: bool, cutoff: float, skeleton: Skeleton,
+              scored_area, root_threshold_m: float):
+    """Per scored tick, (tick, at, person ids, true poses, target ids, target poses): what `score` compares (see
+    the module docstring); ticks before the first output (when there is any) and before `cutoff` (the warm-up)
+    are skipped."""
+    for k, tick in enumerate(latest.ticks.tolist()):
+        chosen = latest.latest(k)  # the latest output stamped at or before the tick
+        if chosen is None and any_output:
+            continue  # nothing delivered yet: no tracker could know anything
+        if tick < cutoff:
+            continue  # the warm-up
+        if chosen is not None and stands(chosen.stamp_s, tick):
+            t_ids, t_poses = _targets(chosen, skeleton)
+            at = chosen.stamp_s
+        else:
+            t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, skeleton.num_joints, 3))
+            at = tick
+        g_ids, g_poses = timeline.at(at)
+        if scored_area is not None:
+            g_ids, g_poses, t_ids, t_poses = _in_area(g_ids, g_poses, t_ids, t_poses, scored_area,
+                                                      root_threshold_m, skeleton)
+        yield tick, at, g_ids, g_poses, t_ids, t_poses
+
+
+def scored_grid(truth: Sequence[PoseTruth], outputs: Iterable[TrackerOutput], *, eval_rate_hz: float = 10.0,
+                root_threshold_m: float = ROOT_MATCH_THRESHOLD_M,
+                scored_area: tuple[float, float, float, float] | None = None, skeleton: Skeleton = COCO17,
+                from_s: float = 0.0):
+    """What `score` compares at each scored tick of its grid, (tick, at, person ids, true poses, target ids,
+    target poses), the people and targets in the scored area only, from `from_s` on (its warm-up): the
+    MOTChallenge export (`crossview.formats.tracking`) writes these, so that another evaluator scores the same
+    instants."""
+    timeline = TruthTimeline(truth)
+    timeline.num_joints = skeleton.num_joints
+    t_start, t_end = timeline.span
+    latest = LatestPerTick(grid_ticks(t_start, t_end, eval_rate_hz) if len(timeline.times) else np.zeros(0))
+    num_outputs = 0
+    for out in outputs:
+        num_outputs += 1
+        latest.offer(out.stamp_s, out)
+    yield from _compared(timeline, latest, num_outputs > 0, t_start + from_s - 1e-9, skeleton, scored_area,
+                         root_threshold_m)
+
+
 def score(
     truth: Sequence[PoseTruth],
     outputs: Iterable[TrackerOutput],
@@ -301,8 +351,7 @@ def score(
         raise ScoringError(f"--from {from_s:g}: the warm-up reaches past the end of the recording, which holds "
                            f"{t_end - t_start:.2f} s of truth; give at most {t_end - t_start:.2f}")
     cutoff = t_start + from_s - 1e-9  # (ticks are t_0 + k / rate: a tick at the warm-up's end is scored)
-    num_ticks = int(np.floor((t_end - t_start) * eval_rate_hz + 1e-9)) + 1 if len(timeline.times) else 0
-    ticks = t_start + np.arange(num_ticks) / eval_rate_hz  # the same floats as t_start + k / eval_rate_hz
+    ticks = grid_ticks(t_start, t_end, eval_rate_hz) if len(timeline.times) else np.zeros(0)
 
     # One pass over the outputs. The grid needs, per tick, only the latest output stamped at or before it
     # (`core.tracks.LatestPerTick`: at most one output per tick is held).
@@ -351,24 +400,9 @@ def score(
                          truth_head=(HeadConvention.EVALUATE if evaluated else HeadConvention.ANNOTATED).value)
     scored_ticks = 0
     compared: list[_Compared] = []  # per identity update
-    for k in range(num_ticks):
-        tick = t_start + k / eval_rate_hz
-        chosen = latest.latest(k)  # the latest output stamped at or before the tick
-        if chosen is None and num_outputs:
-            continue  # nothing delivered yet: no tracker could know anything
-        if tick < cutoff:
-            continue  # the warm-up
+    for tick, at, g_ids, g_poses, t_ids, t_poses in _compared(timeline, latest, num_outputs > 0, cutoff, skeleton,
+                                                              scored_area, root_threshold_m):
         scored_ticks += 1
-        if chosen is not None and stands(chosen.stamp_s, tick):
-            t_ids, t_poses = _targets(chosen, skeleton)
-            at = chosen.stamp_s
-        else:
-            t_ids, t_poses = np.zeros(0, dtype=np.int64), np.zeros((0, skeleton.num_joints, 3))
-            at = tick
-        g_ids, g_poses = timeline.at(at)
-        if scored_area is not None:
-            g_ids, g_poses, t_ids, t_poses = _in_area(g_ids, g_poses, t_ids, t_poses, scored_area,
-                                                          root_threshold_m, skeleton)
         shares = pose_acc.update(g_ids, g_poses, t_poses)
         id_acc.update(g_ids, g_poses, t_ids, t_poses)
         compared.append(_Compared(float(tick), float(at), g_ids, body_roots(g_poses, skeleton), shares, t_ids,
