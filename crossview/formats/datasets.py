@@ -506,9 +506,13 @@ def _open_export(rec_path, out_dir):
 
 def check_new_folder(out_dir) -> None:
     """Fails early, before any work, unless `out_dir` is new or an empty folder (an export's output folder)."""
+    from crossview.outputs import check_output
+
     out_dir = Path(out_dir)
     if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
         raise DatasetError(f"{out_dir}: exists and is not an empty folder; choose a new folder for the export")
+    if not out_dir.exists():
+        check_output(out_dir)  # (its folder can be made and written; it is no input)
 
 
 def write_folder(out_dir, files: dict) -> None:

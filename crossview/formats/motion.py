@@ -259,8 +259,10 @@ def bvh_person(motion: Motion, person: int) -> BvhResult:
     pose = motion.people[person][:, [motion.skeleton.index(n) for n in names]]
     complete = np.isfinite(pose).all(axis=(1, 2))
     if not complete.any():
-        raise ExportError(f"person {person}: never seen with all {len(names)} joints a BVH needs "
-                          f"({', '.join(names)}); too few joints for a BVH")
+        never = [n for n, seen in zip(names, np.isfinite(pose).all(axis=-1).any(axis=0)) if not seen]
+        raise ExportError(f"{motion.source}: person {person}: never seen with all {len(names)} joints a BVH needs "
+                          f"(never known: {', '.join(never) or 'none, but never all at once'}); too few joints "
+                          "for a BVH")
     first, last = np.flatnonzero(complete)[[0, -1]]
     frames = np.arange(first, last + 1)
     known = np.flatnonzero(complete)
@@ -422,7 +424,10 @@ def export_motion(path, out_dir, fmt: str, rate_hz: float | None = None) -> list
     report = []
     for person in sorted(motion.people):
         if fmt == "bvh":
-            r = bvh_person(motion, person)
+            try:
+                r = bvh_person(motion, person)
+            except ExportError as e:
+                raise ExportError(f"{path}: {e}") from None
             name = person_file(person, ".bvh")
             files[name] = r.text.encode("ascii")
             worst = max(r.bone_change_cm, key=r.bone_change_cm.get)

@@ -13,6 +13,7 @@ from crossview.cli import main
 from crossview.formats.motion import (
     BVH_JOINT_NAMES,
     Y_UP,
+    ExportError,
     _bones,
     _points,
     bvh_person,
@@ -103,7 +104,7 @@ def test_bvh_of_a_person_never_seen_whole_is_one_line_naming_the_person(store_re
     motion = read_motion(store_recording)
     person = sorted(motion.people)[0]
     motion.people[person][:, COCO17.index("left_knee")] = np.nan
-    with pytest.raises(Exception, match=f"person {person}: never seen with all 13 joints.*too few joints"):
+    with pytest.raises(ExportError, match=f"person {person}: never seen with all 13 joints.*never known: left_knee"):
         bvh_person(motion, person)
 
 
@@ -255,3 +256,34 @@ def test_tracks_motion_takes_the_latest_output_at_each_tick():
                       10.0)
     assert m.times.tolist() == [0.0, 0.1] and sorted(m.people) == [1]
     assert m.people[1][:, 0, 0].tolist() == [0.0, 3.0]
+
+
+def test_bvh_of_a_tracks_file_with_a_person_missing_a_joint_is_one_line(store_tracks, tmp_path, capsys):
+    tracks = open_tracks(store_tracks)
+    first = min(t.id for out in tracks.outputs() for t in out.targets)
+    broken = tmp_path / "no_knee.mcap"
+    knee = COCO17.index("left_knee")
+    with TracksWriter(broken, tracks.header, tracks.cameras) as writer:
+        for out in tracks.outputs():
+            targets = []
+            for target in out.targets:
+                pose = np.array(target.pose)
+                if target.id == first:
+                    pose[knee] = np.nan
+                targets.append(dataclasses.replace(target, pose=pose))
+            writer.write(TrackerOutput(out.stamp_s, out.camera, targets, out.detection_target_ids))
+        writer.finish(tracks.summary)
+    status = main(["--no-progress", "export", str(broken), "--format", "bvh", "-o", str(tmp_path / "b")])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.splitlines()) == 1 and f"person {first}: never seen with all 13 joints" in err
+    assert "never known: left_knee)" in err and not (tmp_path / "b").exists()
+
+
+@pytest.mark.parametrize("fmt", ["bvh", "mot"], ids=["bvh", "mot"])
+def test_an_export_into_an_unwritable_place_is_one_line_and_leaves_nothing(fmt, store_recording, tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    status = main(["--no-progress", "export", str(store_recording), "--format", fmt, "-o", str(blocker / "out")])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.splitlines()) == 1 and str(blocker) in err
+    assert blocker.read_text() == "x" and sorted(p.name for p in tmp_path.iterdir()) == ["a_file"]
