@@ -172,7 +172,7 @@ def bvh_source_joints(skeleton: Skeleton) -> tuple[str, ...]:
     return (*_LIMB_JOINTS, head)
 
 
-def _points(skeleton: Skeleton, pose: np.ndarray) -> dict[str, np.ndarray]:
+def bvh_points(skeleton: Skeleton, pose: np.ndarray) -> dict[str, np.ndarray]:
     """The BVH joints' positions (F, 3) in the Y-up frame, centimetres, from (F, J, 3) world poses in metres."""
     names = bvh_source_joints(skeleton)
     p = {n: (pose[:, skeleton.index(n)] @ Y_UP.T) * M_TO_CM for n in names}
@@ -189,7 +189,7 @@ def _points(skeleton: Skeleton, pose: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def _bones(pts: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+def bvh_bone_lengths(pts: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     """(F,) length of each bone a BVH offset stands for, centimetres."""
     def dist(a, b):
         return np.linalg.norm(pts[a] - pts[b], axis=-1)
@@ -272,8 +272,8 @@ def bvh_person(motion: Motion, person: int) -> BvhResult:
             full[:, j, c] = np.interp(frames, known, pose[known, j, c])
     whole = np.full((len(frames), motion.skeleton.num_joints, 3), np.nan)
     whole[:, [motion.skeleton.index(n) for n in names]] = full
-    pts = _points(motion.skeleton, whole)
-    bones = _bones(pts)
+    pts = bvh_points(motion.skeleton, whole)
+    bones = bvh_bone_lengths(pts)
     lengths = {k: float(np.median(v)) for k, v in bones.items()}
     change = {k: float(np.max(np.abs(v - lengths[k]))) for k, v in bones.items()}
 
