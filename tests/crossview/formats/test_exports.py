@@ -14,26 +14,14 @@ from crossview.formats.motion import (
     BVH_JOINT_NAMES,
     Y_UP,
     ExportError,
-    bvh_bone_lengths,
     bvh_person,
-    bvh_points,
     read_motion,
     tracks_motion,
 )
 from crossview.recording import TracksWriter, open_recording, open_tracks
+from tests.reference.exports import CHAIN, bvh_errors, disturbed_tracks
 from tracker.types import Target, TargetState, TrackerOutput
 
-# (each BVH joint's chain of bones from the root, for the error bound of forward kinematics)
-_CHAIN = {
-    "Hips": [], "Spine": [], "LeftUpLeg": ["hip_half"], "RightUpLeg": ["hip_half"],
-    "LeftLeg": ["hip_half", "left_thigh"], "LeftFoot": ["hip_half", "left_thigh", "left_shin"],
-    "RightLeg": ["hip_half", "right_thigh"], "RightFoot": ["hip_half", "right_thigh", "right_shin"],
-    "Chest": ["spine"], "Neck": ["spine"], "Head": ["spine", "neck"],
-    "LeftArm": ["spine", "shoulder_half"], "LeftForeArm": ["spine", "shoulder_half", "left_upper_arm"],
-    "LeftHand": ["spine", "shoulder_half", "left_upper_arm", "left_forearm"],
-    "RightArm": ["spine", "shoulder_half"], "RightForeArm": ["spine", "shoulder_half", "right_upper_arm"],
-    "RightHand": ["spine", "shoulder_half", "right_upper_arm", "right_forearm"],
-}
 _FLOAT32_CM = 1e-3  # bvhio computes in float32: 0.01 mm at a few metres
 
 
@@ -42,27 +30,6 @@ def _export(args, capsys):
     out, err = capsys.readouterr()
     assert status == 0, err
     return out
-
-
-def _bvh_errors(motion, person, path, step=1):
-    """Per frame (every `step`-th) and BVH joint: (bvhio's forward-kinematics position - the source point, the
-    bound: the summed change of the bone lengths along the joint's chain), centimetres."""
-    import bvhio
-
-    root = bvhio.readAsHierarchy(str(path))
-    layout = [j for j, _, _ in root.layout()]
-    assert [j.Name for j in layout] == list(BVH_JOINT_NAMES)
-    span = motion.span(person)
-    pts = bvh_points(motion.skeleton, motion.people[person][span])
-    bones = bvh_bone_lengths(pts)
-    median = {k: np.median(v) for k, v in bones.items()}
-    errors, bounds = [], []
-    assert len(root.Keyframes) == len(pts["Hips"])
-    for f in range(0, len(root.Keyframes), step):
-        root.loadPose(f)
-        errors.append([np.linalg.norm(np.array(tuple(j.PositionWorld)) - pts[j.Name][f]) for j in layout])
-        bounds.append([sum(abs(bones[b][f] - median[b]) for b in _CHAIN[j.Name]) for j in layout])
-    return np.array(errors), np.array(bounds), {k: v[::step] for k, v in bones.items()}
 
 
 @pytest.mark.parametrize("which", ["truth", "tracks"])
@@ -74,10 +41,10 @@ def test_bvh_read_back_by_bvhio_is_the_source_within_the_bone_length_change(whic
     assert len(out.splitlines()) == len(motion.people) >= 3
     for person in sorted(motion.people):
         step = 3 if which == "truth" else 1  # (bvhio poses a frame in about 3 ms: every 3rd of the truth's 100 Hz)
-        errors, bounds, bones = _bvh_errors(motion, person, tmp_path / "bvh" / f"person_{person}.bvh", step)
+        errors, bounds, bones = bvh_errors(motion, person, tmp_path / "bvh" / f"person_{person}.bvh", step)
         assert np.all(errors <= bounds + _FLOAT32_CM)
         constant = [j for j, name in enumerate(BVH_JOINT_NAMES)
-                    if all(np.ptp(bones[b]) < 1e-6 for b in _CHAIN[name])]
+                    if all(np.ptp(bones[b]) < 1e-6 for b in CHAIN[name])]
         assert 0 in constant and np.all(errors[:, constant] <= 0.1)  # 1 mm where the lengths are constant
         if which == "truth":
             assert np.all(errors <= 1.0)  # the truth's bones change by under 1 cm (the neck: the nose nods)
@@ -161,39 +128,10 @@ def test_c3d_without_its_extra_says_which_to_install(store_recording, tmp_path, 
     assert not (tmp_path / "c").exists()
 
 
-def _disturbed(tracks_path, out_path):
-    """The tracks with errors of every kind TrackEval and `crossview score` count: two targets swap ids for a
-    while (switches), one is dropped for a second (misses), one is moved 1.4 m away for a second (a false positive
-    and a miss), and a ghost stands in the store for 2 s."""
-    tracks = open_tracks(tracks_path)
-    a, b, c, d = sorted({t.id for out in tracks.outputs() for t in out.targets})[:4]
-    header = dataclasses.replace(tracks.header, method="disturbed")
-    swap = {b: c, c: b}
-    with TracksWriter(out_path, header, tracks.cameras) as writer:
-        for out in tracks.outputs():
-            t = out.stamp_s
-            kept = []
-            for target in out.targets:
-                target = dataclasses.replace(target, pose=np.array(target.pose))
-                if 1.0 <= t < 2.0 and target.id == a:
-                    continue
-                if 2.5 <= t < 4.5 and target.id in swap:
-                    target = dataclasses.replace(target, id=swap[target.id])
-                if 3.0 <= t < 4.0 and target.id == d:
-                    target = dataclasses.replace(target, pose=target.pose + np.array([1.4, 0.0, 0.0]))
-                kept.append(target)
-            if 0.5 <= t < 2.5 and kept:
-                ghost = np.array(kept[0].pose) + np.array([0.0, 2.5, 0.0])
-                kept.append(Target(987654, ghost, t, TargetState.CONFIRMED))
-            writer.write(TrackerOutput(t, out.camera, kept, out.detection_target_ids))
-        writer.finish(tracks.summary)
-    return out_path
-
-
 def test_mot_export_scored_by_trackeval_equals_crossview_score(store_recording, store_tracks, tmp_path, capsys):
     from examples.trackeval_mot import score as trackeval_score
 
-    tracks = _disturbed(store_tracks, tmp_path / "disturbed.mcap")
+    tracks = disturbed_tracks(store_tracks, tmp_path / "disturbed.mcap")
     out = _export([tracks, "--recording", store_recording, "--format", "mot", "-o", tmp_path / "mot"], capsys)
     assert "sequence store_layout1-s0" in out
     report, _ = pipeline.score(store_recording, tracks, progress=False, worker_process=False)
