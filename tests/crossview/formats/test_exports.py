@@ -237,3 +237,18 @@ def test_an_export_is_the_same_bytes_every_time(fmt, store_recording, tmp_path, 
     assert files and files == sorted(p.relative_to(tmp_path / "b") for p in (tmp_path / "b").rglob("*") if p.is_file())
     for f in files:
         assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes(), f
+
+
+@pytest.mark.parametrize("args, named", [
+    (["--format", "trc", "--recording", "REC"], "--recording"),
+    (["--format", "mot", "--rate", "25"], "--rate 25"),
+    (["--format", "coco", "--tracks-file"], "expected here"),
+], ids=["recording-without-mot", "rate-without-motion", "coco-of-tracks"])
+def test_an_export_asked_what_its_format_does_not_take_is_one_line(args, named, store_recording, store_tracks,
+                                                                    tmp_path, capsys):
+    src = store_tracks if "--tracks-file" in args else store_recording
+    args = [str(store_recording) if a == "REC" else a for a in args if a != "--tracks-file"]
+    status = main(["--no-progress", "export", str(src), *args, "-o", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert status == 2 and len(err.splitlines()) == 1 and named in err
+    assert not (tmp_path / "out").exists()
