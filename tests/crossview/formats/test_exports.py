@@ -252,3 +252,24 @@ def test_an_export_asked_what_its_format_does_not_take_is_one_line(args, named, 
     err = capsys.readouterr().err
     assert status == 2 and len(err.splitlines()) == 1 and named in err
     assert not (tmp_path / "out").exists()
+
+
+def test_bvh_of_the_campus_joints_ends_the_head_at_the_top_of_the_head(store_recording, tmp_path):
+    import bvhio
+
+    from core.layouts import coco17_to_campus14
+    from core.types import CAMPUS14
+
+    motion = read_motion(store_recording)
+    person = sorted(motion.people)[0]
+    campus = dataclasses.replace(motion, skeleton=CAMPUS14,
+                                 people={person: coco17_to_campus14(motion.people[person][:60])},
+                                 times=motion.times[:60])
+    result = bvh_person(campus, person)
+    (tmp_path / "p.bvh").write_text(result.text)
+    root = bvhio.readAsHierarchy(str(tmp_path / "p.bvh"))
+    root.loadPose(30)
+    head = next(j for j, _, _ in root.layout() if j.Name == "Head")
+    top = campus.people[person][30, CAMPUS14.index("top_head")] @ Y_UP.T * 100.0
+    bound = result.bone_change_cm["spine"] + result.bone_change_cm["neck"] + 1e-3
+    assert np.linalg.norm(np.array(tuple(head.PositionWorld)) - top) <= bound
