@@ -981,8 +981,17 @@ def _cmd_export(args) -> None:
         return
     if args.format == "mot":
         from crossview.formats.tracking import export_mot
+        from crossview.recording.reader import read_kind
+        from crossview.recording.schemas import KIND_RECORDING
 
-        print(export_mot(args.file, args.output, args.recording))
+        if read_kind(args.file) == KIND_RECORDING:
+            rec, tracks = recording.open_recording(args.file), None
+        elif args.recording is None:
+            raise CrossviewError(f"{args.file}: a tracks file; --format mot needs its recording too (--recording "
+                                 "REC.mcap): the truth and the scored area are there")
+        else:
+            rec, tracks = pipeline.open_run(args.recording, args.file)
+        print(export_mot(rec, tracks, args.output, pipeline.watched_floor(rec.boxes)))
         return
     if args.format == "coco":
         from crossview.formats.tracking import export_coco

@@ -25,43 +25,32 @@ def _mot_rows(frame: int, ids: np.ndarray, roots: np.ndarray) -> list[str]:
     return [f"{frame},{int(i)},-1,-1,-1,-1,1,{x:.6f},{y:.6f},0" for i, (x, y) in zip(ids, roots)]
 
 
-def export_mot(path, out_dir, recording=None) -> str:
+def export_mot(rec, tracks, out_dir, scored_area=None) -> str:
     """Writes a recording's truth, or a tracks file with its recording's truth, as a TrackEval MOTChallenge folder:
     `gt/mot_challenge/CROSSVIEW-test/SEQ/gt/gt.txt` with `seqinfo.ini`, `gt/mot_challenge/seqmaps/CROSSVIEW-test.txt`
     and, for tracks, `trackers/mot_challenge/CROSSVIEW-test/METHOD/data/SEQ.txt` (SEQ: scenario and seed). Frame k
     is the k-th tick of `crossview score`'s grid (1-based); a tick `score` does not score has no rows.
 
     Args:
-        path: a recording, or a tracks file (then `recording` is required).
+        rec: the opened recording.
+        tracks: the opened tracks file made from it (checked by the caller), or None for the truth alone.
         out_dir: a new folder.
-        recording: the tracks' recording.
+        scored_area: the store's floor, as `crossview score` takes it (`crossview.pipeline.watched_floor`).
 
     Returns:
         A line saying what was written.
     """
-    from crossview import pipeline
     from crossview.formats.datasets import check_new_folder, write_folder
-    from crossview.recording import open_recording
-    from crossview.recording.reader import read_kind
-    from crossview.recording.schemas import KIND_RECORDING
     from crossview.scoring import scored_grid
     from crossview.scoring.identity import body_roots
 
     out_dir = Path(out_dir)
     check_new_folder(out_dir)
-    if read_kind(path) == KIND_RECORDING:
-        rec, tracks, outputs = open_recording(path), None, ()
-    else:
-        if recording is None:
-            raise ExportError(f"{path}: a tracks file; --format mot needs its recording too (--recording REC.mcap): "
-                              "the truth and the scored area are there")
-        rec, tracks = pipeline.open_run(recording, path)
-        outputs = tracks.outputs()
+    outputs = () if tracks is None else tracks.outputs()
     rate = 10.0
     truth = list(rec.truth())
     t0 = min((s.t_s for s in truth), default=0.0)
-    grid = scored_grid(truth, outputs, eval_rate_hz=rate, scored_area=pipeline.watched_floor(rec.boxes),
-                       skeleton=rec.skeleton)
+    grid = scored_grid(truth, outputs, eval_rate_hz=rate, scored_area=scored_area, skeleton=rec.skeleton)
     gt, found, ticks = [], [], 0
     for tick, _, g_ids, g_poses, t_ids, t_poses in grid:
         frame = int(round((tick - t0) * rate)) + 1
