@@ -174,6 +174,21 @@ def test_coco_read_back_by_pycocotools(store_recording, tmp_path, capsys):
             if seen.any():
                 worst = max(worst, float(np.max(np.abs(anns[pid][seen, :2] - true_px[seen]))))
     assert worst < 1e-6
+    # ... and against OpenCV's projection of the truth at each frame's capture (an independent camera model).
+    import cv2
+
+    cam = rec.cameras[0]
+    rvec, _ = cv2.Rodrigues(cam.R_cam_from_world)
+    worst, joints = 0.0, 0
+    for image_id, cf in enumerate((cf for cf in rec.frames(with_poses=True) if cf.frame.camera == camera), start=1):
+        anns = {a["person_id"]: np.reshape(a["keypoints"], (-1, 3)) for a in gt.loadAnns(gt.getAnnIds(image_id))}
+        for pid, pose in zip(cf.poses_at_capture.person_ids, cf.poses_at_capture.poses):
+            if int(pid) in anns:
+                px, _ = cv2.projectPoints(pose.reshape(-1, 1, 3), rvec, cam.t_cam_from_world, cam.K, cam.dist)
+                seen = anns[int(pid)][:, 2] == 2
+                worst = max(worst, float(np.max(np.abs(px.reshape(-1, 2)[seen] - anns[int(pid)][seen, :2]))))
+                joints += int(seen.sum())
+    assert joints > 1000 and worst < 1e-6
     detections = json.loads((tmp_path / "coco" / f"{camera}_detections.json").read_text())
     assert len(detections) == sum(int(np.isfinite(cf.frame.keypoints_px).all(axis=-1).any(axis=-1).sum())
                                   for cf in frames)
