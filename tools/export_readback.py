@@ -55,12 +55,12 @@ worst = 0.0
 for p in sorted(m.people):
     lines = (D / "trc" / f"person_{p}.trc").read_text().split("\n")
     t = np.array([[float(c) if c else np.nan for c in line.split("\t")] for line in lines[5:] if line])
-    worst = max(worst, np.nanmax(np.abs(t[:, 2:] - (m.people[p][m.span(p)] @ Y_UP.T).reshape(len(t), -1))))
+    worst = max(worst, np.nanmax(np.abs(t[:, 2:] - (m.people[p] @ Y_UP.T).reshape(len(t), -1))))
 print(f"TRC truth (parsed as text, tab-separated): max |error| {1000 * worst:.6f} mm over {len(m.people)} people")
 worst = 0.0
 for p in sorted(m.people):
     c = ezc3d.c3d(str(D / "c3d" / f"person_{p}.c3d"))
-    worst = max(worst, np.max(np.abs(c["data"]["points"][:3].transpose(2, 1, 0) - m.people[p][m.span(p)] * 1000)))
+    worst = max(worst, np.max(np.abs(c["data"]["points"][:3].transpose(2, 1, 0) - m.people[p] * 1000)))
 print(f"C3D truth (ezc3d): max |error| {worst:.6f} mm")
 disturbed = disturbed_tracks(D / "tracks.mcap", D / "disturbed.mcap")
 for name, tracks in (("tracks", D / "tracks.mcap"), ("disturbed", disturbed)):

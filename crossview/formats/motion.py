@@ -38,24 +38,43 @@ class Motion:
     Attributes:
         skeleton: the joint layout.
         times: (F,) seconds since the recording's start, increasing.
-        people: person or target id -> (F, J, 3) world positions, metres (z up); NaN where the person is absent
-            or the joint unknown.
+        people: person or target id -> (n, J, 3) world positions, metres (z up), from the person's first frame to
+            their last: NaN where the person is absent or the joint unknown. (Only each person's own span is held:
+            a long recording's hundreds of passers-by each keep their minute, not the whole recording.)
+        first: person id -> the index in `times` of their first frame.
         source: "truth" or "tracks".
     """
 
     skeleton: Skeleton
     times: np.ndarray
     people: dict[int, np.ndarray]
+    first: dict[int, int]
     source: str
 
     @property
     def rate_hz(self) -> float:
         return float(1.0 / np.median(np.diff(self.times))) if len(self.times) > 1 else 1.0
 
-    def span(self, person: int) -> slice:
-        """The frames from the person's first to last with any known joint."""
-        seen = np.flatnonzero(np.isfinite(self.people[person]).any(axis=(1, 2)))
-        return slice(int(seen[0]), int(seen[-1]) + 1) if len(seen) else slice(0, 0)
+    def times_of(self, person: int) -> np.ndarray:
+        """The times of the person's frames (`people[person]`)."""
+        start = self.first[person]
+        return self.times[start:start + len(self.people[person])]
+
+
+def _collect(rows, times: np.ndarray, skeleton: Skeleton, source: str) -> Motion:
+    """A Motion from (frame index, ids (P,), poses (P, J, 3)) rows, each person over their own span."""
+    seen: dict[int, list[tuple[int, np.ndarray]]] = {}
+    for f, ids, poses in rows:
+        for i, pose in zip(ids, poses):
+            seen.setdefault(int(i), []).append((f, pose))
+    people, first = {}, {}
+    for i in sorted(seen):
+        frames = [f for f, _ in seen[i]]
+        first[i] = frames[0]
+        people[i] = np.full((frames[-1] - frames[0] + 1, skeleton.num_joints, 3), np.nan)
+        for f, pose in seen[i]:
+            people[i][f - frames[0]] = pose
+    return Motion(skeleton, times, people, first, source)
 
 
 def read_motion(path, rate_hz: float | None = None) -> Motion:
@@ -75,14 +94,16 @@ def read_motion(path, rate_hz: float | None = None) -> Motion:
             raise ExportError(f"{path}: --rate resamples a tracks file; a recording's truth is written at its own "
                               "rate (every sample)")
         rec = open_recording(path)
-        samples = list(rec.truth())
-        times = np.array([s.t_s for s in samples], dtype=np.float64)
-        ids = sorted({int(i) for s in samples for i in s.person_ids})
-        people = {i: np.full((len(samples), rec.skeleton.num_joints, 3), np.nan) for i in ids}
-        for f, s in enumerate(samples):
-            for i, pose in zip(s.person_ids, s.poses):
-                people[int(i)][f] = pose
-        return Motion(rec.skeleton, times, people, "truth")
+        times: list[float] = []
+
+        def rows():
+            for f, sample in enumerate(rec.truth()):  # (streamed: only each person's own frames are kept)
+                times.append(sample.t_s)
+                yield f, sample.person_ids, sample.poses
+
+        motion = _collect(rows(), np.zeros(0), rec.skeleton, "truth")
+        motion.times = np.array(times, dtype=np.float64)
+        return motion
     tracks = open_tracks(path)
     return tracks_motion(tracks.outputs(), tracks.skeleton, rate_hz or DEFAULT_TRACKS_RATE_HZ)
 
@@ -96,25 +117,19 @@ def tracks_motion(outputs, skeleton: Skeleton, rate_hz: float) -> Motion:
 
     outputs = list(outputs)
     if not outputs:
-        return Motion(skeleton, np.zeros(0), {}, "tracks")
+        return Motion(skeleton, np.zeros(0), {}, {}, "tracks")
     stamps = [o.stamp_s for o in outputs]
     t0, t1 = min(stamps), max(stamps)
     ticks = TickOutputs.grid(t0, t1, rate_hz)
     grid = TickOutputs(ticks)
     for out in outputs:
         grid.add(out)
-    rows: list[tuple[np.ndarray, np.ndarray]] = []
-    for tick, chosen in grid.walk():
-        if chosen is None or tick - chosen.stamp_s > OUTPUT_MAX_AGE_S:
-            rows.append((np.zeros(0, dtype=np.int64), np.zeros((0, skeleton.num_joints, 3))))
-        else:
-            rows.append(scored_targets(chosen.targets, skeleton.num_joints))
-    ids = sorted({int(i) for r, _ in rows for i in r})
-    people = {i: np.full((len(ticks), skeleton.num_joints, 3), np.nan) for i in ids}
-    for f, (r, poses) in enumerate(rows):
-        for i, pose in zip(r, poses):
-            people[int(i)][f] = pose
-    return Motion(skeleton, np.asarray(ticks, dtype=np.float64), people, "tracks")
+    def rows():
+        for f, (tick, chosen) in enumerate(grid.walk()):
+            if chosen is not None and tick - chosen.stamp_s <= OUTPUT_MAX_AGE_S:
+                yield (f, *scored_targets(chosen.targets, skeleton.num_joints))
+
+    return _collect(rows(), np.asarray(ticks, dtype=np.float64), skeleton, "tracks")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -347,9 +362,8 @@ def trc_person(motion: Motion, person: int, file_name: str) -> tuple[str, int]:
     the rate line's names and values with units m, marker names, X1 Y1 Z1 ...), then `Frame#` from 1 and `Time`
     (seconds since the recording's start) and the markers in metres, Y up (`Y_UP`); an unknown joint is an empty
     cell. Frames from the person's first to last appearance. Returns (text, frames)."""
-    span = motion.span(person)
-    pose = motion.people[person][span] @ Y_UP.T
-    times = motion.times[span]
+    pose = motion.people[person] @ Y_UP.T
+    times = motion.times_of(person)
     names = [TRC_MARKERS.get(j, j) for j in motion.skeleton.joints]
     rate = motion.rate_hz
     n = len(times)
@@ -384,8 +398,7 @@ def c3d_person(motion: Motion, person: int) -> tuple[bytes, int]:
         import c3d
     except ImportError:
         raise ExportError("--format c3d needs the optional extra: pip install 'crossview-testbed[c3d]'") from None
-    span = motion.span(person)
-    pose = motion.people[person][span] * 1000.0
+    pose = motion.people[person] * 1000.0
     writer = c3d.Writer(point_rate=float(motion.rate_hz), point_units="mm  ")
     writer.set_point_labels([TRC_MARKERS.get(j, j) for j in motion.skeleton.joints])
     frames = []

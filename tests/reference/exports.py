@@ -30,8 +30,7 @@ def bvh_errors(motion, person, path, step=1):
     root = bvhio.readAsHierarchy(str(path))
     layout = [j for j, _, _ in root.layout()]
     assert [j.Name for j in layout] == list(BVH_JOINT_NAMES)
-    span = motion.span(person)
-    pts = bvh_points(motion.skeleton, motion.people[person][span])
+    pts = bvh_points(motion.skeleton, motion.people[person])
     bones = bvh_bone_lengths(pts)
     median = {k: np.median(v) for k, v in bones.items()}
     errors, bounds = [], []

@@ -89,9 +89,8 @@ def test_trc_is_pose2sims_layout_and_parses_back_to_the_truth(store_recording, t
     assert lines[4].split("\t")[2:5] == ["X1", "Y1", "Z1"]
     table = np.array([[float(c) if c else np.nan for c in line.split("\t")] for line in lines[5:] if line])
     assert int(head["NumFrames"]) == len(table) and np.array_equal(table[:, 0], np.arange(1, len(table) + 1))
-    span = motion.span(person)
-    np.testing.assert_allclose(table[:, 1], motion.times[span], atol=1e-6)
-    expected = (motion.people[person][span] @ Y_UP.T).reshape(len(table), -1)
+    np.testing.assert_allclose(table[:, 1], motion.times_of(person), atol=1e-6)
+    expected = (motion.people[person] @ Y_UP.T).reshape(len(table), -1)
     error = np.abs(table[:, 2:] - expected)
     assert np.nanmax(error) <= 1e-6 and np.array_equal(np.isnan(table[:, 2:]), np.isnan(expected))
 
@@ -106,7 +105,7 @@ def test_c3d_read_back_by_ezc3d_is_the_truth(store_recording, tmp_path, capsys):
         assert point["LABELS"]["value"][:2] == ["Nose", "LEye"] and point["UNITS"]["value"] == ["mm"]
         assert point["RATE"]["value"][0] == pytest.approx(100.0)
         read = c["data"]["points"][:3].transpose(2, 1, 0)  # (frames, markers, xyz), mm
-        expected = motion.people[person][motion.span(person)] * 1000.0
+        expected = motion.people[person] * 1000.0
         assert read.shape == expected.shape
         assert np.max(np.abs(read - expected)) < 0.01  # float32 in the file: 0.01 mm at a few metres
 
@@ -279,7 +278,7 @@ def test_bvh_of_the_campus_joints_ends_the_head_at_the_top_of_the_head(store_rec
     person = sorted(motion.people)[0]
     campus = dataclasses.replace(motion, skeleton=CAMPUS14,
                                  people={person: coco17_to_campus14(motion.people[person][:60])},
-                                 times=motion.times[:60])
+                                 first={person: 0}, times=motion.times_of(person)[:60])
     result = bvh_person(campus, person)
     (tmp_path / "p.bvh").write_text(result.text)
     root = bvhio.readAsHierarchy(str(tmp_path / "p.bvh"))
