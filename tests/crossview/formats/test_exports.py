@@ -287,3 +287,15 @@ def test_bvh_of_the_campus_joints_ends_the_head_at_the_top_of_the_head(store_rec
     top = campus.people[person][30, CAMPUS14.index("top_head")] @ Y_UP.T * 100.0
     bound = result.bone_change_cm["spine"] + result.bone_change_cm["neck"] + 1e-3
     assert np.linalg.norm(np.array(tuple(head.PositionWorld)) - top) <= bound
+
+
+def test_bvh_fills_a_gap_by_interpolating_the_joints_and_counts_it(store_recording):
+    motion = read_motion(store_recording)
+    person = sorted(motion.people)[0]
+    knee = COCO17.index("left_knee")
+    whole = bvh_person(motion, person)
+    motion.people[person][10:21, knee] = np.nan
+    gapped = bvh_person(motion, person)
+    assert whole.filled_frames == 0 and gapped.filled_frames == 11 and gapped.frames == whole.frames
+    rows = gapped.text.splitlines()[-gapped.frames:]
+    assert rows[:10] == whole.text.splitlines()[-whole.frames:][:10]  # before the gap: the same frames
