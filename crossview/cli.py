@@ -471,6 +471,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "mot: TrackEval's MOTChallenge folder of the instants `score` compares (tracks need --recording); "
                    "coco: COCO keypoints per camera, projected truth and detections")
     p.add_argument("--recording", type=Path, metavar="REC.mcap", help="mot: the recording the tracks were made from")
+    p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="mot: leave out the first S "
+                   "seconds, as `score --from S` does (default 0)")
     p.add_argument("--rate", type=_positive_float, metavar="HZ", help="bvh, trc, c3d of a tracks file: the rate of "
                    "the grid the tracks are sampled on (default 30; a recording's truth keeps its own 100 Hz)")
     add_output(p, "the file, or a new folder (dataset, openpose, bvh, trc, c3d, mot, coco)")
@@ -971,6 +973,8 @@ def _cmd_export(args) -> None:
 
     if args.format != "mot" and args.recording is not None:
         raise CrossviewError(f"--recording {args.recording}: only --format mot reads a tracks file's recording")
+    if args.format != "mot" and args.from_s is not None:
+        raise CrossviewError(f"--from {args.from_s:g}: only --format mot leaves out a warm-up")
     if args.format not in ("bvh", "trc", "c3d") and args.rate is not None:
         raise CrossviewError(f"--rate {args.rate:g}: only --format bvh, trc and c3d resample tracks")
     if args.format in ("bvh", "trc", "c3d"):
@@ -991,7 +995,7 @@ def _cmd_export(args) -> None:
                                  "REC.mcap): the truth and the scored area are there")
         else:
             rec, tracks = pipeline.open_run(args.recording, args.file)
-        print(export_mot(rec, tracks, args.output, pipeline.watched_floor(rec.boxes)))
+        print(export_mot(rec, tracks, args.output, pipeline.watched_floor(rec.boxes), from_s=args.from_s or 0.0))
         return
     if args.format == "coco":
         from crossview.formats.tracking import export_coco

@@ -25,7 +25,7 @@ def _mot_rows(frame: int, ids: np.ndarray, roots: np.ndarray) -> list[str]:
     return [f"{frame},{int(i)},-1,-1,-1,-1,1,{x:.6f},{y:.6f},0" for i, (x, y) in zip(ids, roots)]
 
 
-def export_mot(rec, tracks, out_dir, scored_area=None) -> str:
+def export_mot(rec, tracks, out_dir, scored_area=None, from_s: float = 0.0) -> str:
     """Writes a recording's truth, or a tracks file with its recording's truth, as a TrackEval MOTChallenge folder:
     `gt/mot_challenge/CROSSVIEW-test/SEQ/gt/gt.txt` with `seqinfo.ini`, `gt/mot_challenge/seqmaps/CROSSVIEW-test.txt`
     and, for tracks, `trackers/mot_challenge/CROSSVIEW-test/METHOD/data/SEQ.txt` (SEQ: scenario and seed). Frame k
@@ -36,6 +36,7 @@ def export_mot(rec, tracks, out_dir, scored_area=None) -> str:
         tracks: the opened tracks file made from it (checked by the caller), or None for the truth alone.
         out_dir: a new folder.
         scored_area: the store's floor, as `crossview score` takes it (`crossview.pipeline.watched_floor`).
+        from_s: the warm-up left out, seconds after the first truth sample (`score --from`).
 
     Returns:
         A line saying what was written.
@@ -50,7 +51,8 @@ def export_mot(rec, tracks, out_dir, scored_area=None) -> str:
     rate = 10.0
     truth = list(rec.truth())
     t0 = min((s.t_s for s in truth), default=0.0)
-    grid = scored_grid(truth, outputs, eval_rate_hz=rate, scored_area=scored_area, skeleton=rec.skeleton)
+    grid = scored_grid(truth, outputs, eval_rate_hz=rate, scored_area=scored_area, skeleton=rec.skeleton,
+                       from_s=from_s)
     gt, found, ticks = [], [], 0
     for tick, _, g_ids, g_poses, t_ids, t_poses in grid:
         frame = int(round((tick - t0) * rate)) + 1
