@@ -259,8 +259,9 @@ def test_an_export_is_the_same_bytes_every_time(fmt, store_recording, tmp_path, 
 @pytest.mark.parametrize("args, named", [
     (["--format", "trc", "--recording", "REC"], "--recording"),
     (["--format", "mot", "--rate", "25"], "--rate 25"),
+    (["--format", "bvh", "--from", "2"], "--from 2"),
     (["--format", "coco", "--tracks-file"], "expected here"),
-], ids=["recording-without-mot", "rate-without-motion", "coco-of-tracks"])
+], ids=["recording-without-mot", "rate-without-motion", "from-without-mot", "coco-of-tracks"])
 def test_an_export_asked_what_its_format_does_not_take_is_one_line(args, named, store_recording, store_tracks,
                                                                     tmp_path, capsys):
     src = store_tracks if "--tracks-file" in args else store_recording
