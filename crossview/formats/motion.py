@@ -3,7 +3,7 @@ as Pose2Sim writes it) and C3D (biomechanics), one file per person, from a recor
 
 The people's motion (`Motion`) comes from a recording's truth samples as they are (100 Hz), or from a tracks file
 on a regular grid (`rate_hz`): at each tick the latest output stamped at or before it, as `crossview score` takes
-it (`crossview.scoring.TickOutputs`), its confirmed and lost targets. See docs/exports.md.
+it (`core.tracks.LatestPerTick`), its confirmed and lost targets. See docs/exports.md.
 """
 
 from __future__ import annotations
@@ -110,24 +110,26 @@ def read_motion(path, rate_hz: float | None = None) -> Motion:
 
 def tracks_motion(outputs, skeleton: Skeleton, rate_hz: float) -> Motion:
     """Tracker outputs on a grid at `rate_hz` from the first output's stamp to the last: at each tick the targets
-    of the latest output stamped at or before it (`crossview.scoring.TickOutputs`), nobody where it is older than
-    `crossview.scoring.OUTPUT_MAX_AGE_S`."""
-    from crossview.scoring import OUTPUT_MAX_AGE_S, TickOutputs
-    from crossview.scoring.association import scored_targets
+    of the latest output stamped at or before it (`core.tracks.LatestPerTick`), nobody where it no longer stands
+    (`core.tracks.stands`: older than `core.tracks.OUTPUT_MAX_AGE_S`)."""
+    from core.tracks import LatestPerTick
+    from crossview.scoring import grid_ticks
+    from tracker.types import target_arrays
 
     outputs = list(outputs)
     if not outputs:
         return Motion(skeleton, np.zeros(0), {}, {}, "tracks")
     stamps = [o.stamp_s for o in outputs]
-    t0, t1 = min(stamps), max(stamps)
-    ticks = TickOutputs.grid(t0, t1, rate_hz)
-    grid = TickOutputs(ticks)
+    ticks = grid_ticks(min(stamps), max(stamps), rate_hz)
+    grid = LatestPerTick(ticks)
     for out in outputs:
-        grid.add(out)
+        grid.offer(out.stamp_s, out)
+
     def rows():
-        for f, (tick, chosen) in enumerate(grid.walk()):
-            if chosen is not None and tick - chosen.stamp_s <= OUTPUT_MAX_AGE_S:
-                yield (f, *scored_targets(chosen.targets, skeleton.num_joints))
+        for f in range(len(ticks)):
+            chosen = grid.at(f)
+            if chosen is not None:
+                yield (f, *target_arrays(chosen.targets, skeleton.num_joints))
 
     return _collect(rows(), np.asarray(ticks, dtype=np.float64), skeleton, "tracks")
 
