@@ -12,6 +12,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from pathlib import Path
 
 from core.errors import CrossviewError, Interrupted
@@ -1249,11 +1250,19 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+_THREAD_GRACE_S = 5.0  # how long `run` waits for threads that are no daemons before it ends without them
+
+
 def run() -> None:
-    """The `crossview` command. It ends when its command has: a thread that is no daemon and still runs then
-    (a plug-in tracker's, left running) would keep the interpreter waiting on it for ever, so the process
-    ends without waiting, after one warning line naming the threads (docs/plugins.md)."""
+    """The `crossview` command. It ends when its command has: a thread that is no daemon and still runs
+    `_THREAD_GRACE_S` later (a plug-in tracker's, left running) would keep the interpreter waiting on it for
+    ever, so the process ends without waiting, after one warning line naming the threads (docs/plugins.md)."""
     status = main()
+    # Threads of the command's own (a pool's result handler, say) end in moments: wait for them a little.
+    deadline = time.monotonic() + _THREAD_GRACE_S
+    for t in threading.enumerate():
+        if t is not threading.main_thread() and not t.daemon:
+            t.join(max(0.0, deadline - time.monotonic()))
     lingering = [t.name for t in threading.enumerate()
                  if t is not threading.main_thread() and not t.daemon and t.is_alive()]
     if lingering:
