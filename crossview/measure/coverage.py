@@ -79,7 +79,7 @@ PCP_BONE_JOINTS: tuple[tuple[str, tuple[int, ...]], ...] = (
     ("head", (0, 3, 4)), ("torso", (5, 6, 11, 12)),
 )
 
-PCP_CALIBRATION = (1.318, 1.004)
+PCP_CALIBRATION = (0.832, 0.948)
 """(a, b) of the calibration curve: the predicted PCP's log-odds are a + b x the quality's log-odds,
 PCP = 1 / (1 + exp(-(a + b ln(q / (1 - q))))): 0 where no bone is usable, 1 where every bone always is, and in
 between the tracker's odds of a correct bone are e^a times (b = 1: proportional to) the odds that the bone has two
