@@ -46,8 +46,6 @@ def test_an_unknown_flag_is_named(argv, capsys):
 def test_cold_cache_is_seen(tmp_path, monkeypatch):
     """A kernel module without an index in numba's cache is cold; one with an index (here under $NUMBA_CACHE_DIR,
     as numba names it) is not."""
-    if jit.numba is None:
-        pytest.skip("numba is not installed: nothing compiles")
     monkeypatch.setattr(jit, "GROUPS", {"probe": ("core.errors",)})  # (a module no kernel of which is cached)
     monkeypatch.setattr(jit, "PLAIN", frozenset())
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
@@ -61,8 +59,6 @@ def test_cold_cache_is_seen(tmp_path, monkeypatch):
 
 
 def test_a_cold_cache_is_said_as_compiling_starts_and_bad_input_stays_one_line(tmp_path, monkeypatch, capsys):
-    if jit.numba is None:
-        pytest.skip("numba is not installed: nothing compiles")
     monkeypatch.setattr(jit, "cold_cache", lambda: True)
 
     def command(args):  # (a kernel never compiled in this process: numba compiles it here)
