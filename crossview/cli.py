@@ -700,12 +700,8 @@ def _cmd_coverage(args) -> None:
 
 def _cmd_plan(args) -> None:
     from crossview import pipeline
-    from crossview.experiments import plan
+    from crossview.experiments import plan, sweep
     from crossview.measure import coverage
-
-    if not 0.0 < args.target_pcp <= 1.0:  # (before any work; NaN fails too)
-        raise CrossviewError(f"--target-pcp: {args.target_pcp:g} is outside (0, 1]")
-    from crossview.experiments import sweep
 
     seeds = sweep.parse_seeds(args.seeds)
     heights = plan.parse_floats("--heights", args.heights, 0.0, 20.0, "metres") if args.heights else None
@@ -722,10 +718,7 @@ def _cmd_plan(args) -> None:
     print(result.table())
     print(f"recommended: {rec.cameras} cameras ({rec.grid[0]} x {rec.grid[1]}) at {rec.height_m:g} m with "
           f"{rec.hfov_deg:g} deg lenses, predicted PCP {rec.predicted_pcp:.3f}")
-    scenario = pipeline.load_scenario(args.scenario, people=args.people,
-                                      overrides=plan.rig_overrides(pipeline.load_scenario(args.scenario), rec.grid,
-                                                                    rec.height_m, rec.hfov_deg))
-    print(f"map: {coverage.write_map(coverage.coverage(scenario), map_path)}")
+    print(f"map: {coverage.write_map(rec.coverage, map_path)}")
     if args.confirm:
         result = plan.Plan(**{**vars(result), "confirmed": plan.confirm(
             args.scenario, result, confirm_dir, people=args.people, seeds=seeds, duration_s=args.duration,

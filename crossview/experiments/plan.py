@@ -11,7 +11,7 @@ until a candidate meets the target, then bisects between the last that did not a
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from core.errors import CrossviewError
@@ -36,6 +36,7 @@ class Candidate:
         predicted_pcp: `Prediction.predicted_pcp`.
         usable_two_view_share: `Prediction.usable_two_view_share`.
         risk_share: `Prediction.risk_share`.
+        coverage: the whole `crossview.measure.coverage.Coverage` the figures come from (for its map).
     """
 
     cameras: int
@@ -45,6 +46,7 @@ class Candidate:
     predicted_pcp: float
     usable_two_view_share: float
     risk_share: float
+    coverage: object = field(default=None, compare=False, repr=False)
 
     def as_dict(self) -> dict:
         return {"cameras": self.cameras, "grid": list(self.grid), "height_m": round(self.height_m, 3),
@@ -101,9 +103,10 @@ def predict_candidate(path, scenario, grid, height_m: float, hfov_deg: float, pe
 
     rig = pipeline.load_scenario(path, seed=scenario.seed, people=people,
                                  overrides=rig_overrides(scenario, grid, height_m, hfov_deg))
-    pred = coverage(rig).prediction
+    cov = coverage(rig)
+    pred = cov.prediction
     return Candidate(grid[0] * grid[1], tuple(grid), height_m, hfov_deg, pred.predicted_pcp,
-                     pred.usable_two_view_share, pred.risk_share)
+                     pred.usable_two_view_share, pred.risk_share, cov)
 
 
 def search(ladder: list[tuple[int, int]], target: float, predict_at) -> tuple[int | None, dict[int, Candidate]]:
