@@ -254,16 +254,17 @@ class Crowd:
         self._spots = store.browse_spots()
         self._obstacles = store.obstacle_arrays()
         _warm_up()
-        checkout = [o for o in store.obstacles if o.key == "store.checkout_m"]
+        # The tills: (where a shopper stands, heading, the counter's top), 0.5 m off the middle of each paying face.
         self._checkout_spots = []
-        self._checkout_top = checkout[0].height if checkout else 0.0
-        if checkout:
-            ob = checkout[0]
+        for ob in store.obstacles:
+            if ob.till_normal is None:
+                continue
+            n = ob.till_normal
             for side in (-1.0, 1.0):
-                p = ob.center + np.array([0.0, side * (ob.half[1] + 0.5)])
+                p = ob.center + n * side * (float(np.abs(n) @ ob.half) + 0.5)
                 i, j = store.cell_of(p)
                 if store.free[i, j]:
-                    self._checkout_spots.append((p, math.atan2(-side, 0.0)))
+                    self._checkout_spots.append((p, math.atan2(-side * n[1], -side * n[0]), ob.height))
         fi, fj = np.nonzero(store.free)
         cells = store.cell_centers[fi, fj]
         # Places to start or stand: free cells away from the walls (the door corridors are free too).
@@ -373,9 +374,8 @@ class Crowd:
             open_tills = [spot for spot in self._checkout_spots if not self._taken(spot[0], s)]
             if open_tills and not agent.checked_out:
                 # Pay at a free till; with every till busy, leave without queueing (self-checkout).
-                goal, heading = open_tills[int(rng.integers(len(open_tills)))]
+                goal, heading, top = open_tills[int(rng.integers(len(open_tills)))]
                 kind = Activity.CHECKOUT
-                top = self._checkout_top
             else:
                 goal, kind = store.exit.inside, Activity.WALK
         else:

@@ -39,6 +39,12 @@ INSIDE_DOOR_M = 0.8
 MIN_AISLE_M = 1.0
 
 
+def _tidy(v: float) -> float:
+    """4.2, not 4.200000000000001: a layout's computed coordinate, where the floor's own digits make it exact."""
+    short = round(v, 9)
+    return short if abs(short - v) < 1e-12 else v
+
+
 @dataclass(frozen=True)
 class ShelfConfig:
     """[[store.shelves]]: one shelf unit, a box standing on the floor.
@@ -147,15 +153,89 @@ class AislesConfig:
         if side:
             units += [(room / 2, c, room, side, self.wall_shelf_height_m) for c in (side / 2, across - side / 2)]
 
-        def tidy(v: float) -> float:  # 4.2, not 4.200000000000001; a value the floor's own digits make stays exact
-            short = round(v, 9)
-            return short if abs(short - v) < 1e-12 else v
-
         def shelf(a: float, c: float, size_a: float, size_c: float, height: float) -> ShelfConfig:
             xy, size = ((c, a), (size_c, size_a)) if self.along is AisleAxis.Y else ((a, c), (size_a, size_c))
-            return ShelfConfig(tuple(tidy(v) for v in xy), (*(tidy(v) for v in size), height))
+            return ShelfConfig(tuple(_tidy(v) for v in xy), (*(_tidy(v) for v in size), height))
 
         return tuple(shelf(*unit) for unit in units)
+
+
+# A checkout counter a `[store.checkout_lanes]` row expands to: ((x, y) centre, (x, y, height) size).
+Counter = tuple[tuple[float, float], tuple[float, float, float]]
+
+
+@dataclass(frozen=True)
+class CheckoutLanesConfig:
+    """[store.checkout_lanes]: a row of checkout counters near the front wall, each with its lane beside it.
+
+    The counters run along `along` from `front_gap_m` off the front wall and stand side by side across the
+    floor from `start_m`: a lane, a counter, a lane, a counter, ... (`count` of each, so the row is
+    count x (lane_width_m + counter_width_m) wide). Shoppers pay standing in the lane at the middle of a
+    counter's long face (either face); with every till taken they leave without paying. A row that does not
+    fit the floor (across it, or leaving under 1 m behind the counters) is refused, naming the key; counters
+    are checked with the shelves at load (apart from them, doors free, all floor reachable).
+
+    Attributes:
+        count: checkout lanes, one counter each.
+        along: the axis the counters run along, as `[store.aisles]`'s: "y" from the front wall y = 0, "x" from
+            the front wall x = 0.
+        start_m: where the row starts across the floor (the first lane's outer edge; x when `along` is "y");
+            left out, the row stands in the middle of the floor's width across.
+        front_gap_m: clear floor between the front wall and the counters' near ends.
+        counter_length_m: length of each counter along `along`.
+        counter_width_m: width of each counter across.
+        counter_height_m: height of the counters, at most the ceiling.
+        lane_width_m: clear width of each lane, between a counter and the one before it (or the row's start).
+    """
+
+    count: int = bounded(3, 1, 50, unit="lanes")
+    along: AisleAxis = AisleAxis.Y
+    start_m: float | None = bounded(None, 0.0, MAX_FLOOR_M)
+    front_gap_m: float = bounded(1.5, MIN_AISLE_M, MAX_FLOOR_M)
+    counter_length_m: float = bounded(2.0, 0.0, MAX_FLOOR_M, low_open=True)
+    counter_width_m: float = bounded(0.8, 0.0, MAX_FLOOR_M, low_open=True)
+    counter_height_m: float = bounded(0.9, 0.0, 20.0, low_open=True)
+    lane_width_m: float = bounded(1.2, MIN_AISLE_M, MAX_FLOOR_M)
+
+    def __post_init__(self):
+        check_ranges(self)
+
+    def counters(self, width_m: float, depth_m: float, ceiling_m: float) -> tuple[Counter, ...]:
+        """The counters of this row on a [0, width] x [0, depth] floor, from `start_m` across: ((x, y) centre,
+        (x, y, height) size) each.
+
+        Raises:
+            ValueError: the row does not fit the floor or the ceiling; the message names the key
+                (`checkout_lanes.`...) and what would fit.
+        """
+        if self.counter_height_m > ceiling_m:
+            raise ValueError(f"checkout_lanes.counter_height_m: {self.counter_height_m:g} m is above ceiling_m = "
+                             f"{ceiling_m:g}")
+        length, across = (depth_m, width_m) if self.along is AisleAxis.Y else (width_m, depth_m)
+        step = self.lane_width_m + self.counter_width_m
+        row = self.count * step
+        if row > across + 1e-9:
+            raise ValueError(f"checkout_lanes.count: {self.count} lanes {self.lane_width_m:g} m wide beside counters "
+                             f"{self.counter_width_m:g} m wide ({row:.2f} m) do not fit across the floor's "
+                             f"{across:g} m (at most {int((across + 1e-9) // step)} lanes)")
+        start = (across - row) / 2 if self.start_m is None else self.start_m
+        if start + row > across + 1e-9:
+            raise ValueError(f"checkout_lanes.start_m: a row {row:.2f} m wide from {start:g} m ends past the floor's "
+                             f"{across:g} m across (at most {across - row:.2f} m)")
+        behind = length - self.front_gap_m - self.counter_length_m
+        if behind < MIN_AISLE_M:
+            raise ValueError(f"checkout_lanes.counter_length_m: {self.counter_length_m:g} m counters from "
+                             f"front_gap_m = {self.front_gap_m:g} m leave {behind:.2f} m of the floor's {length:g} m "
+                             f"along {self.along.value} behind them, need >= {MIN_AISLE_M:g} m (at most "
+                             f"{length - self.front_gap_m - MIN_AISLE_M:.2f} m)")
+        a = self.front_gap_m + self.counter_length_m / 2  # centre along `along`
+        out = []
+        for k in range(self.count):
+            c = start + k * step + self.lane_width_m + self.counter_width_m / 2
+            xy, size = (((c, a), (self.counter_width_m, self.counter_length_m)) if self.along is AisleAxis.Y
+                        else ((a, c), (self.counter_length_m, self.counter_width_m)))
+            out.append((tuple(_tidy(v) for v in xy), (*(_tidy(v) for v in size), self.counter_height_m)))
+        return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -176,6 +256,8 @@ class StoreConfig:
         door_width_m: clear width of both doors.
         checkout_m: (x, y) centre of the checkout counter; left out, the store has none.
         checkout_size_m: (x, y, height) of the checkout counter.
+        checkout_lanes: a row of checkout counters with their lanes ([store.checkout_lanes]), besides or instead of
+            `checkout_m`'s counter; the counters are checked with the shelves at load.
     """
 
     width_m: float = bounded(4.0, 2.0, MAX_FLOOR_M)
@@ -189,6 +271,7 @@ class StoreConfig:
     door_width_m: float = bounded(1.0, 0.7, 5.0)
     checkout_m: tuple[float, float] | None = bounded(None, 0.0, MAX_FLOOR_M)
     checkout_size_m: tuple[float, float, float] = bounded((1.4, 0.6, 0.9), 0.0, MAX_FLOOR_M, low_open=True)
+    checkout_lanes: CheckoutLanesConfig | None = None
     # Index of the first shelf that `aisles` expanded to (None: all written by hand), for error messages only.
     first_expanded: int | None = field(default=None, init=False, compare=False, repr=False)
 
@@ -203,6 +286,8 @@ class StoreConfig:
             object.__setattr__(self, "first_expanded", len(self.shelves))
             object.__setattr__(self, "shelves", self.shelves + expanded)
             object.__setattr__(self, "aisles", None)
+        if self.checkout_lanes is not None:
+            self.checkout_lanes.counters(self.width_m, self.depth_m, self.ceiling_m)  # raises where it does not fit
         for i, shelf in enumerate(self.shelves):
             if shelf.size_m[2] > self.ceiling_m:
                 raise ValueError(f"shelves[{i}].size_m: height {shelf.size_m[2]} is above ceiling_m = {self.ceiling_m}")
@@ -218,6 +303,8 @@ class Obstacle:
         half: (2,) half extents along the rectangle's own axes.
         yaw: rotation about z, radians.
         height: top of the box above the floor.
+        till_normal: (2,) for a checkout counter, the normal of the faces shoppers pay at (standing 0.5 m off
+            either face's middle); None for a shelf.
     """
 
     key: str
@@ -225,6 +312,7 @@ class Obstacle:
     half: np.ndarray
     yaw: float
     height: float
+    till_normal: np.ndarray | None = None
 
     def corners(self) -> np.ndarray:
         """(4, 2) footprint corners, counter-clockwise."""
@@ -320,7 +408,7 @@ class StoreGeometry:
 
     Attributes:
         config: the `[store]` section.
-        obstacles: shelves then the checkout counter.
+        obstacles: shelves, then the checkout counter, then the checkout lanes' counters.
         entrance, exit: the doors.
         free: (nx, ny) bool navigation grid, True where a pelvis may plan to be.
         boxes: every box of the store for drawing and recording.
@@ -351,7 +439,14 @@ class StoreGeometry:
                                       math.radians(shelf.yaw_deg), shelf.size_m[2]))
         if config.checkout_m is not None:
             obstacles.append(Obstacle("store.checkout_m", np.array(config.checkout_m, float),
-                                      np.array(config.checkout_size_m[:2], float) / 2, 0.0, config.checkout_size_m[2]))
+                                      np.array(config.checkout_size_m[:2], float) / 2, 0.0, config.checkout_size_m[2],
+                                      np.array([0.0, 1.0])))
+        if config.checkout_lanes is not None:
+            lanes = config.checkout_lanes
+            normal = np.array([1.0, 0.0] if lanes.along is AisleAxis.Y else [0.0, 1.0])  # the long faces, in the lanes
+            for k, (center, size) in enumerate(lanes.counters(W, D, config.ceiling_m)):
+                obstacles.append(Obstacle(f"store.checkout_lanes[{k}]", np.array(center, float),
+                                          np.array(size[:2], float) / 2, 0.0, size[2], normal))
         self.obstacles = tuple(obstacles)
         # The same rectangles as arrays, for vectorised distance and push-out.
         self._ob_center = np.array([o.center for o in obstacles]).reshape(-1, 2)
@@ -620,7 +715,7 @@ class StoreGeometry:
             across = INSIDE_DOOR_M if door.inward[1] else door.width
             boxes.append(Box(kind, (c[0], c[1], DOOR_MAT_HEIGHT_M / 2), (along, across, DOOR_MAT_HEIGHT_M)))
         for ob in self.obstacles:
-            kind = BoxKind.CHECKOUT if ob.key == "store.checkout_m" else BoxKind.SHELF
+            kind = BoxKind.SHELF if ob.till_normal is None else BoxKind.CHECKOUT
             boxes.append(Box(kind, (ob.center[0], ob.center[1], ob.height / 2),
                              (2 * ob.half[0], 2 * ob.half[1], ob.height), ob.yaw))
         return tuple(boxes)
@@ -632,7 +727,7 @@ class StoreGeometry:
         """
         spots = []
         for k, ob in enumerate(self.obstacles):
-            if ob.key == "store.checkout_m":
+            if ob.till_normal is not None:  # a checkout counter: paid at, not browsed
                 continue
             c, s = math.cos(ob.yaw), math.sin(ob.yaw)
             ax, ay = np.array([c, s]), np.array([-s, c])

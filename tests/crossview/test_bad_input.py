@@ -69,6 +69,15 @@ SCENARIO_CASES = [
      "s.toml: [store] aisles.count: 10 aisles between 9 gondolas 1.2 m wide do not fit across the floor's 18 m"),
     ("aisles-too-long", "[store]\nwidth_m = 18.0\ndepth_m = 12.0\n[store.aisles]\ngondola_length_m = 11.0\n", [],
      "s.toml: [store] aisles.gondola_length_m: 11 m gondolas leave less than 1 m of cross aisle"),
+    ("checkout-lanes-do-not-fit", "[store]\nwidth_m = 18.0\ndepth_m = 12.0\n[store.checkout_lanes]\ncount = 10\n", [],
+     "s.toml: [store] checkout_lanes.count: 10 lanes 1.2 m wide beside counters 0.8 m wide (20.00 m) do not fit "
+     "across the floor's 18 m (at most 9 lanes)"),
+    ("checkout-lanes-too-long", "[store]\nwidth_m = 18.0\ndepth_m = 12.0\n[store.checkout_lanes]\n"
+     "counter_length_m = 10.0\n", [], "s.toml: [store] checkout_lanes.counter_length_m: 10 m counters from "
+     "front_gap_m = 1.5 m leave 0.50 m of the floor's 12 m along y behind them, need >= 1 m (at most 9.50 m)"),
+    ("checkout-lane-before-a-door", "[store]\nwidth_m = 12.0\ndepth_m = 8.0\nexit_m = [9.0, 0.0]\n"
+     "[store.checkout_lanes]\nfront_gap_m = 1.2\n", [],
+     "s.toml: store.exit_m: door at (9, 0) is blocked by store.checkout_lanes[2]"),
     ("trapped-back-half", (Path(__file__).resolve().parents[1] / "sim" / "data" / "trapped_back_half.toml").read_text(),
      [], "s.toml: store.shelves[0]: closes off 14.8 m² of walkable floor"),
 ]

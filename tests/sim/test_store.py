@@ -14,9 +14,11 @@ import scipy.sparse.csgraph
 from core.errors import ScenarioError
 from core.records import BoxKind
 from sim import scenario as sc
+from sim.crowd import Crowd, CrowdConfig
 from sim.store import (
     AisleAxis,
     AislesConfig,
+    CheckoutLanesConfig,
     Obstacle,
     ShelfConfig,
     StoreConfig,
@@ -263,6 +265,108 @@ def test_an_area_two_shelves_close_together_names_both():
     with pytest.raises(ScenarioError, match=r": store.shelves\[1\] and store.shelves\[0\] together: closes off "
                                             r"8.1 m² of walkable floor in x \[0.3, 7.7\] x y \[4.6, 5.7\] m"):
         StoreGeometry(_store(shelves=shelves, entrance_m=(2.0, 0.0), exit_m=(6.0, 0.0)))
+
+
+# ---------------------------------------------------------------- the store builder: [store.checkout_lanes]
+
+LANES_TOML = """
+[store]
+width_m = 12.0
+depth_m = 12.0
+entrance_m = [1.5, 0.0]
+exit_m = [10.5, 0.0]
+
+[store.aisles]
+count = 3
+gondola_length_m = 5.0
+front_aisle_m = 4.0
+
+[store.checkout_lanes]
+count = 3
+front_gap_m = 1.2
+counter_length_m = 1.8
+"""
+
+
+def test_checkout_lanes_expand_to_the_counters_worked_out_by_hand(tmp_path):
+    # docs/scenarios.md's example by hand: a row of 3 x (1.2 m lane + 0.8 m counter) = 6 m in the middle of the
+    # 12 m floor starts at x = 3; counter k's centre is 3 + 2k + 1.2 + 0.4, its near end 1.2 m off the front wall.
+    path = tmp_path / "lanes.toml"
+    path.write_text(LANES_TOML)
+    loaded = sc.load(path)
+    store = StoreGeometry(loaded.store, name="lanes")
+    counters = [b for b in store.boxes if b.kind is BoxKind.CHECKOUT]
+    assert [(tuple(map(float, b.center_m)), tuple(map(float, b.size_m)), b.yaw_rad) for b in counters] == [
+        ((4.6, 2.1, 0.45), (0.8, 1.8, 0.9), 0.0), ((6.6, 2.1, 0.45), (0.8, 1.8, 0.9), 0.0),
+        ((8.6, 2.1, 0.45), (0.8, 1.8, 0.9), 0.0)]
+    assert [o.key for o in store.obstacles[-3:]] == [f"store.checkout_lanes[{k}]" for k in range(3)]
+    # `scenarios --show` writes the table back (it loads as the same store) and lists the counters as comments.
+    shown = sc.resolved_toml(loaded)
+    assert sc._from_text(shown, {}, "shown.toml", "shown").store == loaded.store
+    assert "#   store.checkout_lanes[2]: [8.6, 2.1], [0.8, 1.8, 0.9]" in shown
+    # Shoppers pay in the lanes: 0.5 m off the middle of each counter's long faces, facing it, at its height.
+    tills = Crowd(CrowdConfig(people=4), store, np.random.default_rng(0))._checkout_spots
+    assert [(tuple(np.round(p, 6)), round(math.degrees(h)) % 360, top) for p, h, top in tills] == [
+        ((3.7, 2.1), 0, 0.9), ((5.5, 2.1), 180, 0.9), ((5.7, 2.1), 0, 0.9), ((7.5, 2.1), 180, 0.9),
+        ((7.7, 2.1), 0, 0.9), ((9.5, 2.1), 180, 0.9)]
+
+
+def test_checkout_lanes_along_x_are_the_row_along_y_transposed_and_every_lane_is_as_wide_as_asked():
+    rng = np.random.default_rng(11)
+    for _ in range(12):
+        lanes = CheckoutLanesConfig(count=int(rng.integers(1, 6)), lane_width_m=float(rng.uniform(1.0, 2.0)),
+                                    counter_width_m=float(rng.uniform(0.5, 1.0)),
+                                    counter_length_m=float(rng.uniform(1.0, 3.0)),
+                                    front_gap_m=float(rng.uniform(1.0, 2.0)),
+                                    start_m=None if rng.integers(2) else float(rng.uniform(0.0, 2.0)))
+        w, d = float(rng.uniform(14.0, 20.0)), float(rng.uniform(8.0, 12.0))
+        along_y = lanes.counters(w, d, 3.0)
+        along_x = dataclasses.replace(lanes, along=AisleAxis.X).counters(d, w, 3.0)
+        assert [(c[::-1], (*size[1::-1], size[2])) for c, size in along_y] == [(c, size) for c, size in along_x]
+        # Across the floor: the row's start, then lane, counter, lane, counter, ...
+        start = (w - lanes.count * (lanes.lane_width_m + lanes.counter_width_m)) / 2 if lanes.start_m is None \
+            else lanes.start_m
+        edges = [start] + [e for c, _ in along_y for e in (c[0] - lanes.counter_width_m / 2,
+                                                           c[0] + lanes.counter_width_m / 2)]
+        np.testing.assert_allclose(np.diff(edges)[::2], lanes.lane_width_m, atol=1e-6)
+        np.testing.assert_allclose([c[1] - size[1] / 2 for c, size in along_y], lanes.front_gap_m, atol=1e-9)
+
+
+@pytest.mark.parametrize(("lanes", "expected"), [
+    (CheckoutLanesConfig(count=10), r"checkout_lanes.count: 10 lanes 1.2 m wide beside counters 0.8 m wide "
+                                    r"\(20.00 m\) do not fit across the floor's 18 m \(at most 9 lanes\)"),
+    (CheckoutLanesConfig(start_m=13.0), r"checkout_lanes.start_m: a row 6.00 m wide from 13 m ends past the "
+                                        r"floor's 18 m across \(at most 12.00 m\)"),
+    (CheckoutLanesConfig(counter_length_m=10.0), r"checkout_lanes.counter_length_m: 10 m counters from "
+                                                 r"front_gap_m = 1.5 m leave 0.50 m .* \(at most 9.50 m\)"),
+    (CheckoutLanesConfig(counter_height_m=3.5), r"checkout_lanes.counter_height_m: 3.5 m is above ceiling_m = 3"),
+])
+def test_checkout_lanes_that_do_not_fit_the_floor_name_the_key(lanes, expected):
+    with pytest.raises(ValueError, match=expected):
+        StoreConfig(width_m=18.0, depth_m=12.0, checkout_lanes=lanes)
+    # The most that fit are accepted: 9 lanes across 18 m, a row from 12 m, 9.5 m counters.
+    for fits in (dict(count=9), dict(start_m=12.0), dict(counter_length_m=9.5)):
+        StoreConfig(width_m=18.0, depth_m=12.0, checkout_lanes=CheckoutLanesConfig(**fits))
+
+
+def test_a_lane_walled_in_by_shelves_is_refused_naming_its_counter():
+    # The first lane runs along the x = 0 wall; shelves written by hand close both its ends, so only its counter
+    # stands between the lane and the store. The named counter's removal joins the lane (scipy's labels).
+    shelves = (ShelfConfig((0.6, 0.675), (1.2, 0.55, 1.6)), ShelfConfig((0.6, 3.2), (1.2, 0.4, 1.6)))
+    config = _store(shelves=shelves, entrance_m=(4.0, 0.0), exit_m=(6.0, 0.0),
+                    checkout_lanes=CheckoutLanesConfig(count=1, start_m=0.0, front_gap_m=1.0, counter_length_m=2.0))
+    with pytest.raises(ScenarioError, match=r"store: store.checkout_lanes\[0\]: closes off 0.6 m² of walkable floor "
+                                            r"in x \[0.3, 0.8\] x y \[1.4, 2.5\] m from the doors"):
+        StoreGeometry(config)
+    bare = StoreGeometry(_store(entrance_m=(4.0, 0.0), exit_m=(6.0, 0.0)))
+    counter = Obstacle("counter", np.array([1.6, 2.0]), np.array([0.4, 1.0]), 0.0, 0.9)
+    obstacles = [Obstacle(f"s{i}", np.array(s.center_m), np.array(s.size_m[:2]) / 2, 0.0, s.size_m[2])
+                 for i, s in enumerate(shelves)]
+    entrance = bare.cell_of(bare.entrance.inside)
+    lane = bare.cell_of((0.5, 2.0))
+    with_counter, _ = scipy.ndimage.label(store_reference.free_grid(bare, [*obstacles, counter]), structure=EIGHT)
+    without, _ = scipy.ndimage.label(store_reference.free_grid(bare, obstacles), structure=EIGHT)
+    assert with_counter[lane] != with_counter[entrance] and without[lane] == without[entrance] != 0
 
 
 @pytest.mark.parametrize("name", [*SHIPPED, "hypermarket", "convenience"])
