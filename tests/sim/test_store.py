@@ -349,6 +349,34 @@ def test_checkout_lanes_that_do_not_fit_the_floor_name_the_key(lanes, expected):
         StoreConfig(width_m=18.0, depth_m=12.0, checkout_lanes=CheckoutLanesConfig(**fits))
 
 
+def test_a_row_of_checkout_lanes_that_fits_cuts_off_no_floor():
+    # Lanes, the front gap and the floor behind the counters are all >= 1 m, so a row alone closes nothing off:
+    # on an empty floor it is accepted, with every free cell in the entrance's component (scipy's labels), or
+    # refused naming the door it stands in front of.
+    rng = np.random.default_rng(12)
+    accepted = 0
+    for _ in range(25):
+        w, d = float(rng.uniform(8.0, 16.0)), float(rng.uniform(6.0, 10.0))
+        lanes = CheckoutLanesConfig(count=int(rng.integers(1, 5)), lane_width_m=float(rng.uniform(1.0, 1.6)),
+                                    counter_width_m=float(rng.uniform(0.5, 1.0)),
+                                    counter_length_m=float(rng.uniform(1.0, d - 3.5)),
+                                    front_gap_m=float(rng.uniform(1.0, 2.0)),
+                                    along=AisleAxis.X if rng.integers(2) else AisleAxis.Y)
+        try:
+            store = StoreGeometry(_store(width_m=w, depth_m=d, checkout_lanes=lanes))
+        except ValueError as e:
+            assert re.match(r"checkout_lanes\.(count|counter_length_m): ", str(e)), e
+            continue
+        except ScenarioError as e:
+            assert re.search(r": store\.(entrance|exit)_m: door at .* store\.checkout_lanes\[\d\]", str(e)), e
+            continue
+        labels, _ = scipy.ndimage.label(store.free, structure=EIGHT)
+        assert set(np.unique(labels[store.free])) == {labels[store.cell_of(store.entrance.inside)]}
+        assert sum(b.kind is BoxKind.CHECKOUT for b in store.boxes) == lanes.count
+        accepted += 1
+    assert accepted >= 10, accepted
+
+
 def test_a_lane_walled_in_by_shelves_is_refused_naming_its_counter():
     # The first lane runs along the x = 0 wall; shelves written by hand close both its ends, so only its counter
     # stands between the lane and the store. The named counter's removal joins the lane (scipy's labels).
