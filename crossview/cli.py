@@ -334,8 +334,9 @@ def build_parser() -> argparse.ArgumentParser:
     add_output(p, "the plan to write (JSON)", metavar="PLAN.json")
     p.add_argument("--map", type=Path, metavar="MAP.png", help="the recommended rig's coverage map (default: "
                    "PLAN.png beside the plan)")
-    p.add_argument("--confirm", action="store_true", help="measure the recommended rig: a sweep (--seeds x "
-                   "--duration) into PLAN.confirm/ beside the plan, and say whether the tracker agrees")
+    p.add_argument("--confirm", action="store_true", help="measure the recommended rig with the tracker (a sweep "
+                   "of --seeds x --duration into PLAN.confirm/cN/ beside the plan), then walk the grid ladder to "
+                   "the fewest cameras measured to meet the target, which becomes the recommendation")
     p.add_argument("--seeds", default="0,1,2", help="with --confirm: comma-separated seeds (default 0,1,2)")
     p.add_argument("--duration", type=_duration_s, default=30.0, help="with --confirm: simulated seconds per "
                    "seed (default 30)")
@@ -722,12 +723,23 @@ def _cmd_plan(args) -> None:
     if args.confirm:
         result = plan.Plan(**{**vars(result), "confirmed": plan.confirm(
             args.scenario, result, confirm_dir, people=args.people, seeds=seeds, duration_s=args.duration,
-            workers=args.workers, progress=not args.no_progress)})
+            workers=args.workers, progress=progress)})
         c = result.confirmed
-        verdict = "meets the target" if c["meets_target"] else "does NOT meet the target"
-        print(f"confirmed: measured PCP {c['pcp_mean']:.3f} (95 % interval {c['pcp_ci95'][0]:.3f} to "
-              f"{c['pcp_ci95'][1]:.3f}, seeds {', '.join(map(str, c['seeds']))}, {c['duration_s']:g} s each): "
-              f"{verdict} {result.target_pcp:g}")
+        for m in c["measured"]:
+            verdict = "meets the target" if m["meets_target"] else "does NOT meet the target"
+            print(f"measured: {m['cameras']} cameras ({m['grid'][0]} x {m['grid'][1]}): PCP {m['pcp_mean']:.3f} "
+                  f"(95 % interval {m['pcp_ci95'][0]:.3f} to {m['pcp_ci95'][1]:.3f}, seeds "
+                  f"{', '.join(map(str, m['seeds']))}, {m['duration_s']:g} s each): {verdict} {result.target_pcp:g}")
+        if c["meets_target"]:
+            below = c["steps_below_prediction"]
+            moved = ("the prediction's answer" if below == 0 else
+                     f"{abs(below)} grid step{'' if abs(below) == 1 else 's'} "
+                     f"{'below' if below > 0 else 'above'} the prediction's {rec.cameras}")
+            print(f"confirmed: {c['cameras']} cameras ({c['grid'][0]} x {c['grid'][1]}) are the fewest measured to "
+                  f"meet PCP {result.target_pcp:g}: {c['pcp_mean']:.3f} ({moved})")
+        else:
+            print(f"confirmed: no rig measured meets PCP {result.target_pcp:g}; the most measured, {c['cameras']} "
+                  f"cameras, gave {c['pcp_mean']:.3f}")
     pipeline.write_json(result.as_dict(), args.output)
     print(f"plan: {args.output}")
 

@@ -18,6 +18,8 @@ from core.errors import CrossviewError
 
 GRID_ASPECT_TOLERANCE = 1.4
 """A grid fits the floor when its columns-to-rows ratio is within this factor of the floor's width-to-depth."""
+MIN_CAMERAS = 2
+"""The fewest cameras of a candidate: the tracker triangulates from two views or more."""
 CONFIRM_SEEDS = (0, 1, 2)
 """The seeds of `--confirm`'s sweep."""
 CONFIRM_DURATION_S = 30.0
@@ -56,9 +58,9 @@ class Candidate:
 
 
 def grid_ladder(width_m: float, depth_m: float, max_cameras: int) -> list[tuple[int, int]]:
-    """The candidate grids (rows, cols) of a floor, one per camera count, in order of count: every grid whose
-    columns-to-rows ratio is within `GRID_ASPECT_TOLERANCE` of the floor's width-to-depth, the best-fitting one
-    where several have the same count; at most `max_cameras` cameras."""
+    """The candidate grids (rows, cols) of a floor, one per camera count from `MIN_CAMERAS`, in order of count:
+    every grid whose columns-to-rows ratio is within `GRID_ASPECT_TOLERANCE` of the floor's width-to-depth, the
+    best-fitting one where several have the same count; at most `max_cameras` cameras."""
     from sim.cameras import MAX_GRID
 
     aspect = width_m / depth_m
@@ -68,6 +70,8 @@ def grid_ladder(width_m: float, depth_m: float, max_cameras: int) -> list[tuple[
             count = rows * cols
             if count > max_cameras:
                 break
+            if count < MIN_CAMERAS:
+                continue
             misfit = abs(math.log(cols / rows / aspect))
             if misfit <= math.log(GRID_ASPECT_TOLERANCE) and (count not in best or misfit < best[count][0]):
                 best[count] = (misfit, (rows, cols))
@@ -151,7 +155,8 @@ class Plan:
         people: the crowd planned for.
         recommended: the chosen rig (the fewest cameras; among equal counts, the first height and lens given).
         candidates: every rig predicted, by camera count, then height and lens.
-        confirmed: `--confirm`'s measurement, or None.
+        ladder: the grids searched (`grid_ladder`), in order of count.
+        confirmed: `--confirm`'s measurement (`confirm`), or None.
     """
 
     scenario: str
@@ -159,13 +164,26 @@ class Plan:
     people: int
     recommended: Candidate
     candidates: tuple[Candidate, ...]
+    ladder: tuple[tuple[int, int], ...] = ()
     confirmed: dict | None = None
 
+    @property
+    def answer(self) -> tuple[int, tuple[int, int], str]:
+        """(cameras, grid, by what): the fewest cameras measured to meet the target where `--confirm` found
+        them, else the prediction's."""
+        c = self.confirmed
+        if c and c["meets_target"]:
+            return c["cameras"], tuple(c["grid"]), "measurement"
+        return self.recommended.cameras, self.recommended.grid, "prediction"
+
     def as_dict(self) -> dict:
+        cameras, grid, by = self.answer
+        rec = self.recommended
         return {"scenario": self.scenario, "target_pcp": self.target_pcp, "people": self.people,
-                "recommended_cameras": self.recommended.cameras, "grid": list(self.recommended.grid),
-                "height_m": round(self.recommended.height_m, 3), "hfov_deg": round(self.recommended.hfov_deg, 3),
-                "predicted_pcp": round(self.recommended.predicted_pcp, 4),
+                "recommended_cameras": cameras, "grid": list(grid), "recommended_by": by,
+                "height_m": round(rec.height_m, 3), "hfov_deg": round(rec.hfov_deg, 3),
+                "predicted_cameras": rec.cameras, "predicted_grid": list(rec.grid),
+                "predicted_pcp": round(rec.predicted_pcp, 4),
                 "candidates": [c.as_dict() for c in self.candidates], "confirmed": self.confirmed}
 
     def table(self) -> str:
@@ -242,13 +260,14 @@ def plan(path, target_pcp: float, *, people: int | None = None, heights_m: tuple
                              f"{best.hfov_deg:g} deg), and the largest count tried {largest} (--max-cameras "
                              f"{limit})")
     recommended = min(found, key=lambda c: (c.cameras, heights.index(c.height_m), lenses.index(c.hfov_deg)))
-    return Plan(scenario.name, target_pcp, scenario.crowd.people, recommended, tuple(predicted))
+    return Plan(scenario.name, target_pcp, scenario.crowd.people, recommended, tuple(predicted), tuple(ladder))
 
 
-def confirm(path, result: Plan, out: Path, *, people: int | None = None, seeds: tuple[int, ...] = CONFIRM_SEEDS,
-            duration_s: float = CONFIRM_DURATION_S, workers: int | None = None, progress: bool = True) -> dict:
-    """Measures the recommended rig: a sweep of `seeds` cells (`crossview.experiments.sweep`) into `out`, and the
-    tracker's PCP over them: {cameras, grid, seeds, pcp, pcp_mean, pcp_ci95, meets_target}.
+def measure(path, grid: tuple[int, int], height_m: float, hfov_deg: float, out: Path, *, target_pcp: float,
+            people: int | None, seeds: tuple[int, ...], duration_s: float, workers: int | None,
+            progress: bool) -> dict:
+    """The tracker's PCP on one rig: a sweep of `seeds` cells (`crossview.experiments.sweep`, each leaving out the
+    default warm-up) into `out`: {cameras, grid, seeds, duration_s, pcp, pcp_mean, pcp_ci95, meets_target, sweep}.
 
     Raises:
         CrossviewError: a cell failed (its line names it).
@@ -258,8 +277,7 @@ def confirm(path, result: Plan, out: Path, *, people: int | None = None, seeds: 
     from crossview.experiments.sweep_report import t_interval
 
     scenario = pipeline.load_scenario(path)
-    rec = result.recommended
-    fixed = rig_overrides(scenario, rec.grid, rec.height_m, rec.hfov_deg)
+    fixed = rig_overrides(scenario, grid, height_m, hfov_deg)
     if people is not None:
         fixed["crowd.people"] = people
     axes = tuple(sweep.Axis(key, (value,)) for key, value in fixed.items())
@@ -273,6 +291,78 @@ def confirm(path, result: Plan, out: Path, *, people: int | None = None, seeds: 
     pcp = [float(r["score"]["pcp"]) for r in summary.rows]
     mean = sum(pcp) / len(pcp)
     low, high = t_interval(pcp)
-    return {"cameras": rec.cameras, "grid": list(rec.grid), "seeds": list(seeds), "duration_s": duration_s,
+    return {"cameras": grid[0] * grid[1], "grid": list(grid), "seeds": list(seeds), "duration_s": duration_s,
             "pcp": [round(p, 4) for p in pcp], "pcp_mean": round(mean, 4), "pcp_ci95": [round(low, 4), round(high, 4)],
-            "meets_target": mean >= result.target_pcp, "sweep": str(out)}
+            "meets_target": mean >= target_pcp, "sweep": str(out)}
+
+
+def walk(start: int, length: int, meets) -> int | None:
+    """The fewest index of a ladder of `length` rigs at which `meets(i)` holds, asking as few as it can from
+    `start`: down from a start that meets (one step, then two, four, ... until one falls short, then bisection
+    between), or up from one that does not (the same, upward; None where not even the last meets). Assumes that
+    `meets` never turns false with more cameras."""
+    if meets(start):
+        low, high, step = -1, start, 1  # ladder[low] falls short (-1: none asked), ladder[high] meets
+        while high - step >= 0:
+            if not meets(high - step):
+                low = high - step
+                break
+            high, step = high - step, step * 2
+    else:
+        low, high, step = start, None, 1
+        while low + step < length:
+            if meets(low + step):
+                high = low + step
+                break
+            low, step = low + step, step * 2
+        if high is None:
+            if low == length - 1 or not meets(length - 1):
+                return None
+            high = length - 1
+    while high - low > 1:
+        mid = (low + high) // 2
+        if meets(mid):
+            high = mid
+        else:
+            low = mid
+    return high
+
+
+def confirm(path, result: Plan, out: Path, *, people: int | None = None, seeds: tuple[int, ...] = CONFIRM_SEEDS,
+            duration_s: float = CONFIRM_DURATION_S, workers: int | None = None, progress=None) -> dict:
+    """The recommendation measured, then the ladder walked with the tracker to the fewest cameras that meet the
+    target (same height and lens): down from a recommendation that meets it (one grid step, then two, four, ...
+    until a rig falls short, then bisection between), or up from one that does not. Each rig is a sweep of
+    `seeds` cells (`measure`) into out/cN/ (a rerun resumes). Like the prediction's search, it assumes that more
+    cameras never measure worse; the measured rigs are all listed.
+
+    Returns:
+        {cameras, grid, seeds, duration_s, pcp, pcp_mean, pcp_ci95, meets_target, sweep}: the fewest cameras
+        measured to meet the target (else the most measured, `meets_target` false), with `measured` (every rig
+        measured, by count) and `steps_below_prediction` (grid steps from the prediction's answer down to it).
+
+    Raises:
+        CrossviewError: a cell failed.
+    """
+    rec = result.recommended
+    ladder = list(result.ladder) or [rec.grid]
+    start = ladder.index(rec.grid)
+    measured: dict[int, dict] = {}
+
+    def meets(i: int) -> bool:
+        if i not in measured:
+            grid = ladder[i]
+            measured[i] = measure(path, grid, rec.height_m, rec.hfov_deg, out / f"c{grid[0] * grid[1]}",
+                                  target_pcp=result.target_pcp, people=people, seeds=seeds, duration_s=duration_s,
+                                  workers=workers, progress=bool(progress))
+            m = measured[i]
+            if progress:
+                progress(f"measured {m['cameras']} cameras ({grid[0]} x {grid[1]}): PCP {m['pcp_mean']:.3f} "
+                         f"(95 % interval {m['pcp_ci95'][0]:.3f} to {m['pcp_ci95'][1]:.3f}): "
+                         f"{'meets' if m['meets_target'] else 'below'} {result.target_pcp:g}")
+        return measured[i]["meets_target"]
+
+    high = walk(start, len(ladder), meets)
+    answer = measured[high] if high is not None else measured[max(measured)]
+    return {**answer, "measured": [measured[i] for i in sorted(measured)],
+            "steps_below_prediction": start - high if high is not None else None}

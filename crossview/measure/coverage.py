@@ -4,8 +4,8 @@
 The tracker triangulates a joint from two views or more (`tracker.triangulation`), so a person is tracked
 only where at least two cameras *detect* them, which is less than where two cameras *see* the point above the
 floor. For each cell of the walkable floor (`sim.store.StoreGeometry.free`: where a pelvis may be), the model
-stands a person of the crowd's mean height there (`sim.humanoid.standing_keypoints`, turned to four headings)
-and asks, for each camera, what the scenario's detector (`sim.sensing.draws.draw_detections`, with the
+stands three people of the crowd's heights there (`crowd_heights`; `sim.humanoid.standing_keypoints`, turned to
+four headings) and asks, for each camera, what the scenario's detector (`sim.sensing.draws.draw_detections`, with the
 scenario's `DetectorParams`) would do with that person-view:
 
 - the joints in the image, through the camera's own lens (`core.projection.in_image`): a body cut by the image
@@ -22,7 +22,7 @@ scenario's `DetectorParams`) would do with that person-view:
   then reported at its group's rate (`joint_miss_prob`, or `occluded_drop_prob` where occluded).
 
 This gives each camera's chance of reporting each joint of a person at the cell in a frame. The chance that two
-cameras or more report a joint follows (cameras independent, a Poisson-binomial); a bone of the score's ten
+cameras or more report a joint follows (cameras independent, a Poisson-binomial, for each height, then averaged); a bone of the score's ten
 (`crossview.scoring.pose`) is usable when its end joints are, and the cell's *quality* is the mean over the ten
 bones. The predicted PCP is that quality through a curve calibrated once against the tracker on the shipped
 scenarios (`PCP_CALIBRATION`; docs/coverage.md gives the runs and the fit), the same for every scenario.
@@ -54,8 +54,11 @@ SHARES_OF = (1, 2, 3)
 
 
 PERSON_HEIGHT_M = 1.70
-"""Height of the person stood on each cell: the crowd's mean (`sim.humanoid.sample_heights`: an even mix of
-women, N(1.63, 0.065) m, and men, N(1.76, 0.07) m)."""
+"""The crowd's mean height (`sim.humanoid.sample_heights`: an even mix of women, N(1.63, 0.065) m, and men,
+N(1.76, 0.07) m): the occluders' height."""
+HEIGHT_QUANTILES = (1 / 6, 1 / 2, 5 / 6)
+"""The people stood on each cell: the crowd's heights at these quantiles (`crowd_heights`), each standing for a
+third of the crowd. Near a detector's size limit a short person is missed where a tall one is not."""
 HEADINGS = 4
 """Headings the person is turned to on each cell (0, 90, 180, 270 degrees); the figures are their mean."""
 PREDICT_CELL_M = 0.5
@@ -79,7 +82,7 @@ PCP_BONE_JOINTS: tuple[tuple[str, tuple[int, ...]], ...] = (
     ("head", (0, 3, 4)), ("torso", (5, 6, 11, 12)),
 )
 
-PCP_CALIBRATION = (0.832, 0.948)
+PCP_CALIBRATION = (0.831, 0.946)
 """(a, b) of the calibration curve: the predicted PCP's log-odds are a + b x the quality's log-odds,
 PCP = 1 / (1 + exp(-(a + b ln(q / (1 - q))))): 0 where no bone is usable, 1 where every bone always is, and in
 between the tracker's odds of a correct bone are e^a times (b = 1: proportional to) the odds that the bone has two
@@ -218,7 +221,22 @@ def _people_hiding(origin: np.ndarray, points: np.ndarray, density_per_m2: float
     return 1.0 - np.exp(-density_per_m2 * OCCLUDER_WIDTH_M * np.maximum(below - PERSONAL_SPACE_M, 0.0))
 
 
-def predict(store, cameras: list[Camera], params, people: int, occlusion: bool = True) -> Prediction:
+def crowd_heights(crowd, people: int | None = None) -> tuple[float, ...]:
+    """The heights of the people the prediction stands on each cell: the `HEIGHT_QUANTILES` of the crowd's heights
+    (a `sim.crowd.CrowdConfig`: its fixed `heights_m` where they name everybody, else its mixture within
+    `height_range_m`, drawn from a fixed stream), metres."""
+    from sim.humanoid import sample_heights
+
+    people = crowd.people if people is None else people
+    if people and len(crowd.heights_m) >= people:
+        pool = np.asarray(crowd.heights_m[:people], dtype=float)
+    else:
+        pool = sample_heights(np.random.default_rng(0), 2000, *crowd.height_range_m)
+    return tuple(float(h) for h in np.quantile(pool, HEIGHT_QUANTILES))
+
+
+def predict(store, cameras: list[Camera], params, people: int, occlusion: bool = True,
+            heights_m: tuple[float, ...] = (PERSON_HEIGHT_M,)) -> Prediction:
     """The detection model of the module's docstring over a store's walkable floor.
 
     Args:
@@ -227,6 +245,7 @@ def predict(store, cameras: list[Camera], params, people: int, occlusion: bool =
         params: the detector's `sim.sensing.profiles.DetectorParams`.
         people: how many people share the floor (their occlusion); 0 leaves it out.
         occlusion: whether shelves and people hide joints (the scenario's `[detector] occlusion`).
+        heights_m: the heights of the people stood on each cell (`crowd_heights`), equally likely.
     """
     from core.projection import in_image
     from core.types import COCO17
@@ -240,57 +259,61 @@ def predict(store, cameras: list[Camera], params, people: int, occlusion: bool =
     M, J, H = len(cells_xy), COCO17.num_joints, HEADINGS
     area = float(store.free.sum()) * GRID_CELL_M**2
     density = people / area if occlusion and people > 0 and area > 0 else 0.0
-    body = standing_keypoints(PERSON_HEIGHT_M)
-    angles = 2 * np.pi * np.arange(H) / H
-    turned = np.stack([np.column_stack([body[:, 0] * np.cos(a) - body[:, 1] * np.sin(a),
-                                        body[:, 0] * np.sin(a) + body[:, 1] * np.cos(a), body[:, 2]])
-                       for a in angles])  # (H, J, 3)
-    points = np.concatenate([np.broadcast_to(cells_xy[:, None, None, :], (M, H, J, 2)),
-                             np.zeros((M, H, J, 1))], axis=-1) + turned[None]  # (M, H, J, 3)
     group = joint_groups(COCO17)
     joint_miss = np.asarray(params.joint_miss_prob)[group]  # (J,)
     occluded_miss = np.maximum(joint_miss, params.occluded_drop_prob)
-    report = np.zeros((len(cameras), M, H, J))
-    detect = np.zeros((len(cameras), M, H))
+    angles = 2 * np.pi * np.arange(H) / H
     tally = dict(too_small=0.0, cut=0.0, hidden=0.0, missed=0.0, detected=0.0)
-    for c, camera in enumerate(cameras):
-        px, inside = in_image(camera, points)  # (M, H, J, 2), (M, H, J)
-        some = inside.any(axis=2)
-        if not some.any():
-            continue
-        view_px, view_in, view_points = px[some], inside[some], points[some]  # (V, J, ...)
-        origin = camera.center_world
-        hidden = np.zeros(view_in.shape)
-        if occlusion and store.obstacles:
-            hidden[view_in] = _blocked_by_boxes(origin, view_points[view_in], store.obstacles)
-        crowd = np.zeros(view_in.shape)
-        crowd[view_in] = _people_hiding(origin, view_points[view_in], density)
-        occluded = 1.0 - (1.0 - hidden) * (1.0 - crowd)  # (V, J): chance each joint is hidden
-        n_in = view_in.sum(axis=1)
-        n_visible = ((1.0 - occluded) * view_in).sum(axis=1)
-        large = person_size_px(view_px) >= params.min_person_frac * camera.height_px
-        enough_in = n_in >= params.min_visible_joints
-        enough = n_visible >= params.min_visible_joints
-        detectable = large & enough
-        miss = np.clip(params.miss_prob + params.miss_occlusion_gain * (occluded * view_in).sum(axis=1)
-                       / np.maximum(n_in, 1), 0.0, 1.0)
-        p_detect = np.where(detectable, 1.0 - miss, 0.0)
-        rate = (1.0 - occluded) * (1.0 - joint_miss) + occluded * (1.0 - occluded_miss)
-        detect[c][some] = p_detect
-        report[c][some] = p_detect[:, None] * rate * view_in
-        tally["too_small"] += float((~large).sum())
-        tally["cut"] += float((large & ~enough_in).sum())
-        tally["hidden"] += float((large & enough_in & ~enough).sum())
-        tally["missed"] += float(miss[detectable].sum())
-        tally["detected"] += float(p_detect.sum())
+    two_view, bones, camera_detect = np.zeros(M), np.zeros((M, len(PCP_BONE_JOINTS))), np.zeros((len(cameras), M))
+    for height_m in heights_m:
+        body = standing_keypoints(height_m)
+        turned = np.stack([np.column_stack([body[:, 0] * np.cos(a) - body[:, 1] * np.sin(a),
+                                            body[:, 0] * np.sin(a) + body[:, 1] * np.cos(a), body[:, 2]])
+                           for a in angles])  # (H, J, 3)
+        points = np.concatenate([np.broadcast_to(cells_xy[:, None, None, :], (M, H, J, 2)),
+                                 np.zeros((M, H, J, 1))], axis=-1) + turned[None]  # (M, H, J, 3)
+        report = np.zeros((len(cameras), M, H, J))
+        detect = np.zeros((len(cameras), M, H))
+        for c, camera in enumerate(cameras):
+            px, inside = in_image(camera, points)  # (M, H, J, 2), (M, H, J)
+            some = inside.any(axis=2)
+            if not some.any():
+                continue
+            view_px, view_in, view_points = px[some], inside[some], points[some]  # (V, J, ...)
+            origin = camera.center_world
+            hidden = np.zeros(view_in.shape)
+            if occlusion and store.obstacles:
+                hidden[view_in] = _blocked_by_boxes(origin, view_points[view_in], store.obstacles)
+            crowd = np.zeros(view_in.shape)
+            crowd[view_in] = _people_hiding(origin, view_points[view_in], density)
+            occluded = 1.0 - (1.0 - hidden) * (1.0 - crowd)  # (V, J): chance each joint is hidden
+            n_in = view_in.sum(axis=1)
+            n_visible = ((1.0 - occluded) * view_in).sum(axis=1)
+            large = person_size_px(view_px) >= params.min_person_frac * camera.height_px
+            enough_in = n_in >= params.min_visible_joints
+            enough = n_visible >= params.min_visible_joints
+            detectable = large & enough
+            miss = np.clip(params.miss_prob + params.miss_occlusion_gain * (occluded * view_in).sum(axis=1)
+                           / np.maximum(n_in, 1), 0.0, 1.0)
+            p_detect = np.where(detectable, 1.0 - miss, 0.0)
+            rate = (1.0 - occluded) * (1.0 - joint_miss) + occluded * (1.0 - occluded_miss)
+            detect[c][some] = p_detect
+            report[c][some] = p_detect[:, None] * rate * view_in
+            tally["too_small"] += float((~large).sum())
+            tally["cut"] += float((large & ~enough_in).sum())
+            tally["hidden"] += float((large & enough_in & ~enough).sum())
+            tally["missed"] += float(miss[detectable].sum())
+            tally["detected"] += float(p_detect.sum())
+        # A person has one height: the chances over the cameras are combined per height, then averaged.
+        two_view += _two_or_more(detect, axis=0).mean(axis=1) / len(heights_m)  # (M,)
+        joint_two = _two_or_more(report, axis=0)  # (M, H, J)
+        bones += np.stack([np.prod(joint_two[:, :, list(ends)], axis=2) for _, ends in PCP_BONE_JOINTS],
+                          axis=-1).mean(axis=1) / len(heights_m)  # (M, 10)
+        camera_detect += detect.mean(axis=2) / len(heights_m)
     total = sum(tally.values())
     losses = ViewLosses(**{k: v / total if total else 0.0 for k, v in tally.items()})
-    two_view = _two_or_more(detect, axis=0).mean(axis=1)  # (M,)
-    joint_two = _two_or_more(report, axis=0)  # (M, H, J)
-    bones = np.stack([np.prod(joint_two[:, :, list(ends)], axis=2) for _, ends in PCP_BONE_JOINTS],
-                     axis=-1).mean(axis=1)  # (M, 10)
-    return Prediction(cells_xy, step * GRID_CELL_M, int(people), density, detect.sum(axis=0).mean(axis=1),
-                      two_view, bones, losses, detect.mean(axis=2))
+    return Prediction(cells_xy, step * GRID_CELL_M, int(people), density, camera_detect.sum(axis=0), two_view, bones,
+                      losses, camera_detect)
 
 
 @dataclass(frozen=True)
@@ -427,7 +450,8 @@ def coverage(scenario, cameras: list[Camera] | None = None, people: int | None =
         heights.append(HeightCoverage(name, height_m, counts))
     crowd = scenario.crowd.people if people is None else people
     params = scenario.detector.params()
-    prediction = predict(store, list(cameras), params, crowd, occlusion=scenario.detector.occlusion)
+    prediction = predict(store, list(cameras), params, crowd, occlusion=scenario.detector.occlusion,
+                         heights_m=crowd_heights(scenario.crowd, crowd))
     return Coverage(scenario.name, tuple(cameras), GRID_CELL_M, cells_xy, store.boxes, tuple(heights), prediction,
                     grid, scenario.detector.profile.value)
 

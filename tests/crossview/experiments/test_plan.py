@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from crossview.cli import main
-from crossview.experiments.plan import GRID_ASPECT_TOLERANCE, Candidate, grid_ladder, search
+from crossview.experiments.plan import GRID_ASPECT_TOLERANCE, Candidate, grid_ladder, search, walk
 from tests.crossview.test_cli import _run_bad
 
 
 def test_the_ladder_holds_one_grid_per_count_that_fits_the_floor():
     ladder = grid_ladder(18.0, 12.0, 40)
     counts = [r * c for r, c in ladder]
-    assert counts == sorted(set(counts)) and max(counts) <= 40
+    assert counts == sorted(set(counts)) and max(counts) <= 40 and min(counts) >= 2
     for rows, cols in ladder:
         assert abs(math.log(cols / rows / 1.5)) <= math.log(GRID_ASPECT_TOLERANCE)
     # The issue's convenience store: 3 x 4 and 4 x 5 and 5 x 6 are on it, 1 x 12 is not.
@@ -92,21 +92,53 @@ def test_a_height_above_the_ceiling_or_a_placed_rig_is_refused(tmp_path, capsys)
     assert not out.exists()
 
 
-def test_confirm_measures_the_recommended_rig_with_the_tracker(tmp_path, capsys):
+def test_confirm_walks_the_ladder_to_the_fewest_cameras_the_tracker_measures_meeting_the_target(tmp_path, capsys):
     out = tmp_path / "l1.json"
     assert main(["--no-progress", "plan", "store_layout1", "--target-pcp", "0.5", "--confirm", "--seeds", "0,1",
-                 "--duration", "2", "--workers", "1", "-o", str(out)]) == 0
+                 "--duration", "1.5", "--workers", "1", "-o", str(out)]) == 0
     printed = capsys.readouterr().out
     plan = json.loads(out.read_text())
     confirmed = plan["confirmed"]
-    assert confirmed["cameras"] == plan["recommended_cameras"] and confirmed["grid"] == plan["grid"]
-    assert confirmed["seeds"] == [0, 1] and len(confirmed["pcp"]) == 2
-    low, high = confirmed["pcp_ci95"]
-    assert low <= confirmed["pcp_mean"] <= high and confirmed["pcp_mean"] == pytest.approx(np.mean(confirmed["pcp"]),
-                                                                                          abs=1e-4)
-    assert confirmed["meets_target"] == (confirmed["pcp_mean"] >= 0.5)
-    assert "confirmed: measured PCP" in printed
-    # The sweep's own results hold the cells: the recommended grid, the seeds.
-    results = json.loads((tmp_path / "l1.confirm" / "results.json").read_text())
-    cells = results["cells"] if isinstance(results, dict) else results
-    assert len(cells) == 2
+    measured = {m["cameras"]: m for m in confirmed["measured"]}
+    assert plan["predicted_cameras"] in measured  # the prediction's answer is measured first
+    for m in measured.values():
+        assert m["seeds"] == [0, 1] and len(m["pcp"]) == 2
+        low, high = m["pcp_ci95"]
+        assert low <= m["pcp_mean"] <= high and m["pcp_mean"] == pytest.approx(np.mean(m["pcp"]), abs=1e-4)
+        assert m["meets_target"] == (m["pcp_mean"] >= 0.5)
+        # The sweep's own results hold the cells: the rig's grid, the seeds.
+        results = json.loads((tmp_path / "l1.confirm" / f"c{m['cameras']}" / "results.json").read_text())
+        cells = results["cells"] if isinstance(results, dict) else results
+        assert len(cells) == 2
+    # The answer is the fewest measured that meet the target, and the rig one grid step below it, measured too,
+    # does not (unless the answer is the ladder's first).
+    meeting = sorted(c for c, m in measured.items() if m["meets_target"])
+    assert confirmed["meets_target"] and confirmed["cameras"] == meeting[0]
+    from crossview import pipeline
+
+    store = pipeline.load_scenario("store_layout1").store
+    ladder = [r * c for r, c in grid_ladder(store.width_m, store.depth_m, max(16, int(store.width_m * store.depth_m)))]
+    below = [c for c in ladder if c < meeting[0]]
+    assert not below or (below[-1] in measured and not measured[below[-1]]["meets_target"])
+    assert plan["recommended_cameras"] == confirmed["cameras"] and plan["recommended_by"] == "measurement"
+    assert confirmed["steps_below_prediction"] == ladder.index(plan["predicted_cameras"]) - ladder.index(
+        confirmed["cameras"])
+    assert "confirmed:" in printed and "measured:" in printed
+
+
+@pytest.mark.parametrize("length", [1, 2, 7, 16])
+def test_the_measured_walk_finds_the_fewest_meeting_rig_from_any_start(length):
+    """`walk` against the plain answer (the first index that meets, by looking at all), for every threshold and
+    start on ladders of several lengths, asking each rig at most once and fewer than the ladder holds when long."""
+    for first in range(length + 1):  # index of the first rig that meets (length: none does)
+        for start in range(length):
+            asked = []
+
+            def meets(i, asked=asked, first=first):
+                assert 0 <= i < length and i not in asked
+                asked.append(i)
+                return i >= first
+
+            assert walk(start, length, meets) == (first if first < length else None)
+            if length == 16:
+                assert len(asked) <= 9

@@ -276,3 +276,20 @@ def test_the_predicted_detections_are_the_simulated_detectors(store_recording):
                 found += int(pid) in detected
     assert found > 500
     assert expected == pytest.approx(found, rel=0.12)
+
+
+def test_the_people_stood_on_a_cell_are_the_crowds_height_quantiles():
+    """`crowd_heights` against the mixture's own distribution function (scipy: truncated normals for women and
+    men, as `sim.humanoid.sample_heights` draws them), and against a crowd whose heights are all fixed."""
+    from scipy import stats
+
+    from crossview.measure.coverage import HEIGHT_QUANTILES, crowd_heights
+    from sim.crowd import CrowdConfig
+
+    low, high = 1.5, 1.95
+    parts = [stats.truncnorm((low - m) / s, (high - m) / s, loc=m, scale=s) for m, s in ((1.63, 0.065), (1.76, 0.07))]
+    x = np.linspace(low, high, 4501)
+    exact = np.interp(HEIGHT_QUANTILES, 0.5 * (parts[0].cdf(x) + parts[1].cdf(x)), x)
+    np.testing.assert_allclose(crowd_heights(CrowdConfig(people=30, height_range_m=(low, high))), exact, atol=0.01)
+    fixed = CrowdConfig(people=3, heights_m=(1.6, 1.7, 1.9))
+    assert crowd_heights(fixed) == pytest.approx(np.quantile([1.6, 1.7, 1.9], HEIGHT_QUANTILES))
