@@ -22,10 +22,11 @@ scenario's `DetectorParams`) would do with that person-view:
   then reported at its group's rate (`joint_miss_prob`, or `occluded_drop_prob` where occluded).
 
 This gives each camera's chance of reporting each joint of a person at the cell in a frame. The chance that two
-cameras or more report a joint follows (cameras independent, a Poisson-binomial, for each height, then averaged); a bone of the score's ten
-(`crossview.scoring.pose`) is usable when its end joints are, and the cell's *quality* is the mean over the ten
-bones. The predicted PCP is that quality through a curve calibrated once against the tracker on the shipped
-scenarios (`PCP_CALIBRATION`; docs/coverage.md gives the runs and the fit), the same for every scenario.
+cameras or more report a joint follows (cameras independent, a Poisson-binomial, for each height, then
+averaged); a bone of the score's ten (`crossview.scoring.pose`) is usable when its end joints are, and the cell's
+*quality* is the mean over the ten bones. The predicted PCP is that quality through a curve calibrated once
+against the tracker on the shipped scenarios (`PCP_CALIBRATION`; docs/coverage.md gives the runs and the fit),
+the same for every scenario.
 
 The old figure, a point above the cell inside two frustums, is kept as an upper bound: the most a rig can see
 before shelves, sizes, image edges and the detector (`HeightCoverage`).
@@ -40,9 +41,8 @@ import numpy as np
 
 from core.records import BoxKind
 from core.types import Camera
+from tracker.visibility import HIP_HEIGHT_M, floor_sight
 
-HIP_HEIGHT_M = 0.9
-"""Height of an adult's hips above the floor, metres (the middle of the body: its torso and legs)."""
 HEAD_HEIGHT_M = 1.6
 """Height of an adult's head above the floor, metres (the top of the body, the first to leave a view)."""
 HEIGHTS_M = (("hip", HIP_HEIGHT_M), ("head", HEAD_HEIGHT_M))
@@ -430,7 +430,6 @@ def coverage(scenario, cameras: list[Camera] | None = None, people: int | None =
     Raises:
         ScenarioError: the store or the rig cannot be built (named by the scenario's file and key).
     """
-    from core.projection import in_image
     from sim.cameras import build_rig
     from sim.rng import child_rng
     from sim.store import GRID_CELL_M, StoreGeometry
@@ -441,13 +440,8 @@ def coverage(scenario, cameras: list[Camera] | None = None, people: int | None =
     if cameras is None:
         cameras = build_rig(scenario, child_rng(scenario.seed, "cameras"))
     cells_xy = store.cell_centers[store.free]
-    heights = []
-    for name, height_m in HEIGHTS_M:
-        points = np.column_stack([cells_xy, np.full(len(cells_xy), height_m)])
-        counts = np.zeros(len(cells_xy), np.int64)
-        for camera in cameras:
-            counts += in_image(camera, points)[1]
-        heights.append(HeightCoverage(name, height_m, counts))
+    heights = [HeightCoverage(name, height_m, floor_sight(cameras, cells_xy, height_m).sum(axis=0, dtype=np.int64))
+               for name, height_m in HEIGHTS_M]
     crowd = scenario.crowd.people if people is None else people
     params = scenario.detector.params()
     prediction = predict(store, list(cameras), params, crowd, occlusion=scenario.detector.occlusion,
