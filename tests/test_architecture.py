@@ -1,7 +1,8 @@
 """The rules of docs/architecture.md, read off the source: no import cycles, `core/` imports no other part,
 `tracker/` neither mujoco, mcap nor `sim/`, scoring and the file formats not `sim/`, only the recording package
 imports mcap, only `sim/` imports mujoco, no private name crosses a module, no code reaches into a library's
-private (name-mangled) attributes, and every document the code and the docs cite is in the repository."""
+private (name-mangled) attributes, no module imports its own package's face, and every document the code and
+the docs cite is in the repository."""
 
 from __future__ import annotations
 
@@ -186,6 +187,62 @@ def test_a_private_name_crossing_a_module_is_found(tmp_path):
                                             "        return self._own + D._own\n", encoding="utf-8")
     modules = {f"core.{p.stem}": p for p in sorted((tmp_path / "core").glob("*.py"))}
     assert private_crossings(modules) == ["core.b: core.a._hidden", "core.c: core.a._hidden"]
+
+
+def _face_holds_code(path: Path) -> bool:
+    """Whether a package's `__init__.py` holds more than its docstring (and `from __future__`): a face with
+    imports or definitions, which a module of the package importing it would loop through."""
+    for node in ast.parse(path.read_text(encoding="utf-8")).body:
+        docstring = isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+        if not docstring and not (isinstance(node, ast.ImportFrom) and node.module == "__future__"):
+            return True
+    return False
+
+
+def face_imports(modules: dict[str, Path]) -> list[str]:
+    """Every import by a module inside a package of its own package's face (`from P import x` or `import P`,
+    where P's `__init__.py` holds code), each as "module:line: P". A module of P imports P's submodules
+    directly (`from P.sub import x`, `import P.sub as sub`); only the face gathers them."""
+    faces = {name for name, path in modules.items() if path.name == "__init__.py" and _face_holds_code(path)}
+    found = []
+    for name, path in modules.items():
+        inside = {face for face in faces if name.startswith(face + ".")}
+        if not inside:
+            continue
+        package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.Import):
+                named = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                base = node.module or ""
+                if node.level:
+                    parts = package.split(".")[:len(package.split(".")) - node.level + 1]
+                    base = ".".join(parts + ([base] if base else []))
+                named = [base]
+            else:
+                continue
+            found += [f"{name}:{node.lineno}: {face}" for face in sorted(inside) if face in named]
+    return sorted(found)
+
+
+def test_no_package_imports_its_own_face():
+    assert face_imports(_modules()) == []
+
+
+def test_a_package_importing_its_own_face_is_found(tmp_path):
+    package = tmp_path / "crossview" / "rec"
+    package.mkdir(parents=True)
+    (tmp_path / "crossview" / "__init__.py").write_text('"""Only a docstring."""\n', encoding="utf-8")
+    (package / "__init__.py").write_text('"""The face."""\n\nfrom crossview.rec.a import x\n', encoding="utf-8")
+    (package / "a.py").write_text("x = 1\n", encoding="utf-8")
+    (package / "b.py").write_text("from crossview.rec import a\n", encoding="utf-8")
+    (package / "c.py").write_text("import crossview.rec.a as a\nfrom crossview.rec.a import x\n", encoding="utf-8")
+    (package / "d.py").write_text("from . import a\n\n\ndef f():\n    import crossview.rec\n", encoding="utf-8")
+    (package / "e.py").write_text("from crossview import rec\n", encoding="utf-8")  # (crossview's face: empty)
+    modules = {"crossview": tmp_path / "crossview" / "__init__.py", "crossview.rec": package / "__init__.py"}
+    modules |= {f"crossview.rec.{p.stem}": p for p in sorted(package.glob("[a-z].py"))}
+    assert face_imports(modules) == ["crossview.rec.b:1: crossview.rec", "crossview.rec.d:1: crossview.rec",
+                                     "crossview.rec.d:5: crossview.rec"]
 
 
 def test_no_private_attribute_of_a_library_is_touched():

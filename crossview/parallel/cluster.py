@@ -17,6 +17,7 @@ import threading
 
 from core.errors import CrossviewError, one_line
 from crossview.parallel.reaper import Reaper
+from crossview.parallel.workers import Actors, WorkerLost, run_task, warm
 
 # Environment of Ray workers on a cluster (local workers inherit the driver's, which the CLI sets): one BLAS
 # thread per process, and no MuJoCo rendering back-end to look for.
@@ -203,8 +204,6 @@ def tasks(fn, items: list, setup, cancel_left: bool):
     not pending"), exit 1 and a stack dump instead of the command's one line, about one SIGTERM in eight."""
     import ray
 
-    from crossview.parallel import run_task
-
     # (named after fn, not the wrapper: its worker's process title is ray::FN, e.g. ray::run_cell)
     task = ray.remote(num_cpus=1, max_retries=0)(run_task).options(name=getattr(fn, "__name__", "task"))
     refs: dict = {}
@@ -236,8 +235,6 @@ class ActorHost:
     """A Ray actor's body: the warm-up, then the object `factory(*args)`, whose methods `call` runs."""
 
     def __init__(self, factory, args: tuple, setup):
-        from crossview.parallel import warm
-
         warm(setup)
         self.obj = factory(*args)
 
@@ -259,8 +256,6 @@ class _Handle:
         return self.actor.call.remote(method, args)
 
     def result(self, ref):
-        from crossview.parallel import WorkerLost
-
         try:
             return get_one(self.ray, ref)
         except self.ray.exceptions.RayActorError as e:
@@ -279,8 +274,6 @@ def get_one(ray, ref):
 def actors(factory, args: list[tuple], setup, what: str):
     """One Ray actor per args tuple (one CPU, never restarted), all made before the block runs, all ended after."""
     import ray
-
-    from crossview.parallel import Actors
 
     remote = ray.remote(num_cpus=1, max_restarts=0, max_task_retries=0)(ActorHost)
     handles: list[_Handle] = []

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
 from core import processes
-from crossview.parallel import Actors, Setup, WorkerLost, run_task, warm
+from crossview.parallel.workers import Actors, Setup, WorkerLost, run_task, warm
 
 
 def _context(setup: Setup):

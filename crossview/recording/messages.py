@@ -15,9 +15,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+import crossview.recording.foxglove as foxglove
 from core.records import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from core.types import Frame, Skeleton
-from crossview.recording import foxglove
 from crossview.recording.schemas import PoseTruthMsg, TrackerOutputMsg, to_ns
 from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
 
@@ -87,7 +87,7 @@ class Encoder:
 
     def _scene(self, ids: np.ndarray, poses: np.ndarray, pieces: foxglove.PieceTable, t_ns: int) -> bytes:
         """A skeleton scene of the entities `ids` (n,) with poses (n, J, 3), from their rows of `pieces`."""
-        from crossview.recording import wire  # (numba: loaded for writing only)
+        import crossview.recording.wire as wire  # (numba: loaded for writing only)
 
         rows = pieces.rows(ids)
         head, deletion = foxglove.scene_heads(t_ns)
@@ -122,7 +122,7 @@ class Encoder:
             bounds: (n + 1,) frame i owns rows bounds[i]:bounds[i + 1].
             rows: the frames' detections (the detector's `DetectionRows`).
         """
-        from crossview.recording import wire  # (numba: loaded for writing only)
+        import crossview.recording.wire as wire  # (numba: loaded for writing only)
 
         times = np.ascontiguousarray(times, dtype=np.float64).reshape(-1, 3)
         bounds = np.ascontiguousarray(bounds, dtype=np.int64)

@@ -13,9 +13,9 @@ import numpy as np
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.writer import CompressionType
 
+import crossview.recording.foxglove as foxglove
 from core.records import Box, BoxKind
 from core.types import SKELETONS, Camera, Skeleton
-from crossview.recording import foxglove
 
 FORMAT_VERSION = 2  # of recordings
 TRACKS_FORMAT_VERSION = 4  # of tracks files; 3: targets carry joint_state; 4: poses as float32 (1 to 3 are read too)

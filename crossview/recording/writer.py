@@ -8,11 +8,11 @@ from collections.abc import Sequence
 import numpy as np
 from mcap.writer import Writer
 
+import crossview.recording.foxglove as foxglove
 from core.records import Box, CameraFrame, DetectionRows, PoseTruth
 from core.stream import Block, LogTimeOrder, frame_times
 from core.types import SKELETONS, Camera
 from crossview.outputs import AtomicOutput
-from crossview.recording import foxglove
 from crossview.recording.messages import EncodedFrame, Encoder
 from crossview.recording.schemas import (
     CHUNK_SIZE,
