@@ -2,7 +2,7 @@
 
 Each error names the file, key or value at fault and what would be valid. The readers of a file turn the
 ValueError (or TypeError) of a check below them into one of these naming the file, at the file's boundary
-(`sim.scenario.from_dict`, `crossview.formats.datasets.image_size` and `load_cameras`); a ValueError that
+(`sim.config.from_dict`, `crossview.formats.datasets.image_size` and `load_cameras`); a ValueError that
 reaches the command line unwrapped is a bug, and shows its traceback.
 """
 

@@ -644,9 +644,10 @@ def _cmd_run(args) -> None:
 
 def _cmd_scenarios(args) -> None:
     from sim import scenario as scenario_mod
+    from sim.scenario_reference import reference_markdown
 
     if args.reference:
-        print(scenario_mod.reference_markdown(), end="")
+        print(reference_markdown(), end="")
     elif args.show:
         print(scenario_mod.resolved_toml(scenario_mod.load(args.show)), end="")
     else:
@@ -904,13 +905,13 @@ def _cmd_fit_detector(args) -> None:
         recording_detector_stats,
     )
     from sim import scenario as scenario_mod
-    from sim.sensing.profiles import DetectorProfile
+    from sim.sensing.profiles import DetectorProfile, profile_file_text, profile_params
 
     if (args.recording is None) == (args.target is None):
         raise CrossviewError("fit-detector: give a recording to fit, or --target FILE.json|shelf-openpose (not both)")
     target_file = None if args.target in (None, "shelf-openpose") else Path(args.target)
     pipeline.check_writable(args.output, inputs=() if target_file is None else (target_file,))
-    start = scenario_mod.profile_params(args.start)  # (a bad --start refused before any measuring)
+    start = profile_params(args.start)  # (a bad --start refused before any measuring)
     seed = args.seed
     if args.recording is not None:
         target = recording_detector_stats(args.recording)
@@ -950,7 +951,7 @@ def _cmd_fit_detector(args) -> None:
     comment = (f"Detector profile fitted by `crossview fit-detector` to {where}, on {scenario.name} (seed {seed}, "
                f"{args.duration:g} s a round, {args.rounds} rounds, from {args.start}).\nLargest deviation of a "
                f"row from the target: {100 * worst:+.1f} % ({key}{'' if group is None else ', ' + group}).")
-    pipeline.write_text(scenario_mod.profile_file_text(best.params, DetectorProfile.TYPICAL, comment), args.output)
+    pipeline.write_text(profile_file_text(best.params, DetectorProfile.TYPICAL, comment), args.output)
     print(f"{args.output}: the fitted profile (largest deviation {100 * best.worst:.1f} %)")
 
 
@@ -1113,7 +1114,7 @@ def _command_inputs(args) -> tuple[Path, ...]:
     """
     from crossview import pipeline, plugins
     from crossview.formats.json_input import check_input_file
-    from sim import scenario as scenario_mod
+    from sim.sensing.profiles import is_profile_file
 
     found: list[Path] = []
     for dest, value in vars(args).items():
@@ -1126,7 +1127,7 @@ def _command_inputs(args) -> tuple[Path, ...]:
                     found.extend(p for p in (*item.glob("*"), *item.glob("*/*")) if p.is_file())
     if isinstance(getattr(args, "scenario", None), str) or args.command == "run":
         found.extend(pipeline.scenario_files(args.scenario))
-    if scenario_mod.is_profile_file(getattr(args, "start", None)):  # (fit-detector's starting profile)
+    if is_profile_file(getattr(args, "start", None)):  # (fit-detector's starting profile)
         found.append(Path(args.start))
     if getattr(args, "target", None) not in (None, "shelf-openpose"):  # (fit-detector's statistics file)
         found.append(Path(args.target))

@@ -23,6 +23,7 @@ from core.records import BoxKind
 from core.types import COCO17
 from crossview import outputs
 from sim import scenario as scenario_mod
+from sim.sensing.profiles import is_profile_file
 
 log = logging.getLogger(__name__)
 
@@ -93,7 +94,7 @@ def scenario_files(name_or_path) -> tuple[Path, ...]:
     for section, key in (("cameras", "calibration"), ("detector", "profile")):
         table = tree.get(section)
         value = table.get(key) if isinstance(table, dict) else None
-        if isinstance(value, str) and value and (key != "profile" or scenario_mod.is_profile_file(value)):
+        if isinstance(value, str) and value and (key != "profile" or is_profile_file(value)):
             named.append(path.parent / value)
     return (path, *named)
 

@@ -1,22 +1,20 @@
-"""Scenario files: TOML read with the standard library into frozen, validated dataclasses.
+"""Scenario files: TOML read with the standard library into frozen, validated dataclasses, and written back
+with every key resolved (`resolved_toml`, `crossview scenarios --show`).
 
 Each section of a scenario is the config dataclass of the module that owns it (`[store]` is
-`sim.store.StoreConfig`, `[crowd]` is `sim.crowd.CrowdConfig`, ...). This module only walks the
-TOML tree against those dataclasses: unknown keys, wrong types and values that a config's
-`__post_init__` rejects all become a `ScenarioError` that names the file and the key.
+`sim.store.StoreConfig`, `[crowd]` is `sim.crowd.CrowdConfig`, ...). This module finds the file, applies the
+overrides and a detector profile file the scenario names (`sim.sensing.profiles.load_profile_file`), and has
+`sim.config.from_dict` walk the TOML tree against those dataclasses: unknown keys, wrong types and values that
+a config's `__post_init__` rejects all become a `ScenarioError` that names the file and the key. The reference
+of every key (docs/scenarios.md) is written by `sim.scenario_reference`.
 """
 
 from __future__ import annotations
 
 import ast
 import dataclasses
-import enum
 import hashlib
-import inspect
-import json
-import math
 import tomllib
-import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,9 +25,9 @@ from core.errors import ScenarioError
 from core.head import HeadConvention
 from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
-from sim.config import bounded, check_ranges, field_range, field_unit
+from sim.config import bounded, check_ranges, convert, file_keys, from_dict, is_table, table_class, toml_value
 from sim.crowd import CrowdConfig
-from sim.sensing.profiles import PROFILES, DetectorConfig, DetectorParams, DetectorProfile
+from sim.sensing.profiles import DetectorConfig, is_profile_file, load_profile_file
 from sim.store import StoreConfig, StoreGeometry
 
 MAX_DURATION_S = 86400.0  # a day of simulated time
@@ -168,56 +166,6 @@ def _from_text(text: str, overrides: dict, where: str, name: str, folder: Path |
     return dataclasses.replace(scenario, source_text=text + note)
 
 
-PROFILE_FILE_SUFFIX = ".toml"
-
-
-def is_profile_file(profile) -> bool:
-    """Whether a `detector.profile` value names a profile file rather than a shipped profile."""
-    return isinstance(profile, str) and profile.endswith(PROFILE_FILE_SUFFIX)
-
-
-def load_profile_file(path: Path) -> dict:
-    """A detector profile file (what `crossview fit-detector` writes): `base`, the shipped profile it starts
-    from (default typical), and any parameters of `DetectorParams`, each checked as a [detector] key is.
-
-    Returns:
-        {"profile": base, parameter: value, ...} as TOML values.
-
-    Raises:
-        ScenarioError: the file is missing, unreadable or malformed, or a key is unknown or invalid; the
-            message names the file and the key.
-    """
-    try:
-        tree = tomlfile.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ScenarioError(f"{path}: no such detector profile file (detector.profile names a shipped profile, "
-                            f"{', '.join(p.value for p in DetectorProfile)}, or a profile file)") from None
-    except (OSError, UnicodeDecodeError) as e:
-        raise ScenarioError(f"{path}: cannot read the detector profile: {e}") from None
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(f"{path}: malformed TOML: {e}") from None
-    base = tree.pop("base", DetectorProfile.TYPICAL.value)
-    valid = [p.value for p in DetectorProfile]
-    if base not in valid:
-        raise ScenarioError(f"{path}: base = {base!r} is not one of {valid}")
-    unknown = sorted(set(tree) - set(DetectorParams._fields))
-    if unknown:
-        raise ScenarioError(f"{path}: unknown key '{unknown[0]}' (valid keys: base, "
-                            f"{', '.join(DetectorParams._fields)})")
-    from_dict(DetectorConfig, {**tree, "profile": base}, str(path), "")  # every value checked, naming the file
-    return {"profile": base, **tree}
-
-
-def profile_params(profile: str) -> DetectorParams:
-    """The parameters of a shipped profile (by name) or of a profile file (a path ending in .toml)."""
-    if is_profile_file(profile):
-        return from_dict(DetectorConfig, load_profile_file(Path(profile)), profile, "").params()
-    valid = [p.value for p in DetectorProfile]
-    if profile not in valid:
-        raise ScenarioError(f"profile {profile!r}: not one of {valid} nor a profile file (.toml)")
-    return PROFILES[DetectorProfile(profile)]
-
-
 def _with_profile_file(tree: dict, overrides: dict, folder: Path | None) -> dict:
     """`overrides` with the parameters of the profile file that `detector.profile` names, if it names one: the
     file's base profile as the profile, and each of its parameters that neither the scenario's [detector] nor
@@ -235,14 +183,6 @@ def _with_profile_file(tree: dict, overrides: dict, folder: Path | None) -> dict
     merged["detector.profile"] = inline.pop("profile")
     merged.update({f"detector.{k}": v for k, v in inline.items() if k not in explicit})
     return merged
-
-
-def profile_file_text(params: DetectorParams, base: DetectorProfile, comment: str) -> str:
-    """A profile file holding every parameter of `params` (what `load_profile_file` reads back)."""
-    lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
-    lines += ["", f"base = {_toml_value(base.value)}"]
-    lines += [f"{name} = {_toml_value(getattr(params, name))}" for name in DetectorParams._fields]
-    return "\n".join(lines) + "\n"
 
 
 def from_source_text(source_text: str, name: str, where: str) -> Scenario:
@@ -285,216 +225,17 @@ def check_override(dotted: str, value, file: str = "override") -> None:
     cls, prefix = Scenario, ""
     names = dotted.split(".")
     for depth, name in enumerate(names):
-        fields = {f.name for f in _keys(cls)}
+        fields = {f.name for f in file_keys(cls)}
         if name not in fields:
             raise ScenarioError(f"{file}: unknown key '{prefix}{name}' (valid keys: {', '.join(sorted(fields))})")
         hint = typing.get_type_hints(cls)[name]
         if depth < len(names) - 1:
-            if _table_class(hint) is None:
+            if table_class(hint) is None:
                 raise ScenarioError(f"{file}: '{prefix}{name}' is not a table, so '{dotted}' is not a key")
-            cls, prefix = _table_class(hint), f"{prefix}{name}."
-    if _is_table(hint):
+            cls, prefix = table_class(hint), f"{prefix}{name}."
+    if is_table(hint):
         raise ScenarioError(f"{file}: '{dotted}' is a table; name one of its keys")
-    _convert(hint, value, file, dotted)
-
-
-def from_dict(cls, tree: dict, file: str, prefix: str):
-    """Builds dataclass `cls` from a TOML table, naming `file` and the dotted key on any error."""
-    if not isinstance(tree, dict):
-        raise ScenarioError(f"{file}: [{prefix.rstrip('.')}] must be a table, got {type(tree).__name__}")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name: f for f in dataclasses.fields(cls) if f.init and f.name not in ("source_text", "source_path")}
-    unknown = sorted(set(tree) - set(fields))
-    if unknown:
-        raise ScenarioError(
-            f"{file}: unknown key '{prefix}{unknown[0]}' (valid keys: {', '.join(sorted(fields))})"
-        )
-    kwargs = {name: _convert(hints[name], value, file, f"{prefix}{name}") for name, value in tree.items()}
-    try:
-        return cls(**kwargs)
-    except ScenarioError:
-        raise
-    except (ValueError, TypeError) as e:
-        where = f"[{prefix.rstrip('.')}] " if prefix else ""
-        raise ScenarioError(f"{file}: {where}{e}") from None
-
-
-def _convert(hint, value, file: str, key: str):
-    """Converts one TOML value to the annotated field type."""
-    origin = typing.get_origin(hint)
-    if dataclasses.is_dataclass(hint):
-        return from_dict(hint, value, file, f"{key}.")
-    if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(hint) if a is not type(None)]
-        return None if value is None else _convert(args[0], value, file, key)
-    if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        valid = [m.value for m in hint]
-        if value not in valid:
-            raise ScenarioError(f"{file}: {key} = {value!r} is not one of {valid}")
-        return hint(value)
-    if origin is tuple:
-        args = typing.get_args(hint)
-        if not isinstance(value, list):
-            raise ScenarioError(f"{file}: {key} must be an array, got {value!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, file, f"{key}[{i}]") for i, v in enumerate(value))
-        if len(args) != len(value):
-            raise ScenarioError(f"{file}: {key} must have {len(args)} elements, got {len(value)}")
-        return tuple(_convert(a, v, file, f"{key}[{i}]") for i, (a, v) in enumerate(zip(args, value)))
-    if hint is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ScenarioError(f"{file}: {key} = {value!r} must be a number")
-        return float(value)
-    if hint is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ScenarioError(f"{file}: {key} = {value!r} must be an integer")
-        return value
-    if hint is bool:
-        if not isinstance(value, bool):
-            raise ScenarioError(f"{file}: {key} = {value!r} must be true or false")
-        return value
-    if hint is str:
-        if not isinstance(value, str):
-            raise ScenarioError(f"{file}: {key} = {value!r} must be a string")
-        return value
-    raise TypeError(f"scenario field {key} has unsupported type {hint}")
-
-
-# ---------------------------------------------------------------- the reference of every key, and resolved files
-
-# Where a section's keys are explained when its class documents them elsewhere (the detector's knobs are the
-# profile's parameters).
-_MEANINGS_FROM = {DetectorConfig: (DetectorParams,)}
-
-
-def attribute_docs(cls) -> dict[str, str]:
-    """Each field's meaning from the `Attributes:` section of `cls`'s docstring (Google style; a line may
-    document several fields, `a, b: text`), then from the classes in `_MEANINGS_FROM`."""
-    docs: dict[str, str] = {}
-    for source in (*_MEANINGS_FROM.get(cls, ()), cls):
-        lines = inspect.getdoc(source).splitlines()
-        if "Attributes:" not in lines:
-            continue
-        names: list[str] = []
-        for line in lines[lines.index("Attributes:") + 1:]:
-            if line and not line.startswith(" "):
-                break
-            head, sep, text = line.strip().partition(": ")
-            if line.startswith("    ") and not line.startswith("     ") and sep:
-                names = [n.strip() for n in head.split(",")]
-                for name in names:
-                    docs[name] = text.strip()
-            elif line.strip():
-                for name in names:
-                    docs[name] += " " + line.strip()
-    return docs
-
-
-def _sections(cls=Scenario, prefix: str = ""):
-    """(dotted section name, class, is an array of tables) of `cls` and every section below it."""
-    yield prefix, cls, False
-    hints = typing.get_type_hints(cls)
-    for f in _keys(cls):
-        hint = hints[f.name]
-        if _table_class(hint) is not None:
-            yield from _sections(_table_class(hint), f"{prefix}{f.name}.")
-        elif typing.get_origin(hint) is tuple and dataclasses.is_dataclass(typing.get_args(hint)[0]):
-            yield from ((name, sub, True) for name, sub, _ in _sections(typing.get_args(hint)[0], f"{prefix}{f.name}."))
-
-
-def _keys(cls) -> list[dataclasses.Field]:
-    return [f for f in dataclasses.fields(cls) if f.init and f.name not in ("source_text", "source_path")]
-
-
-def _table_class(hint):
-    """The dataclass of a table-valued field (`Section` or `Section | None`), else None."""
-    if typing.get_origin(hint) in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(hint) if a is not type(None)]
-        hint = args[0] if len(args) == 1 else None
-    return hint if dataclasses.is_dataclass(hint) else None
-
-
-def _is_table(hint) -> bool:
-    return _table_class(hint) is not None or (
-        typing.get_origin(hint) is tuple and dataclasses.is_dataclass(typing.get_args(hint)[0]))
-
-
-def _type_name(hint) -> str:
-    origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if origin in (typing.Union, types.UnionType):
-        return _type_name(next(a for a in args if a is not type(None)))
-    if origin is tuple:
-        if len(args) == 2 and args[1] is Ellipsis:
-            return f"array of {_type_name(args[0])}"
-        return f"array of {len(args)} {_type_name(args[0])}"
-    if isinstance(hint, type) and issubclass(hint, enum.Enum):
-        return "one of " + ", ".join(f'"{m.value}"' for m in hint)
-    return {float: "number", int: "integer", bool: "true or false", str: "text"}.get(hint, str(hint))
-
-
-def _default_text(cls, f: dataclasses.Field) -> str:
-    if f.default is dataclasses.MISSING:
-        value = f.default_factory() if f.default_factory is not dataclasses.MISSING else None
-    else:
-        value = f.default
-    if cls is DetectorConfig and value is None:
-        typical = getattr(PROFILES[DetectorProfile.TYPICAL], f.name)
-        return f"the profile's (typical: {_toml_value(typical)})"
-    if cls is Scenario and f.name == "name":
-        return "the file's name"
-    if value is None:
-        return "none"
-    return f"`{_toml_value(value)}`" if value != () else "none"
-
-
-def reference_markdown() -> str:
-    """docs/scenarios.md: every key of a scenario file with its meaning, type, unit, default and valid range,
-    written from the configuration classes themselves (a test checks the committed file against it)."""
-    out = [
-        "# Scenario files: every key",
-        "",
-        "A scenario is a TOML file; every key is optional and takes the default below. `crossview scenarios` lists",
-        "the shipped scenarios and `crossview scenarios --show NAME` prints one with every key resolved, as a file",
-        "to start from. Unknown keys, wrong types and values outside the valid range are errors that name the",
-        "file and the key. Relative paths (`cameras.calibration`) are taken from the scenario file's folder.",
-        "",
-        "This page is generated from the configuration classes (`crossview scenarios --reference`); a test fails",
-        "when it is stale. The notes on the shipped scenarios at its end are written by hand.",
-    ]
-    for section, cls, array in _sections():
-        title = section.rstrip(".")
-        heading = "Top level" if not title else (f"[[{title}]]" if array else f"[{title}]")
-        summary = inspect.getdoc(cls).split("\n\n")[0].replace("\n", " ")
-        summary = summary.split(": ", 1)[1] if summary.startswith("[") else summary
-        out += ["", f"## {heading}", "", summary[0].upper() + summary[1:], "",
-                "| key | meaning | type | unit | default | valid |", "|---|---|---|---|---|---|"]
-        docs = attribute_docs(cls)
-        hints = typing.get_type_hints(cls)
-        shown = "" if array else section  # keys of an array of tables are written under its [[header]]
-        for f in _keys(cls):
-            if _is_table(hints[f.name]):
-                continue
-            valid = field_range(f)
-            kind = _type_name(hints[f.name])
-            valid_text = str(valid) if valid is not None else ("see type" if kind.startswith("one of") else "any")
-            meaning = docs.get(f.name, "").replace("|", "\\|")
-            out.append(f"| `{shown}{f.name}` | {meaning} | {kind} | {field_unit(f) or '–'} | "
-                       f"{_default_text(cls, f)} | {valid_text} |")
-    return "\n".join(out) + "\n"
-
-
-def _toml_value(value) -> str:
-    if isinstance(value, enum.Enum):
-        value = value.value
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return repr(value) if math.isfinite(value) else ("inf" if value > 0 else "-inf")
-    if isinstance(value, str):
-        return json.dumps(value)
-    if isinstance(value, tuple):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    return str(value)
+    convert(hint, value, file, dotted)
 
 
 def resolved_toml(scenario: Scenario) -> str:
@@ -515,15 +256,15 @@ def resolved_toml(scenario: Scenario) -> str:
         if header is not None:
             lines.extend(["", header])
         nested = []
-        for f in _keys(cls):
+        for f in file_keys(cls):
             value = getattr(obj, f.name)
-            if _is_table(hints[f.name]):
+            if is_table(hints[f.name]):
                 nested.append((f, value))
             elif value is None and cls is DetectorConfig:
                 effective = getattr(obj.params(), f.name)
-                lines.append(f"# {f.name} = {_toml_value(effective)}  # the {obj.profile.value} profile's")
+                lines.append(f"# {f.name} = {toml_value(effective)}  # the {obj.profile.value} profile's")
             elif value is not None and (obj is not scenario or f.name != "name" or explicit_name):
-                lines.append(f"{f.name} = {_toml_value(value)}")
+                lines.append(f"{f.name} = {toml_value(value)}")
         for f, value in nested:
             if value is None:  # an optional table left out ([store.aisles], expanded into the shelves at load)
                 continue

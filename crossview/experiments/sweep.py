@@ -32,6 +32,7 @@ from core.errors import CrossviewError, ScenarioError, one_line
 from crossview import outputs, parallel, pipeline
 from crossview.parallel import Executor, cluster
 from sim import scenario as scenario_mod
+from sim.sensing.profiles import is_profile_file, load_profile_file
 
 log = logging.getLogger(__name__)
 
@@ -254,7 +255,7 @@ def parse_values(option: str, text: str) -> tuple:
 
 
 PROFILE_KEY = "detector.profile"
-"""The key whose value may name a profile file (`sim.scenario.load_profile_file`), relative to the working
+"""The key whose value may name a profile file (`sim.sensing.profiles.load_profile_file`), relative to the working
 folder as an override's is."""
 
 
@@ -272,9 +273,9 @@ def parse_axis(key: str, text: str) -> Axis:
         if key == CAMERAS_AXIS:
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise CrossviewError(f"--cameras: {value!r} is not a camera count (an integer >= 1)")
-        elif key == PROFILE_KEY and scenario_mod.is_profile_file(value):  # a fitted profile, as in a scenario
+        elif key == PROFILE_KEY and is_profile_file(value):  # a fitted profile, as in a scenario
             try:
-                scenario_mod.load_profile_file(Path(value))
+                load_profile_file(Path(value))
             except ScenarioError as e:
                 raise CrossviewError(f"{option}: {e}") from None
         elif not key.startswith(TRACKER_PREFIX):  # (tracker values are checked together, by `plan`)

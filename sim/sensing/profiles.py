@@ -1,14 +1,19 @@
-"""Detector profiles: the error model's parameters, the shipped presets and the scenario's [detector] section."""
+"""Detector profiles: the error model's parameters, the shipped presets, the scenario's [detector] section and
+the profile file (what `crossview fit-detector` writes and a scenario's `detector.profile` may name)."""
 
 from __future__ import annotations
 
 import enum
 import math
+import tomllib
 from dataclasses import dataclass
+from pathlib import Path
 from typing import NamedTuple
 
 import core.types
-from sim.config import bounded, check_ranges
+from core import tomlfile
+from core.errors import ScenarioError
+from sim.config import bounded, check_ranges, from_dict, toml_value
 
 
 class DetectorProfile(enum.Enum):
@@ -224,3 +229,62 @@ class DetectorConfig:
         overrides = {name: getattr(self, name) for name in DetectorParams._fields if getattr(self, name) is not None}
         return PROFILES[self.profile]._replace(**overrides)
 
+
+# ---------------------------------------------------------------- the profile file
+
+PROFILE_FILE_SUFFIX = ".toml"
+
+
+def is_profile_file(profile) -> bool:
+    """Whether a `detector.profile` value names a profile file rather than a shipped profile."""
+    return isinstance(profile, str) and profile.endswith(PROFILE_FILE_SUFFIX)
+
+
+def load_profile_file(path: Path) -> dict:
+    """A detector profile file (what `crossview fit-detector` writes): `base`, the shipped profile it starts
+    from (default typical), and any parameters of `DetectorParams`, each checked as a [detector] key is.
+
+    Returns:
+        {"profile": base, parameter: value, ...} as TOML values.
+
+    Raises:
+        ScenarioError: the file is missing, unreadable or malformed, or a key is unknown or invalid; the
+            message names the file and the key.
+    """
+    try:
+        tree = tomlfile.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ScenarioError(f"{path}: no such detector profile file (detector.profile names a shipped profile, "
+                            f"{', '.join(p.value for p in DetectorProfile)}, or a profile file)") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ScenarioError(f"{path}: cannot read the detector profile: {e}") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ScenarioError(f"{path}: malformed TOML: {e}") from None
+    base = tree.pop("base", DetectorProfile.TYPICAL.value)
+    valid = [p.value for p in DetectorProfile]
+    if base not in valid:
+        raise ScenarioError(f"{path}: base = {base!r} is not one of {valid}")
+    unknown = sorted(set(tree) - set(DetectorParams._fields))
+    if unknown:
+        raise ScenarioError(f"{path}: unknown key '{unknown[0]}' (valid keys: base, "
+                            f"{', '.join(DetectorParams._fields)})")
+    from_dict(DetectorConfig, {**tree, "profile": base}, str(path), "")  # every value checked, naming the file
+    return {"profile": base, **tree}
+
+
+def profile_params(profile: str) -> DetectorParams:
+    """The parameters of a shipped profile (by name) or of a profile file (a path ending in .toml)."""
+    if is_profile_file(profile):
+        return from_dict(DetectorConfig, load_profile_file(Path(profile)), profile, "").params()
+    valid = [p.value for p in DetectorProfile]
+    if profile not in valid:
+        raise ScenarioError(f"profile {profile!r}: not one of {valid} nor a profile file (.toml)")
+    return PROFILES[DetectorProfile(profile)]
+
+
+def profile_file_text(params: DetectorParams, base: DetectorProfile, comment: str) -> str:
+    """A profile file holding every parameter of `params` (what `load_profile_file` reads back)."""
+    lines = [f"# {line}" if line else "#" for line in comment.splitlines()]
+    lines += ["", f"base = {toml_value(base.value)}"]
+    lines += [f"{name} = {toml_value(getattr(params, name))}" for name in DetectorParams._fields]
+    return "\n".join(lines) + "\n"

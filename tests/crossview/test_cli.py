@@ -89,7 +89,7 @@ def test_scenarios_lists_every_shipped_one_with_its_description(capsys):
 
 
 def test_scenarios_show_prints_a_file_that_loads_and_reference_is_the_docs(tmp_path, capsys):
-    from sim import scenario
+    from sim import scenario, scenario_reference
 
     assert main(["scenarios", "--show", "store_layout2"]) == 0
     (tmp_path / "mine.toml").write_text(capsys.readouterr().out)
@@ -100,7 +100,7 @@ def test_scenarios_show_prints_a_file_that_loads_and_reference_is_the_docs(tmp_p
     (tmp_path / "copy.toml").write_text(capsys.readouterr().out)
     assert scenario.load(tmp_path / "copy.toml").name == "pharmacy"
     assert main(["scenarios", "--reference"]) == 0
-    assert capsys.readouterr().out == scenario.reference_markdown()
+    assert capsys.readouterr().out == scenario_reference.reference_markdown()
     err = _run_bad(capsys, ["scenarios", "--show", "nowhere"])
     assert ("nowhere: no such scenario file (shipped scenarios: campus, convenience, hypermarket, panoptic_dome, "
             "shelf, store_layout1") in err

@@ -5,7 +5,7 @@ from pathlib import Path
 import pytest
 
 from core.errors import ScenarioError
-from sim import scenario
+from sim import scenario, scenario_reference
 from sim.sensing.profiles import DetectorProfile
 
 SHIPPED = sorted(scenario.SCENARIO_DIR.glob("*.toml"))
@@ -101,7 +101,7 @@ def test_a_resolved_scenario_loads_back_as_the_same_scenario(path, tmp_path):
 def test_docs_scenarios_md_is_the_reference_of_the_configuration_classes():
     # The page is the generated reference, then the notes on the shipped scenarios written by hand.
     docs = (Path(__file__).resolve().parents[2] / "docs" / "scenarios.md").read_text()
-    reference = scenario.reference_markdown()
+    reference = scenario_reference.reference_markdown()
     notes = docs[len(reference):]
     assert docs[:len(reference)] == reference and notes.startswith("\n## Notes on the shipped scenarios\n"), (
         "docs/scenarios.md is stale: replace its part above the shipped scenarios' notes by "
@@ -117,13 +117,13 @@ def _holds_numbers(hint) -> bool:
 def test_every_key_has_a_meaning_and_every_number_a_range():
     import typing
 
-    from sim.config import field_range
+    from sim.config import field_range, file_keys, is_table
 
-    for section, cls, _ in scenario._sections():
-        docs = scenario.attribute_docs(cls)
+    for section, cls, _ in scenario_reference._sections():
+        docs = scenario_reference.attribute_docs(cls)
         hints = typing.get_type_hints(cls)
-        for f in scenario._keys(cls):
-            if scenario._is_table(hints[f.name]):
+        for f in file_keys(cls):
+            if is_table(hints[f.name]):
                 continue
             assert docs.get(f.name), f"{section}{f.name} has no meaning in {cls.__name__}'s Attributes"
             if _holds_numbers(hints[f.name]):

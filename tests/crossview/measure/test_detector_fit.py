@@ -15,7 +15,7 @@ from crossview.cli import main
 from crossview.measure import detector_fit
 from crossview.measure.detector_stats import SHELF_OPENPOSE, SHELF_OPENPOSE_FILE, recording_detector_stats
 from sim import scenario as scenario_mod
-from sim.sensing.profiles import JOINT_GROUPS, PROFILES, DetectorProfile
+from sim.sensing.profiles import JOINT_GROUPS, PROFILES, DetectorProfile, profile_params
 
 TYPICAL = PROFILES[DetectorProfile.TYPICAL]
 WRISTS = JOINT_GROUPS.index("wrists")
@@ -93,7 +93,7 @@ def test_a_fit_moves_toward_a_changed_profile_and_writes_a_profile_scenarios_acc
     assert moved.phantom_rate > 0.55
     # The command writes the best round as a profile, which is a profile wherever a profile name goes.
     assert main(["--no-progress", "fit-detector", str(rec), "-o", str(fitted), "--duration", "2", "--rounds", "1"]) == 0
-    params = scenario_mod.profile_params(str(fitted))
+    params = profile_params(str(fitted))
     assert params == TYPICAL  # (one round: the starting profile, as measured)
     again = scenario_mod.load("shelf", {"detector.profile": str(fitted)})
     assert again.detector.params() == params
@@ -171,7 +171,7 @@ def test_a_statistics_file_is_a_target_its_column_is_labelled_by_it_and_unreache
     # A file's false-positive people are a target (only the shipped Shelf table's are not: NOT_TARGETS).
     assert "false_positive_people_per_frame:" in text
     assert "rows further than 25 % from the target" in text
-    assert scenario_mod.profile_params(str(out)) == TYPICAL
+    assert profile_params(str(out)) == TYPICAL
 
 
 def test_unreached_rows_name_their_parameter_and_why():
