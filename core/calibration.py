@@ -29,7 +29,7 @@ MAX_ABS_CM = 1e9  # the largest number a dataset layout camera pose may hold, ce
 
 
 MAX_CAMERAS = 10_000
-"""Most cameras of one calibration: a scenario's largest grid (100 x 100, `crossview.pipeline.camera_grid`); a
+"""Most cameras of one calibration: a scenario's largest grid (100 x 100, `sim.cameras.camera_grid`); a
 recording numbers its channels in 16 bits, a few per camera."""
 
 

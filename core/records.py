@@ -44,6 +44,21 @@ class Box:
     yaw_rad: float = 0.0
 
 
+def watched_floor(boxes) -> tuple[float, float, float, float] | None:
+    """(x_min, y_min, x_max, y_max) of the store's floor (the cameras' ground), metres; None without a floor."""
+    floors = [b for b in boxes if b.kind is BoxKind.FLOOR]
+    if not floors:
+        return None
+    corners = []
+    for b in floors:
+        c, s = np.cos(b.yaw_rad), np.sin(b.yaw_rad)
+        for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1)):
+            hx, hy = dx * b.size_m[0] / 2, dy * b.size_m[1] / 2
+            corners.append((b.center_m[0] + c * hx - s * hy, b.center_m[1] + s * hx + c * hy))
+    xy = np.array(corners)
+    return (*xy.min(axis=0).tolist(), *xy.max(axis=0).tolist())
+
+
 @dataclass(frozen=True, eq=False)
 class PoseTruth:
     """The true 3D poses of everybody in the store at one instant.

@@ -991,6 +991,7 @@ def _cmd_export(args) -> None:
             print(args.output / line)
         return
     if args.format == "mot":
+        from core.records import watched_floor
         from crossview.formats.tracking import export_mot
         from crossview.recording.reader import read_kind
         from crossview.recording.schemas import KIND_RECORDING
@@ -1002,7 +1003,7 @@ def _cmd_export(args) -> None:
                                  "REC.mcap): the truth and the scored area are there")
         else:
             rec, tracks = pipeline.open_run(args.recording, args.file)
-        print(export_mot(rec, tracks, args.output, pipeline.watched_floor(rec.boxes), from_s=args.from_s or 0.0))
+        print(export_mot(rec, tracks, args.output, watched_floor(rec.boxes), from_s=args.from_s or 0.0))
         return
     if args.format == "coco":
         from crossview.formats.tracking import export_coco

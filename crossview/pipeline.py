@@ -15,42 +15,16 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from core.errors import CrossviewError
-from core.head import HeadConvention, HeadPoints
-from core.records import BoxKind
+from core.head import HeadPoints
+from core.records import watched_floor
 from core.types import COCO17
 from crossview import outputs
 from sim import scenario as scenario_mod
+from sim.cameras import camera_grid
 from sim.sensing.profiles import is_profile_file
 
 log = logging.getLogger(__name__)
-
-def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
-    """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor, of those with at
-    most `sim.cameras.MAX_GRID` rows and columns.
-
-    Args:
-        count: number of cameras, >= 1.
-        width_m, depth_m: floor extents along x (columns) and y (rows).
-    """
-    if count < 1:
-        raise CrossviewError(f"--cameras: {count} must be >= 1")
-    from sim.cameras import MAX_GRID
-
-    if count > MAX_GRID * MAX_GRID:  # (before the divisor search, which would take as long as the count is large)
-        raise CrossviewError(f"--cameras: {count} is more than the {MAX_GRID * MAX_GRID} cameras a grid may hold "
-                             f"(cameras.rows and cameras.cols at most {MAX_GRID} each)")
-    aspect = width_m / depth_m
-    shapes = [r for r in range(1, count + 1) if count % r == 0 and max(r, count // r) <= MAX_GRID]
-    if not shapes:  # (else the scenario's check would blame the file for a shape the option made)
-        raise CrossviewError(f"--cameras: {count} cameras make no grid of at most {MAX_GRID} rows and {MAX_GRID} "
-                             "columns; give a count that does (a product of two numbers up to "
-                             f"{MAX_GRID})")
-    rows = min(shapes, key=lambda r: abs(math.log((count // r) / r / aspect)))
-    return rows, count // rows
-
 
 def load_scenario(path, *, seed=None, duration_s=None, people=None, cameras=None,
                   overrides: dict | None = None) -> scenario_mod.Scenario:
@@ -351,38 +325,19 @@ def jsonable(value):
     return json.loads(json.dumps(value, default=lambda v: getattr(v, "value", str(v))))
 
 
-def watched_floor(boxes) -> tuple[float, float, float, float] | None:
-    """(x_min, y_min, x_max, y_max) of the store's floor (the cameras' ground), metres; None without a floor."""
-    floors = [b for b in boxes if b.kind is BoxKind.FLOOR]
-    if not floors:
-        return None
-    corners = []
-    for b in floors:
-        c, s = np.cos(b.yaw_rad), np.sin(b.yaw_rad)
-        for dx, dy in ((-1, -1), (-1, 1), (1, -1), (1, 1)):
-            hx, hy = dx * b.size_m[0] / 2, dy * b.size_m[1] / 2
-            corners.append((b.center_m[0] + c * hx - s * hy, b.center_m[1] + s * hx + c * hy))
-    xy = np.array(corners)
-    return (*xy.min(axis=0).tolist(), *xy.max(axis=0).tolist())
-
-
 def truth_head(rec) -> HeadPoints | None:
     """Where PCP puts the true head joints of an opened recording (`crossview.scoring.score`'s `truth_head`):
-    on the humanoid's head (`sim.humanoid.ANNOTATED_HEAD`) when the scenario it keeps says `[scoring]
-    truth_head = "annotated"` and its truth is COCO-17; else None, evaluate.py's mapping. A recording converted
-    from a dataset keeps no scenario, and its 14-joint truth already holds the annotated head joints.
+    what the `[scoring] truth_head` of the scenario it keeps says (`sim.scenario.ScoringConfig.head_points`)
+    when its truth is COCO-17; else None, evaluate.py's mapping. A recording converted from a dataset keeps no
+    scenario, and its 14-joint truth already holds the annotated head joints.
 
     Raises:
         ScenarioError: the scenario text the recording keeps is not a valid scenario.
     """
     if rec.skeleton.name != COCO17.name or not rec.header.scenario_text:
         return None
-    scenario = scenario_mod.from_source_text(rec.header.scenario_text, rec.header.scenario_name, str(rec.path))
-    if scenario.scoring.truth_head is HeadConvention.ANNOTATED:
-        from sim.humanoid import ANNOTATED_HEAD
-
-        return ANNOTATED_HEAD
-    return None
+    return scenario_mod.from_source_text(rec.header.scenario_text, rec.header.scenario_name,
+                                         str(rec.path)).scoring.head_points()
 
 
 def open_run(rec_path: Path, tracks_path: Path):
@@ -418,6 +373,7 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
     from crossview.formats.results import is_result_file, read_results
     from crossview.scoring import TruthTimeline
     from crossview.scoring import score as score_outputs
+    from crossview.scoring.orchestrate import SCORE_WORKER, SCORED_HERE, camera_2d_worker
 
     rec = recording.open_recording(rec_path)
     truth = list(rec.truth())
@@ -441,10 +397,10 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
         # Every SCORED_HERE-th camera here, the others in the worker, forked after the truth is read: it
         # shares its pages instead of reading it again.
         here = {c.name for c in cameras[::SCORED_HERE]}
-        beside = processes.Worker(_camera_2d_worker, (truth, rec.skeleton.num_joints,
+        beside = processes.Worker(camera_2d_worker, (truth, rec.skeleton.num_joints,
                                                       [c for c in cameras if c.name not in here],
                                                       Path(tracks_path), from_s), "crossview-score-2d",
-                                   _SCORE_WORKER)
+                                   SCORE_WORKER)
     try:
         if beside is not None:
             beside.start()
@@ -472,32 +428,6 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
         camera_frames_per_s=frames_per_s,
     )
     return report, result
-
-
-_SCORE_WORKER = "2D scoring worker"  # (how errors and warnings name the process)
-
-SCORED_HERE = 3
-"""`score` with a worker computes the 2D scores of every SCORED_HERE-th camera itself, the worker those of
-the others. The worker's reading of the tracks file and the 2D scores took about 14 s over 6 s of the
-hypermarket, while the rest took about 8 s (2-core test machine, 2026-11-26, format-3 tracks): a third of
-the cameras here about evens them. Over 30 s of it (format 4), every 3rd, 4th or 6th camera here scored in
-54.0, 52.5 and 53.7 s: the split is not critical."""
-
-
-def _camera_2d_worker(truth, num_joints: int, cameras, tracks_path: Path, from_s: float, sender) -> None:
-    """The second process of `score` (`processes.Worker`): the per-camera 2D scores of `cameras`, leaving out
-    the outputs of the warm-up as `crossview.scoring.score` does."""
-    from crossview import recording
-    from crossview.scoring import TruthTimeline
-    from crossview.scoring.per_camera import projected_2d_scores
-
-    timeline = TruthTimeline(truth)
-    timeline.num_joints = num_joints
-    names = {c.name for c in cameras}
-    cutoff = timeline.span[0] + from_s - 1e-9
-    outputs = (out for out in recording.open_tracks(tracks_path).outputs()
-               if out.camera in names and out.stamp_s >= cutoff)
-    sender.send(("result", projected_2d_scores(outputs, cameras, timeline.at)))
 
 
 class _Counted:

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from core.errors import ConfigError, CrossviewError
+from core.records import watched_floor
 from crossview import parallel, pipeline
 
 BATCH_S = 0.5
@@ -45,7 +46,7 @@ def cut(cameras, boxes, text: str, overlap_m: float):
     """The zones of a store (its cameras, its boxes' floor) for `--zones TEXT`."""
     from tracker import zones
 
-    floor = pipeline.watched_floor(boxes)
+    floor = watched_floor(boxes)
     if floor is None:
         raise CrossviewError("--zones: the recording keeps no store floor to cut into zones")
     return zones.cut(cameras, floor, zone_count(text, len(cameras)), overlap_m)
@@ -245,8 +246,8 @@ def write_map(name: str, boxes, cameras, zones, overlap_m: float, path: Path) ->
     from crossview.pictures import layout as pictures
 
     image = pictures.draw_layout(boxes, list(cameras), title=f"{name}: {len(zones)} zones, overlap {overlap_m:g} m",
-                                 px_per_m=pictures.layout_scale(pipeline.watched_floor(boxes)[2]
-                                                                - pipeline.watched_floor(boxes)[0]),
+                                 px_per_m=pictures.layout_scale(watched_floor(boxes)[2]
+                                                                - watched_floor(boxes)[0]),
                                  zones=[(z.cell, z.region, f"zone {z.index}: {len(z.cameras)} cameras")
                                         for z in zones])
     return pictures.write_png(image, path)

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from core.calibration import M_PER_CM, calibration_image_wh, dataset_cameras, dataset_entries, orthonormalise
-from core.errors import ScenarioError
+from core.errors import CrossviewError, ScenarioError
 from core.projection import in_image
 from core.types import Camera
 from sim.config import bounded, check_ranges
@@ -29,6 +29,29 @@ MAX_GRID = 100  # cameras along one side of a grid
 MAX_IMAGE_PX = 16384
 # When a camera looks (almost) straight down, "up" in its image points along world +y.
 _STRAIGHT_DOWN_COS = 0.999
+
+
+def camera_grid(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
+    """Rows and columns of a grid of exactly `count` cameras whose shape best fits the floor, of those with at
+    most `MAX_GRID` rows and columns (`crossview generate --cameras N` on a scenario without a calibration).
+
+    Args:
+        count: number of cameras, >= 1.
+        width_m, depth_m: floor extents along x (columns) and y (rows).
+    """
+    if count < 1:
+        raise CrossviewError(f"--cameras: {count} must be >= 1")
+    if count > MAX_GRID * MAX_GRID:  # (before the divisor search, which would take as long as the count is large)
+        raise CrossviewError(f"--cameras: {count} is more than the {MAX_GRID * MAX_GRID} cameras a grid may hold "
+                             f"(cameras.rows and cameras.cols at most {MAX_GRID} each)")
+    aspect = width_m / depth_m
+    shapes = [r for r in range(1, count + 1) if count % r == 0 and max(r, count // r) <= MAX_GRID]
+    if not shapes:  # (else the scenario's check would blame the file for a shape the option made)
+        raise CrossviewError(f"--cameras: {count} cameras make no grid of at most {MAX_GRID} rows and {MAX_GRID} "
+                             "columns; give a count that does (a product of two numbers up to "
+                             f"{MAX_GRID})")
+    rows = min(shapes, key=lambda r: abs(math.log((count // r) / r / aspect)))
+    return rows, count // rows
 
 
 @dataclass(frozen=True)

@@ -22,11 +22,12 @@ from pathlib import Path
 import scenarios
 from core import tomlfile
 from core.errors import ScenarioError
-from core.head import HeadConvention
+from core.head import HeadConvention, HeadPoints
 from sim.cameras import CameraRigConfig
 from sim.clock import ClockConfig
 from sim.config import bounded, check_ranges, convert, file_keys, from_dict, is_table, table_class, toml_value
 from sim.crowd import CrowdConfig
+from sim.humanoid import ANNOTATED_HEAD
 from sim.sensing.profiles import DetectorConfig, is_profile_file, load_profile_file
 from sim.store import StoreConfig, StoreGeometry
 
@@ -49,6 +50,12 @@ class ScoringConfig:
     """
 
     truth_head: HeadConvention = HeadConvention.EVALUATE
+
+    def head_points(self) -> HeadPoints | None:
+        """Where PCP puts the true head joints of a COCO-17 truth (`crossview.scoring.score`'s `truth_head`):
+        on the humanoid's head (`sim.humanoid.ANNOTATED_HEAD`) for "annotated"; None for "evaluate", mapped
+        with evaluate.py's factors as the estimate's."""
+        return ANNOTATED_HEAD if self.truth_head is HeadConvention.ANNOTATED else None
 
 
 @dataclass(frozen=True)

@@ -35,7 +35,7 @@ def export_mot(rec, tracks, out_dir, scored_area=None, from_s: float = 0.0) -> s
         rec: the opened recording.
         tracks: the opened tracks file made from it (checked by the caller), or None for the truth alone.
         out_dir: a new folder.
-        scored_area: the store's floor, as `crossview score` takes it (`crossview.pipeline.watched_floor`).
+        scored_area: the store's floor, as `crossview score` takes it (`core.records.watched_floor`).
         from_s: the warm-up left out, seconds after the first truth sample (`score --from`).
 
     Returns:

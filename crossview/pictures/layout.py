@@ -234,7 +234,7 @@ def top_down_picture(rec, tracks, t0_s: float, t1_s: float, rate_hz: float = 10.
     Returns:
         (H, W, 3) uint8 BGR image.
     """
-    from crossview.pipeline import watched_floor
+    from core.records import watched_floor
     from crossview.scoring import score
     from crossview.scoring.identity import body_roots
 

@@ -10,8 +10,10 @@ import time
 
 import pytest
 
+from core.records import watched_floor
 from crossview import pipeline
 from crossview.cli import EXIT_BAD_INPUT, main
+from sim.cameras import camera_grid
 from sim.scenario import from_source_text
 
 SCORE_KEYS = [
@@ -59,7 +61,7 @@ def test_the_campus_rig_scenario_runs_end_to_end(tmp_path):
 def test_the_2d_scores_of_a_second_process_are_those_of_one(short_run, monkeypatch):
     """`score` leaves the per-camera 2D scores to a forked process: the same JSON as in one process; a failure
     there is raised here, as what it was, and no process is left behind."""
-    from crossview.scoring import per_camera
+    from crossview.scoring import orchestrate
 
     rec, tracks = short_run / "store_layout1.mcap", short_run / "store_layout1.tracks.mcap"
     _, alone = pipeline.score(rec, tracks, progress=False, worker_process=False)
@@ -70,7 +72,7 @@ def test_the_2d_scores_of_a_second_process_are_those_of_one(short_run, monkeypat
     def broken(*args):
         raise ArithmeticError("2D scoring broke")
 
-    monkeypatch.setattr(per_camera, "projected_2d_scores", broken)
+    monkeypatch.setattr(orchestrate, "projected_2d_scores", broken)  # (the worker's)
     with pytest.raises(ArithmeticError, match="2D scoring broke") as failure:
         pipeline.score(rec, tracks, progress=False, worker_process=True)
     assert any("raised in the 2D scoring worker process" in note for note in failure.value.__notes__)
@@ -102,13 +104,13 @@ def test_info_describes_the_recording(short_run, capsys):
 
 @pytest.mark.parametrize("count, expected", [(12, (3, 4)), (28, (4, 7)), (7, (1, 7)), (1, (1, 1))])
 def test_camera_grid_fits_the_floor(count, expected):
-    assert pipeline.camera_grid(count, width_m=8.0, depth_m=6.0) == expected
+    assert camera_grid(count, width_m=8.0, depth_m=6.0) == expected
 
 
 def test_camera_grid_keeps_to_the_largest_grid_a_scenario_takes():
     # 10,000 on a long floor fitted best as 80 x 125, which the scenario then refused blaming its own file.
-    assert pipeline.camera_grid(10_000, width_m=100.0, depth_m=64.0) == (100, 100)
-    assert pipeline.camera_grid(200, width_m=1000.0, depth_m=1.0) == (2, 100)  # (unbounded: 1 x 200)
+    assert camera_grid(10_000, width_m=100.0, depth_m=64.0) == (100, 100)
+    assert camera_grid(200, width_m=1000.0, depth_m=1.0) == (2, 100)  # (unbounded: 1 x 200)
 
 
 def test_the_watched_floor_is_the_floor_box_footprint_walls_included():
@@ -119,11 +121,11 @@ def test_the_watched_floor_is_the_floor_box_footprint_walls_included():
     from sim.store import StoreGeometry
 
     store = StoreGeometry(load("store_layout1").store)
-    x0, y0, x1, y1 = pipeline.watched_floor(store.boxes)
+    x0, y0, x1, y1 = watched_floor(store.boxes)
     assert (x0, y0) == pytest.approx((-0.1, -0.1)) and (x1, y1) == pytest.approx((4.7, 3.9))  # 4.6 x 3.8 m, 0.1 m walls
     turned = Box(BoxKind.FLOOR, (1.0, 2.0, 0.0), (4.0, 2.0, 0.1), np.pi / 2)
-    assert pipeline.watched_floor([turned]) == pytest.approx((0.0, 0.0, 2.0, 4.0))
-    assert pipeline.watched_floor([Box(BoxKind.SHELF, (0, 0, 0), (1, 1, 1))]) is None
+    assert watched_floor([turned]) == pytest.approx((0.0, 0.0, 2.0, 4.0))
+    assert watched_floor([Box(BoxKind.SHELF, (0, 0, 0), (1, 1, 1))]) is None
 
 
 def test_generate_gives_the_bytes_of_a_plain_one_process_write(tmp_path):

@@ -22,7 +22,7 @@ def test_the_ladder_holds_one_grid_per_count_that_fits_the_floor():
     # The convenience store: 3 x 4 and 4 x 5 and 5 x 6 are on it, 1 x 12 is not.
     assert {(3, 4), (4, 5), (5, 6), (2, 4)} <= set(ladder) and (1, 12) not in ladder
     # Each rung is the grid `--cameras N` fits to the same floor (the one rule for a count's grid).
-    from crossview.pipeline import camera_grid
+    from sim.cameras import camera_grid
 
     assert all(camera_grid(r * c, 18.0, 12.0) == (r, c) for r, c in ladder)
 
