@@ -11,7 +11,7 @@ class TargetRows(NamedTuple):
     """The live targets' state that the kernels read and write in place, a row per target (T targets,
     C cameras, J joints, H history slots).
 
-    The tracker's `_Targets` owns the arrays (and the lifecycle's own: ids, states, birth times) and hands out
+    The tracker's `_TargetRowStore` owns the arrays (and the lifecycle's own: ids, states, birth times) and hands out
     this tuple of their current views. numba compiles a NamedTuple of arrays as a struct of them, but its
     dispatch looks at every field on every call (a few tenths of a microsecond each), so the tuple holds only
     what the kernels use.

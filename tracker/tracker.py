@@ -73,11 +73,12 @@ MAX_SIGHT_MAP_CELLS = 20_000_000
 """Most cells of all cameras' sight maps together (two float64 counts each: 320 MB)."""
 
 
-class _Targets(Rows):
-    """Array storage of all live targets (rows), grown on demand and compacted on removal.
+class _TargetRowStore(Rows):
+    """The live targets' rows (`TargetRows`, with the lifecycle's ids, states and birth times), grown on demand
+    and compacted on removal.
 
     Attributes:
-        arrays: the current views of the fields as one `TargetRows`, the way the kernels take them (made again
+        rows: the current views of the fields as one `TargetRows`, the way the kernels take them (made again
             whenever the views are).
     """
 
@@ -96,7 +97,7 @@ class _Targets(Rows):
 
     def _views(self) -> None:
         super()._views()
-        self.arrays = TargetRows._make(self.__dict__[name] for name in TargetRows._fields)
+        self.rows = TargetRows._make(self.__dict__[name] for name in TargetRows._fields)
 
 
 class Tracker:
@@ -172,7 +173,7 @@ class Tracker:
             raise ConfigError(f"TrackerConfig.ghost_cell_m: {config.ghost_cell_m} m makes {C} sight maps of "
                               f"{nx * ny:,} cells (over {MAX_SIGHT_MAP_CELLS:,} in all); raise it, or 0 for no map")
         self._sight_maps = [SightMap(grid, nx, ny, np.zeros(nx * ny + 1), np.zeros(nx * ny + 1)) for _ in range(C)]
-        self._targets = _Targets(C, J, config.velocity_history, self._prior_bones.shape[0])
+        self._targets = _TargetRowStore(C, J, config.velocity_history, self._prior_bones.shape[0])
         self._next_id = 0
         self._camera_last_s = np.full(C, -np.inf)
         # Each camera's latest stamp intervals (a ring, NaN unfilled) and their median, its frame period (NaN
@@ -315,7 +316,7 @@ class Tracker:
         # before the camera's second frame, when no target can hold a point of this camera for eq. 2.)
         alpha_2d_px_per_s = max(cfg.alpha_2d_px_per_frame / self._period_s[c], cfg.alpha_2d_floor_px_per_s)
         matrix = np.empty((rows.size, det_px.shape[0]))
-        aff.affinity_matrix(tg.arrays, c, det_px, self._world_from_pixel[c], self._centers[c], t, alpha_2d_px_per_s,
+        aff.affinity_matrix(tg.rows, c, det_px, self._world_from_pixel[c], self._centers[c], t, alpha_2d_px_per_s,
                             self._affinity_params, rows, matrix)
         matched, cols = associate(matrix)  # eq. (1), (T, D)
         return rows[matched], cols
@@ -333,7 +334,7 @@ class Tracker:
             rows: (M,) matched targets; cols: (M,) their detections in det_px (D, J, 2).
         """
         tg = self._targets
-        update_matched(rows, cols, det_px, c, t, tg.arrays, self._P, self._bones, self._update_params)
+        update_matched(rows, cols, det_px, c, t, tg.rows, self._P, self._bones, self._update_params)
         tg.state[rows] = lifecycle.on_match(tg.state[rows], tg.born_s[rows], tg.num_updates[rows], t, self.config,
                                             self._has_body(rows))
 
@@ -359,7 +360,7 @@ class Tracker:
             return
         matched = np.zeros(len(tg), dtype=np.bool_)
         matched[rows] = True
-        count_sightings(self._planes[c], self._hips, tg.arrays, t, matched, tg.state == lifecycle.CONFIRMED,
+        count_sightings(self._planes[c], self._hips, tg.rows, t, matched, tg.state == lifecycle.CONFIRMED,
                         self._sight_maps[c], self._evidence_params)
         if rows.size:
             bad = np.empty(rows.size, dtype=np.bool_)

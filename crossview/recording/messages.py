@@ -28,7 +28,7 @@ class EncodedFrame(NamedTuple):
     log-time order, without the CameraFrame objects in between."""
     camera: str
     log_time_ns: int  # its delivery time
-    frame: bytes  # crossview.CameraFrame
+    frame_bytes: bytes  # the crossview.CameraFrame message
     annotations: bytes  # foxglove.ImageAnnotations stamped log_time_ns
     image: bytes | None = None  # a rendered JPEG picture of the frame (`crossview generate --images`), or None
 

@@ -249,7 +249,7 @@ class RecordingWriter(_WriterContext):
                 if frame_channel is None:
                     raise ValueError(f"CameraFrame: camera {event.camera!r} is not one of the recording's cameras")
                 t = self._log_time(event.log_time_ns, f"CameraFrame {event.camera}")
-                messages.append((frame_channel, t, event.frame))
+                messages.append((frame_channel, t, event.frame_bytes))
                 messages.append((self._annotation_ch[event.camera], t, event.annotations))
                 if event.image is not None:
                     picture = foxglove.camera_image(self._camera_of[event.camera], t, event.image)

@@ -177,7 +177,7 @@ def test_compiled_target_update_runs_the_same_as_plain_python(layout1, config):
         assert rows.size
         results = []
         for kernel in (update_matched, plain_python(update_matched)):
-            arrays = tracker._targets.arrays.copy()
+            arrays = tracker._targets.rows.copy()
             kernel(rows, cols, det_px, c, frame.stamp_s, arrays, tracker._P, tracker._bones, tracker._update_params)
             results.append(arrays)
         for name, compiled, plain in zip(TargetRows._fields, *results):
@@ -360,7 +360,7 @@ def test_compiled_evidence_kernels_run_the_same_as_plain_python(layout1):
         counts, bads = [], []
         for sightings, bodies in ((count_sightings, implausible_bodies),
                                   (count_sightings.py_func, implausible_bodies.py_func)):
-            state = tg.arrays.copy()
+            state = tg.rows.copy()
             state.pos[0, :4, 2] = 3.5  # a few joints too high, to exercise the rule
             sight_map = tracker._sight_maps[c]
             sight_map = sight_map._replace(expected=sight_map.expected.copy(), matched=sight_map.matched.copy())

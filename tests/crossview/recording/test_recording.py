@@ -670,7 +670,7 @@ def test_encoded_messages_are_protobufs_own_serialisation(world):
             effects = rng.integers(0, 1 << 31, len(event.truth.effects))
             bigger = CameraFrame(event.frame, dataclasses.replace(event.truth, effects=effects), event.poses_at_capture)
             for cf in (event, bigger):
-                data = encoder.camera_frames([cf])[0].frame
+                data = encoder.camera_frames([cf])[0].frame_bytes
                 assert data == reference.camera_frame_to_msg(cf).SerializeToString()
                 back = schemas.CameraFrameMsg.FromString(data)
                 assert back.camera == cf.frame.camera and back.num_detections == cf.frame.num_detections
