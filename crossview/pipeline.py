@@ -15,7 +15,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from core.errors import CrossviewError
+from core.errors import ConfigError, CrossviewError
 from core.head import HeadPoints
 from core.records import watched_floor
 from core.types import COCO17
@@ -190,7 +190,6 @@ def tracker_config(preset: str, config_path: Path | None = None, overrides: dict
     """The tracker configuration of a preset, optionally overridden by a TOML file and then by `overrides`
     (field -> value, as a sweep's `tracker.*` axes give them); validated: a `ConfigError` names the file or
     the field."""
-    from core.errors import ConfigError
     from tracker.config import TrackerConfig
 
     config = TrackerConfig.from_toml(config_path, base=preset) if config_path else TrackerConfig.preset(preset)
@@ -220,8 +219,8 @@ def make_tracker(method: str, cameras, preset: str, config_path: Path | None, sk
     config = tracker_config(preset, config_path, overrides)
     try:
         config.check_fits(len(cameras), skeleton.num_joints)
-    except CrossviewError as e:
-        raise CrossviewError(f"{config_path or '--preset ' + preset}: {e}") from None
+    except ConfigError as e:  # (the one error check_fits raises)
+        raise ConfigError(f"{config_path or '--preset ' + preset}: {e}") from None
     return resolved.make(cameras, config, skeleton), config
 
 

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 from core import processes, tomlfile
-from core.errors import CrossviewError, ScenarioError, one_line
+from core.errors import ConfigError, CrossviewError, ScenarioError, one_line
 from crossview import outputs, parallel, pipeline
 from crossview.parallel import Executor, cluster
 from sim import scenario as scenario_mod
@@ -299,7 +299,7 @@ def _check_tracker_axes(axes, presets) -> None:
         for preset in presets:
             try:
                 pipeline.tracker_config(preset, None, fields)
-            except CrossviewError as e:
+            except ConfigError as e:
                 for n, i in enumerate(picks):
                     first_error.setdefault((n, i), e)
                 continue
@@ -430,7 +430,7 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
         if tracker and error is None:
             try:
                 pipeline.tracker_config(preset, None, tracker)
-            except CrossviewError as e:
+            except ConfigError as e:
                 error = portable(one_line(e), folder)
         # (A cell without tracker axes or a plug-in keeps the key it had before they were keyed: finished cells
         # stay found. The method as given, label included: a method without a label keeps its key.)
