@@ -284,7 +284,7 @@ def resolved_toml(scenario: Scenario) -> str:
                 table(value, f"{section}{f.name}.", f"[{section}{f.name}]")
                 if isinstance(obj, StoreConfig) and f.name == "checkout_lanes":
                     lines.append("# its counters, (x, y) centre and (x, y, height) size:")
-                    lines.extend(f"#   store.checkout_lanes[{k}]: {_toml_value(c)}, {_toml_value(size)}"
+                    lines.extend(f"#   store.checkout_lanes[{k}]: {toml_value(c)}, {toml_value(size)}"
                                  for k, (c, size) in enumerate(value.counters(obj.width_m, obj.depth_m, obj.ceiling_m)))
 
     table(scenario, "", None)
