@@ -17,6 +17,7 @@ from pathlib import Path
 
 from core.errors import CrossviewError, Interrupted
 from crossview.live import DEFAULT_PORT, parse_speed
+from crossview.tables import emit
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
@@ -246,6 +247,21 @@ def add_output(p: argparse.ArgumentParser, help: str, *, required: bool = True, 
                            help=argparse.SUPPRESS)
 
 
+def add_format(p: argparse.ArgumentParser) -> None:
+    """Adds `--format text|json|markdown`: how a command that prints a table prints it, and writes it with -o
+    (`crossview.tables`: one rule for every such command)."""
+    from crossview.tables import FORMATS
+
+    p.add_argument("--format", choices=FORMATS, help="how to print the table: text (default), json or markdown; a "
+                   "file written with -o takes this format, else its suffix's (.json, .md), else text")
+
+
+def _say(args, line: str) -> None:
+    """A line about what the command did: on stdout beside a text table, on stderr when stdout holds a JSON or
+    Markdown document (`--format`)."""
+    print(line, file=sys.stdout if getattr(args, "format", None) in (None, "text") else sys.stderr, flush=True)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _TopParser(prog="crossview", description=__doc__.splitlines()[0])
     parser.add_argument("--version", action=_Version, help="print the version and exit")
@@ -318,7 +334,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "scenario's)")
     p.add_argument("--people", type=_non_negative_int, help="the crowd whose occlusion to predict (default: the "
                    "scenario's [crowd] people)")
-    p.add_argument("--figures", type=Path, metavar="FILE.json", help="write the figures as JSON here")
+    p.add_argument("--figures", type=Path, metavar="FILE", help="write the figures here too (in --format, else "
+                   "as its suffix says: .json, .md, else text)")
+    add_format(p)
 
     p = sub.add_parser("plan", help="how many cameras a store needs: the fewest ceiling cameras whose predicted "
                        "tracking meets a PCP target, with --confirm measured by a short sweep")
@@ -373,7 +391,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
     p.add_argument("tracks", type=Path, help="tracks file (.mcap), result_3d.json or JSON lines "
                    "(docs/recording-format.md)")
-    add_output(p, "write the score JSON here (default: print the table only)", required=False, old=("--json",))
+    add_output(p, "write the score here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",))
+    add_format(p)
     p.add_argument("--from", dest="from_s", type=_non_negative_float, default=0.0, metavar="S",
                    help="leave out a warm-up: truth and tracks before S seconds are not scored (default 0)")
     p.add_argument("--map", type=Path, metavar="MAP.png", help="draw where and when the tracker failed: floor "
@@ -419,6 +439,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "registered name) with an optional @PRESET, or file:PATH of a result file ({recording} in PATH "
                    "is the recording's name without .mcap)")
     add_output(p, "folder for compare.md, compare.csv, the charts and tracks", old=("--out",), metavar="DIR")
+    add_format(p)
 
     p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
     p.add_argument("scenario", help="base scenario file or shipped name")
@@ -494,14 +515,17 @@ def build_parser() -> argparse.ArgumentParser:
                        "(the paper's Table 5)")
     p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
     p.add_argument("tracks", type=Path, help="cross-view tracks file made from the recording")
-    add_output(p, "write the table as JSON here (default: print it only)", required=False, old=("--json",))
+    add_output(p, "write the table here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",))
+    add_format(p)
 
     p = sub.add_parser("detector-stats", help="measure a recording's 2D detections against its projected 3D truth, "
                        "beside real OpenPose on Shelf")
     p.add_argument("recording", type=Path, help="a recording with 3D truth: `crossview generate`, or `crossview "
                    "convert` of a dataset folder with annotation_3d.json")
-    add_output(p, "write the figures as JSON here (default: print the table only)", required=False, old=("--json",),
-               metavar="FILE")
+    add_output(p, "write the figures here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",), metavar="FILE")
+    add_format(p)
 
     p = sub.add_parser("fit-detector", help="fit a detector profile to a recording's detector statistics (or to "
                        "real OpenPose on Shelf), by simulating the rig with candidate profiles")
@@ -519,6 +543,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "scenario's)")
     p.add_argument("--duration", type=_duration_s, default=20.0, help="simulated seconds per round (default 20)")
     p.add_argument("--rounds", type=_positive_int, default=8, help="rounds of simulate, measure, update (default 8)")
+    p.add_argument("--figures", type=Path, metavar="FILE", help="write the fitted statistics beside the target here "
+                   "(in --format, else as its suffix says: .json, .md, else text)")
+    add_format(p)
 
     p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
     p.add_argument("scenario", help="scenario file or shipped name")
@@ -528,9 +555,14 @@ def build_parser() -> argparse.ArgumentParser:
                           f"at most {MAX_DURATION_S:g})")
     duration.add_argument("--minutes", dest="duration", type=_minutes_as_s, default=argparse.SUPPRESS,
                           help=argparse.SUPPRESS)  # (the old spelling, for one version)
+    add_output(p, "write the figures here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, metavar="FILE")
+    add_format(p)
 
     p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
-    add_output(p, "write the figures as JSON here", required=False, old=("--json",))
+    add_output(p, "write the figures here (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",))
+    add_format(p)
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
     p.add_argument("--duration", type=_duration_s, help="simulated seconds per case (default 20; 10 with --scale)")
     p.add_argument("--scale", action="store_true", help="the tracker at crowd scale instead (28/16 to 240/200 "
@@ -662,10 +694,10 @@ def _say_cameras(args, scenario) -> None:
     if getattr(args, "cameras", None) is None:
         return
     if scenario.cameras.calibration:
-        print(f"--cameras {args.cameras}: the first {args.cameras} cameras of {scenario.cameras.calibration}")
+        _say(args, f"--cameras {args.cameras}: the first {args.cameras} cameras of {scenario.cameras.calibration}")
     else:
-        print(f"--cameras {args.cameras}: a grid of {scenario.cameras.rows} rows x {scenario.cameras.cols} columns "
-              f"over the {scenario.store.width_m:g} m x {scenario.store.depth_m:g} m floor")
+        _say(args, f"--cameras {args.cameras}: a grid of {scenario.cameras.rows} rows x {scenario.cameras.cols} "
+             f"columns over the {scenario.store.width_m:g} m x {scenario.store.depth_m:g} m floor")
 
 
 def _warn_coverage(scenario) -> None:
@@ -688,12 +720,9 @@ def _cmd_coverage(args) -> None:
         if path:
             pipeline.check_writable(path)
     cov = coverage.coverage(scenario, people=args.people)
-    print("\n".join(cov.lines()))
+    emit(cov.as_dict(), fmt=args.format, output=args.figures, text="\n".join(cov.lines()))
     if args.output:
-        print(f"map: {coverage.write_map(cov, args.output)}")
-    if args.figures:
-        pipeline.write_json(cov.as_dict(), args.figures)
-        print(f"figures: {args.figures}")
+        _say(args, f"map: {coverage.write_map(cov, args.output)}")
     warning = cov.warning()
     if warning:
         print(warning, file=sys.stderr)
@@ -864,13 +893,11 @@ def _cmd_score(args) -> None:
     if args.map:
         pipeline.check_writable(args.map, inputs=(*inputs, *([args.output] if args.output else [])))
     report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress, from_s=args.from_s)
-    print(report.table())
-    if args.output:
-        pipeline.write_json(result, args.output, inputs=inputs)
-        print(f"score JSON: {args.output}")
+    emit(result, fmt=args.format, output=args.output, what="score", text=report.table(),
+         blocks=report.markdown_blocks(), inputs=inputs)
     if args.map:
         pipeline.write_score_map(result, args.recording, args.map, inputs=inputs)
-        print(f"map: {args.map}")
+        _say(args, f"map: {args.map}")
 
 
 def _cmd_info(args) -> None:
@@ -882,15 +909,13 @@ def _cmd_info(args) -> None:
 
 def _cmd_detector_stats(args) -> None:
     from crossview import pipeline
-    from crossview.measure.detector_stats import format_detector_stats, recording_detector_stats
+    from crossview.measure.detector_stats import detector_stats_blocks, format_detector_stats, recording_detector_stats
 
     if args.output:
         pipeline.check_writable(args.output, inputs=(args.recording,))
     stats = recording_detector_stats(args.recording, progress=not args.no_progress)
-    print(format_detector_stats(stats))
-    if args.output:
-        pipeline.write_json(stats, args.output, inputs=(args.recording,))
-        print(f"figures JSON: {args.output}")
+    emit(stats, fmt=args.format, output=args.output, text=format_detector_stats(stats),
+         blocks=detector_stats_blocks(stats), inputs=(args.recording,))
 
 
 def _cmd_fit_detector(args) -> None:
@@ -899,6 +924,7 @@ def _cmd_fit_detector(args) -> None:
     from crossview.measure.detector_stats import (
         SHELF_OPENPOSE,
         SHELF_OPENPOSE_LABEL,
+        detector_stats_blocks,
         format_detector_stats,
         read_stats_file,
         recording_detector_stats,
@@ -910,6 +936,8 @@ def _cmd_fit_detector(args) -> None:
         raise CrossviewError("fit-detector: give a recording to fit, or --target FILE.json|shelf-openpose (not both)")
     target_file = None if args.target in (None, "shelf-openpose") else Path(args.target)
     pipeline.check_writable(args.output, inputs=() if target_file is None else (target_file,))
+    if args.figures:
+        pipeline.check_writable(args.figures, inputs=(args.output, *(() if target_file is None else (target_file,))))
     start = scenario_mod.profile_params(args.start)  # (a bad --start refused before any measuring)
     seed = args.seed
     if args.recording is not None:
@@ -937,31 +965,39 @@ def _cmd_fit_detector(args) -> None:
 
     def report(k, result):
         (key, group), worst = max(deviations(result.stats, target).items(), key=lambda kv: abs(kv[1]))
-        print(f"round {k + 1}/{args.rounds}: largest deviation {100 * worst:+.1f} % ({key}"
-              f"{'' if group is None else ', ' + group})", flush=True)
+        _say(args, f"round {k + 1}/{args.rounds}: largest deviation {100 * worst:+.1f} % ({key}"
+             f"{'' if group is None else ', ' + group})")
 
     best = fit(target, scenario, start, seed=seed, duration_s=args.duration, rounds=args.rounds, on_round=report)
-    print(format_detector_stats(best.stats, reference=target, reference_label=label))
     missed = unreached(best, target)
-    print(f"rows further than {100 * REACHED:g} % from the target: {len(missed) or 'none'}")
-    for key, group, dev, why in missed:
-        print(f"  {key}{'' if group is None else ', ' + group}: {100 * dev:+.1f} %: {why}")
+    unreached_lines = [f"rows further than {100 * REACHED:g} % from the target: {len(missed) or 'none'}",
+                       *(f"  {key}{'' if group is None else ', ' + group}: {100 * dev:+.1f} %: {why}"
+                         for key, group, dev, why in missed)]
+    figures = {"reference": where, "fitted": best.stats, "target": target,
+               "unreached": [{"key": key, "group": group, "deviation": dev, "why": why}
+                             for key, group, dev, why in missed]}
+    emit(figures, fmt=args.format, output=args.figures, what="fitted statistics",
+         text="\n".join([format_detector_stats(best.stats, reference=target, reference_label=label),
+                         *unreached_lines]),
+         blocks=[*detector_stats_blocks(best.stats, reference=target, reference_label=label),
+                 *(line.strip() for line in unreached_lines)],
+         inputs=() if target_file is None else (target_file,))
     (key, group), worst = max(deviations(best.stats, target).items(), key=lambda kv: abs(kv[1]))
     comment = (f"Detector profile fitted by `crossview fit-detector` to {where}, on {scenario.name} (seed {seed}, "
                f"{args.duration:g} s a round, {args.rounds} rounds, from {args.start}).\nLargest deviation of a "
                f"row from the target: {100 * worst:+.1f} % ({key}{'' if group is None else ', ' + group}).")
     pipeline.write_text(scenario_mod.profile_file_text(best.params, DetectorProfile.TYPICAL, comment), args.output)
-    print(f"{args.output}: the fitted profile (largest deviation {100 * best.worst:.1f} %)")
+    _say(args, f"{args.output}: the fitted profile (largest deviation {100 * best.worst:.1f} %)")
 
 
 def _cmd_world_stats(args) -> None:
-    import json
-
     from crossview import pipeline
-    from sim.world import measure
+    from crossview.measure.world_stats import measure
 
+    if args.output:
+        pipeline.check_writable(args.output)
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed)
-    print(json.dumps(measure(scenario, duration_s=args.duration), indent=1))
+    emit(measure(scenario, duration_s=args.duration), fmt=args.format, output=args.output)
 
 
 def _cmd_evaluate(args) -> None:
@@ -1042,12 +1078,10 @@ def _cmd_per_camera(args) -> None:
     if args.output:
         pipeline.check_writable(args.output, inputs=(args.recording, args.tracks))
     table = per_camera_table(args.recording, args.tracks, progress=not args.no_progress)
-    print(table.markdown())
-    print()
-    print(paper_means_line())
-    if args.output:
-        pipeline.write_json(table.to_json(), args.output)
-        print(f"table JSON: {args.output}")
+    rows = table.table()
+    emit(table.to_json(), fmt=args.format, output=args.output, what="table",
+         text=rows.text() + "\n\n" + paper_means_line(), blocks=[rows, paper_means_line()],
+         inputs=(args.recording, args.tracks))
 
 
 def _cmd_compare(args) -> None:
@@ -1063,24 +1097,32 @@ def _cmd_compare(args) -> None:
         rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks",
                                     progress=not args.no_progress)
         written = compare.write_report(rows, args.output)
-    print(compare.markdown(rows), end="")
-    print(f"written: {', '.join(str(p) for p in written)}")
+    emit({"rows": rows}, fmt=args.format, text=compare.table(rows, marked=False).text(),
+         blocks=[compare.table(rows)])
+    _say(args, f"written: {', '.join(str(p) for p in written)}")
 
 
 def _cmd_bench(args) -> None:
+    from crossview import pipeline
+
+    if args.output:
+        pipeline.check_writable(args.output)
+
+    def show(payload, text):
+        emit(payload, fmt=args.format, output=args.output, text=text)
+
     if args.scale:
         from crossview.experiments import bench_scale
 
-        bench_scale.main(json_path=args.output, duration_s=args.duration or 10.0, progress=not args.no_progress,
-                         markdown_path=args.markdown, budget_s=args.budget)
+        bench_scale.main(duration_s=args.duration or 10.0, progress=not args.no_progress,
+                         markdown_path=args.markdown, budget_s=args.budget, show=show)
     else:
         from crossview.experiments import bench
 
-        bench.main(json_path=args.output, duration_s=args.duration or 20.0, progress=not args.no_progress,
-                   markdown_path=args.markdown)
-    written = [str(p) for p in (args.output, args.markdown) if p]
-    if written:
-        print(f"written: {', '.join(written)}")
+        bench.main(duration_s=args.duration or 20.0, progress=not args.no_progress, markdown_path=args.markdown,
+                   show=show)
+    if args.markdown:
+        _say(args, f"written: {args.markdown}")
 
 
 def _cmd_render(args) -> None:
@@ -1173,6 +1215,11 @@ COMMANDS = {
     "verify": _cmd_verify,
     "ablate": _cmd_ablate,
 }
+
+
+TABLE_COMMANDS = ("score", "per-camera", "detector-stats", "fit-detector", "world-stats", "coverage", "compare",
+                  "bench")
+"""The commands that print a table, each with `--format` and `-o` (`crossview.tables`; docs/cli.md)."""
 
 
 COMPILING_LINE = "crossview: compiling numeric kernels (once, about a minute)"

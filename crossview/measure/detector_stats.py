@@ -558,10 +558,10 @@ def _people(spread: dict) -> str:
     return "-" if share is None else f"{100 * share:.0f} % of {spread['people_measured']}"
 
 
-def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
-                          reference_label: str = SHELF_OPENPOSE_LABEL) -> str:
-    """The statistics table: the measured figures beside `reference` (by default real OpenPose on Shelf), whose
-    column is headed `reference_label`."""
+def _table_rows(stats: dict, reference: dict) -> tuple[str, list[tuple[str, str | None, str | None]],
+                                                          list[tuple[str, ...]]]:
+    """The table's parts: the line above it, its rows (statistic, measured, reference; a heading row has None for
+    both), and one row per camera (name, frames, matched, error/size, joint miss, missed views, FP / frame)."""
     groups, ref_groups = stats["per_group"], reference.get("per_group", {})
     rows = [("joint error / person size: median", stats, reference, "error_over_size_median", ""),
             ("  p90", stats, reference, "error_over_size_p90", ""),
@@ -591,25 +591,51 @@ def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
         *((f"  {g}", groups[g], ref_groups.get(g, {}), "cross_view_error_m", "cm") for g in GROUPS),
     ]
     size = stats["person_size_px_median"]
-    lines = [f"{stats['frames_measured']} of {stats['frames']} camera frames measured (truth at their capture "
+    intro = (f"{stats['frames_measured']} of {stats['frames']} camera frames measured (truth at their capture "
              f"time), {stats['matched_detections']} matched detections, {stats['person_views']} person-views, "
              f"person size median {'-' if size is None else f'{size:.0f}'} px, "
-             f"{stats['cross_view_joints']} joints triangulated across views",
-             f"{'statistic':<56}{'measured':>12}{reference_label[:22]:>24}"]
-    for label, measured, ref, key, kind in rows:
-        if measured is None:
-            lines.append(label)
-            continue
-        lines.append(f"{label:<56}{_fmt(measured.get(key), kind):>12}{_fmt(ref.get(key), kind):>24}")
+             f"{stats['cross_view_joints']} joints triangulated across views")
+    cells = [(label, None, None) if measured is None
+             else (label, _fmt(measured.get(key), kind), _fmt(ref.get(key), kind))
+             for label, measured, ref, key, kind in rows]
     spread, ref_spread = stats.get("per_person") or {}, reference.get("per_person") or {}
-    lines.append(f"{f'people with a limb error > {BAD_LIMB_FACTOR:g} x the median (of people measured)':<56}"
-                 f"{_people(spread):>12}{_people(ref_spread):>24}")
-    if stats["per_camera"]:
-        lines += ["", f"{'camera':<16}{'frames':>8}{'matched':>9}{'error/size':>12}{'joint miss':>12}"
-                      f"{'missed views':>14}{'FP / frame':>12}"]
-        for name, c in stats["per_camera"].items():
-            lines.append(f"{name:<16}{c['frames_measured']:>8}{c['matched_detections']:>9}"
-                         f"{_fmt(c['error_over_size_median'], ''):>12}{_fmt(c['miss_rate'], '%'):>12}"
-                         f"{_fmt(c['missed_person_view_rate'], '%'):>14}"
-                         f"{_fmt(c['false_positive_people_per_frame'], ''):>12}")
+    cells.append((f"people with a limb error > {BAD_LIMB_FACTOR:g} x the median (of people measured)",
+                  _people(spread), _people(ref_spread)))
+    cameras = [(name, str(c["frames_measured"]), str(c["matched_detections"]), _fmt(c["error_over_size_median"], ""),
+                _fmt(c["miss_rate"], "%"), _fmt(c["missed_person_view_rate"], "%"),
+                _fmt(c["false_positive_people_per_frame"], "")) for name, c in stats["per_camera"].items()]
+    return intro, cells, cameras
+
+
+_CAMERA_HEADER = ("camera", "frames", "matched", "error/size", "joint miss", "missed views", "FP / frame")
+
+
+def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
+                          reference_label: str = SHELF_OPENPOSE_LABEL) -> str:
+    """The statistics table: the measured figures beside `reference` (by default real OpenPose on Shelf), whose
+    column is headed `reference_label`."""
+    intro, cells, cameras = _table_rows(stats, reference)
+    lines = [intro, f"{'statistic':<56}{'measured':>12}{reference_label[:22]:>24}"]
+    for label, measured, ref in cells:
+        lines.append(label if measured is None else f"{label:<56}{measured:>12}{ref:>24}")
+    if cameras:
+        widths = (16, 8, 9, 12, 12, 14, 12)
+        lines += ["", "".join(h.ljust(w) if i == 0 else h.rjust(w) for i, (h, w) in enumerate(zip(_CAMERA_HEADER,
+                                                                                                   widths)))]
+        lines += ["".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths)))
+                  for row in cameras]
     return "\n".join(lines)
+
+
+def detector_stats_blocks(stats: dict, reference: dict = SHELF_OPENPOSE,
+                          reference_label: str = SHELF_OPENPOSE_LABEL) -> list:
+    """The same table for `crossview.tables` (`--format markdown`): the line above it, the statistics beside the
+    reference, the cameras."""
+    from crossview.tables import Table
+
+    intro, cells, cameras = _table_rows(stats, reference)
+    blocks = [intro, Table(("statistic", "measured", reference_label),
+                           tuple((label.strip(), m or "", r or "") for label, m, r in cells))]
+    if cameras:
+        blocks.append(Table(_CAMERA_HEADER, tuple(cameras)))
+    return blocks
