@@ -1219,7 +1219,7 @@ COMMANDS = {
 
 TABLE_COMMANDS = ("score", "per-camera", "detector-stats", "fit-detector", "world-stats", "coverage", "compare",
                   "bench")
-"""The commands that print a table, each with `--format` and `-o` (`crossview.tables`; docs/cli.md)."""
+"""The commands that print a table, each with `--format` and `-o` (`crossview.tables`; README.md, "Commands")."""
 
 
 COMPILING_LINE = "crossview: compiling numeric kernels (once, about a minute)"
