@@ -520,12 +520,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_format(p)
 
     p = sub.add_parser("detector-stats", help="measure a recording's 2D detections against its projected 3D truth, "
-                       "beside real OpenPose on Shelf")
+                       "beside a reference (default real OpenPose on Shelf)")
     p.add_argument("recording", type=Path, help="a recording with 3D truth: `crossview generate`, or `crossview "
                    "convert` of a dataset folder with annotation_3d.json")
     add_output(p, "write the figures here too (in --format, else as its suffix says: .json, .md, else text)",
                required=False, old=("--json",), metavar="FILE")
     add_format(p)
+    p.add_argument("--reference", default="shelf-openpose", metavar="FILE.json|shelf-openpose", help="what to "
+                   "print the figures beside, its column headed by its source: a `detector-stats -o` file (of a "
+                   "recording like this one), or shelf-openpose, real OpenPose on Shelf's 400 px people (default)")
 
     p = sub.add_parser("fit-detector", help="fit a detector profile to a recording's detector statistics (or to "
                        "real OpenPose on Shelf), by simulating the rig with candidate profiles")
@@ -909,32 +912,40 @@ def _cmd_info(args) -> None:
 
 def _cmd_detector_stats(args) -> None:
     from crossview import pipeline
-    from crossview.measure.detector_stats import detector_stats_blocks, format_detector_stats, recording_detector_stats
+    from crossview.measure.detector_stats import (
+        SHELF_OPENPOSE_NAME,
+        detector_stats_blocks,
+        format_detector_stats,
+        recording_detector_stats,
+        reference,
+    )
 
+    inputs = (args.recording, *(() if args.reference == SHELF_OPENPOSE_NAME else (Path(args.reference),)))
     if args.output:
-        pipeline.check_writable(args.output, inputs=(args.recording,))
+        pipeline.check_writable(args.output, inputs=inputs)
+    ref = reference(args.reference)  # (a bad file refused before measuring)
     stats = recording_detector_stats(args.recording, progress=not args.no_progress)
-    emit(stats, fmt=args.format, output=args.output, text=format_detector_stats(stats),
-         blocks=detector_stats_blocks(stats), inputs=(args.recording,))
+    emit({**stats, "reference": {"label": ref.label, "where": ref.where}}, fmt=args.format, output=args.output,
+         text=format_detector_stats(stats, ref), blocks=detector_stats_blocks(stats, ref), inputs=inputs)
 
 
 def _cmd_fit_detector(args) -> None:
     from crossview import pipeline, recording
     from crossview.measure.detector_fit import NOT_TARGETS, REACHED, deviations, fit, unreached
     from crossview.measure.detector_stats import (
-        SHELF_OPENPOSE,
-        SHELF_OPENPOSE_LABEL,
+        SHELF_OPENPOSE_NAME,
+        Reference,
         detector_stats_blocks,
         format_detector_stats,
-        read_stats_file,
         recording_detector_stats,
+        reference,
     )
     from sim import scenario as scenario_mod
     from sim.sensing.profiles import DetectorProfile
 
     if (args.recording is None) == (args.target is None):
         raise CrossviewError("fit-detector: give a recording to fit, or --target FILE.json|shelf-openpose (not both)")
-    target_file = None if args.target in (None, "shelf-openpose") else Path(args.target)
+    target_file = None if args.target in (None, SHELF_OPENPOSE_NAME) else Path(args.target)
     pipeline.check_writable(args.output, inputs=() if target_file is None else (target_file,))
     if args.figures:
         pipeline.check_writable(args.figures, inputs=(args.output, *(() if target_file is None else (target_file,))))
@@ -942,7 +953,7 @@ def _cmd_fit_detector(args) -> None:
     seed = args.seed
     if args.recording is not None:
         target = recording_detector_stats(args.recording)
-        where, label = f"{args.recording}", args.recording.name
+        where, label = f"{args.recording}", args.recording.name  # (fitted to the recording's own statistics)
         if args.scenario is None:
             header = recording.open_recording(args.recording).header
             if not header.scenario_text:
@@ -953,13 +964,12 @@ def _cmd_fit_detector(args) -> None:
         else:
             scenario = pipeline.load_scenario(args.scenario)
     else:
+        ref = reference(args.target)
+        target, where, label = ref.stats, ref.where, ref.label
         if target_file is None:
             # Its false-positive people count a person the annotation leaves out: no target
             # (crossview/measure/data/README.md).
-            target = {k: v for k, v in SHELF_OPENPOSE.items() if k not in NOT_TARGETS}
-            where, label = "real OpenPose on the Shelf dataset (shelf-openpose)", SHELF_OPENPOSE_LABEL
-        else:
-            target, where, label = read_stats_file(target_file), f"{target_file}", target_file.name
+            target = {k: v for k, v in target.items() if k not in NOT_TARGETS}
         scenario = pipeline.load_scenario(args.scenario or "shelf")
     seed = scenario.seed if seed is None else seed
 
@@ -977,9 +987,9 @@ def _cmd_fit_detector(args) -> None:
                "unreached": [{"key": key, "group": group, "deviation": dev, "why": why}
                              for key, group, dev, why in missed]}
     emit(figures, fmt=args.format, output=args.figures, what="fitted statistics",
-         text="\n".join([format_detector_stats(best.stats, reference=target, reference_label=label),
+         text="\n".join([format_detector_stats(best.stats, Reference(target, label, where)),
                          *unreached_lines]),
-         blocks=[*detector_stats_blocks(best.stats, reference=target, reference_label=label),
+         blocks=[*detector_stats_blocks(best.stats, Reference(target, label, where)),
                  *(line.strip() for line in unreached_lines)],
          inputs=() if target_file is None else (target_file,))
     (key, group), worst = max(deviations(best.stats, target).items(), key=lambda kv: abs(kv[1]))
@@ -1170,8 +1180,10 @@ def _command_inputs(args) -> tuple[Path, ...]:
         found.extend(pipeline.scenario_files(args.scenario))
     if scenario_mod.is_profile_file(getattr(args, "start", None)):  # (fit-detector's starting profile)
         found.append(Path(args.start))
-    if getattr(args, "target", None) not in (None, "shelf-openpose"):  # (fit-detector's statistics file)
-        found.append(Path(args.target))
+    for option in ("target", "reference"):  # (fit-detector's and detector-stats' statistics files)
+        value = getattr(args, option, None)
+        if isinstance(value, str) and value != "shelf-openpose":  # (scenarios' --reference is a switch)
+            found.append(Path(value))
     methods = [m.strip() for m in getattr(args, "method", "").split(",")]
     for text in getattr(args, "tracker", None) or []:
         from crossview.experiments.compare import Contender

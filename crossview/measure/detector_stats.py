@@ -147,6 +147,38 @@ SHELF_OPENPOSE: dict = read_stats_file(SHELF_OPENPOSE_FILE)
 `crossview fit-detector --target shelf-openpose`."""
 
 
+SHELF_OPENPOSE_NAME = "shelf-openpose"
+"""The `--reference` (`detector-stats`) and `--target` (`fit-detector`) that name `SHELF_OPENPOSE_FILE`."""
+
+
+@dataclass(frozen=True)
+class Reference:
+    """What a recording's statistics are put beside: a statistics table, the column's heading (its source) and
+    the words saying where it comes from."""
+
+    stats: dict
+    label: str
+    where: str
+
+
+def reference(text: str = SHELF_OPENPOSE_NAME) -> Reference:
+    """The reference `text` names: `shelf-openpose` (real OpenPose on Shelf, shipped) or a statistics file
+    (`crossview detector-stats -o FILE.json`), labelled by the source it records (`source`: the recording it was
+    measured on) or, in a file without one, by its own name.
+
+    Raises:
+        CrossviewError: the file is no statistics table (`read_stats_file`).
+    """
+    if text == SHELF_OPENPOSE_NAME:
+        return Reference(SHELF_OPENPOSE, SHELF_OPENPOSE_LABEL,
+                         f"real OpenPose on the Shelf dataset ({SHELF_OPENPOSE_NAME}: 5 cameras, people "
+                         f"{SHELF_OPENPOSE['person_size_px_median']:.0f} px, a different scene from a store's)")
+    stats = read_stats_file(text)
+    source = stats.get("source")
+    label = source if isinstance(source, str) and source else Path(text).name
+    return Reference(stats, label, f"{text}" + (f" (measured on {source})" if label == source else ""))
+
+
 def joint_indices(skeleton: Skeleton) -> np.ndarray:
     """(12,) the index in `skeleton` of each of `JOINTS_12`.
 
@@ -532,6 +564,7 @@ def recording_detector_stats(path, progress: bool = False) -> dict:
         raise CrossviewError(f"{path}: only {stats['matched_detections']} detections match a true person (at "
                              f"most {MATCH_GATE} of its size away on average); detector-stats needs at least "
                              f"{MIN_MATCHED_DETECTIONS}")
+    stats["source"] = Path(path).name  # (the label of its column where the file is a --reference)
     return stats
 
 
@@ -558,10 +591,12 @@ def _people(spread: dict) -> str:
     return "-" if share is None else f"{100 * share:.0f} % of {spread['people_measured']}"
 
 
-def _table_rows(stats: dict, reference: dict) -> tuple[str, list[tuple[str, str | None, str | None]],
-                                                          list[tuple[str, ...]]]:
-    """The table's parts: the line above it, its rows (statistic, measured, reference; a heading row has None for
-    both), and one row per camera (name, frames, matched, error/size, joint miss, missed views, FP / frame)."""
+def _table_rows(stats: dict, ref: Reference) -> tuple[str, list[tuple[str, str | None, str | None]],
+                                                        list[tuple[str, ...]]]:
+    """The table's parts: the lines above it (what was measured, what it is beside), its rows (statistic, measured,
+    reference; a heading row has None for both), and one row per camera (name, frames, matched, error/size, joint
+    miss, missed views, FP / frame)."""
+    reference = ref.stats
     groups, ref_groups = stats["per_group"], reference.get("per_group", {})
     rows = [("joint error / person size: median", stats, reference, "error_over_size_median", ""),
             ("  p90", stats, reference, "error_over_size_p90", ""),
@@ -594,7 +629,8 @@ def _table_rows(stats: dict, reference: dict) -> tuple[str, list[tuple[str, str 
     intro = (f"{stats['frames_measured']} of {stats['frames']} camera frames measured (truth at their capture "
              f"time), {stats['matched_detections']} matched detections, {stats['person_views']} person-views, "
              f"person size median {'-' if size is None else f'{size:.0f}'} px, "
-             f"{stats['cross_view_joints']} joints triangulated across views")
+             f"{stats['cross_view_joints']} joints triangulated across views\n"
+             f"beside: {ref.where}")
     cells = [(label, None, None) if measured is None
              else (label, _fmt(measured.get(key), kind), _fmt(ref.get(key), kind))
              for label, measured, ref, key, kind in rows]
@@ -610,12 +646,12 @@ def _table_rows(stats: dict, reference: dict) -> tuple[str, list[tuple[str, str 
 _CAMERA_HEADER = ("camera", "frames", "matched", "error/size", "joint miss", "missed views", "FP / frame")
 
 
-def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
-                          reference_label: str = SHELF_OPENPOSE_LABEL) -> str:
-    """The statistics table: the measured figures beside `reference` (by default real OpenPose on Shelf), whose
-    column is headed `reference_label`."""
-    intro, cells, cameras = _table_rows(stats, reference)
-    lines = [intro, f"{'statistic':<56}{'measured':>12}{reference_label[:22]:>24}"]
+def format_detector_stats(stats: dict, ref: Reference | None = None) -> str:
+    """The statistics table: the measured figures beside `ref` (by default real OpenPose on Shelf), whose column
+    is headed by its label."""
+    ref = ref or reference()
+    intro, cells, cameras = _table_rows(stats, ref)
+    lines = [intro, f"{'statistic':<56}{'measured':>12}{ref.label[:22]:>24}"]
     for label, measured, ref in cells:
         lines.append(label if measured is None else f"{label:<56}{measured:>12}{ref:>24}")
     if cameras:
@@ -627,14 +663,14 @@ def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
     return "\n".join(lines)
 
 
-def detector_stats_blocks(stats: dict, reference: dict = SHELF_OPENPOSE,
-                          reference_label: str = SHELF_OPENPOSE_LABEL) -> list:
-    """The same table for `crossview.tables` (`--format markdown`): the line above it, the statistics beside the
+def detector_stats_blocks(stats: dict, ref: Reference | None = None) -> list:
+    """The same table for `crossview.tables` (`--format markdown`): the lines above it, the statistics beside the
     reference, the cameras."""
     from crossview.tables import Table
 
-    intro, cells, cameras = _table_rows(stats, reference)
-    blocks = [intro, Table(("statistic", "measured", reference_label),
+    ref = ref or reference()
+    intro, cells, cameras = _table_rows(stats, ref)
+    blocks = [*intro.splitlines(), Table(("statistic", "measured", ref.label),
                            tuple((label.strip(), m or "", r or "") for label, m, r in cells))]
     if cameras:
         blocks.append(Table(_CAMERA_HEADER, tuple(cameras)))

@@ -113,6 +113,28 @@ def test_detector_stats_json_and_markdown_agree(store_recording, tmp_path, capsy
     assert [r[0] for r in cameras[1:]] == list(stats["per_camera"])
     assert [r[2] for r in cameras[1:]] == [str(c["matched_detections"]) for c in stats["per_camera"].values()]
 
+    # The recording's own figures as the reference: the column is headed by their source, and equals the measured.
+    own = tmp_path / "own.json"
+    assert main(["--no-progress", "detector-stats", str(store_recording), "-o", str(own)]) == 0
+    assert json.loads(own.read_text())["source"] == store_recording.name
+    capsys.readouterr()
+    assert main(["--no-progress", "detector-stats", str(store_recording), "--reference", str(own), "--format",
+                 "markdown"]) == 0
+    printed = capsys.readouterr().out
+    assert f"beside: {own} (measured on {store_recording.name})" in printed
+    figures = _markdown_tables(printed)[0]
+    assert figures[0] == ["statistic", "measured", store_recording.name]
+    assert [r[1] for r in figures[1:]] == [r[2] for r in figures[1:]]
+
+
+def test_a_reference_that_is_no_statistics_file_is_one_line(store_recording, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{}")
+    assert main(["detector-stats", str(store_recording), "--reference", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"crossview detector-stats: error: {bad}: per_group: missing; not a detector statistics file "
+                   "(what `crossview detector-stats REC -o FILE.json` writes)")
+
 
 def test_world_stats_writes_its_figures(monkeypatch, tmp_path, capsys):
     from crossview.measure import world_stats
