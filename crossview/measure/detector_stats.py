@@ -27,6 +27,15 @@ a real one (`crossview convert` of a dataset folder with 3D truth) give comparab
   (DLT, at least `CROSS_VIEW_MIN_VIEWS` views): how far the detections lie from the point they agree on
   (reprojection, px at 400) and how far that point lies from the true joint (metres).
 
+- **Why person-views were missed** (a recording with its scenario: `crossview generate`): each missed person-view
+  is put down to the first of the rig's geometry that rules it out under the recording's detector profile, as
+  the simulated detector rules (`sim.sensing.draws.draw_detections`) and `crossview coverage` predicts: too
+  small (the box of all its projected joints below `min_person_frac` of the image height), cut by the image edge
+  (fewer than `min_visible_joints` joints inside the image), hidden by shelves (fewer of them left unblocked by
+  the store's shelves and counters, `crossview.measure.coverage.blocked_by_boxes`); the rest are the detector's
+  own misses or people hidden by other people (a recording holds visibility only for the people it detected).
+  A converted dataset holds no profile: its misses are not split.
+
 A camera frame whose truth holds nobody is not measured: datasets leave the frames they did not annotate
 empty, so such a frame says nothing about the detector (a synthetic store that is empty is skipped alike).
 """
@@ -226,15 +235,60 @@ class _FrameRecord:
     views: dict[int, _View] = field(default_factory=dict)  # person id -> view
 
 
+MISS_CAUSES = ("too_small", "cut_by_image_edge", "hidden_by_shelves", "detector_or_people")
+"""Why person-views were missed (module docstring), in the order they are tried."""
+MISS_CAUSE_LABELS = ("too small for the profile's size limit", "cut by the image edge", "hidden by shelves",
+                     "the detector's own, or hidden by people")
+
+
+@dataclass(frozen=True)
+class MissGeometry:
+    """What rules a person-view out before the detector's own misses: the detector profile's size and visible-joint
+    limits and the store's shelves and counters (`sim.store.Obstacle`s; none where the scenario's detector ignores
+    occlusion)."""
+
+    min_person_frac: float
+    min_visible_joints: int
+    obstacles: tuple = ()
+
+    @classmethod
+    def of(cls, scenario) -> MissGeometry:
+        """The geometry of a `sim.scenario.Scenario`'s detector and store."""
+        from sim.store import StoreGeometry
+
+        params = scenario.detector.params()
+        obstacles = StoreGeometry(scenario.store, name=scenario.where).obstacles if scenario.detector.occlusion else ()
+        return cls(float(params.min_person_frac), int(params.min_visible_joints), tuple(obstacles))
+
+    def cause(self, camera: Camera, joints_m: np.ndarray) -> str:
+        """The first of `MISS_CAUSES` that explains a missed view by `camera` of a person with joints `joints_m`
+        (J, 3): all of the skeleton's joints, as the detector sees them."""
+        from crossview.measure.coverage import blocked_by_boxes
+
+        px, inside = in_image(camera, joints_m)
+        if not person_sizes_px(px[None])[0] >= self.min_person_frac * camera.height_px:  # (NaN: no joint known)
+            return "too_small"
+        if inside.sum() < self.min_visible_joints:
+            return "cut_by_image_edge"
+        if self.obstacles:
+            hidden = blocked_by_boxes(camera.center_world, joints_m[inside], self.obstacles)
+            if inside.sum() - hidden.sum() < self.min_visible_joints:
+                return "hidden_by_shelves"
+        return "detector_or_people"
+
+
 class DetectorStatsAccumulator:
     """Measures detections frame by frame (`add`), then gives the figures (`result`).
 
     Args:
         cameras: the rig (a sequence or name -> Camera).
         skeleton: the joint layout of both the frames and the truth.
+        geometry: the rig's detector limits and shelves, to say why person-views were missed (None: not said).
     """
 
-    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], skeleton: Skeleton):
+    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], skeleton: Skeleton,
+                 geometry: MissGeometry | None = None):
+        self._geometry = geometry
         cams = list(cameras.values()) if isinstance(cameras, Mapping) else list(cameras)
         self.cameras = cams
         self._camera_of = {c.name: i for i, c in enumerate(cams)}
@@ -273,7 +327,12 @@ class DetectorStatsAccumulator:
                 detections[d], error, np.isfinite(detections[d, :, 0]), inside[p], float(size[p]), truth_m[p])
         view = inside.mean(axis=1) >= HALF_IN_IMAGE
         counts["person_views"] += int(view.sum())
-        counts["missed_person_views"] += int(np.count_nonzero(view & ~np.isin(np.arange(len(view)), matched_truth)))
+        missed = np.flatnonzero(view & ~np.isin(np.arange(len(view)), matched_truth))
+        counts["missed_person_views"] += len(missed)
+        if self._geometry is not None:
+            everyone = np.asarray(poses.poses, dtype=np.float64)
+            for p in missed:
+                counts[f"missed_{self._geometry.cause(self.cameras[c], everyone[p])}"] += 1
         unmatched = np.setdiff1d(np.arange(len(detections)), matched_det)
         # A detection with none of the 12 measured joints (a face alone) cannot be told from a person: not counted.
         unmatched = unmatched[np.isfinite(detections[unmatched, :, 0]).any(axis=1)]
@@ -329,6 +388,9 @@ class DetectorStatsAccumulator:
             "missed_person_view_rate": _ratio(total["missed_person_views"], total["person_views"]),
             "false_positive_people_per_frame": _ratio(total["false_positive_people"], frames_measured),
             "false_positive_people_ge6_per_frame": _ratio(total["false_positive_people_ge6"], frames_measured),
+            "missed_person_views_by_cause": None if self._geometry is None else {
+                cause: _ratio(sum(c[f"missed_{cause}"] for c in self._counts), total["person_views"])
+                for cause in MISS_CAUSES},
             "person_size_px_median": _quantile(sizes, 50), "cross_view_joints": cross["count"],
             "match_gate": MATCH_GATE,
             "per_joint": {name: figures([j]) for j, name in enumerate(JOINTS_12)},
@@ -518,20 +580,21 @@ def _ratio(a: float, b: float) -> float | None:
 
 
 def detector_stats(camera_frames: Iterable[CameraFrame], cameras: Sequence[Camera] | Mapping[str, Camera],
-                   skeleton: Skeleton) -> dict:
+                   skeleton: Skeleton, geometry: MissGeometry | None = None) -> dict:
     """Measures detections against their projected 3D truth (see the module docstring).
 
     Args:
         camera_frames: the frames, each with `poses_at_capture`.
         cameras: the rig.
         skeleton: the joint layout of the frames and the truth.
+        geometry: the rig's detector limits and shelves, to say why person-views were missed (None: not said).
 
     Returns:
         The figures: the keys of `SHELF_OPENPOSE` at the top level (all joints) and, the same per joint
         name ("per_joint"), per group ("per_group"), a few per camera ("per_camera"), and the counts
         behind them.
     """
-    acc = DetectorStatsAccumulator(cameras, skeleton)
+    acc = DetectorStatsAccumulator(cameras, skeleton, geometry)
     for cf in camera_frames:
         acc.add(cf)
     return acc.result()
@@ -551,9 +614,18 @@ def recording_detector_stats(path, progress: bool = False) -> dict:
     from crossview import recording
 
     rec = recording.open_recording(path)
+    geometry = None
+    if rec.header.scenario_text:  # (a converted dataset holds no scenario, so no detector profile)
+        from sim import scenario as scenario_mod
+
+        try:
+            geometry = MissGeometry.of(scenario_mod.from_source_text(rec.header.scenario_text,
+                                                                     rec.header.scenario_name, str(path)))
+        except CrossviewError:  # (a profile file it names, moved since: the misses are measured, not split)
+            geometry = None
     frames = tqdm(rec.frames(with_poses=True), unit="frame", desc="detector-stats", disable=not progress, leave=False)
     try:
-        stats = detector_stats(frames, rec.cameras, rec.skeleton)
+        stats = detector_stats(frames, rec.cameras, rec.skeleton, geometry)
     except CrossviewError as e:
         raise CrossviewError(f"{path}: {e}") from None
     if stats["frames_measured"] == 0:
@@ -617,6 +689,9 @@ def _table_rows(stats: dict, ref: Reference) -> tuple[str, list[tuple[str, str |
         ("gross errors (> 0.2 x size)", stats, reference, "gross_error_rate", "%"),
         ("P(joint missed next frame | missed now)", stats, reference, "miss_persistence", ""),
         ("missed person-views", stats, reference, "missed_person_view_rate", "%"),
+        *((f"  {label}", stats.get("missed_person_views_by_cause") or {},
+           reference.get("missed_person_views_by_cause") or {}, cause, "%")
+          for cause, label in zip(MISS_CAUSES, MISS_CAUSE_LABELS) if stats.get("missed_person_views_by_cause")),
         ("false-positive people per camera frame", stats, reference, "false_positive_people_per_frame", ""),
         (f"  with >= {PERSON_LIKE_JOINTS} of 12 joints", stats, reference, "false_positive_people_ge6_per_frame", ""),
         (f"cross-view reprojection px at 400 (>= {CROSS_VIEW_MIN_VIEWS} views): all", stats, reference,

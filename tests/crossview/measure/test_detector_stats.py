@@ -18,6 +18,7 @@ from crossview.measure.detector_stats import (
     BAD_LIMB_FACTOR,
     GROSS_ERROR_FRAC,
     JOINTS_12,
+    MISS_CAUSES,
     SHELF_OPENPOSE,
     SHELF_OPENPOSE_FILE,
     detector_stats,
@@ -330,3 +331,25 @@ def test_format_gives_a_dash_for_what_was_not_measured():
     lines = {line[:56].strip(): line[56:].split() for line in format_detector_stats(stats).splitlines()}
     assert lines["P(joint missed next frame | missed now)"][0] == "-"
     assert lines["joint error / person size: median"] == ["0.000", "0.028"]
+
+
+def test_the_geometry_explains_every_miss_of_a_detector_that_misses_nobody_it_can_see(tmp_path):
+    """One person in the convenience store, a detector whose only misses are the rig's geometry (no miss_prob, no
+    occlusion gain, nobody else to hide behind): every missed person-view is put down to the profile's size limit,
+    the image edge or the shelves, as the simulator ruled; the causes add up to the missed share."""
+    profile = tmp_path / "p.toml"
+    profile.write_text('base = "typical"\nmiss_prob = 0.0\nmiss_occlusion_gain = 0.0\n')
+    text = scenario_mod.resolve_path("convenience").read_text()
+    assert 'profile = "typical"' in text
+    (tmp_path / "s.toml").write_text(text.replace('profile = "typical"', f'profile = "{profile}"'))
+    rec = tmp_path / "s.mcap"
+    assert main(["--no-progress", "generate", str(tmp_path / "s.toml"), "-o", str(rec), "--duration", "2",
+                 "--people", "1"]) == 0
+    stats = recording_detector_stats(rec)
+    causes = stats["missed_person_views_by_cause"]
+    assert set(causes) == set(MISS_CAUSES)
+    assert stats["missed_person_view_rate"] > 0.05  # (the shelves hide a lone shopper from some cameras)
+    assert causes["detector_or_people"] == 0.0
+    assert causes["hidden_by_shelves"] > 0.0
+    assert sum(causes.values()) == pytest.approx(stats["missed_person_view_rate"], abs=1e-12)
+
