@@ -262,71 +262,70 @@ def _say(args, line: str) -> None:
     print(line, file=sys.stdout if getattr(args, "format", None) in (None, "text") else sys.stderr, flush=True)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _TopParser(prog="crossview", description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action=_Version, help="print the version and exit")
-    for flags, text in GLOBAL_OPTIONS:
-        parser.add_argument(*flags, action="store_true", help=text)
-    # The commands in the order a user meets them: a first run, the scenarios, a recording and its cameras'
-    # coverage, tracking and scoring it, looking at it, comparing and sweeping, then the dataset tools.
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
+def _scenario_options(p):
+    """The options of the commands that simulate a scenario (`run`, `generate`)."""
+    p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
+    p.add_argument("--duration", type=_duration_s, help="simulated seconds (default: the scenario's)")
+    p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
+    p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
 
-    def scenario_options(p):
-        p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
-        p.add_argument("--duration", type=_duration_s, help="simulated seconds (default: the scenario's)")
-        p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
-        p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
 
-    def live_options(p, what):
-        if what:
-            p.add_argument("--live", action="store_true", help=f"{what} live on a Foxglove WebSocket server as it "
-                           "runs (pip install '.[live]'; docs/recording-format.md)")
-        p.add_argument("--port", type=_non_negative_int, default=DEFAULT_PORT, help="the live server's port (0: any "
-                       f"free port, printed; default {DEFAULT_PORT})")
-        p.add_argument("--speed", type=parse_speed, default=1.0, metavar="FACTOR|max",
-                       help="pace of the live view: times real time, or max for as fast as it runs (default 1)")
+def _live_options(p, what):
+    """The live server's options; `what` words `--live` (None: the command always serves, as `serve`)."""
+    if what:
+        p.add_argument("--live", action="store_true", help=f"{what} live on a Foxglove WebSocket server as it "
+                       "runs (pip install '.[live]'; docs/recording-format.md)")
+    p.add_argument("--port", type=_non_negative_int, default=DEFAULT_PORT, help="the live server's port (0: any "
+                   f"free port, printed; default {DEFAULT_PORT})")
+    p.add_argument("--speed", type=parse_speed, default=1.0, metavar="FACTOR|max",
+                   help="pace of the live view: times real time, or max for as fast as it runs (default 1)")
 
-    def tracker_options(p):
-        p.add_argument("--method", default="crossview", metavar="METHOD",
-                       help="crossview, baseline, a name registered under the entry-point group crossview.trackers, "
-                       "or package.module:Class of the tracker shape (docs/plugins.md); default crossview")
-        p.add_argument(
-            "--preset",
-            default="store",
-            help="tracker preset: campus, shelf, store, or campus-paper, shelf-paper, store-paper for Table S2 "
-            "verbatim (default store)",
-        )
-        p.add_argument("--config", type=Path, help="TOML file of tracker parameters over the preset")
 
-    p = sub.add_parser("run", help="generate, track and score a scenario (default: the built-in store)")
+def _tracker_options(p):
+    """The options choosing a tracker (`run`, `track`)."""
+    p.add_argument("--method", default="crossview", metavar="METHOD",
+                   help="crossview, baseline, a name registered under the entry-point group crossview.trackers, "
+                   "or package.module:Class of the tracker shape (docs/plugins.md); default crossview")
+    p.add_argument(
+        "--preset",
+        default="store",
+        help="tracker preset: campus, shelf, store, or campus-paper, shelf-paper, store-paper for Table S2 "
+        "verbatim (default store)",
+    )
+    p.add_argument("--config", type=Path, help="TOML file of tracker parameters over the preset")
+
+
+def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", nargs="?", help="scenario file or shipped name (default store_layout1)")
-    scenario_options(p)
-    tracker_options(p)
+    _scenario_options(p)
+    _tracker_options(p)
     add_output(p, "folder for NAME.mcap, NAME.tracks.mcap, NAME.score.json (default recordings/)",
                required=False, default=Path("recordings"), old=("--out",), metavar="DIR")
     p.add_argument("--json", type=Path, help="score JSON path (default OUTPUT/NAME.score.json)")
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="score from S seconds on, "
                    "leaving out the warm-up before (default: the warm-up rule of docs/metrics.md)")
-    live_options(p, "publish the recording, then the tracks,")
+    _live_options(p, "publish the recording, then the tracks,")
 
-    p = sub.add_parser("scenarios", help="list the shipped scenarios, print one resolved, or the key reference")
+
+def _scenarios_args(p: argparse.ArgumentParser) -> None:
     show = p.add_mutually_exclusive_group()
     show.add_argument("--show", metavar="SCENARIO", help="print a scenario with every key resolved (TOML)")
     show.add_argument("--reference", action="store_true", help="print every key's meaning, unit, default and range "
                       "(docs/scenarios.md)")
 
-    p = sub.add_parser("generate", help="simulate a scenario into a recording")
+
+def _generate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
-    scenario_options(p)
+    _scenario_options(p)
     p.add_argument("--images", type=_positive_float, metavar="RATE", help="store RATE rendered JPEG pictures per "
                    "second per camera (at most the frame rate; needs the render extra; docs/rendering.md)")
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend for --images (default: "
                    "$MUJOCO_GL when it names one, else EGL, then OSMesa)")
-    live_options(p, "publish the recording")
+    _live_options(p, "publish the recording")
 
-    p = sub.add_parser("coverage", help="how many cameras see each floor cell: the shares of the walkable floor "
-                       "seen by 1, 2, 3 or more cameras, and a top-down map")
+
+def _coverage_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     add_output(p, "the map to write (.png; default: the shares only)", required=False, metavar="MAP.png")
     p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
@@ -338,8 +337,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "as its suffix says: .json, .md, else text)")
     add_format(p)
 
-    p = sub.add_parser("plan", help="how many cameras a store needs: the fewest ceiling cameras whose predicted "
-                       "tracking meets a PCP target, with --confirm measured by a short sweep")
+
+def _plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name (its rig a ceiling grid)")
     p.add_argument("--target-pcp", type=float, required=True, metavar="P", help="the PCP to reach, in (0, 1]")
     p.add_argument("--people", type=_non_negative_int, help="the crowd to plan for (default: the scenario's)")
@@ -361,10 +360,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_positive_int, help="with --confirm: local worker processes (default: the "
                    "cores)")
 
-    p = sub.add_parser("track", help="run a tracker over a recording")
+
+def _track_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate or convert")
     add_output(p, "tracks file to write (.mcap)", metavar="TRACKS.mcap")
-    tracker_options(p)
+    _tracker_options(p)
     p.add_argument("--zones", metavar="auto|N", help="track the store as N zones, each by its own tracker, "
                    "identities handed over at their borders (auto: one zone per 60 cameras; docs/zones.md)")
     p.add_argument("--overlap", type=_positive_float, default=2.0, metavar="M", help="with --zones: how far "
@@ -375,8 +375,8 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS", help="with --zones: the zones as Ray "
                        "actors: alone, on a local instance; with ADDRESS, on that cluster (pip install '.[ray]')")
 
-    p = sub.add_parser("zones", help="cut a store's floor into zones for `track --zones`: each zone's cell and "
-                       "cameras, and a top-down map")
+
+def _zones_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--zones", default="auto", metavar="auto|N", help="number of zones (default auto: one per 60 "
                    "cameras)")
@@ -387,7 +387,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "scenario's)")
     add_output(p, "the map to write (.png; default: the table only)", required=False, metavar="MAP.png")
 
-    p = sub.add_parser("score", help="score a tracks file or a result file against its recording")
+
+def _score_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
     p.add_argument("tracks", type=Path, help="tracks file (.mcap), result_3d.json or JSON lines "
                    "(docs/recording-format.md)")
@@ -399,14 +400,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--map", type=Path, metavar="MAP.png", help="draw where and when the tracker failed: floor "
                    "heat maps of misses, false positives and ID switches, and each person's time line")
 
-    p = sub.add_parser("info", help="describe a recording or tracks file")
+
+def _info_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", type=Path, help="a recording or tracks file (.mcap)")
     p.add_argument("--allow-truncated", action="store_true", help="report the readable prefix of a cut file")
     p.add_argument("--summary-only", action="store_true",
                    help="describe a complete file from its summary alone, without reading every chunk and "
                         "checking its CRC")
 
-    p = sub.add_parser("render", help="pictures of what the cameras saw, with the detections and tracks drawn on")
+
+def _render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--camera", metavar="NAME", help="one camera's view")
@@ -424,15 +427,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend (default: $MUJOCO_GL when it "
                    "names one, else EGL, then OSMesa)")
 
-    p = sub.add_parser("serve", help="replay a recording (and its tracks) on a Foxglove WebSocket server, with play, "
-                       "pause, seek and speed (pip install '.[live]')")
+
+def _serve_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
     p.add_argument("tracks", type=Path, nargs="?", help="tracks file (.mcap) made from the recording")
-    live_options(p, None)
+    _live_options(p, None)
     p.add_argument("--play", action="store_true", help="start playing at once (default: paused until a client "
                    "plays)")
 
-    p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
+
+def _compare_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")
     p.add_argument("--tracker", action="append", required=True, metavar="LABEL=SPEC",
                    help="repeat for each tracker; SPEC is a --method (crossview, baseline, pkg.module:Class, a "
@@ -441,7 +445,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_output(p, "folder for compare.md, compare.csv, the charts and tracks", old=("--out",), metavar="DIR")
     add_format(p)
 
-    p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
+
+def _sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="base scenario file or shipped name")
     p.add_argument("--set", dest="axes", action="append", type=_sweep_axis, default=[], metavar="KEY=V1,V2,...",
                    help="an axis: any scenario key by its dotted name (crowd.people, clock.fps, ...); repeatable, "
@@ -468,12 +473,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-recordings", action="store_true", help="keep each cell's recording and write "
                    "manifest.json (for crossview verify)")
 
-    p = sub.add_parser("verify", help="regenerate a kept sweep's recordings and check their bytes")
+
+def _verify_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("folder", type=Path, help="a sweep folder with manifest.json (sweep --keep-recordings)")
     p.add_argument("--cells", type=_positive_int, help="check a fixed sample of this many (default: all)")
 
-    p = sub.add_parser("ablate", help="the paper's ablations (Tables S1, 4, 5, Figures 5, 6) and the tracker's body "
-                       "and joint priors into one report")
+
+def _ablate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("experiments", nargs="*", metavar="EXPERIMENT",
                    help="affinity, reconstruction, frame-rate, speed, single-view, priors (default: all)")
     p.add_argument("--quick", action="store_true", help="one seed, short runs, fewer points (about 2 minutes)")
@@ -481,8 +487,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "cores; 1 runs them in this process)")
     add_output(p, "output folder (a rerun into it resumes)", old=("--out",), metavar="DIR")
 
-    p = sub.add_parser("export", help="write tracks or a recording for other tools: the paper's dataset layout, "
-                       "motion (BVH, TRC, C3D), MOTChallenge, COCO keypoints (docs/exports.md)")
+
+def _export_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl, bvh, trc, c3d, mot) or recording "
                    "(dataset, openpose, bvh, trc, c3d, mot, coco)")
     p.add_argument("--format", default="crossview-json", choices=EXPORT_FORMATS,
@@ -500,27 +506,29 @@ def build_parser() -> argparse.ArgumentParser:
                    "the grid the tracks are sampled on (default 30; a recording's truth keeps its own 100 Hz)")
     add_output(p, "the file, or a new folder (dataset, openpose, bvh, trc, c3d, mot, coco)")
 
-    p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
+
+def _convert_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
                    "one folder of OpenPose *_keypoints.json per camera")
     add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
     p.add_argument("--fps", type=_frame_rate, help="OpenPose folders: frame rate for the stamps that "
                    "timestamps.json does not give (stamp = frame number / fps)")
 
-    p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
+
+def _evaluate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
     p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
 
-    p = sub.add_parser("per-camera", help="per-camera MOTA and IDF1: single-view baseline against cross-view "
-                       "(the paper's Table 5)")
+
+def _per_camera_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
     p.add_argument("tracks", type=Path, help="cross-view tracks file made from the recording")
     add_output(p, "write the table here too (in --format, else as its suffix says: .json, .md, else text)",
                required=False, old=("--json",))
     add_format(p)
 
-    p = sub.add_parser("detector-stats", help="measure a recording's 2D detections against its projected 3D truth, "
-                       "beside a reference (default real OpenPose on Shelf)")
+
+def _detector_stats_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="a recording with 3D truth: `crossview generate`, or `crossview "
                    "convert` of a dataset folder with annotation_3d.json")
     add_output(p, "write the figures here too (in --format, else as its suffix says: .json, .md, else text)",
@@ -530,8 +538,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "print the figures beside, its column headed by its source: a `detector-stats -o` file (of a "
                    "recording like this one), or shelf-openpose, real OpenPose on Shelf's 400 px people (default)")
 
-    p = sub.add_parser("fit-detector", help="fit a detector profile to a recording's detector statistics (or to "
-                       "real OpenPose on Shelf), by simulating the rig with candidate profiles")
+
+def _fit_detector_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, nargs="?", help="a recording whose detections to fit (synthetic, or "
                    "converted from a dataset with 3D truth); leave out with --target")
     add_output(p, "the profile file to write (TOML)", metavar="PROFILE.toml")
@@ -550,7 +558,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "(in --format, else as its suffix says: .json, .md, else text)")
     add_format(p)
 
-    p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
+
+def _world_stats_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
     duration = p.add_mutually_exclusive_group()
@@ -562,7 +571,8 @@ def build_parser() -> argparse.ArgumentParser:
                required=False, metavar="FILE")
     add_format(p)
 
-    p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
+
+def _bench_args(p: argparse.ArgumentParser) -> None:
     add_output(p, "write the figures here (in --format, else as its suffix says: .json, .md, else text)",
                required=False, old=("--json",))
     add_format(p)
@@ -572,8 +582,80 @@ def build_parser() -> argparse.ArgumentParser:
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
     p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
                    "timed per case (the rest of a slower case's stream is left unscored; default 300)")
+
+
+COMMAND_ARGUMENTS = (
+    ("run", _run_args,
+     "generate, track and score a scenario (default: the built-in store)"),
+    ("scenarios", _scenarios_args,
+     "list the shipped scenarios, print one resolved, or the key reference"),
+    ("generate", _generate_args,
+     "simulate a scenario into a recording"),
+    ("coverage", _coverage_args,
+     "how many cameras see each floor cell: the shares of the walkable floor "
+     "seen by 1, 2, 3 or more cameras, and a top-down map"),
+    ("plan", _plan_args,
+     "how many cameras a store needs: the fewest ceiling cameras whose predicted "
+     "tracking meets a PCP target, with --confirm measured by a short sweep"),
+    ("track", _track_args,
+     "run a tracker over a recording"),
+    ("zones", _zones_args,
+     "cut a store's floor into zones for `track --zones`: each zone's cell and "
+     "cameras, and a top-down map"),
+    ("score", _score_args,
+     "score a tracks file or a result file against its recording"),
+    ("info", _info_args,
+     "describe a recording or tracks file"),
+    ("render", _render_args,
+     "pictures of what the cameras saw, with the detections and tracks drawn on"),
+    ("serve", _serve_args,
+     "replay a recording (and its tracks) on a Foxglove WebSocket server, with play, "
+     "pause, seek and speed (pip install '.[live]')"),
+    ("compare", _compare_args,
+     "several trackers over the same recordings: one table, a chart per metric"),
+    ("sweep", _sweep_args,
+     "run a grid of generate-track-score cells (scenario keys x seeds x methods)"),
+    ("verify", _verify_args,
+     "regenerate a kept sweep's recordings and check their bytes"),
+    ("ablate", _ablate_args,
+     "the paper's ablations (Tables S1, 4, 5, Figures 5, 6) and the tracker's body "
+     "and joint priors into one report"),
+    ("export", _export_args,
+     "write tracks or a recording for other tools: the paper's dataset layout, "
+     "motion (BVH, TRC, C3D), MOTChallenge, COCO keypoints (docs/exports.md)"),
+    ("convert", _convert_args,
+     "turn a dataset in the paper's layout into a recording"),
+    ("evaluate", _evaluate_args,
+     "score a result in the paper's dataset layout with its PCP protocol"),
+    ("per-camera", _per_camera_args,
+     "per-camera MOTA and IDF1: single-view baseline against cross-view "
+     "(the paper's Table 5)"),
+    ("detector-stats", _detector_stats_args,
+     "measure a recording's 2D detections against its projected 3D truth, "
+     "beside a reference (default real OpenPose on Shelf)"),
+    ("fit-detector", _fit_detector_args,
+     "fit a detector profile to a recording's detector statistics (or to "
+     "real OpenPose on Shelf), by simulating the rig with candidate profiles"),
+    ("world-stats", _world_stats_args,
+     "measure the crowd: clearances, foot slip, activities, speeds, sim speed"),
+    ("bench", _bench_args,
+     "measure tracker and simulator speed on the shipped stores"),
+)
+"""Every command: its name, the function adding its arguments, its --help line; in the order a user meets them: a
+first run, the scenarios, a recording and its cameras' coverage, tracking and scoring it, looking at it, comparing
+and sweeping, then the dataset tools."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _TopParser(prog="crossview", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action=_Version, help="print the version and exit")
+    for flags, text in GLOBAL_OPTIONS:
+        parser.add_argument(*flags, action="store_true", help=text)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
+    for name, add_arguments, text in COMMAND_ARGUMENTS:
+        add_arguments(sub.add_parser(name, help=text))
     parser.commands = sub.choices  # name -> its parser (the tests compare them with the docs)
-    for command in sub.choices.values():  # (every command, those added above this line included)
+    for command in sub.choices.values():
         for flags, text in GLOBAL_OPTIONS:  # (SUPPRESS: not given here, the value before the command stands)
             command.add_argument(*flags, action="store_true", default=argparse.SUPPRESS, help=text)
     return parser
