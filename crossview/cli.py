@@ -518,6 +518,9 @@ def _convert_args(p: argparse.ArgumentParser) -> None:
 def _evaluate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
     p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
+    add_output(p, "write the evaluation here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, metavar="FILE")
+    add_format(p)
 
 
 def _per_camera_args(p: argparse.ArgumentParser) -> None:
@@ -1093,9 +1096,14 @@ def _cmd_world_stats(args) -> None:
 
 
 def _cmd_evaluate(args) -> None:
-    from crossview.scoring.campus import evaluate, format_evaluation
+    from crossview import pipeline
+    from crossview.scoring.campus import evaluate, evaluation_blocks, format_evaluation
 
-    print(format_evaluation(evaluate(args.dataset, args.result)))
+    if args.output:
+        pipeline.check_writable(args.output, inputs=(args.dataset, args.result))
+    result = evaluate(args.dataset, args.result)
+    emit(result, fmt=args.format, output=args.output, what="evaluation", text=format_evaluation(result),
+         blocks=evaluation_blocks(result), inputs=(args.dataset, args.result))
 
 
 EXPORT_FORMATS = ("crossview-json", "jsonl", "dataset", "openpose", "bvh", "trc", "c3d", "mot", "coco")
@@ -1312,7 +1320,7 @@ COMMANDS = {
 
 
 TABLE_COMMANDS = ("score", "per-camera", "detector-stats", "fit-detector", "world-stats", "coverage", "compare",
-                  "bench")
+                  "bench", "evaluate")
 """The commands that print a table, each with `--format` and `-o` (`crossview.tables`; README.md, "Commands")."""
 
 

@@ -160,3 +160,19 @@ def test_coverage_figures_follow_the_rule(tmp_path, capsys):
     doc = json.loads(out)  # (the grid it chose goes to stderr, beside the line saying where)
     assert doc["cameras"] == 6 and "--cameras 6: a grid of" in err
     assert f"figures JSON: {figures}" in err and json.loads(figures.read_text()) == doc
+
+
+def test_evaluate_prints_the_papers_campus_table_in_each_format(tmp_path, capsys):
+    from pathlib import Path
+
+    campus = Path(__file__).resolve().parents[1] / "data" / "campus"
+    args = ["evaluate", str(campus), str(campus / "result_3d.json")]
+    out = tmp_path / "campus.md"
+    assert main([*args, "-o", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "Total" in text and "0.9663" in text and text.splitlines()[-1] == f"evaluation Markdown: {out}"
+    (table,) = _markdown_tables(out.read_text())
+    assert table[0][0] == "Bone group" and table[-1][0] == "Total" and table[-1][-1] == "0.9663"  # (Table 2: 96.6)
+    assert main([*args, "--format", "json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert round(result["average"], 4) == 0.9663 and result["num_frames"] == 222
