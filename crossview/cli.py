@@ -386,6 +386,9 @@ def _zones_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
                    "scenario's)")
     add_output(p, "the map to write (.png; default: the table only)", required=False, metavar="MAP.png")
+    p.add_argument("--figures", type=Path, metavar="FILE", help="write the zones here too (in --format, else as "
+                   "its suffix says: .json, .md, else text)")
+    add_format(p)
 
 
 def _score_args(p: argparse.ArgumentParser) -> None:
@@ -952,24 +955,33 @@ def _track_zoned(args) -> None:
 
 def _cmd_zones(args) -> None:
     from crossview import pipeline, zoned
+    from crossview.tables import Table
     from sim.cameras import build_rig
     from sim.rng import child_rng
     from sim.store import StoreGeometry
 
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
-    if args.output:
-        pipeline.check_writable(args.output)
+    for path in (args.output, args.figures):
+        if path:
+            pipeline.check_writable(path)
     cameras = build_rig(scenario, child_rng(scenario.seed, "cameras"))
     boxes = StoreGeometry(scenario.store, name=scenario.where).boxes
     cut = zoned.cut(cameras, boxes, args.zones, args.overlap)
     memberships = sum(len(z.cameras) for z in cut)
-    print(f"{scenario.name}: {len(cut)} zones, {len(cameras)} cameras, {memberships} zone cameras "
-          f"({memberships / len(cameras):.2f} per camera: the overlap's cost)")
-    for z in cut:
-        x0, y0, x1, y1 = z.cell
-        print(f"  zone {z.index}: x {x0:.1f}..{x1:.1f} m, y {y0:.1f}..{y1:.1f} m, {len(z.cameras)} cameras")
+    head = (f"{scenario.name}: {len(cut)} zones, {len(cameras)} cameras, {memberships} zone cameras "
+            f"({memberships / len(cameras):.2f} per camera: the overlap's cost)")
+    rows = [f"  zone {z.index}: x {z.cell[0]:.1f}..{z.cell[2]:.1f} m, y {z.cell[1]:.1f}..{z.cell[3]:.1f} m, "
+            f"{len(z.cameras)} cameras" for z in cut]
+    figures = {"scenario": scenario.name, "cameras": len(cameras), "zone_cameras": memberships,
+               "overlap_m": args.overlap,
+               "zones": [{"index": z.index, "cell_m": [float(v) for v in z.cell], "cameras": len(z.cameras)}
+                         for z in cut]}
+    emit(figures, fmt=args.format, output=args.figures, text="\n".join([head, *rows]),
+         blocks=[head, Table(("zone", "x from m", "x to m", "y from m", "y to m", "cameras"),
+                             tuple((str(z.index), *(f"{v:.1f}" for v in (z.cell[0], z.cell[2], z.cell[1], z.cell[3])),
+                                    str(len(z.cameras))) for z in cut))])
     if args.output:
-        print(f"map: {zoned.write_map(scenario.name, boxes, cameras, cut, args.overlap, args.output)}")
+        _say(args, f"map: {zoned.write_map(scenario.name, boxes, cameras, cut, args.overlap, args.output)}")
 
 
 def _cmd_score(args) -> None:
@@ -1320,7 +1332,7 @@ COMMANDS = {
 
 
 TABLE_COMMANDS = ("score", "per-camera", "detector-stats", "fit-detector", "world-stats", "coverage", "compare",
-                  "bench", "evaluate")
+                  "bench", "evaluate", "zones")
 """The commands that print a table, each with `--format` and `-o` (`crossview.tables`; README.md, "Commands")."""
 
 

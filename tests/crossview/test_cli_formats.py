@@ -176,3 +176,15 @@ def test_evaluate_prints_the_papers_campus_table_in_each_format(tmp_path, capsys
     assert main([*args, "--format", "json"]) == 0
     result = json.loads(capsys.readouterr().out)
     assert round(result["average"], 4) == 0.9663 and result["num_frames"] == 222
+
+
+def test_zones_json_and_markdown_hold_the_same_cut(tmp_path, capsys):
+    assert main(["zones", "store_layout2", "--zones", "2", "--format", "markdown"]) == 0
+    (table,) = _markdown_tables(capsys.readouterr().out)
+    figures = tmp_path / "zones.json"
+    assert main(["zones", "store_layout2", "--zones", "2", "--figures", str(figures)]) == 0  # (JSON: its suffix)
+    assert capsys.readouterr().out.splitlines()[-1] == f"figures JSON: {figures}"
+    doc = json.loads(figures.read_text())
+    rows = [[str(z["index"]), *(f"{v:.1f}" for v in (z["cell_m"][0], z["cell_m"][2], z["cell_m"][1],
+                                                      z["cell_m"][3])), str(z["cameras"])] for z in doc["zones"]]
+    assert table[1:] == rows and len(rows) == 2
