@@ -348,7 +348,9 @@ def _plan_args(p: argparse.ArgumentParser) -> None:
                    "(default: the scenario's)")
     p.add_argument("--max-cameras", type=_positive_int, help="the most cameras to try (default: one per m² of "
                    "floor, at least 16)")
-    add_output(p, "the plan to write (JSON)", metavar="PLAN.json")
+    add_output(p, "the plan to write (in --format, else as its suffix says: .json, .md, else text)",
+               metavar="PLAN.json")
+    add_format(p)
     p.add_argument("--map", type=Path, metavar="MAP.png", help="the recommended rig's coverage map (default: "
                    "PLAN.png beside the plan)")
     p.add_argument("--confirm", action="store_true", help="measure the recommended rig with the tracker (a sweep "
@@ -835,33 +837,34 @@ def _cmd_plan(args) -> None:
     result = plan.plan(args.scenario, args.target_pcp, people=args.people, heights_m=heights, lenses_deg=lenses,
                        max_cameras=args.max_cameras, progress=progress)
     rec = result.recommended
-    print(f"{result.scenario}, {result.people} people, target PCP {result.target_pcp:g}:")
-    print(result.table())
-    print(f"recommended: {rec.cameras} cameras ({rec.grid[0]} x {rec.grid[1]}) at {rec.height_m:g} m with "
-          f"{rec.hfov_deg:g} deg lenses, predicted PCP {rec.predicted_pcp:.3f}")
-    print(f"map: {coverage.write_map(rec.coverage, map_path)}")
+    _say(args, f"map: {coverage.write_map(rec.coverage, map_path)}")
     if args.confirm:
         result = plan.Plan(**{**vars(result), "confirmed": plan.confirm(
             args.scenario, result, confirm_dir, people=args.people, seeds=seeds, duration_s=args.duration,
             workers=args.workers, progress=progress)})
+    head = f"{result.scenario}, {result.people} people, target PCP {result.target_pcp:g}:"
+    words = [f"recommended: {rec.cameras} cameras ({rec.grid[0]} x {rec.grid[1]}) at {rec.height_m:g} m with "
+             f"{rec.hfov_deg:g} deg lenses, predicted PCP {rec.predicted_pcp:.3f}"]
+    if result.confirmed:
         c = result.confirmed
         for m in c["measured"]:
             verdict = "meets the target" if m["meets_target"] else "does NOT meet the target"
-            print(f"measured: {m['cameras']} cameras ({m['grid'][0]} x {m['grid'][1]}): PCP {m['pcp_mean']:.3f} "
-                  f"(95 % interval {m['pcp_ci95'][0]:.3f} to {m['pcp_ci95'][1]:.3f}, seeds "
-                  f"{', '.join(map(str, m['seeds']))}, {m['duration_s']:g} s each): {verdict} {result.target_pcp:g}")
+            words.append(f"measured: {m['cameras']} cameras ({m['grid'][0]} x {m['grid'][1]}): PCP "
+                         f"{m['pcp_mean']:.3f} (95 % interval {m['pcp_ci95'][0]:.3f} to {m['pcp_ci95'][1]:.3f}, "
+                         f"seeds {', '.join(map(str, m['seeds']))}, {m['duration_s']:g} s each): {verdict} "
+                         f"{result.target_pcp:g}")
         if c["meets_target"]:
             below = c["steps_below_prediction"]
             moved = ("the prediction's answer" if below == 0 else
                      f"{abs(below)} grid step{'' if abs(below) == 1 else 's'} "
                      f"{'below' if below > 0 else 'above'} the prediction's {rec.cameras}")
-            print(f"confirmed: {c['cameras']} cameras ({c['grid'][0]} x {c['grid'][1]}) are the fewest measured to "
-                  f"meet PCP {result.target_pcp:g}: {c['pcp_mean']:.3f} ({moved})")
+            words.append(f"confirmed: {c['cameras']} cameras ({c['grid'][0]} x {c['grid'][1]}) are the fewest "
+                         f"measured to meet PCP {result.target_pcp:g}: {c['pcp_mean']:.3f} ({moved})")
         else:
-            print(f"confirmed: no rig measured meets PCP {result.target_pcp:g}; the most measured, {c['cameras']} "
-                  f"cameras, gave {c['pcp_mean']:.3f}")
-    pipeline.write_json(result.as_dict(), args.output)
-    print(f"plan: {args.output}")
+            words.append(f"confirmed: no rig measured meets PCP {result.target_pcp:g}; the most measured, "
+                         f"{c['cameras']} cameras, gave {c['pcp_mean']:.3f}")
+    emit(result.as_dict(), fmt=args.format, output=args.output, what="plan",
+         text="\n".join([head, result.table(), *words]), blocks=[head, result.candidates_table(), *words])
 
 
 def _cmd_generate(args) -> None:
@@ -1332,7 +1335,7 @@ COMMANDS = {
 
 
 TABLE_COMMANDS = ("score", "per-camera", "detector-stats", "fit-detector", "world-stats", "coverage", "compare",
-                  "bench", "evaluate", "zones")
+                  "bench", "evaluate", "zones", "plan")
 """The commands that print a table, each with `--format` and `-o` (`crossview.tables`; README.md, "Commands")."""
 
 
