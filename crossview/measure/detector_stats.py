@@ -410,6 +410,8 @@ class DetectorStatsAccumulator:
                 "error_over_size_median": _quantile(e, 50),
                 "miss_rate": _ratio(np.count_nonzero(inside[mine] & ~detected[mine]), np.count_nonzero(inside[mine])),
                 "missed_person_view_rate": _ratio(counts["missed_person_views"], counts["person_views"]),
+                "missed_person_views_by_cause": None if self._geometry is None else {
+                    cause: _ratio(counts[f"missed_{cause}"], counts["person_views"]) for cause in MISS_CAUSES},
                 "false_positive_people_per_frame": _ratio(counts["false_positive_people"], counts["frames"]),
             }
         return stats
@@ -713,12 +715,21 @@ def _table_rows(stats: dict, ref: Reference) -> tuple[str, list[tuple[str, str |
     cells.append((f"people with a limb error > {BAD_LIMB_FACTOR:g} x the median (of people measured)",
                   _people(spread), _people(ref_spread)))
     cameras = [(name, str(c["frames_measured"]), str(c["matched_detections"]), _fmt(c["error_over_size_median"], ""),
-                _fmt(c["miss_rate"], "%"), _fmt(c["missed_person_view_rate"], "%"),
+                _fmt(c["miss_rate"], "%"), _fmt(c["missed_person_view_rate"], "%"), _geometry_share(c),
                 _fmt(c["false_positive_people_per_frame"], "")) for name, c in stats["per_camera"].items()]
     return intro, cells, cameras
 
 
-_CAMERA_HEADER = ("camera", "frames", "matched", "error/size", "joint miss", "missed views", "FP / frame")
+_CAMERA_HEADER = ("camera", "frames", "matched", "error/size", "joint miss", "missed views", "by geometry",
+                  "FP / frame")
+
+
+def _geometry_share(figures: dict) -> str:
+    """The missed person-views the rig's geometry explains (too small, cut, behind shelves), or - (not split)."""
+    causes = figures.get("missed_person_views_by_cause")
+    if not causes or any(causes[c] is None for c in MISS_CAUSES[:-1]):
+        return "-"
+    return _fmt(sum(causes[c] for c in MISS_CAUSES[:-1]), "%")
 
 
 def format_detector_stats(stats: dict, ref: Reference | None = None) -> str:
@@ -730,7 +741,7 @@ def format_detector_stats(stats: dict, ref: Reference | None = None) -> str:
     for label, measured, ref in cells:
         lines.append(label if measured is None else f"{label:<56}{measured:>12}{ref:>24}")
     if cameras:
-        widths = (16, 8, 9, 12, 12, 14, 12)
+        widths = (16, 8, 9, 12, 12, 14, 13, 12)
         lines += ["", "".join(h.ljust(w) if i == 0 else h.rjust(w) for i, (h, w) in enumerate(zip(_CAMERA_HEADER,
                                                                                                    widths)))]
         lines += ["".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths)))
