@@ -9,7 +9,9 @@ a real one (`crossview convert` of a dataset folder with 3D truth) give comparab
   also stores is not used: real data has none, and the detector's joint need not be the scorer's.
 - **Joints**: the 12 joints both skeleton layouts name alike (`JOINTS_12`: shoulders, elbows, wrists, hips,
   knees, ankles; COCO-17 and the Campus/Shelf 14 joints). Person size: the larger side of the box of the
-  person's 12 projected joints (about 400 px on Shelf). Errors are divided by it; pixel offsets are given
+  person's 12 projected joints (about 400 px on Shelf), leaving out the joints behind the camera or beyond its
+  lens's monotonic radius (whose projections are no pixels a lens gives); a person with no joint in the image
+  takes no detection. Errors are divided by it; pixel offsets are given
   at a 400 px person (`SIZE_AT_PX`).
 - **Matching**: per camera frame, detections are assigned to the true people by the Hungarian algorithm on
   the mean distance of their common joints divided by the person's size; a pair further apart than
@@ -316,7 +318,11 @@ class DetectorStatsAccumulator:
         counts = self._counts[c]
         truth_m = np.asarray(poses.poses, dtype=np.float64)[:, self._joints]  # (P, 12, 3)
         truth_px, inside = in_image(self.cameras[c], truth_m)  # (P, 12, 2), (P, 12)
-        size = person_sizes_px(truth_px)  # (P,)
+        # A joint behind the camera or beyond the lens's monotonic radius has no pixel a lens would give it (its
+        # projection runs to 1e12 px): it is left out of the size, as a NaN joint is, and a person with no joint
+        # inside the image is nobody a detection can be of (its size would make every detection match it).
+        size = person_sizes_px(np.where(_projectable(self.cameras[c], truth_m)[..., None], truth_px, np.nan))
+        size[~inside.any(axis=1)] = np.nan
         detections = np.asarray(frame.keypoints_px, dtype=np.float64)[:, self._joints]  # (D, 12, 2)
         record = _FrameRecord(c, float(camera_frame.truth.capture_s))
         counts["frames"] += 1
@@ -465,6 +471,18 @@ def _match(truth_px: np.ndarray, size_px: np.ndarray, detections_px: np.ndarray)
     rows, cols = linear_sum_assignment(np.where(allowed, cost, 2 * MATCH_GATE + 1))
     keep = allowed[rows, cols]
     return rows[keep], cols[keep]
+
+
+def _projectable(camera: Camera, points_m: np.ndarray) -> np.ndarray:
+    """(...,) whether each world point (..., 3) lies in front of `camera` within its lens's monotonic radius
+    (`core.projection.monotonic_radius`), where its projection is a pixel a real lens would give it."""
+    from core.projection import monotonic_radius
+
+    cam = points_m @ np.asarray(camera.R_cam_from_world).T + np.asarray(camera.t_cam_from_world)
+    z = cam[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r2 = (cam[..., 0] ** 2 + cam[..., 1] ** 2) / z**2
+    return (z > 0) & (r2 <= monotonic_radius(camera.dist) ** 2)
 
 
 def _consecutive_pairs(records: list[_FrameRecord]) -> list[tuple[_View, _View]]:

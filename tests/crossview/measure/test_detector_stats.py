@@ -353,3 +353,23 @@ def test_the_geometry_explains_every_miss_of_a_detector_that_misses_nobody_it_ca
     assert causes["hidden_by_shelves"] > 0.0
     assert sum(causes.values()) == pytest.approx(stats["missed_person_view_rate"], abs=1e-12)
 
+
+
+def test_a_person_out_of_the_lens_range_takes_no_detection_of_the_people_in_view():
+    """A barrel lens folds the projections of points far outside its field out to 1e9 px and more: a person
+    standing under the camera (no joint in the image) once had a person size so large that a detection matched it
+    at error / size 0.000 (a phantom counted as a detection, or a real person missed). Such joints have no size,
+    such a person takes no detection."""
+    from core.projection import in_image
+
+    barrel = Camera("c1", CAM.K, np.array([-0.3, 0.0, 0.0, 0.0, 0.0]), CAM.R_cam_from_world, CAM.t_cam_from_world,
+                    CAM.width_px, CAM.height_px)
+    under = _standing(0.0, -0.25)  # around the camera, at (0, 0, 1): nothing of it in the image
+    px, inside = in_image(barrel, np.stack([PEOPLE[1], under, PEOPLE[0]]))
+    assert inside[0].all() and not inside[1].any() and np.nanmax(np.abs(px[1])) > 1e6
+    # The person in view detected exactly, and a phantom where nobody of the truth stands (PEOPLE[0]'s place).
+    frames = [_camera_frame(barrel, k / FPS, [11, 99], np.stack([PEOPLE[1], under]), px[[0, 2]]) for k in range(20)]
+    stats = detector_stats(frames, [barrel], COCO17)
+    assert stats["matched_detections"] == 20 and stats["missed_person_view_rate"] == 0.0
+    assert stats["false_positive_people_per_frame"] == 1.0  # (the phantom, which the person under it once took)
+    assert stats["error_over_size_p99"] == pytest.approx(0.0, abs=1e-9)
