@@ -343,7 +343,7 @@ def test_the_geometry_explains_every_miss_of_a_detector_that_misses_nobody_it_ca
     assert 'profile = "typical"' in text
     (tmp_path / "s.toml").write_text(text.replace('profile = "typical"', f'profile = "{profile}"'))
     rec = tmp_path / "s.mcap"
-    assert main(["--no-progress", "generate", str(tmp_path / "s.toml"), "-o", str(rec), "--duration", "2",
+    assert main(["--no-progress", "generate", str(tmp_path / "s.toml"), "-o", str(rec), "--duration", "1",
                  "--people", "1"]) == 0
     stats = recording_detector_stats(rec)
     causes = stats["missed_person_views_by_cause"]
