@@ -17,6 +17,7 @@ from pathlib import Path
 
 from core.errors import CrossviewError, Interrupted
 from crossview.live import DEFAULT_PORT, parse_speed
+from crossview.tables import emit
 
 EXIT_BAD_INPUT = 2
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM and SIGHUP end with 128 + their number too
@@ -246,71 +247,85 @@ def add_output(p: argparse.ArgumentParser, help: str, *, required: bool = True, 
                            help=argparse.SUPPRESS)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _TopParser(prog="crossview", description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action=_Version, help="print the version and exit")
-    for flags, text in GLOBAL_OPTIONS:
-        parser.add_argument(*flags, action="store_true", help=text)
-    # The commands in the order a user meets them: a first run, the scenarios, a recording and its cameras'
-    # coverage, tracking and scoring it, looking at it, comparing and sweeping, then the dataset tools.
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
+def add_format(p: argparse.ArgumentParser) -> None:
+    """Adds `--format text|json|markdown`: how a command that prints a table prints it, and writes it with -o
+    (`crossview.tables`: one rule for every such command)."""
+    from crossview.tables import FORMATS
 
-    def scenario_options(p):
-        p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
-        p.add_argument("--duration", type=_duration_s, help="simulated seconds (default: the scenario's)")
-        p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
-        p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
+    p.add_argument("--format", choices=FORMATS, help="how to print the table: text (default), json or markdown; a "
+                   "file written with -o takes this format, else its suffix's (.json, .md), else text")
 
-    def live_options(p, what):
-        if what:
-            p.add_argument("--live", action="store_true", help=f"{what} live on a Foxglove WebSocket server as it "
-                           "runs (pip install '.[live]'; docs/recording-format.md)")
-        p.add_argument("--port", type=_non_negative_int, default=DEFAULT_PORT, help="the live server's port (0: any "
-                       f"free port, printed; default {DEFAULT_PORT})")
-        p.add_argument("--speed", type=parse_speed, default=1.0, metavar="FACTOR|max",
-                       help="pace of the live view: times real time, or max for as fast as it runs (default 1)")
 
-    def tracker_options(p):
-        p.add_argument("--method", default="crossview", metavar="METHOD",
-                       help="crossview, baseline, a name registered under the entry-point group crossview.trackers, "
-                       "or package.module:Class of the tracker shape (docs/plugins.md); default crossview")
-        p.add_argument(
-            "--preset",
-            default="store",
-            help="tracker preset: campus, shelf, store, or campus-paper, shelf-paper, store-paper for Table S2 "
-            "verbatim (default store)",
-        )
-        p.add_argument("--config", type=Path, help="TOML file of tracker parameters over the preset")
+def _say(args, line: str) -> None:
+    """A line about what the command did: on stdout beside a text table, on stderr when stdout holds a JSON or
+    Markdown document (`--format`)."""
+    print(line, file=sys.stdout if getattr(args, "format", None) in (None, "text") else sys.stderr, flush=True)
 
-    p = sub.add_parser("run", help="generate, track and score a scenario (default: the built-in store)")
+
+def _scenario_options(p):
+    """The options of the commands that simulate a scenario (`run`, `generate`)."""
+    p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
+    p.add_argument("--duration", type=_duration_s, help="simulated seconds (default: the scenario's)")
+    p.add_argument("--people", type=_non_negative_int, help="number of people (overrides [crowd] people)")
+    p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
+
+
+def _live_options(p, what):
+    """The live server's options; `what` words `--live` (None: the command always serves, as `serve`)."""
+    if what:
+        p.add_argument("--live", action="store_true", help=f"{what} live on a Foxglove WebSocket server as it "
+                       "runs (pip install '.[live]'; docs/recording-format.md)")
+    p.add_argument("--port", type=_non_negative_int, default=DEFAULT_PORT, help="the live server's port (0: any "
+                   f"free port, printed; default {DEFAULT_PORT})")
+    p.add_argument("--speed", type=parse_speed, default=1.0, metavar="FACTOR|max",
+                   help="pace of the live view: times real time, or max for as fast as it runs (default 1)")
+
+
+def _tracker_options(p):
+    """The options choosing a tracker (`run`, `track`)."""
+    p.add_argument("--method", default="crossview", metavar="METHOD",
+                   help="crossview, baseline, a name registered under the entry-point group crossview.trackers, "
+                   "or package.module:Class of the tracker shape (docs/plugins.md); default crossview")
+    p.add_argument(
+        "--preset",
+        default="store",
+        help="tracker preset: campus, shelf, store, or campus-paper, shelf-paper, store-paper for Table S2 "
+        "verbatim (default store)",
+    )
+    p.add_argument("--config", type=Path, help="TOML file of tracker parameters over the preset")
+
+
+def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", nargs="?", help="scenario file or shipped name (default store_layout1)")
-    scenario_options(p)
-    tracker_options(p)
+    _scenario_options(p)
+    _tracker_options(p)
     add_output(p, "folder for NAME.mcap, NAME.tracks.mcap, NAME.score.json (default recordings/)",
                required=False, default=Path("recordings"), old=("--out",), metavar="DIR")
     p.add_argument("--json", type=Path, help="score JSON path (default OUTPUT/NAME.score.json)")
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="score from S seconds on, "
                    "leaving out the warm-up before (default: the warm-up rule of docs/metrics.md)")
-    live_options(p, "publish the recording, then the tracks,")
+    _live_options(p, "publish the recording, then the tracks,")
 
-    p = sub.add_parser("scenarios", help="list the shipped scenarios, print one resolved, or the key reference")
+
+def _scenarios_args(p: argparse.ArgumentParser) -> None:
     show = p.add_mutually_exclusive_group()
     show.add_argument("--show", metavar="SCENARIO", help="print a scenario with every key resolved (TOML)")
     show.add_argument("--reference", action="store_true", help="print every key's meaning, unit, default and range "
                       "(docs/scenarios.md)")
 
-    p = sub.add_parser("generate", help="simulate a scenario into a recording")
+
+def _generate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
-    scenario_options(p)
+    _scenario_options(p)
     p.add_argument("--images", type=_positive_float, metavar="RATE", help="store RATE rendered JPEG pictures per "
                    "second per camera (at most the frame rate; needs the render extra; docs/rendering.md)")
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend for --images (default: "
                    "$MUJOCO_GL when it names one, else EGL, then OSMesa)")
-    live_options(p, "publish the recording")
+    _live_options(p, "publish the recording")
 
-    p = sub.add_parser("coverage", help="how many cameras see each floor cell: the shares of the walkable floor "
-                       "seen by 1, 2, 3 or more cameras, and a top-down map")
+
+def _coverage_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     add_output(p, "the map to write (.png; default: the shares only)", required=False, metavar="MAP.png")
     p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
@@ -318,10 +333,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "scenario's)")
     p.add_argument("--people", type=_non_negative_int, help="the crowd whose occlusion to predict (default: the "
                    "scenario's [crowd] people)")
-    p.add_argument("--figures", type=Path, metavar="FILE.json", help="write the figures as JSON here")
+    p.add_argument("--figures", type=Path, metavar="FILE", help="write the figures here too (in --format, else "
+                   "as its suffix says: .json, .md, else text)")
+    add_format(p)
 
-    p = sub.add_parser("plan", help="how many cameras a store needs: the fewest ceiling cameras whose predicted "
-                       "tracking meets a PCP target, with --confirm measured by a short sweep")
+
+def _plan_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name (its rig a ceiling grid)")
     p.add_argument("--target-pcp", type=float, required=True, metavar="P", help="the PCP to reach, in (0, 1]")
     p.add_argument("--people", type=_non_negative_int, help="the crowd to plan for (default: the scenario's)")
@@ -331,7 +348,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "(default: the scenario's)")
     p.add_argument("--max-cameras", type=_positive_int, help="the most cameras to try (default: one per m² of "
                    "floor, at least 16)")
-    add_output(p, "the plan to write (JSON)", metavar="PLAN.json")
+    add_output(p, "the plan to write (in --format, else as its suffix says: .json, .md, else text)",
+               metavar="PLAN.json")
+    add_format(p)
     p.add_argument("--map", type=Path, metavar="MAP.png", help="the recommended rig's coverage map (default: "
                    "PLAN.png beside the plan)")
     p.add_argument("--confirm", action="store_true", help="measure the recommended rig with the tracker (a sweep "
@@ -343,10 +362,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--workers", type=_positive_int, help="with --confirm: local worker processes (default: the "
                    "cores)")
 
-    p = sub.add_parser("track", help="run a tracker over a recording")
+
+def _track_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate or convert")
     add_output(p, "tracks file to write (.mcap)", metavar="TRACKS.mcap")
-    tracker_options(p)
+    _tracker_options(p)
     p.add_argument("--zones", metavar="auto|N", help="track the store as N zones, each by its own tracker, "
                    "identities handed over at their borders (auto: one zone per 60 cameras; docs/zones.md)")
     p.add_argument("--overlap", type=_positive_float, default=2.0, metavar="M", help="with --zones: how far "
@@ -357,8 +377,8 @@ def build_parser() -> argparse.ArgumentParser:
     where.add_argument("--ray", nargs="?", const="", metavar="ADDRESS", help="with --zones: the zones as Ray "
                        "actors: alone, on a local instance; with ADDRESS, on that cluster (pip install '.[ray]')")
 
-    p = sub.add_parser("zones", help="cut a store's floor into zones for `track --zones`: each zone's cell and "
-                       "cameras, and a top-down map")
+
+def _zones_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--zones", default="auto", metavar="auto|N", help="number of zones (default auto: one per 60 "
                    "cameras)")
@@ -368,25 +388,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=_non_negative_int, help="seed of the cameras' position jitter (default: the "
                    "scenario's)")
     add_output(p, "the map to write (.png; default: the table only)", required=False, metavar="MAP.png")
+    p.add_argument("--figures", type=Path, metavar="FILE", help="write the zones here too (in --format, else as "
+                   "its suffix says: .json, .md, else text)")
+    add_format(p)
 
-    p = sub.add_parser("score", help="score a tracks file or a result file against its recording")
+
+def _score_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
     p.add_argument("tracks", type=Path, help="tracks file (.mcap), result_3d.json or JSON lines "
                    "(docs/recording-format.md)")
-    add_output(p, "write the score JSON here (default: print the table only)", required=False, old=("--json",))
+    add_output(p, "write the score here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",))
+    add_format(p)
     p.add_argument("--from", dest="from_s", type=_non_negative_float, default=0.0, metavar="S",
                    help="leave out a warm-up: truth and tracks before S seconds are not scored (default 0)")
     p.add_argument("--map", type=Path, metavar="MAP.png", help="draw where and when the tracker failed: floor "
                    "heat maps of misses, false positives and ID switches, and each person's time line")
 
-    p = sub.add_parser("info", help="describe a recording or tracks file")
+
+def _info_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", type=Path, help="a recording or tracks file (.mcap)")
     p.add_argument("--allow-truncated", action="store_true", help="report the readable prefix of a cut file")
     p.add_argument("--summary-only", action="store_true",
                    help="describe a complete file from its summary alone, without reading every chunk and "
                         "checking its CRC")
 
-    p = sub.add_parser("render", help="pictures of what the cameras saw, with the detections and tracks drawn on")
+
+def _render_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
     what = p.add_mutually_exclusive_group(required=True)
     what.add_argument("--camera", metavar="NAME", help="one camera's view")
@@ -404,23 +432,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--gl", choices=("egl", "osmesa"), help="MuJoCo's OpenGL backend (default: $MUJOCO_GL when it "
                    "names one, else EGL, then OSMesa)")
 
-    p = sub.add_parser("serve", help="replay a recording (and its tracks) on a Foxglove WebSocket server, with play, "
-                       "pause, seek and speed (pip install '.[live]')")
+
+def _serve_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate")
     p.add_argument("tracks", type=Path, nargs="?", help="tracks file (.mcap) made from the recording")
-    live_options(p, None)
+    _live_options(p, None)
     p.add_argument("--play", action="store_true", help="start playing at once (default: paused until a client "
                    "plays)")
 
-    p = sub.add_parser("compare", help="several trackers over the same recordings: one table, a chart per metric")
+
+def _compare_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recordings", nargs="+", type=Path, help="recordings (.mcap) to track and score")
     p.add_argument("--tracker", action="append", required=True, metavar="LABEL=SPEC",
                    help="repeat for each tracker; SPEC is a --method (crossview, baseline, pkg.module:Class, a "
                    "registered name) with an optional @PRESET, or file:PATH of a result file ({recording} in PATH "
                    "is the recording's name without .mcap)")
     add_output(p, "folder for compare.md, compare.csv, the charts and tracks", old=("--out",), metavar="DIR")
+    add_format(p)
 
-    p = sub.add_parser("sweep", help="run a grid of generate-track-score cells (scenario keys x seeds x methods)")
+
+def _sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="base scenario file or shipped name")
     p.add_argument("--set", dest="axes", action="append", type=_sweep_axis, default=[], metavar="KEY=V1,V2,...",
                    help="an axis: any scenario key by its dotted name (crowd.people, clock.fps, ...); repeatable, "
@@ -447,12 +478,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep-recordings", action="store_true", help="keep each cell's recording and write "
                    "manifest.json (for crossview verify)")
 
-    p = sub.add_parser("verify", help="regenerate a kept sweep's recordings and check their bytes")
+
+def _verify_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("folder", type=Path, help="a sweep folder with manifest.json (sweep --keep-recordings)")
     p.add_argument("--cells", type=_positive_int, help="check a fixed sample of this many (default: all)")
 
-    p = sub.add_parser("ablate", help="the paper's ablations (Tables S1, 4, 5, Figures 5, 6) and the tracker's body "
-                       "and joint priors into one report")
+
+def _ablate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("experiments", nargs="*", metavar="EXPERIMENT",
                    help="affinity, reconstruction, frame-rate, speed, single-view, priors (default: all)")
     p.add_argument("--quick", action="store_true", help="one seed, short runs, fewer points (about 2 minutes)")
@@ -460,8 +492,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "cores; 1 runs them in this process)")
     add_output(p, "output folder (a rerun into it resumes)", old=("--out",), metavar="DIR")
 
-    p = sub.add_parser("export", help="write tracks or a recording for other tools: the paper's dataset layout, "
-                       "motion (BVH, TRC, C3D), MOTChallenge, COCO keypoints (docs/exports.md)")
+
+def _export_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("file", type=Path, help="tracks file (crossview-json, jsonl, bvh, trc, c3d, mot) or recording "
                    "(dataset, openpose, bvh, trc, c3d, mot, coco)")
     p.add_argument("--format", default="crossview-json", choices=EXPORT_FORMATS,
@@ -479,32 +511,43 @@ def build_parser() -> argparse.ArgumentParser:
                    "the grid the tracks are sampled on (default 30; a recording's truth keeps its own 100 Hz)")
     add_output(p, "the file, or a new folder (dataset, openpose, bvh, trc, c3d, mot, coco)")
 
-    p = sub.add_parser("convert", help="turn a dataset in the paper's layout into a recording")
+
+def _convert_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("dataset", type=Path, help="folder of calibration.json and detection.json, annotation_2d.json or "
                    "one folder of OpenPose *_keypoints.json per camera")
     add_output(p, "recording to write (.mcap)", metavar="REC.mcap")
     p.add_argument("--fps", type=_frame_rate, help="OpenPose folders: frame rate for the stamps that "
                    "timestamps.json does not give (stamp = frame number / fps)")
 
-    p = sub.add_parser("evaluate", help="score a result in the paper's dataset layout with its PCP protocol")
+
+def _evaluate_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("dataset", type=Path, help="dataset folder (calibration.json, annotation_3d.json, ...)")
     p.add_argument("result", type=Path, help="result_3d.json in the dataset layout")
+    add_output(p, "write the evaluation here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, metavar="FILE")
+    add_format(p)
 
-    p = sub.add_parser("per-camera", help="per-camera MOTA and IDF1: single-view baseline against cross-view "
-                       "(the paper's Table 5)")
+
+def _per_camera_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="the recording (.mcap) the tracks were made from")
     p.add_argument("tracks", type=Path, help="cross-view tracks file made from the recording")
-    add_output(p, "write the table as JSON here (default: print it only)", required=False, old=("--json",))
+    add_output(p, "write the table here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",))
+    add_format(p)
 
-    p = sub.add_parser("detector-stats", help="measure a recording's 2D detections against its projected 3D truth, "
-                       "beside real OpenPose on Shelf")
+
+def _detector_stats_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="a recording with 3D truth: `crossview generate`, or `crossview "
                    "convert` of a dataset folder with annotation_3d.json")
-    add_output(p, "write the figures as JSON here (default: print the table only)", required=False, old=("--json",),
-               metavar="FILE")
+    add_output(p, "write the figures here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",), metavar="FILE")
+    add_format(p)
+    p.add_argument("--reference", default="shelf-openpose", metavar="FILE.json|shelf-openpose", help="what to "
+                   "print the figures beside, its column headed by its source: a `detector-stats -o` file (of a "
+                   "recording like this one), or shelf-openpose, real OpenPose on Shelf's 400 px people (default)")
 
-    p = sub.add_parser("fit-detector", help="fit a detector profile to a recording's detector statistics (or to "
-                       "real OpenPose on Shelf), by simulating the rig with candidate profiles")
+
+def _fit_detector_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, nargs="?", help="a recording whose detections to fit (synthetic, or "
                    "converted from a dataset with 3D truth); leave out with --target")
     add_output(p, "the profile file to write (TOML)", metavar="PROFILE.toml")
@@ -519,8 +562,12 @@ def build_parser() -> argparse.ArgumentParser:
                    "scenario's)")
     p.add_argument("--duration", type=_duration_s, default=20.0, help="simulated seconds per round (default 20)")
     p.add_argument("--rounds", type=_positive_int, default=8, help="rounds of simulate, measure, update (default 8)")
+    p.add_argument("--figures", type=Path, metavar="FILE", help="write the fitted statistics beside the target here "
+                   "(in --format, else as its suffix says: .json, .md, else text)")
+    add_format(p)
 
-    p = sub.add_parser("world-stats", help="measure the crowd: clearances, foot slip, activities, speeds, sim speed")
+
+def _world_stats_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
     p.add_argument("--seed", type=_seed, help="seed (default: the scenario's)")
     duration = p.add_mutually_exclusive_group()
@@ -528,17 +575,95 @@ def build_parser() -> argparse.ArgumentParser:
                           f"at most {MAX_DURATION_S:g})")
     duration.add_argument("--minutes", dest="duration", type=_minutes_as_s, default=argparse.SUPPRESS,
                           help=argparse.SUPPRESS)  # (the old spelling, for one version)
+    add_output(p, "write the figures here too (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, metavar="FILE")
+    add_format(p)
 
-    p = sub.add_parser("bench", help="measure tracker and simulator speed on the shipped stores")
-    add_output(p, "write the figures as JSON here", required=False, old=("--json",))
+
+def _bench_args(p: argparse.ArgumentParser) -> None:
+    add_output(p, "write the figures here (in --format, else as its suffix says: .json, .md, else text)",
+               required=False, old=("--json",))
+    add_format(p)
     p.add_argument("--markdown", type=Path, help="write them as the benchmarks page here (docs/benchmarks.md)")
     p.add_argument("--duration", type=_duration_s, help="simulated seconds per case (default 20; 10 with --scale)")
     p.add_argument("--scale", action="store_true", help="the tracker at crowd scale instead (28/16 to 240/200 "
                    "cameras/people, and time per round against cameras): docs/benchmarks.md's last section")
     p.add_argument("--budget", type=_positive_float, default=300.0, help="with --scale: most seconds of tracking "
                    "timed per case (the rest of a slower case's stream is left unscored; default 300)")
+
+
+COMMAND_ARGUMENTS = (
+    ("run", _run_args,
+     "generate, track and score a scenario (default: the built-in store)"),
+    ("scenarios", _scenarios_args,
+     "list the shipped scenarios, print one resolved, or the key reference"),
+    ("generate", _generate_args,
+     "simulate a scenario into a recording"),
+    ("coverage", _coverage_args,
+     "how many cameras see each floor cell: the shares of the walkable floor "
+     "seen by 1, 2, 3 or more cameras, and a top-down map"),
+    ("plan", _plan_args,
+     "how many cameras a store needs: the fewest ceiling cameras whose predicted "
+     "tracking meets a PCP target, with --confirm measured by a short sweep"),
+    ("track", _track_args,
+     "run a tracker over a recording"),
+    ("zones", _zones_args,
+     "cut a store's floor into zones for `track --zones`: each zone's cell and "
+     "cameras, and a top-down map"),
+    ("score", _score_args,
+     "score a tracks file or a result file against its recording"),
+    ("info", _info_args,
+     "describe a recording or tracks file"),
+    ("render", _render_args,
+     "pictures of what the cameras saw, with the detections and tracks drawn on"),
+    ("serve", _serve_args,
+     "replay a recording (and its tracks) on a Foxglove WebSocket server, with play, "
+     "pause, seek and speed (pip install '.[live]')"),
+    ("compare", _compare_args,
+     "several trackers over the same recordings: one table, a chart per metric"),
+    ("sweep", _sweep_args,
+     "run a grid of generate-track-score cells (scenario keys x seeds x methods)"),
+    ("verify", _verify_args,
+     "regenerate a kept sweep's recordings and check their bytes"),
+    ("ablate", _ablate_args,
+     "the paper's ablations (Tables S1, 4, 5, Figures 5, 6) and the tracker's body "
+     "and joint priors into one report"),
+    ("export", _export_args,
+     "write tracks or a recording for other tools: the paper's dataset layout, "
+     "motion (BVH, TRC, C3D), MOTChallenge, COCO keypoints (docs/exports.md)"),
+    ("convert", _convert_args,
+     "turn a dataset in the paper's layout into a recording"),
+    ("evaluate", _evaluate_args,
+     "score a result in the paper's dataset layout with its PCP protocol"),
+    ("per-camera", _per_camera_args,
+     "per-camera MOTA and IDF1: single-view baseline against cross-view "
+     "(the paper's Table 5)"),
+    ("detector-stats", _detector_stats_args,
+     "measure a recording's 2D detections against its projected 3D truth, "
+     "beside a reference (default real OpenPose on Shelf)"),
+    ("fit-detector", _fit_detector_args,
+     "fit a detector profile to a recording's detector statistics (or to "
+     "real OpenPose on Shelf), by simulating the rig with candidate profiles"),
+    ("world-stats", _world_stats_args,
+     "measure the crowd: clearances, foot slip, activities, speeds, sim speed"),
+    ("bench", _bench_args,
+     "measure tracker and simulator speed on the shipped stores"),
+)
+"""Every command: its name, the function adding its arguments, its --help line; in the order a user meets them: a
+first run, the scenarios, a recording and its cameras' coverage, tracking and scoring it, looking at it, comparing
+and sweeping, then the dataset tools."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _TopParser(prog="crossview", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action=_Version, help="print the version and exit")
+    for flags, text in GLOBAL_OPTIONS:
+        parser.add_argument(*flags, action="store_true", help=text)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser, metavar="COMMAND")
+    for name, add_arguments, text in COMMAND_ARGUMENTS:
+        add_arguments(sub.add_parser(name, help=text))
     parser.commands = sub.choices  # name -> its parser (the tests compare them with the docs)
-    for command in sub.choices.values():  # (every command, those added above this line included)
+    for command in sub.choices.values():
         for flags, text in GLOBAL_OPTIONS:  # (SUPPRESS: not given here, the value before the command stands)
             command.add_argument(*flags, action="store_true", default=argparse.SUPPRESS, help=text)
     return parser
@@ -663,10 +788,10 @@ def _say_cameras(args, scenario) -> None:
     if getattr(args, "cameras", None) is None:
         return
     if scenario.cameras.calibration:
-        print(f"--cameras {args.cameras}: the first {args.cameras} cameras of {scenario.cameras.calibration}")
+        _say(args, f"--cameras {args.cameras}: the first {args.cameras} cameras of {scenario.cameras.calibration}")
     else:
-        print(f"--cameras {args.cameras}: a grid of {scenario.cameras.rows} rows x {scenario.cameras.cols} columns "
-              f"over the {scenario.store.width_m:g} m x {scenario.store.depth_m:g} m floor")
+        _say(args, f"--cameras {args.cameras}: a grid of {scenario.cameras.rows} rows x {scenario.cameras.cols} "
+             f"columns over the {scenario.store.width_m:g} m x {scenario.store.depth_m:g} m floor")
 
 
 def _warn_coverage(scenario) -> None:
@@ -689,12 +814,9 @@ def _cmd_coverage(args) -> None:
         if path:
             pipeline.check_writable(path)
     cov = coverage.coverage(scenario, people=args.people)
-    print("\n".join(cov.lines()))
+    emit(cov.as_dict(), fmt=args.format, output=args.figures, text="\n".join(cov.lines()))
     if args.output:
-        print(f"map: {coverage.write_map(cov, args.output)}")
-    if args.figures:
-        pipeline.write_json(cov.as_dict(), args.figures)
-        print(f"figures: {args.figures}")
+        _say(args, f"map: {coverage.write_map(cov, args.output)}")
     warning = cov.warning()
     if warning:
         print(warning, file=sys.stderr)
@@ -716,33 +838,34 @@ def _cmd_plan(args) -> None:
     result = plan.plan(args.scenario, args.target_pcp, people=args.people, heights_m=heights, lenses_deg=lenses,
                        max_cameras=args.max_cameras, progress=progress)
     rec = result.recommended
-    print(f"{result.scenario}, {result.people} people, target PCP {result.target_pcp:g}:")
-    print(result.table())
-    print(f"recommended: {rec.cameras} cameras ({rec.grid[0]} x {rec.grid[1]}) at {rec.height_m:g} m with "
-          f"{rec.hfov_deg:g} deg lenses, predicted PCP {rec.predicted_pcp:.3f}")
-    print(f"map: {coverage.write_map(rec.coverage, map_path)}")
+    _say(args, f"map: {coverage.write_map(rec.coverage, map_path)}")
     if args.confirm:
         result = plan.Plan(**{**vars(result), "confirmed": plan.confirm(
             args.scenario, result, confirm_dir, people=args.people, seeds=seeds, duration_s=args.duration,
             workers=args.workers, progress=progress)})
+    head = f"{result.scenario}, {result.people} people, target PCP {result.target_pcp:g}:"
+    words = [f"recommended: {rec.cameras} cameras ({rec.grid[0]} x {rec.grid[1]}) at {rec.height_m:g} m with "
+             f"{rec.hfov_deg:g} deg lenses, predicted PCP {rec.predicted_pcp:.3f}"]
+    if result.confirmed:
         c = result.confirmed
         for m in c["measured"]:
             verdict = "meets the target" if m["meets_target"] else "does NOT meet the target"
-            print(f"measured: {m['cameras']} cameras ({m['grid'][0]} x {m['grid'][1]}): PCP {m['pcp_mean']:.3f} "
-                  f"(95 % interval {m['pcp_ci95'][0]:.3f} to {m['pcp_ci95'][1]:.3f}, seeds "
-                  f"{', '.join(map(str, m['seeds']))}, {m['duration_s']:g} s each): {verdict} {result.target_pcp:g}")
+            words.append(f"measured: {m['cameras']} cameras ({m['grid'][0]} x {m['grid'][1]}): PCP "
+                         f"{m['pcp_mean']:.3f} (95 % interval {m['pcp_ci95'][0]:.3f} to {m['pcp_ci95'][1]:.3f}, "
+                         f"seeds {', '.join(map(str, m['seeds']))}, {m['duration_s']:g} s each): {verdict} "
+                         f"{result.target_pcp:g}")
         if c["meets_target"]:
             below = c["steps_below_prediction"]
             moved = ("the prediction's answer" if below == 0 else
                      f"{abs(below)} grid step{'' if abs(below) == 1 else 's'} "
                      f"{'below' if below > 0 else 'above'} the prediction's {rec.cameras}")
-            print(f"confirmed: {c['cameras']} cameras ({c['grid'][0]} x {c['grid'][1]}) are the fewest measured to "
-                  f"meet PCP {result.target_pcp:g}: {c['pcp_mean']:.3f} ({moved})")
+            words.append(f"confirmed: {c['cameras']} cameras ({c['grid'][0]} x {c['grid'][1]}) are the fewest "
+                         f"measured to meet PCP {result.target_pcp:g}: {c['pcp_mean']:.3f} ({moved})")
         else:
-            print(f"confirmed: no rig measured meets PCP {result.target_pcp:g}; the most measured, {c['cameras']} "
-                  f"cameras, gave {c['pcp_mean']:.3f}")
-    pipeline.write_json(result.as_dict(), args.output)
-    print(f"plan: {args.output}")
+            words.append(f"confirmed: no rig measured meets PCP {result.target_pcp:g}; the most measured, "
+                         f"{c['cameras']} cameras, gave {c['pcp_mean']:.3f}")
+    emit(result.as_dict(), fmt=args.format, output=args.output, what="plan",
+         text="\n".join([head, result.table(), *words]), blocks=[head, result.candidates_table(), *words])
 
 
 def _cmd_generate(args) -> None:
@@ -836,24 +959,33 @@ def _track_zoned(args) -> None:
 
 def _cmd_zones(args) -> None:
     from crossview import pipeline, zoned
+    from crossview.tables import Table
     from sim.cameras import build_rig
     from sim.rng import child_rng
     from sim.store import StoreGeometry
 
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed, cameras=args.cameras)
-    if args.output:
-        pipeline.check_writable(args.output)
+    for path in (args.output, args.figures):
+        if path:
+            pipeline.check_writable(path)
     cameras = build_rig(scenario, child_rng(scenario.seed, "cameras"))
     boxes = StoreGeometry(scenario.store, name=scenario.where).boxes
     cut = zoned.cut(cameras, boxes, args.zones, args.overlap)
     memberships = sum(len(z.cameras) for z in cut)
-    print(f"{scenario.name}: {len(cut)} zones, {len(cameras)} cameras, {memberships} zone cameras "
-          f"({memberships / len(cameras):.2f} per camera: the overlap's cost)")
-    for z in cut:
-        x0, y0, x1, y1 = z.cell
-        print(f"  zone {z.index}: x {x0:.1f}..{x1:.1f} m, y {y0:.1f}..{y1:.1f} m, {len(z.cameras)} cameras")
+    head = (f"{scenario.name}: {len(cut)} zones, {len(cameras)} cameras, {memberships} zone cameras "
+            f"({memberships / len(cameras):.2f} per camera: the overlap's cost)")
+    rows = [f"  zone {z.index}: x {z.cell[0]:.1f}..{z.cell[2]:.1f} m, y {z.cell[1]:.1f}..{z.cell[3]:.1f} m, "
+            f"{len(z.cameras)} cameras" for z in cut]
+    figures = {"scenario": scenario.name, "cameras": len(cameras), "zone_cameras": memberships,
+               "overlap_m": args.overlap,
+               "zones": [{"index": z.index, "cell_m": [float(v) for v in z.cell], "cameras": len(z.cameras)}
+                         for z in cut]}
+    emit(figures, fmt=args.format, output=args.figures, text="\n".join([head, *rows]),
+         blocks=[head, Table(("zone", "x from m", "x to m", "y from m", "y to m", "cameras"),
+                             tuple((str(z.index), *(f"{v:.1f}" for v in (z.cell[0], z.cell[2], z.cell[1], z.cell[3])),
+                                    str(len(z.cameras))) for z in cut))])
     if args.output:
-        print(f"map: {zoned.write_map(scenario.name, boxes, cameras, cut, args.overlap, args.output)}")
+        _say(args, f"map: {zoned.write_map(scenario.name, boxes, cameras, cut, args.overlap, args.output)}")
 
 
 def _cmd_score(args) -> None:
@@ -865,13 +997,11 @@ def _cmd_score(args) -> None:
     if args.map:
         pipeline.check_writable(args.map, inputs=(*inputs, *([args.output] if args.output else [])))
     report, result = pipeline.score(args.recording, args.tracks, progress=not args.no_progress, from_s=args.from_s)
-    print(report.table())
-    if args.output:
-        pipeline.write_json(result, args.output, inputs=inputs)
-        print(f"score JSON: {args.output}")
+    emit(result, fmt=args.format, output=args.output, what="score", text=report.table(),
+         blocks=report.markdown_blocks(), inputs=inputs)
     if args.map:
         pipeline.write_score_map(result, args.recording, args.map, inputs=inputs)
-        print(f"map: {args.map}")
+        _say(args, f"map: {args.map}")
 
 
 def _cmd_info(args) -> None:
@@ -883,39 +1013,48 @@ def _cmd_info(args) -> None:
 
 def _cmd_detector_stats(args) -> None:
     from crossview import pipeline
-    from crossview.measure.detector_stats import format_detector_stats, recording_detector_stats
+    from crossview.measure.detector_stats import (
+        SHELF_OPENPOSE_NAME,
+        detector_stats_blocks,
+        format_detector_stats,
+        recording_detector_stats,
+        reference,
+    )
 
+    inputs = (args.recording, *(() if args.reference == SHELF_OPENPOSE_NAME else (Path(args.reference),)))
     if args.output:
-        pipeline.check_writable(args.output, inputs=(args.recording,))
+        pipeline.check_writable(args.output, inputs=inputs)
+    ref = reference(args.reference)  # (a bad file refused before measuring)
     stats = recording_detector_stats(args.recording, progress=not args.no_progress)
-    print(format_detector_stats(stats))
-    if args.output:
-        pipeline.write_json(stats, args.output, inputs=(args.recording,))
-        print(f"figures JSON: {args.output}")
+    emit({**stats, "reference": {"label": ref.label, "where": ref.where}}, fmt=args.format, output=args.output,
+         text=format_detector_stats(stats, ref), blocks=detector_stats_blocks(stats, ref), inputs=inputs)
 
 
 def _cmd_fit_detector(args) -> None:
     from crossview import pipeline, recording
     from crossview.measure.detector_fit import NOT_TARGETS, REACHED, deviations, fit, unreached
     from crossview.measure.detector_stats import (
-        SHELF_OPENPOSE,
-        SHELF_OPENPOSE_LABEL,
+        SHELF_OPENPOSE_NAME,
+        Reference,
+        detector_stats_blocks,
         format_detector_stats,
-        read_stats_file,
         recording_detector_stats,
+        reference,
     )
     from sim import scenario as scenario_mod
     from sim.sensing.profiles import DetectorProfile, profile_file_text, profile_params
 
     if (args.recording is None) == (args.target is None):
         raise CrossviewError("fit-detector: give a recording to fit, or --target FILE.json|shelf-openpose (not both)")
-    target_file = None if args.target in (None, "shelf-openpose") else Path(args.target)
+    target_file = None if args.target in (None, SHELF_OPENPOSE_NAME) else Path(args.target)
     pipeline.check_writable(args.output, inputs=() if target_file is None else (target_file,))
+    if args.figures:
+        pipeline.check_writable(args.figures, inputs=(args.output, *(() if target_file is None else (target_file,))))
     start = profile_params(args.start)  # (a bad --start refused before any measuring)
     seed = args.seed
     if args.recording is not None:
         target = recording_detector_stats(args.recording)
-        where, label = f"{args.recording}", args.recording.name
+        where, label = f"{args.recording}", args.recording.name  # (fitted to the recording's own statistics)
         if args.scenario is None:
             header = recording.open_recording(args.recording).header
             if not header.scenario_text:
@@ -926,49 +1065,61 @@ def _cmd_fit_detector(args) -> None:
         else:
             scenario = pipeline.load_scenario(args.scenario)
     else:
+        ref = reference(args.target)
+        target, where, label = ref.stats, ref.where, ref.label
         if target_file is None:
             # Its false-positive people count a person the annotation leaves out: no target
             # (crossview/measure/data/README.md).
-            target = {k: v for k, v in SHELF_OPENPOSE.items() if k not in NOT_TARGETS}
-            where, label = "real OpenPose on the Shelf dataset (shelf-openpose)", SHELF_OPENPOSE_LABEL
-        else:
-            target, where, label = read_stats_file(target_file), f"{target_file}", target_file.name
+            target = {k: v for k, v in target.items() if k not in NOT_TARGETS}
         scenario = pipeline.load_scenario(args.scenario or "shelf")
     seed = scenario.seed if seed is None else seed
 
     def report(k, result):
         (key, group), worst = max(deviations(result.stats, target).items(), key=lambda kv: abs(kv[1]))
-        print(f"round {k + 1}/{args.rounds}: largest deviation {100 * worst:+.1f} % ({key}"
-              f"{'' if group is None else ', ' + group})", flush=True)
+        _say(args, f"round {k + 1}/{args.rounds}: largest deviation {100 * worst:+.1f} % ({key}"
+             f"{'' if group is None else ', ' + group})")
 
     best = fit(target, scenario, start, seed=seed, duration_s=args.duration, rounds=args.rounds, on_round=report)
-    print(format_detector_stats(best.stats, reference=target, reference_label=label))
     missed = unreached(best, target)
-    print(f"rows further than {100 * REACHED:g} % from the target: {len(missed) or 'none'}")
-    for key, group, dev, why in missed:
-        print(f"  {key}{'' if group is None else ', ' + group}: {100 * dev:+.1f} %: {why}")
+    unreached_lines = [f"rows further than {100 * REACHED:g} % from the target: {len(missed) or 'none'}",
+                       *(f"  {key}{'' if group is None else ', ' + group}: {100 * dev:+.1f} %: {why}"
+                         for key, group, dev, why in missed)]
+    figures = {"reference": where, "fitted": best.stats, "target": target,
+               "unreached": [{"key": key, "group": group, "deviation": dev, "why": why}
+                             for key, group, dev, why in missed]}
+    emit(figures, fmt=args.format, output=args.figures, what="fitted statistics",
+         text="\n".join([format_detector_stats(best.stats, Reference(target, label, where)),
+                         *unreached_lines]),
+         blocks=[*detector_stats_blocks(best.stats, Reference(target, label, where)),
+                 *(line.strip() for line in unreached_lines)],
+         inputs=() if target_file is None else (target_file,))
     (key, group), worst = max(deviations(best.stats, target).items(), key=lambda kv: abs(kv[1]))
     comment = (f"Detector profile fitted by `crossview fit-detector` to {where}, on {scenario.name} (seed {seed}, "
                f"{args.duration:g} s a round, {args.rounds} rounds, from {args.start}).\nLargest deviation of a "
                f"row from the target: {100 * worst:+.1f} % ({key}{'' if group is None else ', ' + group}).")
     pipeline.write_text(profile_file_text(best.params, DetectorProfile.TYPICAL, comment), args.output)
-    print(f"{args.output}: the fitted profile (largest deviation {100 * best.worst:.1f} %)")
+    _say(args, f"{args.output}: the fitted profile (largest deviation {100 * best.worst:.1f} %)")
 
 
 def _cmd_world_stats(args) -> None:
-    import json
-
     from crossview import pipeline
-    from sim.world import measure
+    from crossview.measure.world_stats import measure
 
+    if args.output:
+        pipeline.check_writable(args.output)
     scenario = pipeline.load_scenario(args.scenario, seed=args.seed)
-    print(json.dumps(measure(scenario, duration_s=args.duration), indent=1))
+    emit(measure(scenario, duration_s=args.duration), fmt=args.format, output=args.output)
 
 
 def _cmd_evaluate(args) -> None:
-    from crossview.scoring.campus import evaluate, format_evaluation
+    from crossview import pipeline
+    from crossview.scoring.campus import evaluate, evaluation_blocks, format_evaluation
 
-    print(format_evaluation(evaluate(args.dataset, args.result)))
+    if args.output:
+        pipeline.check_writable(args.output, inputs=(args.dataset, args.result))
+    result = evaluate(args.dataset, args.result)
+    emit(result, fmt=args.format, output=args.output, what="evaluation", text=format_evaluation(result),
+         blocks=evaluation_blocks(result), inputs=(args.dataset, args.result))
 
 
 EXPORT_FORMATS = ("crossview-json", "jsonl", "dataset", "openpose", "bvh", "trc", "c3d", "mot", "coco")
@@ -1044,12 +1195,10 @@ def _cmd_per_camera(args) -> None:
     if args.output:
         pipeline.check_writable(args.output, inputs=(args.recording, args.tracks))
     table = per_camera_table(args.recording, args.tracks, progress=not args.no_progress)
-    print(table.markdown())
-    print()
-    print(paper_means_line())
-    if args.output:
-        pipeline.write_json(table.to_json(), args.output)
-        print(f"table JSON: {args.output}")
+    rows = table.table()
+    emit(table.to_json(), fmt=args.format, output=args.output, what="table",
+         text=rows.text() + "\n\n" + paper_means_line(), blocks=[rows, paper_means_line()],
+         inputs=(args.recording, args.tracks))
 
 
 def _cmd_compare(args) -> None:
@@ -1065,24 +1214,32 @@ def _cmd_compare(args) -> None:
         rows = compare.compare_rows(contenders, args.recordings, args.output / "tracks",
                                     progress=not args.no_progress)
         written = compare.write_report(rows, args.output)
-    print(compare.markdown(rows), end="")
-    print(f"written: {', '.join(str(p) for p in written)}")
+    emit({"rows": rows}, fmt=args.format, text=compare.table(rows, marked=False).text(),
+         blocks=[compare.table(rows)])
+    _say(args, f"written: {', '.join(str(p) for p in written)}")
 
 
 def _cmd_bench(args) -> None:
+    from crossview import pipeline
+
+    if args.output:
+        pipeline.check_writable(args.output)
+
+    def show(payload, text):
+        emit(payload, fmt=args.format, output=args.output, text=text)
+
     if args.scale:
         from crossview.experiments import bench_scale
 
-        bench_scale.main(json_path=args.output, duration_s=args.duration or 10.0, progress=not args.no_progress,
-                         markdown_path=args.markdown, budget_s=args.budget)
+        bench_scale.main(duration_s=args.duration or 10.0, progress=not args.no_progress,
+                         markdown_path=args.markdown, budget_s=args.budget, show=show)
     else:
         from crossview.experiments import bench
 
-        bench.main(json_path=args.output, duration_s=args.duration or 20.0, progress=not args.no_progress,
-                   markdown_path=args.markdown)
-    written = [str(p) for p in (args.output, args.markdown) if p]
-    if written:
-        print(f"written: {', '.join(written)}")
+        bench.main(duration_s=args.duration or 20.0, progress=not args.no_progress, markdown_path=args.markdown,
+                   show=show)
+    if args.markdown:
+        _say(args, f"written: {args.markdown}")
 
 
 def _cmd_render(args) -> None:
@@ -1130,8 +1287,10 @@ def _command_inputs(args) -> tuple[Path, ...]:
         found.extend(pipeline.scenario_files(args.scenario))
     if is_profile_file(getattr(args, "start", None)):  # (fit-detector's starting profile)
         found.append(Path(args.start))
-    if getattr(args, "target", None) not in (None, "shelf-openpose"):  # (fit-detector's statistics file)
-        found.append(Path(args.target))
+    for option in ("target", "reference"):  # (fit-detector's and detector-stats' statistics files)
+        value = getattr(args, option, None)
+        if isinstance(value, str) and value != "shelf-openpose":  # (scenarios' --reference is a switch)
+            found.append(Path(value))
     methods = [m.strip() for m in getattr(args, "method", "").split(",")]
     for text in getattr(args, "tracker", None) or []:
         from crossview.experiments.compare import Contender
@@ -1175,6 +1334,11 @@ COMMANDS = {
     "verify": _cmd_verify,
     "ablate": _cmd_ablate,
 }
+
+
+TABLE_COMMANDS = ("score", "per-camera", "detector-stats", "fit-detector", "world-stats", "coverage", "compare",
+                  "bench", "evaluate", "zones", "plan")
+"""The commands that print a table, each with `--format` and `-o` (`crossview.tables`; README.md, "Commands")."""
 
 
 COMPILING_LINE = "crossview: compiling numeric kernels (once, about a minute)"

@@ -21,7 +21,7 @@ median 0.14 m/s over one second (store_layout2, 3 min: 0.137 m/s). Frame to fram
 median 0.33 m/s, the synthetic ones 0.19 m/s; the rest of the real figure is most likely the annotation's own
 noise (1 cm of independent error in each frame's 3D point alone gives about 0.5 m/s over 0.04 s), which the
 truth of a synthetic person does not have, so the sizes are set from the one-second figure.
-`sim.world.measure` (`crossview world-stats`) reports both for a scenario.
+`crossview.measure.world_stats.measure` (`crossview world-stats`) reports both for a scenario.
 """
 
 from __future__ import annotations

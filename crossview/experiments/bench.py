@@ -222,16 +222,17 @@ def markdown(payload: dict) -> str:
 
 
 def main(json_path: Path | None = None, duration_s: float = 20.0, progress: bool = True,
-         markdown_path: Path | None = None) -> list[dict]:
+         markdown_path: Path | None = None, show=None) -> list[dict]:
+    """Times every case and prints the table, or hands it to `show(payload, text)` (the CLI's `--format`)."""
     for path in (json_path, markdown_path):
         if path:
             pipeline.check_writable(path)
     with tempfile.TemporaryDirectory(prefix="crossview-bench-") as tmp:
         results = [run_case(name, duration_s, Path(tmp), progress) for name in CASES]
-    print(format_results(results))
     payload = {"date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
                "version": recording.software_version(), "machine": platform.platform(),
                "cpus": os.cpu_count(), "python": platform.python_version(), "cases": results}
+    (show or (lambda _, text: print(text)))(payload, format_results(results))
     if json_path:
         pipeline.write_json(payload, json_path)
     if markdown_path:

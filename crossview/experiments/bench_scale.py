@@ -346,7 +346,9 @@ def replace_section(page: str, section: str) -> str:
 
 
 def main(json_path: Path | None = None, duration_s: float = 10.0, progress: bool = True,
-         markdown_path: Path | None = None, cases=CASES, linear: bool = True, budget_s: float = BUDGET_S) -> dict:
+         markdown_path: Path | None = None, cases=CASES, linear: bool = True, budget_s: float = BUDGET_S,
+         show=None) -> dict:
+    """Times every case and prints the table, or hands it to `show(payload, text)` (the CLI's `--format`)."""
     import datetime
     import os
     import platform
@@ -368,8 +370,8 @@ def main(json_path: Path | None = None, duration_s: float = 10.0, progress: bool
                "version": recording.software_version(), "machine": platform.platform(),
                "cpus": os.cpu_count(), "duration_s": duration_s, "budget_s": budget_s, "cases": results, "linear": line,
                "generation": generation}
-    print(format_results(results, line))
-    print(_generation_line(generation))
+    text = format_results(results, line) + "\n" + _generation_line(generation)
+    (show or (lambda _, text: print(text)))(payload, text)
     if json_path:
         pipeline.write_json(payload, json_path)
     if markdown_path:

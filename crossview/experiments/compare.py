@@ -173,20 +173,26 @@ def _is_best(row: dict, metric: Metric, best: dict) -> bool:
     return value is not None and top is not None and metric.fmt.format(value) == metric.fmt.format(top)
 
 
-def markdown(rows: Sequence[dict]) -> str:
-    """The rows as a markdown table, one row per (recording, tracker), the best of each column per recording
-    in bold; a missing metric is `-`."""
+def table(rows: Sequence[dict], marked: bool = True):
+    """The rows as a `crossview.tables.Table`, one row per (recording, tracker), a missing metric `-`; `marked`: the
+    best of each column per recording in Markdown bold."""
+    from crossview.tables import Table
+
     best = best_values(rows)
-    head = ["recording", "tracker", *(m.heading for m in METRICS)]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    cells = []
     for row in rows:
-        cells = [row["recording"], row["tracker"]]
+        line = [row["recording"], row["tracker"]]
         for metric in METRICS:
             value = row.get(metric.key)
             text = "-" if value is None else metric.fmt.format(value)
-            cells.append(f"**{text}**" if _is_best(row, metric, best) else text)
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+            line.append(f"**{text}**" if marked and _is_best(row, metric, best) else text)
+        cells.append(tuple(line))
+    return Table(("recording", "tracker", *(m.heading for m in METRICS)), tuple(cells))
+
+
+def markdown(rows: Sequence[dict]) -> str:
+    """The rows as a markdown table (`table`), the best of each column per recording in bold."""
+    return table(rows).markdown() + "\n"
 
 
 def csv_text(rows: Sequence[dict]) -> str:

@@ -186,16 +186,29 @@ class Plan:
                 "predicted_pcp": round(rec.predicted_pcp, 4),
                 "candidates": [c.as_dict() for c in self.candidates], "confirmed": self.confirmed}
 
+    _HEADER = ("cameras", "grid", "height m", "lens deg", "predicted PCP", "two views", "at risk")
+
+    def _cells(self) -> list[tuple[tuple[str, ...], bool]]:
+        """Each candidate's cells (`_HEADER`) and whether it is the recommendation."""
+        return [((str(c.cameras), f"{c.grid[0]} x {c.grid[1]}", f"{c.height_m:.2f}", f"{c.hfov_deg:.1f}",
+                  f"{c.predicted_pcp:.3f}", f"{100 * c.usable_two_view_share:.1f}%", f"{100 * c.risk_share:.1f}%"),
+                 c == self.recommended) for c in self.candidates]
+
     def table(self) -> str:
         """The candidates, one line each, the recommendation marked."""
-        lines = [f"{'cameras':>7}  {'grid':>7}  {'height m':>8}  {'lens deg':>8}  {'predicted PCP':>13}  "
-                 f"{'two views':>9}  {'at risk':>7}"]
-        for c in self.candidates:
-            mark = "  <- recommended" if c == self.recommended else ""
-            lines.append(f"{c.cameras:>7}  {f'{c.grid[0]} x {c.grid[1]}':>7}  {c.height_m:>8.2f}  {c.hfov_deg:>8.1f}  "
-                         f"{c.predicted_pcp:>13.3f}  {100 * c.usable_two_view_share:>8.1f}%  "
-                         f"{100 * c.risk_share:>6.1f}%{mark}")
+        widths = (7, 7, 8, 8, 13, 9, 7)
+        lines = ["  ".join(h.rjust(w) for h, w in zip(self._HEADER, widths))]
+        for cells, recommended in self._cells():
+            lines.append("  ".join(c.rjust(w) for c, w in zip(cells, widths))
+                         + ("  <- recommended" if recommended else ""))
         return "\n".join(lines)
+
+    def candidates_table(self):
+        """The same for `crossview.tables` (`--format markdown`): the recommendation marked in its own column."""
+        from crossview.tables import Table
+
+        return Table((*self._HEADER, "recommended"),
+                     tuple((*cells, "yes" if recommended else "") for cells, recommended in self._cells()))
 
 
 def plan(path, target_pcp: float, *, people: int | None = None, heights_m: tuple[float, ...] | None = None,

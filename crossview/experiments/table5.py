@@ -77,26 +77,31 @@ class PerCameraTable:
             "mean": {c: {m: self.mean(c, m) for m in ("mota", "idf1")} for c in columns},
         }
 
-    def markdown(self) -> str:
-        """The table as Markdown, percentages with one decimal."""
+    def table(self):
+        """The table (`crossview.tables.Table`), percentages with one decimal, the means in the last row."""
+        from crossview.tables import Table
 
         def pct(v):
             return "-" if v is None or not math.isfinite(v) else f"{100 * v:.1f}"
 
-        head = ("| camera | single-view MOTA | IDF1 | FP | FN | IDS | cross-view MOTA | IDF1 | FP | FN | IDS "
-                "| projected MOTA | IDF1 |")
-        lines = [head, "|" + "---|" * (head.count("|") - 1)]
+        head = ("camera", "single-view MOTA", "IDF1", "FP", "FN", "IDS", "cross-view MOTA", "IDF1", "FP", "FN", "IDS",
+                "projected MOTA", "IDF1")
+        rows = []
         for r in self.rows:
             s, c, p = r.single_view, r.cross_view, r.cross_view_projected
-            lines.append(f"| {r.camera} | {pct(s.mota)} | {pct(s.idf1)} | {s.false_positives} | {s.false_negatives} "
-                         f"| {s.id_switches} | {pct(c.mota)} | {pct(c.idf1)} | {c.false_positives} "
-                         f"| {c.false_negatives} | {c.id_switches} | {pct(p.mota)} | {pct(p.idf1)} |")
+            rows.append((r.camera, pct(s.mota), pct(s.idf1), str(s.false_positives), str(s.false_negatives),
+                         str(s.id_switches), pct(c.mota), pct(c.idf1), str(c.false_positives), str(c.false_negatives),
+                         str(c.id_switches), pct(p.mota), pct(p.idf1)))
         m = {(col, k): pct(self.mean(col, k)) for col in ("single_view", "cross_view", "cross_view_projected")
              for k in ("mota", "idf1")}
-        lines.append(f"| **mean** | {m['single_view', 'mota']} | {m['single_view', 'idf1']} | | | "
-                     f"| {m['cross_view', 'mota']} | {m['cross_view', 'idf1']} | | | "
-                     f"| {m['cross_view_projected', 'mota']} | {m['cross_view_projected', 'idf1']} |")
-        return "\n".join(lines)
+        rows.append(("mean", m["single_view", "mota"], m["single_view", "idf1"], "", "", "",
+                     m["cross_view", "mota"], m["cross_view", "idf1"], "", "", "",
+                     m["cross_view_projected", "mota"], m["cross_view_projected", "idf1"]))
+        return Table(head, tuple(rows))
+
+    def markdown(self) -> str:
+        """The table as Markdown."""
+        return self.table().markdown()
 
 
 def per_camera_table(rec_path: Path, tracks_path: Path, config: SingleViewConfig = _DEFAULT_SINGLE_VIEW,

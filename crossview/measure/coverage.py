@@ -184,7 +184,7 @@ def _two_or_more(p: np.ndarray, axis: int) -> np.ndarray:
     return np.clip(1.0 - none - one, 0.0, 1.0)
 
 
-def _blocked_by_boxes(origin: np.ndarray, points: np.ndarray, obstacles) -> np.ndarray:
+def blocked_by_boxes(origin: np.ndarray, points: np.ndarray, obstacles) -> np.ndarray:
     """(N,) whether the segment from `origin` (3,) to each point (N, 3) passes through a shelf or counter box
     (yawed boxes standing on the floor) before it reaches the point: the slab test in each box's own frame."""
     blocked = np.zeros(len(points), dtype=bool)
@@ -283,7 +283,7 @@ def predict(store, cameras: list[Camera], params, people: int, occlusion: bool =
             origin = camera.center_world
             hidden = np.zeros(view_in.shape)
             if occlusion and store.obstacles:
-                hidden[view_in] = _blocked_by_boxes(origin, view_points[view_in], store.obstacles)
+                hidden[view_in] = blocked_by_boxes(origin, view_points[view_in], store.obstacles)
             crowd = np.zeros(view_in.shape)
             crowd[view_in] = _people_hiding(origin, view_points[view_in], density)
             occluded = 1.0 - (1.0 - hidden) * (1.0 - crowd)  # (V, J): chance each joint is hidden

@@ -9,7 +9,9 @@ a real one (`crossview convert` of a dataset folder with 3D truth) give comparab
   also stores is not used: real data has none, and the detector's joint need not be the scorer's.
 - **Joints**: the 12 joints both skeleton layouts name alike (`JOINTS_12`: shoulders, elbows, wrists, hips,
   knees, ankles; COCO-17 and the Campus/Shelf 14 joints). Person size: the larger side of the box of the
-  person's 12 projected joints (about 400 px on Shelf). Errors are divided by it; pixel offsets are given
+  person's 12 projected joints (about 400 px on Shelf), leaving out the joints behind the camera or beyond its
+  lens's monotonic radius (whose projections are no pixels a lens gives); a person with no joint in the image
+  takes no detection. Errors are divided by it; pixel offsets are given
   at a 400 px person (`SIZE_AT_PX`).
 - **Matching**: per camera frame, detections are assigned to the true people by the Hungarian algorithm on
   the mean distance of their common joints divided by the person's size; a pair further apart than
@@ -26,6 +28,15 @@ a real one (`crossview convert` of a dataset folder with 3D truth) give comparab
   captured within half a frame interval (`CROSS_VIEW_WINDOW_FRAC`) of each other are triangulated per joint
   (DLT, at least `CROSS_VIEW_MIN_VIEWS` views): how far the detections lie from the point they agree on
   (reprojection, px at 400) and how far that point lies from the true joint (metres).
+
+- **Why person-views were missed** (a recording with its scenario: `crossview generate`): each missed person-view
+  is put down to the first of the rig's geometry that rules it out under the recording's detector profile, as
+  the simulated detector rules (`sim.sensing.draws.draw_detections`) and `crossview coverage` predicts: too
+  small (the box of all its projected joints below `min_person_frac` of the image height), cut by the image edge
+  (fewer than `min_visible_joints` joints inside the image), hidden by shelves (fewer of them left unblocked by
+  the store's shelves and counters, `crossview.measure.coverage.blocked_by_boxes`); the rest are the detector's
+  own misses or people hidden by other people (a recording holds visibility only for the people it detected).
+  A converted dataset holds no profile: its misses are not split.
 
 A camera frame whose truth holds nobody is not measured: datasets leave the frames they did not annotate
 empty, so such a frame says nothing about the detector (a synthetic store that is empty is skipped alike).
@@ -147,6 +158,38 @@ SHELF_OPENPOSE: dict = read_stats_file(SHELF_OPENPOSE_FILE)
 `crossview fit-detector --target shelf-openpose`."""
 
 
+SHELF_OPENPOSE_NAME = "shelf-openpose"
+"""The `--reference` (`detector-stats`) and `--target` (`fit-detector`) that name `SHELF_OPENPOSE_FILE`."""
+
+
+@dataclass(frozen=True)
+class Reference:
+    """What a recording's statistics are put beside: a statistics table, the column's heading (its source) and
+    the words saying where it comes from."""
+
+    stats: dict
+    label: str
+    where: str
+
+
+def reference(text: str = SHELF_OPENPOSE_NAME) -> Reference:
+    """The reference `text` names: `shelf-openpose` (real OpenPose on Shelf, shipped) or a statistics file
+    (`crossview detector-stats -o FILE.json`), labelled by the source it records (`source`: the recording it was
+    measured on) or, in a file without one, by its own name.
+
+    Raises:
+        CrossviewError: the file is no statistics table (`read_stats_file`).
+    """
+    if text == SHELF_OPENPOSE_NAME:
+        return Reference(SHELF_OPENPOSE, SHELF_OPENPOSE_LABEL,
+                         f"real OpenPose on the Shelf dataset ({SHELF_OPENPOSE_NAME}: 5 cameras, people "
+                         f"{SHELF_OPENPOSE['person_size_px_median']:.0f} px, a different scene from a store's)")
+    stats = read_stats_file(text)
+    source = stats.get("source")
+    label = source if isinstance(source, str) and source else Path(text).name
+    return Reference(stats, label, f"{text}" + (f" (measured on {source})" if label == source else ""))
+
+
 def joint_indices(skeleton: Skeleton) -> np.ndarray:
     """(12,) the index in `skeleton` of each of `JOINTS_12`.
 
@@ -194,15 +237,60 @@ class _FrameRecord:
     views: dict[int, _View] = field(default_factory=dict)  # person id -> view
 
 
+MISS_CAUSES = ("too_small", "cut_by_image_edge", "hidden_by_shelves", "detector_or_people")
+"""Why person-views were missed (module docstring), in the order they are tried."""
+MISS_CAUSE_LABELS = ("too small for the profile's size limit", "cut by the image edge", "hidden by shelves",
+                     "the detector's own, or hidden by people")
+
+
+@dataclass(frozen=True)
+class MissGeometry:
+    """What rules a person-view out before the detector's own misses: the detector profile's size and visible-joint
+    limits and the store's shelves and counters (`sim.store.Obstacle`s; none where the scenario's detector ignores
+    occlusion)."""
+
+    min_person_frac: float
+    min_visible_joints: int
+    obstacles: tuple = ()
+
+    @classmethod
+    def of(cls, scenario) -> MissGeometry:
+        """The geometry of a `sim.scenario.Scenario`'s detector and store."""
+        from sim.store import StoreGeometry
+
+        params = scenario.detector.params()
+        obstacles = StoreGeometry(scenario.store, name=scenario.where).obstacles if scenario.detector.occlusion else ()
+        return cls(float(params.min_person_frac), int(params.min_visible_joints), tuple(obstacles))
+
+    def cause(self, camera: Camera, joints_m: np.ndarray) -> str:
+        """The first of `MISS_CAUSES` that explains a missed view by `camera` of a person with joints `joints_m`
+        (J, 3): all of the skeleton's joints, as the detector sees them."""
+        from crossview.measure.coverage import blocked_by_boxes
+
+        px, inside = in_image(camera, joints_m)
+        if not person_sizes_px(px[None])[0] >= self.min_person_frac * camera.height_px:  # (NaN: no joint known)
+            return "too_small"
+        if inside.sum() < self.min_visible_joints:
+            return "cut_by_image_edge"
+        if self.obstacles:
+            hidden = blocked_by_boxes(camera.center_world, joints_m[inside], self.obstacles)
+            if inside.sum() - hidden.sum() < self.min_visible_joints:
+                return "hidden_by_shelves"
+        return "detector_or_people"
+
+
 class DetectorStatsAccumulator:
     """Measures detections frame by frame (`add`), then gives the figures (`result`).
 
     Args:
         cameras: the rig (a sequence or name -> Camera).
         skeleton: the joint layout of both the frames and the truth.
+        geometry: the rig's detector limits and shelves, to say why person-views were missed (None: not said).
     """
 
-    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], skeleton: Skeleton):
+    def __init__(self, cameras: Sequence[Camera] | Mapping[str, Camera], skeleton: Skeleton,
+                 geometry: MissGeometry | None = None):
+        self._geometry = geometry
         cams = list(cameras.values()) if isinstance(cameras, Mapping) else list(cameras)
         self.cameras = cams
         self._camera_of = {c.name: i for i, c in enumerate(cams)}
@@ -230,7 +318,11 @@ class DetectorStatsAccumulator:
         counts = self._counts[c]
         truth_m = np.asarray(poses.poses, dtype=np.float64)[:, self._joints]  # (P, 12, 3)
         truth_px, inside = in_image(self.cameras[c], truth_m)  # (P, 12, 2), (P, 12)
-        size = person_sizes_px(truth_px)  # (P,)
+        # A joint behind the camera or beyond the lens's monotonic radius has no pixel a lens would give it (its
+        # projection runs to 1e12 px): it is left out of the size, as a NaN joint is, and a person with no joint
+        # inside the image is nobody a detection can be of (its size would make every detection match it).
+        size = person_sizes_px(np.where(_projectable(self.cameras[c], truth_m)[..., None], truth_px, np.nan))
+        size[~inside.any(axis=1)] = np.nan
         detections = np.asarray(frame.keypoints_px, dtype=np.float64)[:, self._joints]  # (D, 12, 2)
         record = _FrameRecord(c, float(camera_frame.truth.capture_s))
         counts["frames"] += 1
@@ -241,7 +333,12 @@ class DetectorStatsAccumulator:
                 detections[d], error, np.isfinite(detections[d, :, 0]), inside[p], float(size[p]), truth_m[p])
         view = inside.mean(axis=1) >= HALF_IN_IMAGE
         counts["person_views"] += int(view.sum())
-        counts["missed_person_views"] += int(np.count_nonzero(view & ~np.isin(np.arange(len(view)), matched_truth)))
+        missed = np.flatnonzero(view & ~np.isin(np.arange(len(view)), matched_truth))
+        counts["missed_person_views"] += len(missed)
+        if self._geometry is not None:
+            everyone = np.asarray(poses.poses, dtype=np.float64)
+            for p in missed:
+                counts[f"missed_{self._geometry.cause(self.cameras[c], everyone[p])}"] += 1
         unmatched = np.setdiff1d(np.arange(len(detections)), matched_det)
         # A detection with none of the 12 measured joints (a face alone) cannot be told from a person: not counted.
         unmatched = unmatched[np.isfinite(detections[unmatched, :, 0]).any(axis=1)]
@@ -297,6 +394,9 @@ class DetectorStatsAccumulator:
             "missed_person_view_rate": _ratio(total["missed_person_views"], total["person_views"]),
             "false_positive_people_per_frame": _ratio(total["false_positive_people"], frames_measured),
             "false_positive_people_ge6_per_frame": _ratio(total["false_positive_people_ge6"], frames_measured),
+            "missed_person_views_by_cause": None if self._geometry is None else {
+                cause: _ratio(sum(c[f"missed_{cause}"] for c in self._counts), total["person_views"])
+                for cause in MISS_CAUSES},
             "person_size_px_median": _quantile(sizes, 50), "cross_view_joints": cross["count"],
             "match_gate": MATCH_GATE,
             "per_joint": {name: figures([j]) for j, name in enumerate(JOINTS_12)},
@@ -316,6 +416,8 @@ class DetectorStatsAccumulator:
                 "error_over_size_median": _quantile(e, 50),
                 "miss_rate": _ratio(np.count_nonzero(inside[mine] & ~detected[mine]), np.count_nonzero(inside[mine])),
                 "missed_person_view_rate": _ratio(counts["missed_person_views"], counts["person_views"]),
+                "missed_person_views_by_cause": None if self._geometry is None else {
+                    cause: _ratio(counts[f"missed_{cause}"], counts["person_views"]) for cause in MISS_CAUSES},
                 "false_positive_people_per_frame": _ratio(counts["false_positive_people"], counts["frames"]),
             }
         return stats
@@ -369,6 +471,18 @@ def _match(truth_px: np.ndarray, size_px: np.ndarray, detections_px: np.ndarray)
     rows, cols = linear_sum_assignment(np.where(allowed, cost, 2 * MATCH_GATE + 1))
     keep = allowed[rows, cols]
     return rows[keep], cols[keep]
+
+
+def _projectable(camera: Camera, points_m: np.ndarray) -> np.ndarray:
+    """(...,) whether each world point (..., 3) lies in front of `camera` within its lens's monotonic radius
+    (`core.projection.monotonic_radius`), where its projection is a pixel a real lens would give it."""
+    from core.projection import monotonic_radius
+
+    cam = points_m @ np.asarray(camera.R_cam_from_world).T + np.asarray(camera.t_cam_from_world)
+    z = cam[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r2 = (cam[..., 0] ** 2 + cam[..., 1] ** 2) / z**2
+    return (z > 0) & (r2 <= monotonic_radius(camera.dist) ** 2)
 
 
 def _consecutive_pairs(records: list[_FrameRecord]) -> list[tuple[_View, _View]]:
@@ -486,20 +600,21 @@ def _ratio(a: float, b: float) -> float | None:
 
 
 def detector_stats(camera_frames: Iterable[CameraFrame], cameras: Sequence[Camera] | Mapping[str, Camera],
-                   skeleton: Skeleton) -> dict:
+                   skeleton: Skeleton, geometry: MissGeometry | None = None) -> dict:
     """Measures detections against their projected 3D truth (see the module docstring).
 
     Args:
         camera_frames: the frames, each with `poses_at_capture`.
         cameras: the rig.
         skeleton: the joint layout of the frames and the truth.
+        geometry: the rig's detector limits and shelves, to say why person-views were missed (None: not said).
 
     Returns:
         The figures: the keys of `SHELF_OPENPOSE` at the top level (all joints) and, the same per joint
         name ("per_joint"), per group ("per_group"), a few per camera ("per_camera"), and the counts
         behind them.
     """
-    acc = DetectorStatsAccumulator(cameras, skeleton)
+    acc = DetectorStatsAccumulator(cameras, skeleton, geometry)
     for cf in camera_frames:
         acc.add(cf)
     return acc.result()
@@ -519,9 +634,18 @@ def recording_detector_stats(path, progress: bool = False) -> dict:
     from crossview import recording
 
     rec = recording.open_recording(path)
+    geometry = None
+    if rec.header.scenario_text:  # (a converted dataset holds no scenario, so no detector profile)
+        from sim import scenario as scenario_mod
+
+        try:
+            geometry = MissGeometry.of(scenario_mod.from_source_text(rec.header.scenario_text,
+                                                                     rec.header.scenario_name, str(path)))
+        except CrossviewError:  # (a profile file it names, moved since: the misses are measured, not split)
+            geometry = None
     frames = tqdm(rec.frames(with_poses=True), unit="frame", desc="detector-stats", disable=not progress, leave=False)
     try:
-        stats = detector_stats(frames, rec.cameras, rec.skeleton)
+        stats = detector_stats(frames, rec.cameras, rec.skeleton, geometry)
     except CrossviewError as e:
         raise CrossviewError(f"{path}: {e}") from None
     if stats["frames_measured"] == 0:
@@ -532,6 +656,7 @@ def recording_detector_stats(path, progress: bool = False) -> dict:
         raise CrossviewError(f"{path}: only {stats['matched_detections']} detections match a true person (at "
                              f"most {MATCH_GATE} of its size away on average); detector-stats needs at least "
                              f"{MIN_MATCHED_DETECTIONS}")
+    stats["source"] = Path(path).name  # (the label of its column where the file is a --reference)
     return stats
 
 
@@ -558,10 +683,12 @@ def _people(spread: dict) -> str:
     return "-" if share is None else f"{100 * share:.0f} % of {spread['people_measured']}"
 
 
-def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
-                          reference_label: str = SHELF_OPENPOSE_LABEL) -> str:
-    """The statistics table: the measured figures beside `reference` (by default real OpenPose on Shelf), whose
-    column is headed `reference_label`."""
+def _table_rows(stats: dict, ref: Reference) -> tuple[str, list[tuple[str, str | None, str | None]],
+                                                        list[tuple[str, ...]]]:
+    """The table's parts: the lines above it (what was measured, what it is beside), its rows (statistic, measured,
+    reference; a heading row has None for both), and one row per camera (name, frames, matched, error/size, joint
+    miss, missed views, FP / frame)."""
+    reference = ref.stats
     groups, ref_groups = stats["per_group"], reference.get("per_group", {})
     rows = [("joint error / person size: median", stats, reference, "error_over_size_median", ""),
             ("  p90", stats, reference, "error_over_size_p90", ""),
@@ -582,6 +709,9 @@ def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
         ("gross errors (> 0.2 x size)", stats, reference, "gross_error_rate", "%"),
         ("P(joint missed next frame | missed now)", stats, reference, "miss_persistence", ""),
         ("missed person-views", stats, reference, "missed_person_view_rate", "%"),
+        *((f"  {label}", stats.get("missed_person_views_by_cause") or {},
+           reference.get("missed_person_views_by_cause") or {}, cause, "%")
+          for cause, label in zip(MISS_CAUSES, MISS_CAUSE_LABELS) if stats.get("missed_person_views_by_cause")),
         ("false-positive people per camera frame", stats, reference, "false_positive_people_per_frame", ""),
         (f"  with >= {PERSON_LIKE_JOINTS} of 12 joints", stats, reference, "false_positive_people_ge6_per_frame", ""),
         (f"cross-view reprojection px at 400 (>= {CROSS_VIEW_MIN_VIEWS} views): all", stats, reference,
@@ -591,25 +721,61 @@ def format_detector_stats(stats: dict, reference: dict = SHELF_OPENPOSE,
         *((f"  {g}", groups[g], ref_groups.get(g, {}), "cross_view_error_m", "cm") for g in GROUPS),
     ]
     size = stats["person_size_px_median"]
-    lines = [f"{stats['frames_measured']} of {stats['frames']} camera frames measured (truth at their capture "
+    intro = (f"{stats['frames_measured']} of {stats['frames']} camera frames measured (truth at their capture "
              f"time), {stats['matched_detections']} matched detections, {stats['person_views']} person-views, "
              f"person size median {'-' if size is None else f'{size:.0f}'} px, "
-             f"{stats['cross_view_joints']} joints triangulated across views",
-             f"{'statistic':<56}{'measured':>12}{reference_label[:22]:>24}"]
-    for label, measured, ref, key, kind in rows:
-        if measured is None:
-            lines.append(label)
-            continue
-        lines.append(f"{label:<56}{_fmt(measured.get(key), kind):>12}{_fmt(ref.get(key), kind):>24}")
+             f"{stats['cross_view_joints']} joints triangulated across views\n"
+             f"beside: {ref.where}")
+    cells = [(label, None, None) if measured is None
+             else (label, _fmt(measured.get(key), kind), _fmt(ref.get(key), kind))
+             for label, measured, ref, key, kind in rows]
     spread, ref_spread = stats.get("per_person") or {}, reference.get("per_person") or {}
-    lines.append(f"{f'people with a limb error > {BAD_LIMB_FACTOR:g} x the median (of people measured)':<56}"
-                 f"{_people(spread):>12}{_people(ref_spread):>24}")
-    if stats["per_camera"]:
-        lines += ["", f"{'camera':<16}{'frames':>8}{'matched':>9}{'error/size':>12}{'joint miss':>12}"
-                      f"{'missed views':>14}{'FP / frame':>12}"]
-        for name, c in stats["per_camera"].items():
-            lines.append(f"{name:<16}{c['frames_measured']:>8}{c['matched_detections']:>9}"
-                         f"{_fmt(c['error_over_size_median'], ''):>12}{_fmt(c['miss_rate'], '%'):>12}"
-                         f"{_fmt(c['missed_person_view_rate'], '%'):>14}"
-                         f"{_fmt(c['false_positive_people_per_frame'], ''):>12}")
+    cells.append((f"people with a limb error > {BAD_LIMB_FACTOR:g} x the median (of people measured)",
+                  _people(spread), _people(ref_spread)))
+    cameras = [(name, str(c["frames_measured"]), str(c["matched_detections"]), _fmt(c["error_over_size_median"], ""),
+                _fmt(c["miss_rate"], "%"), _fmt(c["missed_person_view_rate"], "%"), _geometry_share(c),
+                _fmt(c["false_positive_people_per_frame"], "")) for name, c in stats["per_camera"].items()]
+    return intro, cells, cameras
+
+
+_CAMERA_HEADER = ("camera", "frames", "matched", "error/size", "joint miss", "missed views", "by geometry",
+                  "FP / frame")
+
+
+def _geometry_share(figures: dict) -> str:
+    """The missed person-views the rig's geometry explains (too small, cut, behind shelves), or - (not split)."""
+    causes = figures.get("missed_person_views_by_cause")
+    if not causes or any(causes[c] is None for c in MISS_CAUSES[:-1]):
+        return "-"
+    return _fmt(sum(causes[c] for c in MISS_CAUSES[:-1]), "%")
+
+
+def format_detector_stats(stats: dict, ref: Reference | None = None) -> str:
+    """The statistics table: the measured figures beside `ref` (by default real OpenPose on Shelf), whose column
+    is headed by its label."""
+    ref = ref or reference()
+    intro, cells, cameras = _table_rows(stats, ref)
+    lines = [intro, f"{'statistic':<56}{'measured':>12}{ref.label[:22]:>24}"]
+    for label, measured, ref in cells:
+        lines.append(label if measured is None else f"{label:<56}{measured:>12}{ref:>24}")
+    if cameras:
+        widths = (16, 8, 9, 12, 12, 14, 13, 12)
+        lines += ["", "".join(h.ljust(w) if i == 0 else h.rjust(w) for i, (h, w) in enumerate(zip(_CAMERA_HEADER,
+                                                                                                   widths)))]
+        lines += ["".join(c.ljust(w) if i == 0 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths)))
+                  for row in cameras]
     return "\n".join(lines)
+
+
+def detector_stats_blocks(stats: dict, ref: Reference | None = None) -> list:
+    """The same table for `crossview.tables` (`--format markdown`): the lines above it, the statistics beside the
+    reference, the cameras."""
+    from crossview.tables import Table
+
+    ref = ref or reference()
+    intro, cells, cameras = _table_rows(stats, ref)
+    blocks = [*intro.splitlines(), Table(("statistic", "measured", ref.label),
+                           tuple((label.strip(), m or "", r or "") for label, m, r in cells))]
+    if cameras:
+        blocks.append(Table(_CAMERA_HEADER, tuple(cameras)))
+    return blocks

@@ -155,15 +155,20 @@ def evaluate(
     }
 
 
-def format_evaluation(result: dict) -> str:
-    """The evaluation as a text table: bone groups by actor, as evaluate.py prints it."""
+def evaluation_blocks(result: dict) -> list:
+    """The evaluation as a title and a table (`crossview.tables`): bone groups by actor, as evaluate.py prints it."""
+    from crossview.tables import Table
+
     actors = list(result["actors"])
-    header = ["Bone group"] + [f"Actor {a}" for a in actors] + ["Average"]
-    lines = [[g.replace("_", " ").capitalize()] + [f"{v['actors'][a]:.4f}" for a in actors] + [f"{v['average']:.4f}"]
+    header = ("Bone group", *(f"Actor {a}" for a in actors), "Average")
+    lines = [(g.replace("_", " ").capitalize(), *(f"{v['actors'][a]:.4f}" for a in actors), f"{v['average']:.4f}")
              for g, v in result["groups"].items()]
-    lines.append(["Total"] + [f"{result['actors'][a]:.4f}" for a in actors] + [f"{result['average']:.4f}"])
-    widths = [max(len(r[i]) for r in [header, *lines]) for i in range(len(header))]
-    fmt = "  ".join(f"{{:<{w}}}" if i == 0 else f"{{:>{w}}}" for i, w in enumerate(widths))
-    rule = "-" * (sum(widths) + 2 * (len(widths) - 1))
-    title = f"PCP on {result['dataset']} ({result['num_frames']} test frames, alpha {PCP_ALPHA})"
-    return "\n".join([title, fmt.format(*header), rule, *(fmt.format(*r) for r in lines)])
+    lines.append(("Total", *(f"{result['actors'][a]:.4f}" for a in actors), f"{result['average']:.4f}"))
+    return [f"PCP on {result['dataset']} ({result['num_frames']} test frames, alpha {PCP_ALPHA})",
+            Table(header, tuple(lines))]
+
+
+def format_evaluation(result: dict) -> str:
+    """The evaluation as a text table (`evaluation_blocks`)."""
+    title, table = evaluation_blocks(result)
+    return f"{title}\n{table.text()}"

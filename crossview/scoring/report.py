@@ -155,8 +155,9 @@ class ScoreReport:
         }
         return _clean({**head, **extra})
 
-    def table(self) -> str:
-        """A readable text table for the terminal."""
+    def _rows(self) -> tuple[list[tuple[str, str]], list[tuple[str, ...]]]:
+        """The figures as the table shows them: (name, value) rows, then one row per camera (name, association
+        accuracy, MOTA, IDF1, FP, FN, IDS)."""
 
         def pct(v):
             return "-" if v is None else f"{100 * v:.1f} %"
@@ -186,16 +187,32 @@ class ScoreReport:
                          f"{num(self.tracker_fps)} / {num(self.camera_frames_per_s, '{:.0f}')}"))
         if self.pcp_per_group:
             rows.insert(2, ("  PCP by bone group", ", ".join(f"{k} {pct(v)}" for k, v in self.pcp_per_group.items())))
+        cameras = []
+        for cam in dict.fromkeys([*self.camera_2d, *self.association_accuracy_per_camera]):
+            s = self.camera_2d.get(cam)
+            mot = ((pct(s.mota), pct(s.idf1), str(s.false_positives), str(s.false_negatives), str(s.id_switches))
+                   if s else ("-",) * 5)
+            cameras.append((cam, pct(self.association_accuracy_per_camera.get(cam)), *mot))
+        return rows, cameras
+
+    def table(self) -> str:
+        """A readable text table for the terminal."""
+        rows, cameras = self._rows()
         width = max(len(r[0]) for r in rows) + 2
         lines = [f"{name:<{width}}{value}" for name, value in rows]
-        cams = list(dict.fromkeys([*self.camera_2d, *self.association_accuracy_per_camera]))
-        if cams:
+        if cameras:
             lines.append("")
             header = f"{'Camera':<12}{'Assoc.':>9}{'MOTA':>9}{'IDF1':>9}{'FP':>7}{'FN':>7}{'IDS':>6}"
             lines += [header, "-" * len(header)]
-            for cam in cams:
-                s = self.camera_2d.get(cam)
-                mot = (f"{pct(s.mota):>9}{pct(s.idf1):>9}{s.false_positives:>7}{s.false_negatives:>7}{s.id_switches:>6}"
-                       if s else f"{'-':>9}{'-':>9}{'-':>7}{'-':>7}{'-':>6}")
-                lines.append(f"{cam:<12}{pct(self.association_accuracy_per_camera.get(cam)):>9}{mot}")
+            lines += [f"{c:<12}{a:>9}{m:>9}{i:>9}{fp:>7}{fn:>7}{ids:>6}" for c, a, m, i, fp, fn, ids in cameras]
         return "\n".join(lines)
+
+    def markdown_blocks(self) -> list:
+        """The same table for `crossview.tables` (`--format markdown`): the figures, then the cameras."""
+        from crossview.tables import Table
+
+        rows, cameras = self._rows()
+        blocks = [Table(("metric", "value"), tuple((name.strip(), value) for name, value in rows))]
+        if cameras:
+            blocks.append(Table(("camera", "association", "MOTA", "IDF1", "FP", "FN", "IDS"), tuple(cameras)))
+        return blocks

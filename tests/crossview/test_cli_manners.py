@@ -1,7 +1,6 @@
 """The command line behaves like one: --version, the global flags before or after the command, an unknown flag
 named, a line before the kernels compile, --cameras saying its grid, commands saying where they wrote."""
 
-import json
 import re
 
 import pytest
@@ -84,11 +83,3 @@ def test_cameras_says_its_grid(capsys):
     rows, cols = scenario.cameras.rows, scenario.cameras.cols
     assert rows * cols == 6
     assert f"--cameras 6: a grid of {rows} rows x {cols} columns" in capsys.readouterr().out
-
-
-def test_score_says_where_it_wrote(store_recording, store_tracks, tmp_path, capsys):
-    out = tmp_path / "score.json"
-    assert main(["--no-progress", "score", str(store_recording), str(store_tracks), "-o", str(out)]) == 0
-    assert capsys.readouterr().out.splitlines()[-1] == f"score JSON: {out}"
-    assert json.loads(out.read_text())
-

@@ -110,11 +110,11 @@ def test_an_invalid_scenario_is_named_in_one_line_exit_2(tmp_path, capsys):
 
 
 def test_the_shelf_test_agrees_with_mujocos_ray_caster():
-    """`_blocked_by_boxes` against `mujoco.mj_ray` on the same yawed boxes: segments from ceiling points to
+    """`blocked_by_boxes` against `mujoco.mj_ray` on the same yawed boxes: segments from ceiling points to
     points on the floor, blocked when the first hit comes before the segment's end."""
     import mujoco
 
-    from crossview.measure.coverage import _blocked_by_boxes
+    from crossview.measure.coverage import blocked_by_boxes
     from sim.store import Obstacle
 
     rng = np.random.default_rng(3)
@@ -132,7 +132,7 @@ def test_the_shelf_test_agrees_with_mujocos_ray_caster():
     checked = hits = 0
     for origin in origins:
         points = np.column_stack([rng.uniform(0.0, 8.0, (50, 2)), rng.uniform(0.05, 1.9, 50)])
-        ours = _blocked_by_boxes(origin, points, obstacles)
+        ours = blocked_by_boxes(origin, points, obstacles)
         for point, blocked in zip(points, ours):
             x = mujoco.mj_ray(model, data, origin, point - origin, None, 1, -1, geomid)
             if 0.0 <= x < 1.0 and x > 1.0 - 1e-6:  # (a surface at the point itself: either answer is right)

@@ -18,6 +18,7 @@ from crossview.measure.detector_stats import (
     BAD_LIMB_FACTOR,
     GROSS_ERROR_FRAC,
     JOINTS_12,
+    MISS_CAUSES,
     SHELF_OPENPOSE,
     SHELF_OPENPOSE_FILE,
     detector_stats,
@@ -330,3 +331,45 @@ def test_format_gives_a_dash_for_what_was_not_measured():
     lines = {line[:56].strip(): line[56:].split() for line in format_detector_stats(stats).splitlines()}
     assert lines["P(joint missed next frame | missed now)"][0] == "-"
     assert lines["joint error / person size: median"] == ["0.000", "0.028"]
+
+
+def test_the_geometry_explains_every_miss_of_a_detector_that_misses_nobody_it_can_see(tmp_path):
+    """One person in the convenience store, a detector whose only misses are the rig's geometry (no miss_prob, no
+    occlusion gain, nobody else to hide behind): every missed person-view is put down to the profile's size limit,
+    the image edge or the shelves, as the simulator ruled; the causes add up to the missed share."""
+    profile = tmp_path / "p.toml"
+    profile.write_text('base = "typical"\nmiss_prob = 0.0\nmiss_occlusion_gain = 0.0\n')
+    text = scenario_mod.resolve_path("convenience").read_text()
+    assert 'profile = "typical"' in text
+    (tmp_path / "s.toml").write_text(text.replace('profile = "typical"', f'profile = "{profile}"'))
+    rec = tmp_path / "s.mcap"
+    assert main(["--no-progress", "generate", str(tmp_path / "s.toml"), "-o", str(rec), "--duration", "1",
+                 "--people", "1"]) == 0
+    stats = recording_detector_stats(rec)
+    causes = stats["missed_person_views_by_cause"]
+    assert set(causes) == set(MISS_CAUSES)
+    assert stats["missed_person_view_rate"] > 0.05  # (the shelves hide a lone shopper from some cameras)
+    assert causes["detector_or_people"] == 0.0
+    assert causes["hidden_by_shelves"] > 0.0
+    assert sum(causes.values()) == pytest.approx(stats["missed_person_view_rate"], abs=1e-12)
+
+
+
+def test_a_person_out_of_the_lens_range_takes_no_detection_of_the_people_in_view():
+    """A barrel lens folds the projections of points far outside its field out to 1e9 px and more: a person
+    standing under the camera (no joint in the image) once had a person size so large that a detection matched it
+    at error / size 0.000 (a phantom counted as a detection, or a real person missed). Such joints have no size,
+    such a person takes no detection."""
+    from core.projection import in_image
+
+    barrel = Camera("c1", CAM.K, np.array([-0.3, 0.0, 0.0, 0.0, 0.0]), CAM.R_cam_from_world, CAM.t_cam_from_world,
+                    CAM.width_px, CAM.height_px)
+    under = _standing(0.0, -0.25)  # around the camera, at (0, 0, 1): nothing of it in the image
+    px, inside = in_image(barrel, np.stack([PEOPLE[1], under, PEOPLE[0]]))
+    assert inside[0].all() and not inside[1].any() and np.nanmax(np.abs(px[1])) > 1e6
+    # The person in view detected exactly, and a phantom where nobody of the truth stands (PEOPLE[0]'s place).
+    frames = [_camera_frame(barrel, k / FPS, [11, 99], np.stack([PEOPLE[1], under]), px[[0, 2]]) for k in range(20)]
+    stats = detector_stats(frames, [barrel], COCO17)
+    assert stats["matched_detections"] == 20 and stats["missed_person_view_rate"] == 0.0
+    assert stats["false_positive_people_per_frame"] == 1.0  # (the phantom, which the person under it once took)
+    assert stats["error_over_size_p99"] == pytest.approx(0.0, abs=1e-9)
