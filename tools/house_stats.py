@@ -9,7 +9,12 @@ tests excluded:
 - compiled kernels (functions decorated with `jit` or numba's `njit`) and their lines;
 - function-local imports (an `import` inside a function body);
 - private names crossing modules: `from pkg.mod import _name` or `mod._name` where `mod` is an imported
-  project module (each distinct module/name pair counted once).
+  project module (each distinct module/name pair counted once);
+- test-only lines in the product: functions and methods whose name the product never uses (no name, attribute
+  or `__all__` entry anywhere in the product's code outside their own body, nor in examples/ and tools/, which
+  use the product as its users do) but the tests do, with their lines.
+  Dunder methods are left out (Python calls them); a name used by the product at all counts as used, so the
+  figure can miss a test-only function that shares its name with a used one, never the other way round.
 Only Python's `ast` is used, so an old checkout is read the same way as a new one.
 """
 
@@ -98,6 +103,64 @@ def private_crossings(tree: ast.AST, modules: set[str], own: str, is_package: bo
     return found
 
 
+def used_names(tree: ast.AST, skip: set[int] = frozenset()) -> set[str]:
+    """Names, attribute names and string constants (`__all__`, `getattr`) used in `tree`, outside the nodes
+    whose id is in `skip` (a function's own body does not make it used)."""
+    names: set[str] = set()
+    stack = [tree]
+    while stack:
+        node = stack.pop()
+        if id(node) in skip:
+            continue
+        if isinstance(node, ast.Name):
+            names.add(node.id)
+        elif isinstance(node, ast.Attribute):
+            names.add(node.attr)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.isidentifier():
+            names.add(node.value)
+        elif isinstance(node, ast.alias):
+            names.add((node.asname or node.name).split(".")[0])
+            names.add(node.name.split(".")[-1])
+        stack.extend(ast.iter_child_nodes(node))
+    return names
+
+
+def test_only_functions(root: Path, trees: dict[str, ast.AST]) -> list[tuple[int, str]]:
+    """(lines, "file:name") of the product's functions that only the tests use (see the module's docstring)."""
+    definitions = []
+    for rel, tree in trees.items():
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)) and not (
+                node.name.startswith("__") and node.name.endswith("__")
+            ):
+                definitions.append((rel, node))
+    bodies = {id(node): name for name, node in ((f"{r}:{n.name}", n) for r, n in definitions)}
+    product = set()
+    for tree in trees.values():
+        product |= used_names(tree, set(bodies))
+    # A function whose name appears only inside its own body (recursion) or other unused bodies is checked
+    # against the uses outside every function body, plus the bodies of functions that are themselves used.
+    used_bodies = set()
+    changed = True
+    while changed:
+        changed = False
+        for rel, node in definitions:
+            if node.name in product and id(node) not in used_bodies:
+                used_bodies.add(id(node))
+                product |= used_names(node, {id(n) for _, n in definitions if n is not node})
+                changed = True
+    for path in sorted(p for folder in ("examples", "tools") for p in (root / folder).rglob("*.py")):
+        product |= used_names(ast.parse(path.read_text()))
+    tests = set()
+    for path in sorted((root / "tests").rglob("*.py")):
+        tests |= used_names(ast.parse(path.read_text()))
+    return sorted(
+        ((node.end_lineno - node.lineno + 1, f"{rel}:{node.name}") for rel, node in definitions
+         if node.name not in product and node.name in tests),
+        reverse=True,
+    )
+
+
 def house_stats(root: Path) -> dict:
     files = product_files(root)
     modules = {module_name(root, p) for p in files}
@@ -105,13 +168,14 @@ def house_stats(root: Path) -> dict:
     sizes, functions = [], []
     kernels = kernel_lines = local = 0
     crossings: set[tuple[str, str, str]] = set()
+    trees: dict[str, ast.AST] = {}
     for path in files:
         text = path.read_text()
         lines = text.count("\n")
         rel = str(path.relative_to(root))
         per_package[rel.split("/")[0]] += lines
         sizes.append((lines, rel))
-        tree = ast.parse(text)
+        tree = trees[rel] = ast.parse(text)
         own = module_name(root, path)
         for node in ast.walk(tree):
             if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
@@ -125,6 +189,7 @@ def house_stats(root: Path) -> dict:
         crossings |= {(own, m, n) for m, n in found}
     sizes.sort(reverse=True)
     functions.sort(reverse=True)
+    test_only = test_only_functions(root, trees)
     return {
         "lines_per_package": per_package,
         "lines_total": sum(per_package.values()),
@@ -140,6 +205,8 @@ def house_stats(root: Path) -> dict:
         "function_local_imports": local,
         "private_names_crossing_modules": len({(m, n) for _, m, n in crossings}),
         "private_crossings": sorted(f"{user} uses {m}.{n}" for user, m, n in crossings),
+        "test_only_lines": sum(n for n, _ in test_only),
+        "test_only_functions": [{"function": f, "lines": n} for n, f in test_only],
     }
 
 
@@ -165,6 +232,10 @@ def main(argv: list[str] | None = None) -> int:
         f"kernels: {stats['kernels']} ({stats['kernel_lines']} lines); function-local imports: "
         f"{stats['function_local_imports']}; private names crossing modules: "
         f"{stats['private_names_crossing_modules']}"
+    )
+    print(
+        f"test-only lines in the product: {stats['test_only_lines']} in {len(stats['test_only_functions'])} "
+        "functions" + "".join(f"; {f['function']} {f['lines']}" for f in stats["test_only_functions"])
     )
     return 0
 
