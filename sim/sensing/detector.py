@@ -8,7 +8,7 @@ a bottom-up 2D pose detector (OpenPose-like) would deliver, plus the truth behin
    image are not detectable;
 2. cast one ray per remaining keypoint from the camera centre against the MuJoCo bodies (compiled
    loops with MuJoCo's own ray formulas, the hits bit for bit those of `mujoco.mj_multiRay`, which
-   `cast_visibility` still calls as the reference): the first surface it meets tells whether the joint
+   tests/reference/rays.py calls as the reference): the first surface it meets tells whether the joint
    is visible, occluded (a shelf, a wall, another person) or self-occluded (another limb of the same
    person);
 3. miss whole people (more often the more they are occluded), drop occluded joints, add noise
@@ -25,7 +25,7 @@ from typing import NamedTuple
 import numpy as np
 
 from core.projection import in_image_many_kernel, monotonic_radius
-from core.records import CameraFrame, Capture, DetectionEffect, DetectionRows, PoseTruth
+from core.records import CameraFrame, DetectionEffect, DetectionRows
 from core.truth import tick_of
 from core.types import COCO17, Camera, Skeleton
 from sim.sensing.draws import (
@@ -134,42 +134,6 @@ class Detector:
         # Per camera: joints in the image, occluded, self-occluded (all person views no smaller than
         # min_size_px, detected or not).
         self.visibility_counts = np.zeros((len(self.cameras), 3), dtype=np.int64)
-
-    def visibility(self, camera_index: int, world, poses: PoseTruth):
-        """Projection and occlusion of everybody's joints in one camera (`visibility_many` of one capture).
-
-        Args:
-            camera_index: which camera.
-            world: a `sim.world.World` advanced to the poses' time (or None to skip ray casting).
-            poses: the true poses, (P, J, 3).
-
-        Returns:
-            px (P, J, 2) distorted true pixels, in_img (P, J), occluded (P, J), self_occluded (P, J), and
-            found_px (P, J, 2) the detector's own joints' pixels (`JointOffsets`; NaN for people it cannot detect).
-        """
-        return self.visibility_many(world, [Capture(camera_index, poses, poses.t_s, poses.t_s, poses.t_s)])[0]
-
-    def visibility_many(self, world, requests) -> list[tuple]:
-        """`visibility` of several captures whose bodies are all in `world`'s data (one truth tick): the
-        projections and every ray of the tick in one compiled pass each.
-
-        Args:
-            world: the world (or None to skip ray casting).
-            requests: the captures (`Capture`).
-
-        Returns:
-            Per request: px (P, J, 2), in_img, occluded, self_occluded (P, J), found_px (P, J, 2).
-        """
-        if not requests:
-            return []
-        J = self.skeleton.num_joints
-        for r in requests:
-            if np.shape(r.poses.poses)[1:] != (J, 3):
-                raise ValueError(f"visibility: poses of shape {np.shape(r.poses.poses)}, expected (P, {J}, 3)")
-        scenes = [self.scene_now(world, copy=False)] if world is not None else None
-        visible = self.block_visibility(requests, scenes, [0] * len(requests))
-        bounds = np.cumsum([0] + [len(r.poses.person_ids) for r in requests]).tolist()
-        return [tuple(v[a:b] for v in visible) for a, b in zip(bounds[:-1], bounds[1:])]
 
     def scene_now(self, world, copy: bool = True) -> SceneTick | None:
         """What rays need of `world`'s bodies now (None when occlusion is off), copied unless `copy` is False.
@@ -349,40 +313,6 @@ class Detector:
                                          np.asarray(world.geom_groups(), dtype=np.int64))
             self._scene_of = world
         return self._scene_cache
-
-    def _cast(self, world, origins: np.ndarray, points: np.ndarray, mask: np.ndarray, person: np.ndarray):
-        """Occluded and self-occluded flags (R, N) of keypoints points (R, N, 3) seen from origins (R, 3),
-        where mask (R, N); person (R, N // J) is the person id of each row of J keypoints. Also the nearest
-        geom hit before each keypoint (R, N) (-1: none) and its distance."""
-        model = self._scene(world)
-        xpos, xmat, size, rbound, owner = self.scene_now(world, copy=False)[:5]
-        shape = mask.shape
-        hits = RayHits(np.empty(shape, dtype=bool), np.empty(shape, dtype=bool), np.empty(shape, dtype=np.int32),
-                       np.empty(shape))
-        rays = KeypointRays(np.ascontiguousarray(origins, dtype=np.float64),
-                            np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(mask),
-                            np.ascontiguousarray(person, dtype=np.int64), np.zeros(shape[0], dtype=np.int64),
-                            np.zeros(shape[0], dtype=np.int64))
-        scenes = Scenes(xpos[None], xmat[None], size[None], rbound[None], owner[None], np.zeros(1, dtype=np.int64))
-        bounds = np.empty((1, len(model.geom_type) + len(model.groups) - 1, 6))
-        cast_keypoint_rays(rays, model, scenes, float(self.config.self_hit_margin_m), hits,
-                           np.zeros((1, 3), dtype=np.int64), bounds)
-        return hits.occluded, hits.self_occluded, hits.geomid, hits.dist
-
-    def detect_visible(self, requests, visibilities) -> list[CameraFrame]:
-        """The frames of captures whose visibility is already known (`visibility_many` of the same poses, or
-        a dataset's true 2D joints), with the detector's errors drawn for all of them at once.
-
-        Args:
-            requests: the captures (`Capture`).
-            visibilities: per capture, px (P, J, 2), in_img, occluded, self_occluded (P, J), and optionally
-                found_px (P, J, 2) (without it, the detector's joints are the true ones: a dataset's 2D joints).
-        """
-        if not requests:
-            return []
-        rows, bounds = self.detection_rows_of(requests, *(np.concatenate([v[k] for v in visibilities])
-                                                           for k in range(len(visibilities[0]))))
-        return self.frames_from_rows(requests, rows, bounds)
 
     def detection_rows_of(self, requests, px, in_img, occluded, self_occluded, found_px=None,
                           person_ids: list | None = None) -> tuple[DetectionRows, np.ndarray]:

@@ -21,6 +21,7 @@ from crossview.formats.datasets import (
 )
 from crossview.scoring.campus import evaluate
 from sim.scenario import from_source_text
+from tests.reference.detector import detect_visible
 from tracker.config import TrackerConfig
 from tracker.geometry import project
 from tracker.tracker import Tracker
@@ -183,7 +184,7 @@ def _typical_detector(frames, cams, seed):
         clear = np.zeros((D, J), dtype=bool)
         poses = PoseTruth(frame.stamp_s, np.arange(D), np.zeros((D, J, 3)))
         request = Capture(index[frame.camera], poses, frame.stamp_s, frame.stamp_s, frame.stamp_s)
-        out = detector.detect_visible([request], [(px, inside, clear, clear)])[0]
+        out = detect_visible(detector, [request], [(px, inside, clear, clear)])[0]
         noisy.append(Frame(frame.camera, frame.stamp_s, out.frame.keypoints_px, out.frame.scores))
     return noisy
 

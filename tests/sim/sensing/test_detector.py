@@ -17,7 +17,8 @@ from sim.sensing.draws import TEMPLATE_COCO17 as _TEMPLATE_COCO17
 from sim.sensing.draws import person_size_px
 from sim.sensing.profiles import DetectorConfig, DetectorProfile
 from sim.store import StoreConfig
-from tests.reference.detector import detect
+from tests.reference.detector import cast, detect, visibility, visibility_many
+from tests.reference.rays import cast_visibility
 
 # Bodies of the stand-in person (COCO-17 keypoint -> body): head, torso, arms, legs.
 _PARTS = {"head": (0, 1, 2, 3, 4), "larm": (5, 7, 9), "rarm": (6, 8, 10), "lleg": (11, 13, 15),
@@ -120,7 +121,7 @@ def test_limbs_behind_the_body_are_self_occluded_and_other_people_occlude():
     cams = _cameras(CameraPlacement((3.0, 0.0, 1.6), (3.0, 1.5, 1.0)),
                     CameraPlacement((3.0, 3.9, 1.6), (3.0, 2.5, 1.0)))
     detector = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
-    _, in_img, occluded, self_occluded, _ = detector.visibility(0, world, world.truth())
+    _, in_img, occluded, self_occluded, _ = visibility(detector, 0, world, world.truth())
     left_wrist, right_wrist = COCO17.index("left_wrist"), COCO17.index("right_wrist")
     # Camera 0 looks from -y: person 0's left (+y) wrist hides behind its torso, its right wrist is seen.
     assert self_occluded[0, left_wrist] and not occluded[0, left_wrist]
@@ -138,11 +139,11 @@ def test_a_capture_that_sees_nobody_does_not_break_the_batch():
                     CameraPlacement((5.8, 3.8, 2.8), (5.9, 3.9, 0.0)))
     detector = Detector(DetectorConfig(profile=DetectorProfile.IDEAL), cams, np.random.default_rng(1))
     for order in ((0, 1), (1, 0), (1, 1)):
-        views = detector.visibility_many(world, [Capture(c, world.truth(), 0.0, 0.0, 0.0) for c in order])
+        views = visibility_many(detector, world, [Capture(c, world.truth(), 0.0, 0.0, 0.0) for c in order])
         for c, (_, in_img, occluded, _, _) in zip(order, views):
             assert in_img.any() == (c == 0)
             if c == 0:
-                _, in_single, occluded_single, _, _ = detector.visibility(0, world, world.truth())
+                _, in_single, occluded_single, _, _ = visibility(detector, 0, world, world.truth())
                 assert (in_img == in_single).all() and (occluded == occluded_single).all()
 
 
@@ -289,13 +290,13 @@ def test_people_smaller_than_min_person_frac_of_the_image_are_never_detected_and
     world = BoxWorld([(6.0, 0.0), (30.0, 0.0)], shelf=((28.0, 0.0, 0.4), (0.2, 1.0, 0.4)))
     cams = _cameras(CameraPlacement((0.0, 0.0, 2.9), (30.0, 0.0, 0.5)))
     truth = world.truth()
-    sizes = person_size_px(Detector(DetectorConfig(), cams, np.random.default_rng(0)).visibility(
-        0, world, truth)[0])
+    sizes = person_size_px(visibility(Detector(DetectorConfig(), cams, np.random.default_rng(0)), 0, world,
+                                      truth)[0])
     assert sizes[0] > 100 and 20 < sizes[1] < 48  # px, in 720 px high images
 
     def seen(**knobs):
         detector = Detector(_only(**knobs), cams, np.random.default_rng(0))
-        px, in_img, occluded, _, _ = detector.visibility(0, world, truth)
+        px, in_img, occluded, _, _ = visibility(detector, 0, world, truth)
         frame = detect(detector, 0, world, truth, 0.0, 0.0, 0.0)
         return sorted(frame.truth.person_ids.tolist()), in_img, occluded, detector.visibility_counts[0]
 
@@ -342,7 +343,6 @@ def test_compiled_ray_caster_agrees_with_mj_multiray_in_the_store(name, times_s,
 
     from sim import scenario as scenario_mod
     from sim.rng import child_rng
-    from sim.sensing.rays import cast_visibility
     from sim.world import World
 
     scenario = scenario_mod.load(name)
@@ -361,8 +361,8 @@ def test_compiled_ray_caster_agrees_with_mj_multiray_in_the_store(name, times_s,
             _, seen = in_image(camera, points)
             if not seen.any():
                 continue
-            occ, self_occ, geomid, dist = detector._cast(world, camera.center_world[None], points[None], seen[None],
-                                                         person[None])
+            occ, self_occ, geomid, dist = cast(detector, world, camera.center_world[None], points[None], seen[None],
+                                               person[None])
             # Reference: one mj_multiRay batch over the points in view, and the flags cast_visibility gives.
             origin = np.asarray(camera.center_world, dtype=np.float64)
             vec = points[seen] - origin
@@ -404,7 +404,7 @@ def test_block_visibility_of_snapshots_equals_visibility_at_each_tick():
     for k in range(2 * _SCENE_ROWS + 30):
         truth = world.advance(k * 0.05)
         requests = [Capture(c, truth, k * 0.05, k * 0.05, k * 0.05) for c in range(len(cams))]
-        ticks.append((requests, later.scene_now(world), [now.visibility(c, world, truth) for c in range(len(cams))]))
+        ticks.append((requests, later.scene_now(world), [visibility(now, c, world, truth) for c in range(len(cams))]))
     assert len({id(scene[2]) for _, scene, _ in ticks}) > 1 and len({id(scene[4]) for _, scene, _ in ticks}) > 1
     blocks = [list(range(a, min(a + n, len(ticks)))) for a, n in ((0, 7), (7, 50), (57, 10), (67, 70))]
     blocks += [[len(ticks) - 1, 70, 90], list(range(137, len(ticks)))]
