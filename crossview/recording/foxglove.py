@@ -40,9 +40,8 @@ from google.protobuf import descriptor_pb2
 from google.protobuf.descriptor import Descriptor
 from google.protobuf.timestamp_pb2 import Timestamp
 
-from core.records import Box, BoxKind, PoseTruth
+from core.records import Box, BoxKind
 from core.types import Camera, Skeleton
-from tracker.types import TrackerOutput
 
 WORLD_FRAME = "world"
 FRUSTUM_DEPTH_M = 0.6  # how far the drawn frustum reaches along the optical axis
@@ -242,61 +241,21 @@ def camera_image(camera: Camera, t_ns: int, jpeg: bytes) -> CompressedImage:
     return CompressedImage(timestamp=timestamp(t_ns), frame_id=camera_frame_id(camera.name), data=jpeg, format="jpeg")
 
 
-def _bone_points(points: np.ndarray, skeleton: Skeleton) -> np.ndarray:
-    """LINE_LIST endpoints of the bones whose both ends are known: (J, K) -> (2 * bones kept, K)."""
-    bones = np.asarray(skeleton.bones, dtype=np.intp).reshape(-1, 2)
-    known = np.isfinite(points).all(axis=1)
-    kept = bones[known[bones[:, 0]] & known[bones[:, 1]]]
-    return points[kept.ravel()]
-
-
-def _skeleton_entity(
-    entity_id: str, pose: np.ndarray, skeleton: Skeleton, t_ns: int, rgba: Color, thickness_m: float, label: str
-) -> SceneEntity:
-    known = pose[np.all(np.isfinite(pose), axis=1)]
-    entity = SceneEntity(timestamp=timestamp(t_ns), frame_id=WORLD_FRAME, id=entity_id)
-    entity.lines.append(LinePrimitive(
-        type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)), thickness=thickness_m, color=rgba,
-        points=[Point3(x=x, y=y, z=z) for x, y, z in _bone_points(pose, skeleton).tolist()],
-    ))
-    if len(known):
-        top = known[np.argmax(known[:, 2])]
-        entity.texts.append(
-            TextPrimitive(
-                pose=Pose(position=Vector3(x=float(top[0]), y=float(top[1]), z=float(top[2]) + 0.25),
-                          orientation=Quaternion(w=1.0)),
-                billboard=True,
-                font_size=12.0,
-                scale_invariant=True,
-                color=rgba,
-                text=label,
-            )
-        )
-        entity.spheres.append(  # a ball on the highest joint makes a person easy to pick out from above
-            SpherePrimitive(
-                pose=Pose(position=Vector3(x=float(top[0]), y=float(top[1]), z=float(top[2])),
-                          orientation=Quaternion(w=1.0)),
-                size=Vector3(x=JOINT_SPHERE_M * 2, y=JOINT_SPHERE_M * 2, z=JOINT_SPHERE_M * 2),
-                color=rgba,
-            )
-        )
-    return entity
-
-
 def truth_entity_pieces(person_id: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
-    """Constant wire pieces of a person's entity in `truth_skeletons` (a `PieceTable`'s pieces, for the
+    """Constant wire pieces of a person's entity in the truth's skeleton scene (a `PieceTable`'s pieces, for the
     compiled `wire.skeleton_scene`): the id field, the bone line before and after its points, and what follows
     the pose in the label and in the top sphere, each what protobuf writes for those fields."""
     return _entity_pieces(f"person/{person_id}", truth_color(person_id), TRUTH_LINE_M, f"p{person_id}")
 
 
 def track_entity_pieces(target_id: int) -> tuple[bytes, bytes, bytes, bytes, bytes]:
-    """`truth_entity_pieces` of a target's entity in `tracker_skeletons`."""
+    """`truth_entity_pieces` of a target's entity in the tracker's skeleton scene."""
     return _entity_pieces(f"target/{target_id}", track_color(target_id), TRACK_LINE_M, f"T{target_id}")
 
 
 def _entity_pieces(entity_id: str, rgba: Color, thickness_m: float, label: str) -> tuple[bytes, ...]:
-    """The pieces of `_skeleton_entity`'s entity around its points (`truth_entity_pieces`)."""
+    """The pieces of a skeleton entity around its points (`truth_entity_pieces`; the whole entity as protobuf
+    builds it: tests/reference/foxglove.py)."""
     line_head = LinePrimitive(type=LinePrimitive.LINE_LIST, pose=Pose(orientation=Quaternion(w=1.0)),
                               thickness=thickness_m).SerializeToString()
     line_tail = LinePrimitive(color=rgba).SerializeToString()
@@ -320,33 +279,6 @@ ORIENTATION_FIELD = np.frombuffer(Pose(orientation=Quaternion(w=1.0)).SerializeT
 """The identity orientation field of a Pose, as protobuf writes it."""
 LINE_POINTS_KEY = (LinePrimitive.DESCRIPTOR.fields_by_name["points"].number << 3) | 2
 """The one-byte tag of LinePrimitive.points."""
-
-
-def _replace_all(t_ns: int, entities: list[SceneEntity]) -> SceneUpdate:
-    """A SceneUpdate that first deletes everything older, so people who left disappear."""
-    deletion = SceneEntityDeletion(timestamp=timestamp(t_ns), type=SceneEntityDeletion.ALL)
-    return SceneUpdate(deletions=[deletion], entities=entities)
-
-
-def truth_skeletons(truth: PoseTruth, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
-    """Everybody's true skeleton at one instant, pale, labelled with the person id."""
-    entities = [
-        _skeleton_entity(f"person/{pid}", pose, skeleton, t_ns, truth_color(pid), TRUTH_LINE_M, f"p{pid}")
-        for pid, pose in zip(np.asarray(truth.person_ids).tolist(), truth.poses)
-    ]
-    return _replace_all(t_ns, entities)
-
-
-def tracker_skeletons(output: TrackerOutput, skeleton: Skeleton, t_ns: int) -> SceneUpdate:
-    """The tracker's targets after one update, each in its own saturated colour, labelled with its id."""
-    entities = [
-        _skeleton_entity(
-            f"target/{target.id}", np.asarray(target.pose), skeleton, t_ns, track_color(target.id), TRACK_LINE_M,
-            f"T{target.id}",
-        )
-        for target in output.targets
-    ]
-    return _replace_all(t_ns, entities)
 
 
 def detection_style_pieces(person_id: int) -> tuple[bytes, bytes, bytes, bytes]:

@@ -4,8 +4,9 @@ one decoder per message type (protobuf's parser, then arrays).
 Every message is what protobuf serialises for it. Two kinds are written by compiled encoders
 (`crossview.recording.wire`): the camera frames with their 2D annotations, and the skeleton scenes (the
 truth's and the tracker's, each at 20 Hz at most); protobuf's own serialisation of them, one object per point,
-made `crossview generate` 1.3 to 1.5 times slower and `crossview track` 1.38 times (the figures and how they
-were measured: docs/recording-format.md). The others are protobuf's `SerializeToString`."""
+made `crossview generate` 1.29 to 1.47 times slower for the frames and 1.08 (store_layout1) to 1.43 times
+(store_layout2) for the truth's scenes, and `crossview track` 1.38 times for the tracker's (the figures and how
+they were measured: docs/recording-format.md). The others are protobuf's `SerializeToString`."""
 
 from __future__ import annotations
 
@@ -75,9 +76,9 @@ class Encoder:
                             poses_m=poses.ravel().tolist()).SerializeToString()
 
     def truth_scene(self, truth: PoseTruth, t_ns: int) -> bytes:
-        """`foxglove.truth_skeletons` (a SceneUpdate) of one truth tick, stamped t_ns, as protobuf writes it,
-        by the compiled `wire.skeleton_scene` (it is written at every truth tick: docs/benchmarks.md, "Kernel
-        ledger", has what compiling it buys)."""
+        """The truth's skeleton scene (a SceneUpdate) of one truth tick, stamped t_ns, as protobuf writes it
+        (tests/reference/foxglove.py), by the compiled `wire.skeleton_scene` (the writer calls it at 20 Hz,
+        `TRUTH_SCENE_PERIOD_S`: docs/benchmarks.md, "Kernel ledger", has what compiling it buys)."""
         poses = np.ascontiguousarray(truth.poses, dtype=np.float64)
         ids = np.asarray(truth.person_ids, dtype=np.int64)
         if poses.ndim != 3 or poses.shape[2] != 3 or poses.shape[0] != ids.shape[0]:
@@ -98,8 +99,9 @@ class Encoder:
         return out[:wire.skeleton_scene(out, poses, rows, style)].tobytes()
 
     def tracker_scene(self, output: TrackerOutput, t_ns: int) -> bytes:
-        """`foxglove.tracker_skeletons` (a SceneUpdate) of one tracker output, stamped t_ns, as protobuf writes it,
-        by the compiled `wire.skeleton_scene` (written at every tracker update: docs/recording-format.md)."""
+        """The tracker's skeleton scene (a SceneUpdate) of one tracker output, stamped t_ns, as protobuf writes it
+        (tests/reference/foxglove.py), by the compiled `wire.skeleton_scene` (the tracks writer calls it at 20 Hz
+        at most, `TRACK_SCENE_PERIOD_S`: docs/recording-format.md)."""
         targets = output.targets
         J = self.skeleton.num_joints
         if isinstance(targets, TargetArrays):

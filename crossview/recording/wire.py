@@ -1,8 +1,9 @@
 """Protobuf wire bytes of a recording's camera frames with their 2D annotations (`frames_and_annotations`, one
 numba-compiled loop over many frames: `crossview.recording.Encoder.frames`) and of the truth's skeleton scene
-(`skeleton_scene`, at every truth tick: `Encoder.truth_scene`), the recording's two compiled encoders:
-protobuf's own serialisation of the same messages, one Python object per point, made `crossview generate`
-1.3 to 1.5 times slower each (docs/recording-format.md).
+(`skeleton_scene`, at 20 Hz: `Encoder.truth_scene`, and the tracker's: `Encoder.tracker_scene`), the
+recording's two compiled encoders: protobuf's own serialisation of the same messages, one Python object per
+point, made `crossview generate` 1.29 to 1.47 times slower for the frames and up to 1.43 times for the truth's
+scenes, `crossview track` 1.38 times for the tracker's (docs/recording-format.md).
 The tests decode these bytes with protobuf and compare them with its serialisation of the same messages.
 Only the writer imports this module, so reading a recording never loads numba.
 
@@ -389,7 +390,8 @@ def _put_pose(out, pos, x, y, z, orientation):
 
 @_jit
 def skeleton_scene(out, poses, rows, style):
-    """`foxglove.truth_skeletons` (a SceneUpdate) into `out`; returns the number of bytes.
+    """A skeleton scene (a SceneUpdate; as protobuf builds it: tests/reference/foxglove.py) into `out`; returns
+    the number of bytes.
 
     poses (P, J, 3) metres, NaN where unknown; rows (P,) each person's row of the `SceneStyle`'s pieces. Per
     person (in order) an entity: head, id, a sphere and a label (at the highest known joint, the label 0.25 m

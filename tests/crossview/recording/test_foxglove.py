@@ -15,6 +15,7 @@ from core.records import Box, BoxKind, CameraFrame, DetectionTruth, PoseTruth
 from core.types import COCO17, Camera, Frame
 from crossview import recording
 from crossview.recording import foxglove
+from tests.reference.foxglove import tracker_skeletons, truth_skeletons
 from tracker.types import Target, TrackerOutput
 
 LAYOUT = Path(__file__).resolve().parents[3] / "crossview" / "foxglove" / "layout.json"
@@ -94,7 +95,7 @@ def test_store_boxes_become_yawed_cubes():
 def test_truth_skeleton_draws_only_bones_with_both_ends_known():
     pose = np.arange(17 * 3, dtype=float).reshape(17, 3)
     pose[9] = np.nan  # left wrist: the bone (7, 9) disappears
-    update = foxglove.truth_skeletons(PoseTruth(0.5, np.array([4]), pose[None]), COCO17, t_ns=500_000_000)
+    update = truth_skeletons(PoseTruth(0.5, np.array([4]), pose[None]), COCO17, t_ns=500_000_000)
     assert update.deletions[0].type == update.deletions[0].ALL
     (entity,) = update.entities
     assert entity.id == "person/4" and entity.frame_id == "world"
@@ -108,8 +109,8 @@ def test_tracker_colours_differ_from_truth_colours():
     pose = np.zeros((17, 3))
     for identity in range(1, 10):
         output = TrackerOutput(0.0, "cam00", [Target(identity, pose, 0.0)], np.zeros(0, np.int64))
-        track = foxglove.tracker_skeletons(output, COCO17, 0).entities[0].lines[0].color
-        truth = foxglove.truth_skeletons(PoseTruth(0.0, np.array([identity]), pose[None]), COCO17, 0)
+        track = tracker_skeletons(output, COCO17, 0).entities[0].lines[0].color
+        truth = truth_skeletons(PoseTruth(0.0, np.array([identity]), pose[None]), COCO17, 0)
         pale = truth.entities[0].lines[0].color
         assert (track.r, track.g, track.b) != (pale.r, pale.g, pale.b)
         assert track.a == 1.0 and pale.a < 1.0
@@ -150,7 +151,7 @@ def test_file_descriptor_set_rebuilds_the_message_class():
     for f in fds.file:
         pool.Add(f)
     cls = message_factory.GetMessageClass(pool.FindMessageTypeByName("foxglove.SceneUpdate"))
-    original = foxglove.truth_skeletons(PoseTruth(0.0, np.array([1]), np.ones((1, 17, 3))), COCO17, 5)
+    original = truth_skeletons(PoseTruth(0.0, np.array([1]), np.ones((1, 17, 3))), COCO17, 5)
     assert cls.FromString(original.SerializeToString()).SerializeToString() == original.SerializeToString()
 
 

@@ -26,13 +26,13 @@ from crossview.recording import (
     RecordingWriter,
     TracksHeader,
     TracksWriter,
-    foxglove,
     open_recording,
     open_tracks,
     reader,
     schemas,
 )
 from tests.reference import recording as reference
+from tests.reference.foxglove import tracker_skeletons, truth_skeletons
 from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
 
 SCENARIO_TEXT = 'description = "synthetic"\n[crowd]\npeople = 3\n'
@@ -664,7 +664,7 @@ def test_encoded_messages_are_protobufs_own_serialisation(world):
             assert np.array(back.poses_m).tobytes() == np.asarray(event.poses, dtype=np.float64).tobytes()
             # The truth's skeleton scene (compiled): Foxglove's SceneUpdate as protobuf writes it.
             scene = encoder.truth_scene(event, 1_234_567_891)
-            assert scene == foxglove.truth_skeletons(event, COCO17, 1_234_567_891).SerializeToString()
+            assert scene == truth_skeletons(event, COCO17, 1_234_567_891).SerializeToString()
             assert len(SceneUpdate.FromString(scene).entities) == len(event.person_ids)
         else:
             effects = rng.integers(0, 1 << 31, len(event.truth.effects))
@@ -994,5 +994,5 @@ def test_the_tracker_scene_is_protobufs_own_serialisation():
     for targets in (arrays, listed, []):
         output = TrackerOutput(1.0, "cam00", targets, np.zeros(0, np.int64))
         data = encoder.tracker_scene(output, 1_000_000_123)
-        assert data == foxglove.tracker_skeletons(output, COCO17, 1_000_000_123).SerializeToString()
+        assert data == tracker_skeletons(output, COCO17, 1_000_000_123).SerializeToString()
         assert len(SceneUpdate.FromString(data).entities) == len(targets)
