@@ -556,21 +556,6 @@ class StoreGeometry:
                 raise self._err(key, f"door at {_xy(center)} lies inside or against {ob.key}")
         return door
 
-    def _local(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(n, O) coordinates of points in every obstacle's own frame."""
-        d = points[:, None, :] - self._ob_center[None]
-        c, s = self._ob_cos, self._ob_sin
-        return d[..., 0] * c + d[..., 1] * s, -d[..., 0] * s + d[..., 1] * c
-
-    def obstacle_distance(self, points: np.ndarray) -> np.ndarray:
-        """(n,) distance from each point (n, 2) to the nearest shelf or counter footprint (inf without any)."""
-        if not self.obstacles:
-            return np.full(len(points), np.inf)
-        lx, ly = self._local(points)
-        ox = np.maximum(np.abs(lx) - self._ob_half[:, 0], 0.0)
-        oy = np.maximum(np.abs(ly) - self._ob_half[:, 1], 0.0)
-        return np.sqrt(ox * ox + oy * oy).min(axis=1)
-
     def obstacle_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """The footprints as contiguous arrays for the crowd's loops: centres (O, 2), half extents (O, 2),
         cos and sin of the yaws (O,)."""

@@ -1,12 +1,13 @@
 """Plain numpy versions of the store's rules: points pushed out of the obstacle footprints (the rule
 `sim.crowd`'s compiled hard constraint applies, the footprint grown by a clearance, checked against the plain
-rectangle distance), and the navigation grid computed over every cell."""
+rectangle distance), each point's distance to the nearest footprint, and the navigation grid computed over every
+cell."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from sim.store import StoreGeometry
+from sim.store import StoreGeometry, rect_distance
 
 
 def push_out(store: StoreGeometry, points: np.ndarray, clearance_m: float) -> np.ndarray:
@@ -34,10 +35,18 @@ def push_out(store: StoreGeometry, points: np.ndarray, clearance_m: float) -> np
     return points + np.stack([(dx * c - dy * s).sum(axis=1), (dx * s + dy * c).sum(axis=1)], axis=-1)
 
 
+def obstacle_distance(store: StoreGeometry, points: np.ndarray) -> np.ndarray:
+    """(n,) distance from each point (n, 2) to the nearest shelf or counter footprint (inf without any)."""
+    distance = np.full(len(points), np.inf)
+    for ob in store.obstacles:
+        distance = np.minimum(distance, rect_distance(points, ob.center, ob.half, ob.yaw))
+    return distance
+
+
 def free_grid(store: StoreGeometry, obstacles) -> np.ndarray:
     """(nx, ny) the navigation grid of `store`'s floor and doors with these obstacles, plainly: every cell's
     distance to every footprint (no windows), the wall clearance, the door corridors (`StoreGeometry.free`'s rule)."""
-    from sim.store import INSIDE_DOOR_M, rect_distance
+    from sim.store import INSIDE_DOOR_M
 
     P, W, D = store.cell_centers, store.config.width_m, store.config.depth_m
     c = store.wall_clearance_m

@@ -9,6 +9,7 @@ from sim import crowd as cr
 from sim import scenario as sc
 from sim.crowd import Activity, Crowd, CrowdConfig
 from sim.store import StoreGeometry
+from tests.reference import store as store_reference
 
 
 @pytest.mark.parametrize("kwargs,key", [
@@ -51,7 +52,7 @@ def test_hard_limits_hold_at_every_step(name):
         d = np.linalg.norm(p[:, None] - p[None], axis=-1)
         np.fill_diagonal(d, np.inf)
         assert d.min() >= cr.SEPARATION_M - 1e-9
-        assert store.obstacle_distance(p).min() >= cr.SHELF_CLEARANCE_M - 1e-9
+        assert store_reference.obstacle_distance(store, p).min() >= cr.SHELF_CLEARANCE_M - 1e-9
         inside = [not (a.in_door or a.leaving) for a, pid in zip(crowd.agents, crowd.person_id) if pid >= 0]
         q = p[inside]
         assert np.all((q >= cr.WALL_CLEARANCE_M - 1e-9) & (q <= np.array([W, D]) - cr.WALL_CLEARANCE_M + 1e-9))
