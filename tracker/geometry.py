@@ -83,17 +83,6 @@ def undistort_detections(keypoints_px, scores, score_threshold, K, dist, out):
     return usable
 
 
-def distort_points(camera: Camera, points_px: np.ndarray) -> np.ndarray:
-    """Inverse of `undistort_points`: maps undistorted pinhole pixels (..., 2) to distorted pixels (..., 2)."""
-    def distort(finite_px: np.ndarray) -> np.ndarray:
-        normalised = (finite_px - camera.K[:2, 2]) @ np.linalg.inv(camera.K[:2, :2]).T
-        rays = np.concatenate([normalised, np.ones((normalised.shape[0], 1))], axis=1)
-        projected, _ = cv2.projectPoints(rays.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
-        return projected.reshape(-1, 2)
-
-    return _map_finite_pixels(camera, points_px, distort)
-
-
 def _map_finite_pixels(camera: Camera, points_px: np.ndarray, lens_map) -> np.ndarray:
     """Applies `lens_map` ((N, 2) -> (N, 2) pixels) to the finite points of (..., 2); NaN elsewhere.
 
@@ -131,18 +120,6 @@ def project(P: np.ndarray, X: np.ndarray) -> np.ndarray:
     return uv
 
 
-def project_distorted(camera: Camera, X: np.ndarray) -> np.ndarray:
-    """Projects world points (..., 3) to distorted pixels (..., 2) with OpenCV's lens model; NaN behind the camera."""
-    X = np.asarray(X, dtype=np.float64)
-    cam = X @ camera.R_cam_from_world.T + camera.t_cam_from_world
-    out = np.full(X.shape[:-1] + (2,), np.nan)
-    ok = np.all(np.isfinite(cam), axis=-1) & (cam[..., 2] > 0)
-    if ok.any():
-        pts, _ = cv2.projectPoints(cam[ok].reshape(-1, 1, 3), np.zeros(3), np.zeros(3), camera.K, camera.dist)
-        out[ok] = pts.reshape(-1, 2)
-    return out
-
-
 def ray_directions(camera: Camera | None, points_px: np.ndarray, world_from_pixel: np.ndarray | None = None
                    ) -> np.ndarray:
     """Eq. (3): unit world directions of the rays from the camera centre through undistorted pixels.
@@ -170,11 +147,6 @@ def ray_directions(camera: Camera | None, points_px: np.ndarray, world_from_pixe
 def world_from_pixel_matrix(camera: Camera) -> np.ndarray:
     """(3, 3) R^T K^-1: the world direction of the ray through an undistorted homogeneous pixel (eq. 3)."""
     return camera.R_cam_from_world.T @ np.linalg.inv(camera.K)
-
-
-def point_to_ray_distance(X: np.ndarray, origin: np.ndarray, direction: np.ndarray) -> np.ndarray:
-    """d_l of eq. (4): distance from points X (..., 3) to lines through `origin` (3,) with unit `direction` (..., 3)."""
-    return np.linalg.norm(np.cross(X - origin, direction), axis=-1)
 
 
 def skew(v: np.ndarray) -> np.ndarray:

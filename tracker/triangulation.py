@@ -171,25 +171,6 @@ def triangulate(P: np.ndarray, points_px: np.ndarray, min_views: int = 2, row_no
     return solve_weighted(rows, np.ones(rows.shape[:-2]), min_views)
 
 
-def time_weights(
-    rows: np.ndarray, stamps_s: np.ndarray, stamp_s: float, lambda_t_per_s: float
-) -> np.ndarray:
-    """Eq. (11): w_i = e^(-λt (t - t_i)) / ||c_i|| for each row.
-
-    Args:
-        rows: (..., C, 2, 4) rows of C.
-        stamps_s: (..., C) stamps t_i of the points, s.
-        stamp_s: the target time t, s.
-
-    Returns:
-        (..., C, 2) row weights (NaN propagates for missing rows).
-    """
-    decay = np.exp(-lambda_t_per_s * np.maximum(stamp_s - stamps_s, 0.0))
-    norm = np.linalg.norm(rows, axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return decay[..., None] / norm
-
-
 def triangulate_incremental(
     P: np.ndarray,
     points_px: np.ndarray,

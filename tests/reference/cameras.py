@@ -1,5 +1,6 @@
 """OpenCV's camera model as a plain vectorised numpy formula: the reference `core.projection.in_image_many_kernel`
-is tested against, bit for bit (and this against `cv2.projectPoints`)."""
+is tested against, bit for bit (and this against `cv2.projectPoints`); also the lens model applied to pinhole
+pixels (the inverse of `tracker.geometry.undistort_points`)."""
 
 from __future__ import annotations
 
@@ -48,6 +49,16 @@ def _project(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.n
     K = camera.K
     px = np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
     return px, in_front, np.sqrt(xn * xn + yn * yn)
+
+
+def distort_pixels(camera: Camera, points_px: np.ndarray) -> np.ndarray:
+    """Undistorted pinhole pixels (..., 2) to distorted pixels (..., 2) with OpenCV's lens model; NaN stays NaN."""
+    points = np.asarray(points_px, dtype=np.float64)
+    K = camera.K
+    yn = (points[..., 1] - K[1, 2]) / K[1, 1]
+    xn = (points[..., 0] - K[0, 2] - K[0, 1] * yn) / K[0, 0]
+    xd, yd = _distort(xn, yn, camera.dist)
+    return np.stack([K[0, 0] * xd + K[0, 1] * yd + K[0, 2], K[1, 1] * yd + K[1, 2]], axis=-1)
 
 
 def in_image(camera: Camera, points_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

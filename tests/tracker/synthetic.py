@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.types import COCO17, Camera, Frame
-from tracker.geometry import project_distorted
+from tests.reference.cameras import project as project_distorted_px
 
 # A standing COCO-17 pose in the body frame (x forward, y left, z up), metres.
 _REST = np.array([
@@ -98,7 +98,7 @@ def make_frames(cameras: list[Camera], walkers: Walkers, duration_s: float, fps:
         while t < duration_s:
             stamp = t + rng.normal(0, jitter_s)
             poses = walkers.poses(stamp)
-            kp = project_distorted(cam, poses)  # (P, J, 2)
+            kp = project_distorted_px(cam, poses)[0]  # (P, J, 2)
             kp = kp + rng.normal(0, noise_px, kp.shape)
             scores = rng.uniform(0.6, 1.0, kp.shape[:2])
             miss = rng.random(kp.shape[:2]) < miss_rate

@@ -130,14 +130,14 @@ def test_a_burst_of_500_detections_in_a_frame():
 def _burst_frames(rng, t):
     """500 person-shaped detections (random bodies projected) in each of three cameras' frames, then a frame of
     a fourth camera whose every detection is a false positive (random pixels)."""
+    from tests.reference.cameras import project as project_distorted_px
     from tests.tracker.synthetic import _REST
-    from tracker.geometry import project_distorted
 
     bodies = _REST[None] + np.concatenate([rng.uniform([-1, -1], [5.5, 5.0], (500, 2)), np.zeros((500, 1))],
                                           axis=1)[:, None, :]
     frames = []
     for i, cam in enumerate(CAMS[:3]):
-        kp = project_distorted(cam, bodies) + rng.normal(0, 2.0, (500, J, 2))
+        kp = project_distorted_px(cam, bodies)[0] + rng.normal(0, 2.0, (500, J, 2))
         frames.append(Frame(cam.name, t + 0.01 * (i + 1), kp, np.full((500, J), 0.9)))
     frames.append(Frame(CAMS[3].name, t + 0.05, rng.uniform(0, 1280, (40, J, 2)), np.full((40, J), 0.9)))
     return frames

@@ -4,15 +4,15 @@ import cv2
 import numpy as np
 import pytest
 
+from tests.reference.cameras import distort_pixels
+from tests.reference.cameras import project as project_distorted_px
+from tests.reference.geometry import point_to_ray_distance
 from tests.reference.plain import plain_python
 from tests.tracker.synthetic import look_at_camera
 from tracker.geometry import (
-    distort_points,
     fundamental_matrix,
     point_line_distance_px,
-    point_to_ray_distance,
     project,
-    project_distorted,
     ray_directions,
     undistort_detections,
     undistort_points,
@@ -32,16 +32,14 @@ def points():
     return np.random.default_rng(0).uniform([-1, -1, 0], [2, 2, 2], (50, 3))
 
 
-def test_project_distorted_agrees_with_opencv(camera, points):
-    rvec, _ = cv2.Rodrigues(camera.R_cam_from_world)
-    reference, _ = cv2.projectPoints(points, rvec, camera.t_cam_from_world, camera.K, camera.dist)
-    np.testing.assert_allclose(project_distorted(camera, points), reference.reshape(-1, 2), atol=1e-6)  # px
-
-
 def test_undistort_inverts_distortion_onto_the_pinhole_projection(camera, points):
-    distorted = project_distorted(camera, points)
+    # Reference: OpenCV's lens model in numpy (tests/reference/cameras.py, itself checked against cv2.projectPoints).
+    rvec, _ = cv2.Rodrigues(camera.R_cam_from_world)
+    opencv, _ = cv2.projectPoints(points, rvec, camera.t_cam_from_world, camera.K, camera.dist)
+    distorted = project_distorted_px(camera, points)[0]
+    np.testing.assert_allclose(distorted, opencv.reshape(-1, 2), atol=1e-6)  # px
     np.testing.assert_allclose(undistort_points(camera, distorted), project(camera.P, points), atol=1e-3)  # px
-    np.testing.assert_allclose(distort_points(camera, project(camera.P, points)), distorted, atol=1e-3)  # px
+    np.testing.assert_allclose(distort_pixels(camera, project(camera.P, points)), distorted, atol=1e-3)  # px
 
 
 def test_undistort_keeps_nan_and_rejects_infinity(camera):

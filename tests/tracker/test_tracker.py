@@ -4,12 +4,12 @@ import numpy as np
 import pytest
 
 from core.types import Frame
+from tests.reference.cameras import project as project_distorted_px
 from tests.reference.plain import plain_python, reaches_compiled_code
 from tests.tracker.synthetic import Walkers, make_frames, store_like
 from tracker import lifecycle
 from tracker.baseline import BaselineTracker
 from tracker.config import TrackerConfig, Triangulation
-from tracker.geometry import project_distorted
 from tracker.kernels import update_matched
 from tracker.target_rows import TargetRows
 from tracker.tracker import Tracker
@@ -292,7 +292,7 @@ def test_a_target_seen_by_too_few_of_the_cameras_that_should_see_it_is_removed(l
     # half required (the default asks less, for people behind shelves) the target is a ghost.
     for f in frames:
         if f.stamp_s > 1.5 and f.camera not in ("cam00", "cam01", "cam02", "cam03") and f.keypoints_px.shape[0]:
-            proj = project_distorted(index[f.camera], walkers.poses(f.stamp_s)[0])
+            proj = project_distorted_px(index[f.camera], walkers.poses(f.stamp_s)[0])[0]
             err = np.nanmean(np.linalg.norm(f.keypoints_px - proj, axis=-1), axis=1)
             keep = ~(err < 20.0)
             f = Frame(f.camera, f.stamp_s, f.keypoints_px[keep], f.scores[keep])
@@ -320,7 +320,7 @@ def test_the_sight_map_keeps_people_whom_some_cameras_never_see_there(layout1):
     for f in frames:
         if f.camera in blind and f.keypoints_px.shape[0]:
             poses = walkers.poses(f.stamp_s)
-            proj = project_distorted(index[f.camera], poses)  # (P, J, 2)
+            proj = project_distorted_px(index[f.camera], poses)[0]  # (P, J, 2)
             err = np.nanmean(np.linalg.norm(f.keypoints_px[:, None] - proj[None], axis=-1), axis=2)  # (D, P)
             left = poses[np.argmin(err, axis=1), 11:13, 0].mean(axis=1) < 2.25
             f = Frame(f.camera, f.stamp_s, f.keypoints_px[~left], f.scores[~left])

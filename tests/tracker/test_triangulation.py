@@ -16,7 +16,6 @@ from tracker.triangulation import (
     _triangulate_groups,
     dlt_rows,
     smallest_eigenvector_point,
-    time_weights,
     triangulate,
     triangulate_incremental,
     triangulate_observations,
@@ -78,13 +77,6 @@ def test_incremental_equals_standard_dlt_when_all_stamps_are_equal(rig):
     x = np.moveaxis(project(rig, X), 0, 1) + rng.normal(0, 2.0, (10, len(rig), 2))
     stamps = np.full((10, len(rig)), 7.5)
     np.testing.assert_allclose(triangulate_incremental(rig, x, stamps, 7.5, 10.0), triangulate(rig, x), atol=1e-9)
-
-
-def test_time_weights_by_hand():
-    # Eq. (11): w_i = e^(-λt (t - t_i)) / ||c_i||.
-    rows = np.array([[[3.0, 4.0, 0.0, 0.0], [0.0, 0.0, 0.0, 2.0]]])  # one view, two rows of norms 5 and 2
-    w = time_weights(rows, np.array([0.8]), 1.0, 5.0)
-    np.testing.assert_allclose(w, [[np.exp(-1.0) / 5.0, np.exp(-1.0) / 2.0]])
 
 
 def test_incremental_weights_match_an_independent_weighted_svd(rig):
