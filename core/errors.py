@@ -1,9 +1,11 @@
 """The project's errors: one base class that the command line turns into a one-line message and exit 2.
 
 Each error names the file, key or value at fault and what would be valid. The readers of a file turn the
-ValueError (or TypeError) of a check below them into one of these naming the file, at the file's boundary
-(`sim.config.from_dict`, `crossview.formats.datasets.image_size` and `load_cameras`); a ValueError that
-reaches the command line unwrapped is a bug, and shows its traceback.
+ValueError (or TypeError) of a check below them into one of these naming the file, once, at the file's
+boundary: `sim.config.from_dict` (a dataclass's own check in `__post_init__`, or a key missing), and in
+`crossview.formats.datasets` `image_size` and `load_cameras` (the calibration's checks in `core.calibration`)
+and `convert` (a scene.json box, after `read_scene` checked the types). A ValueError that reaches the command
+line unwrapped is a bug, and shows its traceback.
 """
 
 

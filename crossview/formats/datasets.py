@@ -361,7 +361,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
                                  seed=int(scene.get("seed", 0)),
                                  duration_s=float(scene.get("duration_s", end_s)), skeleton_name=skeleton.name)
         boxes = [box_from_json(b) for b in scene.get("boxes", [])]
-    except (TypeError, ValueError, KeyError, AttributeError) as exc:
+    except (TypeError, ValueError, KeyError) as exc:  # (`read_scene` checked the types: a box's key or value)
         raise DatasetError(f"{dataset_dir / SCENE_FILE}: malformed ({exc}); expected scenario_name, seed, "
                            "duration_s and boxes as a recording's header holds them") from None
     J = skeleton.num_joints
