@@ -537,14 +537,11 @@ _CELL_FOLDER = "crossview-cell-"
 
 
 def _remove_dead_cell_folders() -> None:
-    """Removes the cell folders of processes that no longer exist (a sweep killed with SIGKILL, whose workers
-    could remove nothing); a live process's are left alone."""
-    import shutil
+    """Removes the cell folders of processes that no longer exist (a sweep killed with SIGKILL, or the workers a
+    signal to the sweep terminated: neither could remove its own); a live process's are left alone."""
+    from crossview.parallel.pool import remove_dead_folders
 
-    for folder in Path(tempfile.gettempdir()).glob(f"{_CELL_FOLDER}*-*"):
-        pid = folder.name[len(_CELL_FOLDER):].partition("-")[0]
-        if pid.isdigit() and not outputs.process_alive(int(pid)):
-            shutil.rmtree(folder, ignore_errors=True)
+    remove_dead_folders(_CELL_FOLDER)
 
 
 def _crashed(cell: Cell, error: BaseException) -> dict:
@@ -755,15 +752,19 @@ def run_sweep(spec: SweepSpec, out: Path, *, executor: Executor = Executor.POOL,
 
             runner = parallel.tasks(run_cell, pending, executor=executor, workers=workers, setup=_SETUP,
                                     started=started, cancel_left=not disconnect)
-            with runner if pending else contextlib.nullcontext(iter(())) as outcomes:
-                for cell, outcome, error in outcomes:
-                    if error is not None:
-                        outcome = _crashed(cell, error)
-                    stored[cell.key] = _record(out, cell, outcome)
-                    if outcome["status"] != "ok":
-                        log.warning("cell %s failed: %s", cell.label, outcome["status"])
-                    bar.set_postfix_str(cell.label)
-                    bar.update()
+            try:
+                with runner if pending else contextlib.nullcontext(iter(())) as outcomes:
+                    for cell, outcome, error in outcomes:
+                        if error is not None:
+                            outcome = _crashed(cell, error)
+                        stored[cell.key] = _record(out, cell, outcome)
+                        if outcome["status"] != "ok":
+                            log.warning("cell %s failed: %s", cell.label, outcome["status"])
+                        bar.set_postfix_str(cell.label)
+                        bar.update()
+            finally:
+                if executor is Executor.POOL and pending:  # (the pool's workers have ended, ended by a signal too)
+                    _remove_dead_cell_folders()
     rows = [stored[c.key] for c in cells]
     write_results(out, wanted, rows)
     sweep_report.write_report(out, wanted, rows)

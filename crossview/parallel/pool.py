@@ -9,17 +9,65 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import multiprocessing.util
 import os
+import shutil
 import signal
+import tempfile
 import threading
 from collections.abc import Iterator
 from concurrent.futures import ProcessPoolExecutor, as_completed
+from pathlib import Path
 
 from core import processes
+from crossview import outputs
 from crossview.parallel.workers import Actors, Setup, WorkerLost, run_task, warm
+
+POOL_FOLDER = "crossview-pool-"
+"""The command's folder in the system's temporary folder, `crossview-pool-PID-XXXXXXXX`, that holds
+multiprocessing's own temporary folder (`pymp-*`, the fork server's socket): named after the command, so that
+after a kill -9 the next pool can prove it dead and remove it (`_own_temporary_folder`)."""
+
+
+def remove_dead_folders(prefix: str) -> None:
+    """Removes the folders `PREFIX` + `PID-*` in the system's temporary folder whose process no longer exists (a
+    command killed with SIGKILL, which could remove nothing); a live process's are left alone."""
+    for folder in Path(tempfile.gettempdir()).glob(f"{prefix}*-*"):
+        pid = folder.name[len(prefix):].partition("-")[0]
+        if pid.isdigit() and not outputs.process_alive(int(pid)):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+_SOCKET_PATH_MAX = 108  # bytes of a Unix socket's path, its final NUL included (Linux's sun_path)
+_own_folder: list[str] = []  # this process's POOL_FOLDER, once made
+
+
+def _own_temporary_folder() -> None:
+    """Before this process's first pool: removes the pool folders of dead commands, and makes multiprocessing's
+    temporary folder (made once per process, removed by multiprocessing when the process exits normally) inside
+    this process's own POOL_FOLDER, removed at exit too. A process whose multiprocessing folder already exists
+    keeps it where it is."""
+    if _own_folder:
+        return
+    remove_dead_folders(POOL_FOLDER)
+    folder = tempfile.mkdtemp(prefix=f"{POOL_FOLDER}{os.getpid()}-")
+    _own_folder.append(folder)
+    if len(os.fsencode(folder)) + len("/pymp-12345678/listener-12345678") >= _SOCKET_PATH_MAX:
+        os.rmdir(folder)  # (a long TMPDIR: the fork server's socket would not fit below it; pymp-* as ever)
+        return
+    # (at exit after multiprocessing's own folder, whose finalizer has priority -100)
+    multiprocessing.util.Finalize(None, shutil.rmtree, args=(folder,), kwargs={"ignore_errors": True},
+                                  exitpriority=-200)
+    previous = tempfile.tempdir
+    tempfile.tempdir = folder
+    try:
+        multiprocessing.util.get_temp_dir()
+    finally:
+        tempfile.tempdir = previous
 
 
 def _context(setup: Setup):
+    _own_temporary_folder()
     context = multiprocessing.get_context("forkserver")
     context.set_forkserver_preload(["crossview.parallel.pool", *setup.preload])
     return context
@@ -48,8 +96,11 @@ def tasks(fn, items: list, workers: int, setup: Setup) -> Iterator[Iterator[tupl
     finally:
         if not finished:
             pool.shutdown(wait=False, cancel_futures=True)
-            for process in multiprocessing.active_children():  # the pool's workers, still running a task
+            running = multiprocessing.active_children()  # the pool's workers, still running a task
+            for process in running:
                 process.terminate()
+            for process in running:  # (gone before the caller goes on: it may remove what they left)
+                process.join(processes.STOP_WAIT_S)
         pool.shutdown(wait=True)  # (the workers gone, the pool's own thread and queues end and are released)
 
 

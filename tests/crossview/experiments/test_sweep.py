@@ -11,6 +11,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -326,16 +327,28 @@ def _command(out, duration_s: str) -> list[str]:
             "--seeds", "0,1", "--duration", duration_s, "--workers", "2", "-o", str(out)]
 
 
+@pytest.fixture
+def own_temporary_folder():
+    """A temporary folder of the test's own for a sweep (TMPDIR; a short path, as the fork server's socket
+    below it needs), and the environment that points at it."""
+    temporary = Path(tempfile.mkdtemp(prefix="cv-"))
+    yield temporary, {**os.environ, "TMPDIR": str(temporary)}
+    shutil.rmtree(temporary, ignore_errors=True)
+
+
 @pytest.mark.parametrize("ending", ["SIGTERM to the sweep", "Ctrl-C to its process group"])
-def test_an_interrupted_pool_sweep_keeps_finished_cells_and_leaks_nothing(tmp_path, ending):
+def test_an_interrupted_pool_sweep_keeps_finished_cells_and_leaks_nothing(tmp_path, ending, own_temporary_folder):
     out = tmp_path / "interrupted"
+    temporary, env = own_temporary_folder
     # A new session (so that Ctrl-C can go to the whole group, as a terminal sends it), SIGINT not ignored.
     process = subprocess.Popen(_command(out, "4"), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                               start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+                               env=env)
     try:
         while not list((out / "cells").glob("*.json")) and process.poll() is None:
             time.sleep(0.2)
         assert process.poll() is None, process.communicate()
+        assert list(temporary.glob("crossview-pool-*/pymp-*"))  # (the pool's, beside the running cells' folders)
         if ending.startswith("SIGTERM"):
             process.send_signal(signal.SIGTERM)
         else:
@@ -351,6 +364,8 @@ def test_an_interrupted_pool_sweep_keeps_finished_cells_and_leaks_nothing(tmp_pa
     assert 1 <= len(list((out / "cells").glob("*.json"))) < 4
     assert not (out / "results.json").exists()
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp") or p.name.startswith(".")]
+    # Nothing in the temporary folder: the terminated workers' cell folders and multiprocessing's `pymp-*`.
+    assert list(temporary.rglob("*")) == []
 
 
 def test_tracker_settings_of_a_cell_are_checked_together_not_one_by_one():
@@ -489,12 +504,15 @@ def _session_processes(sid: int) -> list[str]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads the processes from /proc (Linux)")
-def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_temporary_file(tmp_path):
+def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_temporary_file(tmp_path,
+                                                                                            own_temporary_folder):
     """kill -9 of the sweep stops nothing itself: its pool workers (waiting on the sweep), the fork server and
-    the resource tracker must still end on their own; the rerun finishes and leaves no temporary file."""
+    the resource tracker must still end on their own; the rerun finishes, leaves no temporary file, and removes
+    the folders the killed sweep left in the temporary folder (their process is gone: provably dead)."""
     out = tmp_path / "killed"
+    temporary, env = own_temporary_folder
     process = subprocess.Popen(_command(out, "4"), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                               start_new_session=True)
+                               start_new_session=True, env=env)
     try:
         while not list((out / "cells").glob("*.json")) and process.poll() is None:
             time.sleep(0.2)
@@ -510,9 +528,12 @@ def test_a_pool_sweep_killed_with_sigkill_leaves_no_process_and_its_rerun_no_tem
         for pid in _session_processes(process.pid):
             os.kill(int(pid), signal.SIGKILL)
     assert left == []
-    again = subprocess.run(_command(out, "4"), capture_output=True, text=True, timeout=600)
+    # What the killed sweep could not remove: its cells' folders and its pool's folder, with `pymp-*` in it.
+    assert [p.name for p in temporary.glob("crossview-pool-*/pymp-*")] and list(temporary.glob("crossview-cell-*"))
+    again = subprocess.run(_command(out, "4"), capture_output=True, text=True, timeout=600, env=env)
     assert again.returncode == 0, again.stderr
     assert not [p for p in out.rglob("*") if p.name.endswith(".tmp")]
+    assert list(temporary.rglob("*")) == []  # (the rerun removed the dead sweep's folders, and its own)
 
 
 def _environ_marks(pids) -> set[str]:
