@@ -110,3 +110,53 @@ def test_tasks_and_actors_on_ray_give_the_serial_results():
     assert {k: (v[0] and v[0][0], v[1]) for k, v in found.items()} == {k: (v[0] and v[0][0], v[1])
                                                                       for k, v in serial.items()}
     assert {v[0][1] for k, v in found.items() if k != 5} == {1}
+
+
+def test_dead_processes_folders_are_removed_and_only_those(tmp_path, monkeypatch):
+    import subprocess
+    import tempfile
+
+    from crossview.parallel.pool import POOL_FOLDER, remove_dead_folders
+
+    ended = subprocess.Popen(["true"])
+    ended.wait()  # (a pid whose process is gone)
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    for name in (f"{POOL_FOLDER}{ended.pid}-abc/pymp-x", f"{POOL_FOLDER}{os.getpid()}-abc/pymp-y",
+                 f"{POOL_FOLDER}notapid-abc", f"crossview-cell-{ended.pid}-abc"):
+        (tmp_path / name).mkdir(parents=True)
+    remove_dead_folders(POOL_FOLDER)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [f"{POOL_FOLDER}{os.getpid()}-abc", f"{POOL_FOLDER}notapid-abc", f"crossview-cell-{ended.pid}-abc"])
+
+
+_POOL_IN_A_LONG_TMPDIR = """
+from crossview import parallel
+from crossview.parallel import Executor
+if __name__ == "__main__":
+    with parallel.tasks(abs, [-1, -2], executor=Executor.POOL, workers=1) as outcomes:
+        print(sorted(r for _, r, _ in outcomes))
+"""
+
+
+# (60: room for pymp-* and its socket, not inside crossview-pool-*)
+@pytest.mark.parametrize("length", [20, 60], ids=["short", "long"])
+def test_a_pool_runs_and_leaves_nothing_whatever_the_length_of_tmpdir(tmp_path, length):
+    """multiprocessing's folder (the fork server's socket) goes inside the command's own `crossview-pool-PID-*`
+    unless the socket's path would then pass the 107 bytes a Unix socket allows: the pool runs either way."""
+    import subprocess
+    import sys
+    import tempfile
+
+    root = tempfile.mkdtemp(prefix="cv-")
+    try:
+        temporary = os.path.join(root, "t" * (length - len(root) - 1))
+        os.mkdir(temporary)
+        env = {**os.environ, "TMPDIR": temporary}
+        done = subprocess.run([sys.executable, "-c", _POOL_IN_A_LONG_TMPDIR], capture_output=True, text=True,
+                              env=env, timeout=120)
+        assert (done.returncode, done.stdout.strip()) == (0, "[1, 2]"), done.stderr
+        assert os.listdir(temporary) == []
+    finally:
+        import shutil
+
+        shutil.rmtree(root, ignore_errors=True)
