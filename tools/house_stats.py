@@ -144,7 +144,7 @@ def test_only_functions(root: Path, trees: dict[str, ast.AST]) -> list[tuple[int
     changed = True
     while changed:
         changed = False
-        for rel, node in definitions:
+        for _, node in definitions:
             if node.name in product and id(node) not in used_bodies:
                 used_bodies.add(id(node))
                 product |= used_names(node, {id(n) for _, n in definitions if n is not node})
