@@ -177,15 +177,18 @@ def _read_frames(dataset_dir: Path, source: str) -> list[_FrameItem]:
     return out
 
 
-def skeleton_of(frames: list[Frame]):
-    """The skeleton the frames' joint count implies (14: CAMPUS14, 17: COCO17)."""
+def skeleton_of(frames: list[Frame], source: Path | None = None):
+    """The skeleton the frames' joint count implies (14: CAMPUS14, 17: COCO17); `source`: the file the frames
+    were read from, named in the error."""
     for frame in frames:
         if frame.num_detections:
             J = frame.keypoints_px.shape[1]
             for skeleton in (COCO17, CAMPUS14):
                 if skeleton.num_joints == J:
                     return skeleton
-            raise DatasetError(f"frames have {J} joints: neither COCO-17 nor the 14 Campus joints")
+            where = "" if source is None else f"{source}: "
+            raise DatasetError(f"{where}key 'points_2d' of camera {frame.camera!r} at {frame.stamp_s} s holds {J:,} "
+                               "joints per pose: expected 17 (COCO-17) or 14 (the Campus joints)")
     return COCO17
 
 
@@ -334,7 +337,7 @@ def convert(dataset_dir, out_mcap, source: str = "auto", fps: float | None = Non
             raise DatasetError(f"{source_path}: camera {item.frame.camera!r} is not in "
                                f"calibration.json ({', '.join(sorted(known))})")
     truth_2d = _matching_annotation_2d(dataset_dir, source_path, frames)
-    skeleton = skeleton_of([item.frame for item in frames])
+    skeleton = skeleton_of([item.frame for item in frames], source_path)
     truth = []
     if (dataset_dir / "annotation_3d.json").is_file():
         try:

@@ -270,11 +270,22 @@ DATASET_CASES = [
     ("missing-calibration", "calibration.json", None, "calibration.json: file not found"),
     ("too-many-cameras", "calibration.json", lambda d: {"cameras": {f"c{i}": _cam0(d) for i in range(10_001)}},
      "key 'cameras' holds 10,001 cameras, more than the 10,000 one recording may hold"),  # (was a struct.error)
+    ("huge-joints-2d", "annotation_2d.json", lambda d: _one_pose_of_10_000_joints(d),
+     "key 'points_2d' of camera 'Camera0' at 13.28 s holds 10,000 joints per pose"),  # (named neither file nor key)
+    ("huge-joints-3d", "annotation_3d.json", lambda d: next(e for e in d if e["poses"])["poses"][0].update(
+        points_3d=[[1.0, 1.0, 1.0]] * 10_000), "points_3d must be 14x3 for each pose; got (10000, 3)"),
     ("infinite-pixel", "annotation_2d.json", lambda d: _with_1e400(d, "points_2d"),
      "pose 0: points_2d holds inf; expected pixels finite, within 1e6"),
     ("infinite-score", "annotation_2d.json", lambda d: _with_1e400(d, "scores"),
      "pose 0: scores holds inf; expected scores finite"),
 ]
+
+
+def _one_pose_of_10_000_joints(d):
+    """The 2D file with one frame left, holding one pose of 10,000 joints."""
+    key, frame = next((k, f) for k, f in d["frames"].items() if f["poses"])
+    frame["poses"] = [{**frame["poses"][0], "points_2d": [[1.0, 1.0]] * 10_000, "scores": [1.0] * 10_000}]
+    return {**d, "frames": {key: frame}}
 
 
 def _with_1e400(d, key):

@@ -85,7 +85,7 @@ def test_fuzz_any_dataset_folder_reads_valid_or_is_refused_naming_the_file(files
         try:
             cameras = datasets.load_cameras(folder)
             frames = datasets.load_frames(folder)
-            skeleton = datasets.skeleton_of(frames)
+            skeleton = datasets.skeleton_of(frames, folder / "annotation_2d.json")
             truth = datasets.load_truth_3d(folder)
         except DatasetError as e:
             assert str(e).startswith(str(folder)) and "\n" not in str(e), e
