@@ -74,7 +74,7 @@ class TrackerConfig:
         alpha_3d_m: point-to-ray distance threshold α3D, metres (eq. 4).
         lambda_a_per_s: time penalty rate λa of the affinity, 1/s (eq. 2, 4).
         alpha_2d_floor_px: least 2D distance threshold of eq. (2), pixels; 0 is the paper (see
-            tracker.affinity.affinity_2d).
+            tracker.affinity.affinity_matrix).
         alpha_2d_floor_px_per_s: least speed eq. (2)'s threshold allows, pixels per second; 0 is the paper.
             Beyond the paper: α2D per frame bounds a joint's move between two frames however long they are
             apart, so at a low frame rate walking people fail it (store_layout1 at 2.5 fps, the `store` preset

@@ -3,14 +3,12 @@
 import numpy as np
 import pytest
 
+from tests.reference.affinity import affinity_2d, affinity_3d, combine
 from tests.reference.plain import plain_python
 from tests.tracker.synthetic import look_at_camera
 from tracker.affinity import (
     AffinityParams,
-    affinity_2d,
-    affinity_3d,
     affinity_matrix,
-    combine,
     epipolar_affinity,
     epipolar_affinity_between,
     epipolar_affinity_matrix,
