@@ -366,10 +366,6 @@ class Coverage:
         """The walkable floor's area, m²."""
         return len(self.cells_xy) * self.cell_m**2
 
-    def two_view_share(self) -> float:
-        """The share of the walkable floor seen by two cameras or more at the worse of the two heights."""
-        return min(h.share(2) for h in self.heights)
-
     def warning(self) -> str | None:
         """One line when less than `WARN_TWO_VIEW_SHARE` of the walkable floor is seen by two cameras or more;
         None otherwise."""
