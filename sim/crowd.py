@@ -78,6 +78,10 @@ PACE_HOLD_S = (2.0, 6.0)
 # Walkers stop on the way only with at least this much path left, and turn this far (radians) to look.
 PAUSE_CLEAR_M = 1.5
 PAUSE_TURN_RAD = (0.4, 1.3)
+# A group (`CrowdConfig.group_size`): the others stand between GROUP_GAP_M and GROUP_RADIUS_M from the goal of
+# the group's first person, as friends or a family stand around the shelf one of them looks at.
+GROUP_GAP_M = 0.6
+GROUP_RADIUS_M = 1.3
 # Bounds of the [crowd] section: people at once, and any duration of a visit or an activity (a day).
 MAX_PEOPLE = 500
 _MAX_TIME_S = 86400.0
@@ -115,6 +119,9 @@ class CrowdConfig:
             talking with their hands, min <= max.
         hand_motion_scale: scale of the sizes of those hand movements (1: standing people's wrists move a
             median 0.14 m/s over one second, as real actors' at a shelf; 0: hands still while they hold a pose).
+        group_size: people who go about together (the people of consecutive body slots): the first picks where
+            to go and the others set off with them at once at their pace, to places 0.6 to 1.3 m around that goal,
+            and stand there until the first moves on; each leaves on their own time (1: everybody alone).
     """
 
     people: int = bounded(4, 0, MAX_PEOPLE, unit="people")
@@ -135,6 +142,7 @@ class CrowdConfig:
     look_rate_hz: float = bounded(0.2, 0.0, 10.0, unit="Hz")
     handling_hz: tuple[float, float] = bounded((0.6, 1.4), 0.0, 5.0, low_open=True, unit="Hz")
     hand_motion_scale: float = bounded(1.0, 0.0, 3.0, unit="times")
+    group_size: int = bounded(1, 1, 20, unit="people")
 
     def __post_init__(self):
         check_ranges(self)
@@ -380,7 +388,11 @@ class Crowd:
                 goal, kind = store.exit.inside, Activity.WALK
         else:
             goal, kind = None, Activity.STAND
-            if self._spots and rng.random() < self.config.browse_share:
+            leader = self._leader(s)
+            if leader is not None:  # walking with the group's first person, at their pace
+                goal = self._beside(s, self.agents[leader].goal)
+                self.speed_pref[s] = self.speed_pref[leader]
+            elif self._spots and rng.random() < self.config.browse_share:
                 for _ in range(8):
                     p, h, shelf = self._spots[int(rng.integers(len(self._spots)))]
                     if not self._taken(p, s):
@@ -414,6 +426,33 @@ class Crowd:
         agent.pace_until = self.time_s
         rate = self.config.pause_rate_hz
         agent.next_pause = self.time_s + rng.exponential(1 / rate) if rate > 0 else math.inf
+        if self.config.group_size > 1 and not agent.leaving and s % self.config.group_size == 0:
+            # The group's first person moves on: the others set off with them.
+            for f in range(s + 1, min(s + self.config.group_size, self.slots)):
+                if self._leader(f) == s:
+                    self._choose_goal(f)
+
+    def _leader(self, s: int) -> int | None:
+        """The slot of the first person of s's group whom s follows now (None: s goes alone): someone present
+        with a goal who is not leaving, while s is through the door and not leaving either."""
+        g = self.config.group_size
+        first = s - s % g
+        if g == 1 or first == s or self.person_id[first] < 0:
+            return None
+        lead, agent = self.agents[first], self.agents[s]
+        if lead.leaving or lead.goal is None or agent.leaving or agent.in_door:
+            return None
+        return first
+
+    def _beside(self, s: int, goal: np.ndarray) -> np.ndarray:
+        """A free place to stand for s between GROUP_GAP_M and GROUP_RADIUS_M from goal (goal's nearest free place
+        when none is)."""
+        d = np.linalg.norm(self._free_cells - goal, axis=1)
+        near = np.flatnonzero((d >= GROUP_GAP_M) & (d <= GROUP_RADIUS_M))
+        for k in self.rng.permutation(near)[:20].tolist():
+            if not self._taken(self._free_cells[k], s):
+                return self._free_cells[k].copy()
+        return self._free_cells[int(np.argmin(d))].copy()
 
     def _start_activity(self, s: int, kind: Activity):
         agent = self.agents[s]

@@ -24,6 +24,7 @@ from tests.reference import store as store_reference
     (dict(handling_hz=(0.0, 1.0)), r"handling_hz\[0\]"),
     (dict(look_rate_hz=float("nan")), "look_rate_hz"),
     (dict(hand_motion_scale=-1.0), "hand_motion_scale"),
+    (dict(group_size=0), "group_size"),
 ])
 def test_bad_crowd_settings_name_the_field(kwargs, key):
     with pytest.raises(ValueError, match=key):
