@@ -373,6 +373,7 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
     from crossview.scoring import TruthTimeline
     from crossview.scoring import score as score_outputs
     from crossview.scoring.orchestrate import SCORE_WORKER, SCORED_HERE, camera_2d_worker
+    from crossview.scoring.switches import zones_of
 
     rec = recording.open_recording(rec_path)
     truth = list(rec.truth())
@@ -404,7 +405,8 @@ def score(rec_path: Path, tracks_path: Path, *, progress: bool = True, worker_pr
         if beside is not None:
             beside.start()
         report = score_outputs(truth, outputs, frames, cameras, scored_area=watched_floor(rec.boxes),
-                               skeleton=rec.skeleton, projected=here, truth_head=truth_head(rec), from_s=from_s)
+                               skeleton=rec.skeleton, projected=here, truth_head=truth_head(rec), from_s=from_s,
+                               zones=zones_of(summary.get("zones") or []))
         if beside is not None:
             there = beside.receive()[1]
             report.camera_2d = {c.name: report.camera_2d[c.name] if c.name in here else there[c.name]

@@ -234,7 +234,8 @@ def track_zoned(rec_path: Path, out: Path, *, zones_text: str, overlap_m: float,
             bar.close()
             writer.finish({"tracker_s": sum(spent), "updates": updates, "num_cameras": len(cameras),
                            pipeline.ASSIGNMENTS_KEY: resolved.builtin,
-                           "zones": [{"cell": list(z.cell), "cameras": len(z.cameras)} for z in zones],
+                           "zones": [{"cell": list(z.cell), "region": list(z.region), "cameras": len(z.cameras)}
+                                     for z in zones],
                            "handovers": len(merger.handovers)})
     return ZonedResult(out, updates, len(groups), time.perf_counter() - start, tuple(spent),
                        tuple(len(z.cameras) for z in zones), len(merger.handovers), len(cameras))

@@ -257,6 +257,7 @@ def score(
     from_s: float = 0.0,
     timeline_bin_s: float = TIMELINE_BIN_S,
     floor_cell_m: float = FLOOR_CELL_M,
+    zones: Sequence | None = None,
 ) -> ScoreReport:
     """Scores a tracker run against the ground truth (see the module docstring and docs/metrics.md).
 
@@ -281,6 +282,9 @@ def score(
         from_s: warm-up left out, seconds after the first truth sample (see the module docstring).
         timeline_bin_s: width of the time line's bins, seconds.
         floor_cell_m: side of the floor grid's cells, metres.
+        zones: the zones of a zoned run (`tracker.zones.Zone`, `crossview.scoring.switches.zones_of` reads them
+            from a tracks file's summary): the report then lists every switch by place and cause
+            (`switches_by_place`).
 
     Returns:
         the report; metrics that cannot be measured are None.
@@ -385,6 +389,12 @@ def score(
         c = compared[switch.update]
         x, y = c.truth_roots[list(c.truth_ids).index(switch.person_id), :2]
         report.id_switch_events.append((c.at_s, switch.person_id, switch.target_id, float(x), float(y)))
+    if zones:
+        from crossview.scoring import switches
+
+        report.switches_by_place = switches.place(
+            id_acc.events(), [c.at_s for c in compared], [(c.truth_ids, c.truth_roots) for c in compared],
+            [(c.target_ids, c.target_roots) for c in compared], zones)
     report.from_s = float(from_s)
     report.timeline, report.floor_grid = _over_time_and_place(
         compared, id_acc.events(), report.id_switch_events, t_start + from_s, timeline_bin_s, floor_cell_m,

@@ -61,6 +61,9 @@ class ScoreReport:
     # Each switch: (time s, person id, the target it switched to, person's root x, y in metres) at the compared
     # instant (the tracker output's stamp).
     id_switch_events: list[tuple[float, int, int, float, float]] = field(default_factory=list)
+    # A zoned tracks file's switches by place and cause (`crossview.scoring.switches.PlacedSwitch`); None for a
+    # run that is not zoned.
+    switches_by_place: list | None = None
     # When and where (`crossview.scoring.score`, docs/metrics.md "Over time and place"): per person the time
     # bins' matched and missed ticks, PCP share and switches; the floor grid's counts.
     timeline: dict = field(default_factory=dict)
@@ -150,6 +153,8 @@ class ScoreReport:
             "truth_head": self.truth_head,
             "id_switch_events": [{"t_s": t, "person_id": p, "target_id": h, "x_m": x, "y_m": y}
                                  for t, p, h, x, y in self.id_switch_events],
+            "switches_by_place": (None if self.switches_by_place is None
+                                  else [sw.to_json() for sw in self.switches_by_place]),
             "timeline": self.timeline,
             "floor_grid": self.floor_grid,
         }
@@ -205,6 +210,10 @@ class ScoreReport:
             header = f"{'Camera':<12}{'Assoc.':>9}{'MOTA':>9}{'IDF1':>9}{'FP':>7}{'FN':>7}{'IDS':>6}"
             lines += [header, "-" * len(header)]
             lines += [f"{c:<12}{a:>9}{m:>9}{i:>9}{fp:>7}{fn:>7}{ids:>6}" for c, a, m, i, fp, fn, ids in cameras]
+        if self.switches_by_place is not None:
+            from crossview.scoring.switches import summary_lines
+
+            lines += ["", *summary_lines(self.switches_by_place)]
         return "\n".join(lines)
 
     def markdown_blocks(self) -> list:

@@ -59,6 +59,10 @@ def test_a_zoned_tracks_file_is_ordinary_and_scores_near_the_single_tracker(zone
     _, single = pipeline.score(store_recording, store_tracks, progress=False)
     assert zoned_score["pcp"] >= single["pcp"] - 0.02
     assert zoned_score["idf1"] >= single["idf1"] - 0.1
+    # Every switch of the zoned run listed by place and cause (tests/crossview/scoring/test_switches.py); none for
+    # the single tracker.
+    assert len(zoned_score["switches_by_place"]) == zoned_score["id_switches"]
+    assert single.get("switches_by_place") is None
 
 
 def test_zoned_tracks_on_ray_are_the_pool_s(zoned_serial, store_recording, tmp_path):
