@@ -10,7 +10,12 @@ ordinary output per camera frame:
   global id of the nearest target another zone reports at that moment within the gate (mean 3D joint
   distance, the tracker's own gate `alpha_3d_m` of eq. 4 by default) whose global id no live local id of this
   zone holds yet: that is the hand-over. Otherwise it starts a new global id, its own namespaced id
-  (`core.tracks.namespaced`), so ids never collide and never depend on worker count or timing;
+  (`core.tracks.namespaced`), so ids never collide and never depend on worker count or timing. That own id is
+  provisional until the zone first reports the target: till then the hand-over is tried again at each of the
+  zone's outputs, so a target born at the far edge of the overlap, whose first poses (from the few cameras
+  that see it there) lie beyond the gate, is still handed over once its pose settles, before anyone saw its
+  provisional id (measured on `border`: every switch of a zoned run was such a missed hand-over,
+  docs/zones.md);
 - reporting: each zone reports the targets whose body root (the hips' midpoint) lies in its own cell
   (`tracker.zones.Zone.owns`; the cells tile the floor, so one place has one reporter), and an output holds what
   every zone reports while its latest output stands; a global id two zones report at once (a person on the
@@ -69,6 +74,7 @@ class Merger:
         self.global_of: dict[tuple[int, int], int] = {}  # (zone, local id) -> global id, for the local id's life
         self.latest: dict[int, tuple[float, np.ndarray, np.ndarray, np.ndarray]] = {}  # zone -> stamp, arrays
         self.handovers: list[tuple[float, int, int, int]] = []  # (stamp, from zone, to zone, global id)
+        self.provisional: set[tuple[int, int]] = set()  # (zone, local id) of own ids not reported yet
 
     def _roots(self, poses: np.ndarray) -> np.ndarray:
         """(N, 2) body roots: the hips' midpoint on the floor (one hip where the other is unknown; NaN for none)."""
@@ -100,14 +106,15 @@ class Merger:
         """Global ids of zone `zone`'s local ids; a new local id is handed over or starts its own."""
         out = np.empty(len(ids), dtype=np.int64)
         others = None
-        known = [self.global_of.get((zone, local)) for local in ids.tolist()]
+        known = [None if (zone, local) in self.provisional else self.global_of.get((zone, local))
+                 for local in ids.tolist()]
         if None not in known:
             out[:] = known
             return out
         held = {g for g in known if g is not None}
         for n, local in enumerate(ids.tolist()):
             key = (zone, local)
-            if key not in self.global_of:
+            if known[n] is None:
                 if others is None:  # the other zones' reports at this moment: (zone, global ids, poses)
                     others = []
                     for z, (o_global, o_poses, _) in self._standing(t).items():
@@ -126,8 +133,10 @@ class Merger:
                 if best is not None:
                     self.global_of[key] = best[2]
                     self.handovers.append((t, best[1], zone, best[2]))
-                else:
+                    self.provisional.discard(key)
+                elif key not in self.global_of:
                     self.global_of[key] = tracks.namespaced(zone, local)
+                    self.provisional.add(key)
                 held.add(self.global_of[key])
             out[n] = self.global_of[key]
         return out
@@ -143,6 +152,8 @@ class Merger:
             ids, poses, states = _arrays(outputs[z], J)
             global_ids = self._identify(z, ids, poses, t)
             owned = self.zones[z].owns(self._roots(poses)) if len(ids) else np.zeros(0, bool)
+            if self.provisional:  # reported now: the id is seen, fixed for the local id's life
+                self.provisional.difference_update((z, local) for local in ids[owned].tolist())
             self.latest[z] = (t, global_ids[owned], poses[owned], states[owned])
             local = np.asarray(outputs[z].detection_target_ids, dtype=np.int64)
             if len(local) == num_detections and len(ids):

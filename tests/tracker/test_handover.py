@@ -68,3 +68,21 @@ def test_an_output_older_than_the_age_limit_is_no_longer_reported():
     merger.add({0: _output(0.0, {0: (2.0, 2.0)}, 0.0)}, 0)
     assert list(merger.add({1: _output(1.0, {}, 0.0)}, 0).targets.ids) == [tracks.namespaced(0, 0)]
     assert list(merger.add({1: _output(1.01, {}, 0.0)}, 0).targets.ids) == []
+
+
+def test_a_target_born_beyond_the_gate_is_handed_over_once_its_pose_settles():
+    """Zone 1 confirms the walker at the far edge of the overlap, its first poses 0.5 m off along each axis (the
+    few cameras that see that edge), beyond the 0.25 m gate; they settle before the walker reaches the border.
+    Zone 1's id is provisional until it reports the walker, so the walker keeps zone 0's id: no switch there."""
+    merger = Merger(ZONES, COCO17, gate_m=0.25)
+    reported = []
+    for k in range(101):
+        t, x = k / 10, 1.0 + 0.08 * k
+        outputs = {0: _output(t, {3: (x, 2.0)} if x <= 6.0 else {}, 0.0)}
+        if x >= 4.3:
+            outputs[1] = _output(t, {0: (x, 2.0)}, -0.5 if x < 4.7 else 0.05)
+        merged = merger.add(outputs, 0)
+        reported.append(merged.targets.ids.tolist())
+    assert all(ids == [tracks.namespaced(0, 3)] for ids in reported)
+    assert [h[1:] for h in merger.handovers] == [(0, 1, tracks.namespaced(0, 3))]
+    assert merger.handovers[0][0] >= 0.45  # (handed over once the pose settled, at x >= 4.7 m)
