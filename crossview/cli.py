@@ -304,6 +304,7 @@ def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", type=Path, help="score JSON path (default OUTPUT/NAME.score.json)")
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="score from S seconds on, "
                    "leaving out the warm-up before (default: the warm-up rule of docs/metrics.md)")
+    _zone_options(p)
     _live_options(p, "publish the recording, then the tracks,")
 
 
@@ -367,6 +368,11 @@ def _track_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", type=Path, help="recording (.mcap) made by generate or convert")
     add_output(p, "tracks file to write (.mcap)", metavar="TRACKS.mcap")
     _tracker_options(p)
+    _zone_options(p)
+
+
+def _zone_options(p):
+    """The options tracking a store as zones (`track`, `run`)."""
     p.add_argument("--zones", metavar="auto|N", help="track the store as N zones, each by its own tracker, "
                    "identities handed over at their borders (auto: one zone per 60 cameras; docs/zones.md)")
     p.add_argument("--overlap", type=_positive_float, default=2.0, metavar="M", help="with --zones: how far "
@@ -751,14 +757,27 @@ def _cmd_run(args) -> None:
     pipeline.check_writable(tracks_path, inputs=(rec_path,))
     pipeline.check_writable(json_path, inputs=(rec_path, tracks_path))
     pipeline.tracker_config(args.preset, args.config)  # (a bad tracker config is found before generating)
+    _check_zone_options(args)
+    if args.zones is not None:  # (zones the rig cannot hold are found before generating)
+        from crossview import zoned
+        from sim.cameras import build_rig
+        from sim.rng import child_rng
+        from sim.store import StoreGeometry
+
+        zoned.cut(build_rig(scenario, child_rng(scenario.seed, "cameras")),
+                  StoreGeometry(scenario.store, name=scenario.where).boxes, args.zones, args.overlap)
     progress = not args.no_progress
     with _live(args) as stream:
         gen = pipeline.generate(scenario, rec_path, progress=progress, live=stream and stream())
         print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
               f"({_speed(gen)})")
-        trk = pipeline.track(rec_path, tracks_path, method=args.method, preset=args.preset, config_path=args.config,
-                             progress=progress, live=stream and stream())
-    print(f"tracked   {trk.path}: {_updates_and_speed(trk, 'at {fps:.1f} FPS (all cameras once)')}")
+        if args.zones is not None:
+            args.recording, args.output = rec_path, tracks_path
+            _track_zoned(args, prefix="tracked   ")
+        else:
+            trk = pipeline.track(rec_path, tracks_path, method=args.method, preset=args.preset,
+                                 config_path=args.config, progress=progress, live=stream and stream())
+            print(f"tracked   {trk.path}: {_updates_and_speed(trk, 'at {fps:.1f} FPS (all cameras once)')}")
     from_s = scoring.default_from_s(scenario.duration_s) if args.from_s is None else args.from_s
     report, result = pipeline.score(rec_path, tracks_path, progress=progress, from_s=from_s)
     pipeline.write_json(result, json_path, inputs=(rec_path, tracks_path))
@@ -913,9 +932,7 @@ def _speed(gen) -> str:
 def _cmd_track(args) -> None:
     from crossview import pipeline
 
-    if args.zones is None and (args.workers is not None or args.ray is not None):
-        raise CrossviewError(f"{'--workers' if args.workers is not None else '--ray'}: only with --zones (one "
-                             "tracker runs in this process)")
+    _check_zone_options(args)
     if args.zones is not None:
         _track_zoned(args)
         return
@@ -935,7 +952,18 @@ def _updates_and_speed(trk, template: str) -> str:
         fps=trk.tracker_fps, frames=trk.camera_frames_per_s)
 
 
-def _track_zoned(args) -> None:
+def _check_zone_options(args) -> None:
+    """--workers and --ray only with --zones; `run --zones` not with --live (the zones' merged tracks are
+    written, not published)."""
+    if args.zones is None and (args.workers is not None or args.ray is not None):
+        raise CrossviewError(f"{'--workers' if args.workers is not None else '--ray'}: only with --zones (one "
+                             "tracker runs in this process)")
+    if args.zones is not None and getattr(args, "live", False):
+        raise CrossviewError("--live: not with --zones (the zones' merged tracks are written to the tracks file, "
+                             "not published; leave out one of them)")
+
+
+def _track_zoned(args, prefix: str = "") -> None:
     from core import processes
     from crossview import zoned
     from crossview.parallel import Executor, cluster
@@ -950,7 +978,7 @@ def _track_zoned(args) -> None:
                                    executor=executor, workers=workers, method=args.method, preset=args.preset,
                                    config_path=args.config, progress=not args.no_progress)
     summed = sum(result.zone_tracker_s)
-    print(f"{result.path}: {result.updates} camera frames, {len(result.zone_cameras)} zones (cameras "
+    print(f"{prefix}{result.path}: {result.updates} camera frames, {len(result.zone_cameras)} zones (cameras "
           f"{', '.join(map(str, result.zone_cameras))}) on {result.workers} worker(s), {result.handovers} hand-overs; "
           f"{result.camera_frames_per_s:.0f} camera frames/s wall-clock, {result.tracker_fps_wall:.1f} FPS (all "
           f"cameras once); zones' update time {summed:.1f} s in all ({result.summed_frames_per_s:.0f} camera "

@@ -100,6 +100,20 @@ def test_bad_zoned_tracking_is_refused_in_one_line_and_writes_nothing(options, e
     assert not out.parent.exists() or not any(out.parent.iterdir())
 
 
+@pytest.mark.parametrize(("options", "expected"), [
+    (["--zones", "6"], "--zones 6: cells of 1.6 x 2.0 m (3 x 2) are not wider than the overlap 2.0 m"),
+    (["--zones", "2", "--live"], "--live: not with --zones"),
+], ids=["run-zones-too-many", "run-zones-live"])
+def test_bad_zoned_run_is_refused_before_generating(options, expected, tmp_path, capsys):
+    """`run --zones`: a cut the rig cannot hold, or --live, is refused before anything is generated."""
+    out = tmp_path / "out"
+    assert main(["--no-progress", "run", "store_layout1", "--duration", "1", "-o", str(out), *options]) == (
+        EXIT_BAD_INPUT)
+    err = capsys.readouterr().err.strip()
+    assert expected in err and len(err.splitlines()) == 1
+    assert not out.exists() or not any(out.iterdir())
+
+
 def test_zones_prints_the_cut_and_draws_it(tmp_path, capsys):
     import cv2
 
