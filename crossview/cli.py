@@ -475,6 +475,8 @@ def _sweep_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="leave the first S seconds "
                    "of each cell out of its score (default: the warm-up rule of docs/metrics.md, min(5 s, half a "
                    "cell))")
+    p.add_argument("--zones", metavar="auto|N", help="track each cell as N zones (2 m overlap), one after another in "
+                   "the cell's worker, as `track --zones` does (docs/zones.md); default one tracker")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--workers", type=_positive_int, help="local worker processes (default: the cores; 1 runs "
                        "the cells one after another in this process)")
@@ -715,8 +717,12 @@ def _cmd_sweep(args) -> None:
         scenario=args.scenario, axes=axes, seeds=seeds,
         methods=methods,
         presets=sweep.parse_names("--preset", args.preset, PRESETS), duration_s=args.duration,
-        warm_up_s=args.from_s,
+        warm_up_s=args.from_s, zones=args.zones,
     )
+    if args.zones is not None:  # (auto or a whole number; whether the rig holds it is each cell's to say)
+        from crossview import zoned
+
+        zoned.zone_count(args.zones, 1)
     if args.ray is not None:
         executor = sweep.Executor.RAY
     else:

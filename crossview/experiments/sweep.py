@@ -82,6 +82,8 @@ class SweepSpec:
         duration_s: simulated seconds per cell; None keeps the scenario's.
         warm_up_s: seconds at the start of each cell left out of its score (`crossview.scoring.score`'s
             `from_s`); None: the default rule, `crossview.scoring.default_from_s` of the cell's duration.
+        zones: `--zones auto|N` of `crossview track`: each cell tracked as zones in its worker, one after another
+            (`crossview.zoned`, 2 m overlap); None: one tracker.
     """
 
     scenario: str
@@ -91,6 +93,7 @@ class SweepSpec:
     presets: tuple[str, ...] = ("store",)
     duration_s: float | None = None
     warm_up_s: float | None = 0.0
+    zones: str | None = None
 
 
 @dataclass(frozen=True)
@@ -119,6 +122,7 @@ class Cell:
             (`crossview.pipeline.generate`, `crossview.pipeline.score`); False where cells already run side by
             side.
         from_s: the warm-up left out of the cell's score, seconds.
+        zones: tracked as zones (`SweepSpec.zones`); None: one tracker.
     """
 
     index: int
@@ -139,6 +143,7 @@ class Cell:
     tracker_overrides: dict = field(default_factory=dict)
     method_label: str | None = None  # the method's name in the results (`--method LABEL=METHOD`); None: `method`
     from_s: float = 0.0
+    zones: str | None = None
 
     def load_scenario(self, folder: Path) -> scenario_mod.Scenario:
         """The cell's resolved scenario, loaded from a copy of its file and the files it refers to in `folder`
@@ -435,13 +440,14 @@ def plan(spec: SweepSpec, *, keep_recordings: bool = False, worker_process: bool
         # (A cell without tracker axes or a plug-in keeps the key it had before they were keyed: finished cells
         # stay found. The method as given, label included: a method without a label keeps its key.)
         identity_parts = (identity, seed, method_text, preset, version) + ((tracker,) if tracker else ()) + (
-            (sources[method_text],) if sources[method_text] else ()) + ((("from_s", from_s),) if from_s else ())
+            (sources[method_text],) if sources[method_text] else ()) + ((("from_s", from_s),) if from_s else ()) + (
+            (("zones", spec.zones),) if spec.zones is not None else ())
         cells.append(Cell(
             index=index, key=_key(*identity_parts), label=_label(values, seed, label, preset),
             values=values, seed=seed, method=method, preset=preset, scenario_name=base.name, scenario_text=text,
             files=files, overrides=resolved, version=version, error=error, keep_recording=keep_recordings,
             worker_process=worker_process, tracker_overrides=tracker,
-            method_label=label if label != method else None, from_s=from_s,
+            method_label=label if label != method else None, from_s=from_s, zones=spec.zones,
         ))
     return cells
 
@@ -508,14 +514,25 @@ def run_cell(cell: Cell) -> dict:
             rec, tracks = Path(tmp) / f"{scenario.name}.mcap", Path(tmp) / f"{scenario.name}.tracks.mcap"
             gen = pipeline.generate(scenario, rec, progress=False, worker_process=cell.worker_process)
             t0 = time.perf_counter()
-            trk = pipeline.track(rec, tracks, method=cell.method, preset=cell.preset,
-                                 overrides=cell.tracker_overrides or None, progress=False)
+            if cell.zones is None:
+                trk = pipeline.track(rec, tracks, method=cell.method, preset=cell.preset,
+                                     overrides=cell.tracker_overrides or None, progress=False)
+                tracker_fps, camera_frames_per_s = trk.tracker_fps, trk.camera_frames_per_s
+            else:  # (the zones one after another in this worker: the sweep runs its cells side by side)
+                from crossview import parallel, zoned
+                from tracker.zones import MIN_OVERLAP_M
+
+                trk = zoned.track_zoned(rec, tracks, zones_text=cell.zones, overlap_m=MIN_OVERLAP_M,
+                                        executor=parallel.Executor.SERIAL, workers=1, method=cell.method,
+                                        preset=cell.preset, overrides=cell.tracker_overrides or None,
+                                        progress=False)
+                tracker_fps, camera_frames_per_s = trk.tracker_fps_wall, trk.camera_frames_per_s
             t1 = time.perf_counter()
             _, score = pipeline.score(rec, tracks, progress=False, worker_process=cell.worker_process,
                                       from_s=cell.from_s)
             timings.update(generate_s=gen.wall_s, generate_realtime_factor=gen.realtime_factor, track_s=t1 - t0,
-                           score_s=time.perf_counter() - t1, tracker_fps=trk.tracker_fps,
-                           camera_frames_per_s=trk.camera_frames_per_s)
+                           score_s=time.perf_counter() - t1, tracker_fps=tracker_fps,
+                           camera_frames_per_s=camera_frames_per_s)
             if cell.keep_recording:
                 recording = rec.read_bytes()
         status = "ok"
@@ -585,6 +602,7 @@ def definition(spec: SweepSpec, cells: list[Cell]) -> dict:
         "presets": list(spec.presets),
         "duration_s": base.duration_s,
         "warm_up_s": spec.warm_up_s,  # (None: the default rule, `crossview.scoring.default_from_s`)
+        "zones": spec.zones,
         "version": cells[0].version if cells else None,
         "cells": len(cells),
     }

@@ -4,6 +4,7 @@ pool and on Ray; a rerun resumes; bad input is refused before any cell runs; ver
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import hashlib
 import json
 import os
@@ -240,6 +241,20 @@ def test_tracker_axes_set_the_tracker_of_each_cell_and_only_its_key():
     # Without tracker axes a cell keeps the key it had before they existed.
     plain, = sweep.plan(sweep.SweepSpec("store_layout1", duration_s=1.0))
     assert plain.tracker_overrides == {} and plain.key not in (paper.key, conventional.key)
+
+
+def test_zoned_cells_are_tracked_as_zones_and_keyed_apart():
+    """`sweep --zones 2`: the same recording, another key (a plain cell keeps its own), and the cell's tracks made
+    by the zones (its score lists the switches by place, which only a zoned tracks file has)."""
+    spec = sweep.SweepSpec("store_layout1", duration_s=0.6, warm_up_s=0.0, zones="2")
+    zoned_cell, = sweep.plan(spec)
+    plain, = sweep.plan(dataclasses.replace(spec, zones=None))
+    assert zoned_cell.zones == "2" and plain.zones is None
+    assert zoned_cell.overrides == plain.overrides and zoned_cell.key != plain.key
+    outcome = sweep.run_cell(zoned_cell)
+    assert outcome["status"] == "ok", outcome["status"]
+    assert outcome["score"]["switches_by_place"] is not None
+    assert len(outcome["score"]["switches_by_place"]) == outcome["score"]["id_switches"]
 
 
 def test_a_tracker_value_invalid_with_the_cells_preset_fails_that_cell_alone():
