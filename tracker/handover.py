@@ -6,7 +6,7 @@ zones is tracked by both. The merger reads the zones' outputs in delivery order,
 ordinary output per camera frame:
 
 - the tracks at t (`core.tracks`): each zone's latest output, while it stands (`core.tracks.stands`);
-- identity: a zone's local id maps to one global id for its life. A local id seen for the first time takes the
+- identity: a zone's local id maps to one global id (changed only as the next item says). A new local id takes the
   global id of the nearest target another zone reports at that moment within the gate (mean 3D joint
   distance, the tracker's own gate `alpha_3d_m` of eq. 4 by default) whose global id no live local id of this
   zone holds yet: that is the hand-over. Otherwise it starts a new global id, its own namespaced id
@@ -14,8 +14,12 @@ ordinary output per camera frame:
   provisional until the zone first reports the target: till then the hand-over is tried again at each of the
   zone's outputs, so a target born at the far edge of the overlap, whose first poses (from the few cameras
   that see it there) lie beyond the gate, is still handed over once its pose settles, before anyone saw its
-  provisional id (measured on `border`: every switch of a zoned run was such a missed hand-over,
-  docs/zones.md);
+  provisional id;
+- in an overlap, a zone's target follows the id under which another zone reports the same person (the nearest
+  within the gate) while this zone does not report it itself, and also while it does when the other zone's id
+  was reported first: two zones that took one person for two (each handed over from another neighbour, or one
+  that missed the gate) agree on one id, the older, instead of handing the person to and fro under two ids as
+  they stand on the border line (measured on `border` with 4 zones: docs/zones.md);
 - reporting: each zone reports the targets whose body root (the hips' midpoint) lies in its own cell
   (`tracker.zones.Zone.owns`; the cells tile the floor, so one place has one reporter), and an output holds what
   every zone reports while its latest output stands; a global id two zones report at once (a person on the
@@ -75,6 +79,7 @@ class Merger:
         self.latest: dict[int, tuple[float, np.ndarray, np.ndarray, np.ndarray]] = {}  # zone -> stamp, arrays
         self.handovers: list[tuple[float, int, int, int]] = []  # (stamp, from zone, to zone, global id)
         self.provisional: set[tuple[int, int]] = set()  # (zone, local id) of own ids not reported yet
+        self.first_reported: dict[int, float] = {}  # global id -> when a zone first reported it
 
     def _roots(self, poses: np.ndarray) -> np.ndarray:
         """(N, 2) body roots: the hips' midpoint on the floor (one hip where the other is unknown; NaN for none)."""
@@ -102,42 +107,59 @@ class Merger:
         """Zone -> what it reports (global ids, poses, joint states) at t, while its latest output stands."""
         return {z: v[1:] for z, v in sorted(self.latest.items()) if tracks.stands(v[0], t)}
 
-    def _identify(self, zone: int, ids: np.ndarray, poses: np.ndarray, t: float) -> np.ndarray:
-        """Global ids of zone `zone`'s local ids; a new local id is handed over or starts its own."""
+    def _in_overlap(self, zone: int, roots: np.ndarray) -> np.ndarray:
+        """(N,) whether body roots (N, 2) lie in another zone's region too (in an overlap of `zone`'s)."""
+        out = np.zeros(len(roots), dtype=bool)
+        x, y = roots[:, 0], roots[:, 1]
+        for other in self.zones:
+            if other.index != zone:
+                x0, y0, x1, y1 = other.region
+                out |= (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
+        return out
+
+    def _identify(self, zone: int, ids: np.ndarray, poses: np.ndarray, t: float, owned: np.ndarray,
+                  overlap: np.ndarray) -> np.ndarray:
+        """Global ids of zone `zone`'s local ids (module docstring): a new local id is handed over or starts its
+        own; one in an overlap follows the other zone's report of the same person while this zone does not report
+        it, or while its own id is provisional, or when the other zone's id was reported first."""
         out = np.empty(len(ids), dtype=np.int64)
-        others = None
-        known = [None if (zone, local) in self.provisional else self.global_of.get((zone, local))
-                 for local in ids.tolist()]
-        if None not in known:
+        known = [self.global_of.get((zone, local)) for local in ids.tolist()]
+        pending = [g is None or (zone, local) in self.provisional for g, local in zip(known, ids.tolist())]
+        if not any(pending) and not overlap.any():
             out[:] = known
             return out
+        others = []  # the other zones' reports at this moment: (zone, global ids, poses)
+        for z, (o_global, o_poses, _) in self._standing(t).items():
+            if z != zone and len(o_global):
+                others.append((z, o_global, o_poses))
         held = {g for g in known if g is not None}
         for n, local in enumerate(ids.tolist()):
-            key = (zone, local)
-            if known[n] is None:
-                if others is None:  # the other zones' reports at this moment: (zone, global ids, poses)
-                    others = []
-                    for z, (o_global, o_poses, _) in self._standing(t).items():
-                        if z != zone and len(o_global):
-                            others.append((z, o_global, o_poses))
-                best = None
-                for z, g_ids, o_poses in others:
-                    dist = self._distance(poses[n:n + 1], o_poses)[0]
-                    for k in np.argsort(dist, kind="stable"):
-                        if dist[k] > self.gate_m:
-                            break
-                        if int(g_ids[k]) not in held:
-                            if best is None or dist[k] < best[0]:
-                                best = (float(dist[k]), z, int(g_ids[k]))
-                            break
-                if best is not None:
+            key, current = (zone, local), known[n]
+            if not (pending[n] or overlap[n]):
+                out[n] = current
+                continue
+            best = None  # the nearest person another zone reports within the gate, whose id no other local holds
+            for z, g_ids, o_poses in others:
+                dist = self._distance(poses[n:n + 1], o_poses)[0]
+                for k in np.argsort(dist, kind="stable"):
+                    if dist[k] > self.gate_m:
+                        break
+                    if int(g_ids[k]) == current or int(g_ids[k]) not in held:
+                        if best is None or dist[k] < best[0]:
+                            best = (float(dist[k]), z, int(g_ids[k]))
+                        break
+            if best is not None and best[2] != current:
+                first = self.first_reported
+                if current is None or pending[n] or not owned[n] or (
+                        first.get(best[2], np.inf) < first.get(current, np.inf)):
                     self.global_of[key] = best[2]
                     self.handovers.append((t, best[1], zone, best[2]))
                     self.provisional.discard(key)
-                elif key not in self.global_of:
-                    self.global_of[key] = tracks.namespaced(zone, local)
-                    self.provisional.add(key)
-                held.add(self.global_of[key])
+                    held.discard(current)
+            if key not in self.global_of:
+                self.global_of[key] = tracks.namespaced(zone, local)
+                self.provisional.add(key)
+            held.add(self.global_of[key])
             out[n] = self.global_of[key]
         return out
 
@@ -150,10 +172,13 @@ class Merger:
         detections = np.full(num_detections, -1, dtype=np.int64)
         for z in sorted(outputs):
             ids, poses, states = _arrays(outputs[z], J)
-            global_ids = self._identify(z, ids, poses, t)
-            owned = self.zones[z].owns(self._roots(poses)) if len(ids) else np.zeros(0, bool)
-            if self.provisional:  # reported now: the id is seen, fixed for the local id's life
+            roots = self._roots(poses) if len(ids) else np.zeros((0, 2))
+            owned = self.zones[z].owns(roots) if len(ids) else np.zeros(0, bool)
+            global_ids = self._identify(z, ids, poses, t, owned, self._in_overlap(z, roots))
+            if self.provisional:  # reported now: the id is seen
                 self.provisional.difference_update((z, local) for local in ids[owned].tolist())
+            for g in global_ids[owned].tolist():
+                self.first_reported.setdefault(g, t)
             self.latest[z] = (t, global_ids[owned], poses[owned], states[owned])
             local = np.asarray(outputs[z].detection_target_ids, dtype=np.int64)
             if len(local) == num_detections and len(ids):

@@ -86,3 +86,21 @@ def test_a_target_born_beyond_the_gate_is_handed_over_once_its_pose_settles():
     assert all(ids == [tracks.namespaced(0, 3)] for ids in reported)
     assert [h[1:] for h in merger.handovers] == [(0, 1, tracks.namespaced(0, 3))]
     assert merger.handovers[0][0] >= 0.45  # (handed over once the pose settled, at x >= 4.7 m)
+
+
+def test_a_person_standing_on_the_border_keeps_one_id_though_two_zones_took_them_for_two():
+    """Zone 1's tracker first places the person 0.6 m off (beyond the gate, inside its own cell: reported under its
+    own id), then 3 cm beside zone 0's estimate, both wandering across the border line. While zone 1 does not
+    report them (its estimate on zone 0's side) its target follows zone 0's id, so from then on the person is
+    reported under zone 0's id alone, by either zone."""
+    merger = Merger(ZONES, COCO17, gate_m=0.25)
+    reported = []
+    for k in range(60):
+        t = k / 10
+        x0 = 4.95 + 0.1 * np.sin(k)
+        x1 = 5.6 if k < 3 else x0 + 0.03
+        merged = merger.add({0: _output(t, {1: (x0, 2.0)}, 0.0), 1: _output(t, {7: (x1, 2.0)}, 0.0)}, 0)
+        reported.append(sorted(set(merged.targets.ids.tolist())))
+    assert reported[0] == sorted([tracks.namespaced(0, 1), tracks.namespaced(1, 7)])  # (two people, at first)
+    settled = reported[10:]
+    assert all(ids == [tracks.namespaced(0, 1)] for ids in settled), settled
