@@ -390,9 +390,9 @@ def score(
         x, y = c.truth_roots[list(c.truth_ids).index(switch.person_id), :2]
         report.id_switch_events.append((c.at_s, switch.person_id, switch.target_id, float(x), float(y)))
     if zones:
-        from crossview.scoring import switches
+        from crossview.scoring.switches import place
 
-        report.switches_by_place = switches.place(
+        report.switches_by_place = place(
             id_acc.events(), [c.at_s for c in compared], [(c.truth_ids, c.truth_roots) for c in compared],
             [(c.target_ids, c.target_roots) for c in compared], zones)
     report.from_s = float(from_s)
