@@ -774,15 +774,21 @@ def _cmd_run(args) -> None:
                   StoreGeometry(scenario.store, name=scenario.where).boxes, args.zones, args.overlap)
     progress = not args.no_progress
     with _live(args) as stream:
-        gen = pipeline.generate(scenario, rec_path, progress=progress, live=stream and stream())
+        tracking_live = stream and args.zones is None  # (tracked as the frames are made: `pipeline.live_run`)
+        if tracking_live:
+            gen, trk = pipeline.live_run(scenario, rec_path, tracks_path, method=args.method, preset=args.preset,
+                                         config_path=args.config, progress=progress, live=stream())
+        else:
+            gen = pipeline.generate(scenario, rec_path, progress=progress, live=stream and stream())
         print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
               f"({_speed(gen)})")
         if args.zones is not None:
             args.recording, args.output = rec_path, tracks_path
             _track_zoned(args, prefix="tracked   ")
         else:
-            trk = pipeline.track(rec_path, tracks_path, method=args.method, preset=args.preset,
-                                 config_path=args.config, progress=progress, live=stream and stream())
+            if not tracking_live:
+                trk = pipeline.track(rec_path, tracks_path, method=args.method, preset=args.preset,
+                                     config_path=args.config, progress=progress)
             print(f"tracked   {trk.path}: {_updates_and_speed(trk, 'at {fps:.1f} FPS (all cameras once)')}")
     from_s = scoring.default_from_s(scenario.duration_s) if args.from_s is None else args.from_s
     report, result = pipeline.score(rec_path, tracks_path, progress=progress, from_s=from_s)

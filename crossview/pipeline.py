@@ -113,7 +113,7 @@ _SCHEDULE_BYTES_PER_FRAME = 170  # the clock's schedule, as arrays and the lists
 
 def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = True,
              worker_process: bool = True, images_per_s: float | None = None, gl: str | None = None,
-             live=None) -> GenerateResult:
+             live=None, tracking=None) -> GenerateResult:
     """Simulates `scenario` for its duration and writes the recording to `out` atomically.
 
     Args:
@@ -124,6 +124,8 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             backend chosen before MuJoCo is imported in this process (`sim.render.choose_backend`).
         gl: that backend ("egl", "osmesa"); None: MUJOCO_GL when it names one, else probed.
         live: where every message written is also published as it is written (`crossview.live.Paced`), or None.
+        tracking: `live_run`'s maker of a `Tracking` from the recording's header and cameras, which is given each
+            camera frame as soon as it is written (`RecordingWriter`'s `frames_to`); None: nothing tracked.
     """
     check_writable(out, inputs=(scenario.source_path or None,))
     if images_per_s is not None:
@@ -163,8 +165,15 @@ def generate(scenario: scenario_mod.Scenario, out: Path, *, progress: bool = Tru
             software_version=recording.software_version(),
             format_version=recording.FORMAT_VERSION,
         )
-        writer = stack.enter_context(recording.RecordingWriter(out, header, sim.cameras, sim.boxes,
-                                                               inputs=(scenario.source_path or None,), live=live))
+        writer = recording.RecordingWriter(out, header, sim.cameras, sim.boxes, inputs=(scenario.source_path or None,),
+                                           live=live)
+        if tracking is not None:  # (opened after the recording, whose channels come first live; entered before it,
+            try:  # so that it closes after it: the writer's close delivers the last frames)
+                writer.frames_to = stack.enter_context(tracking(header, sim.cameras)).update_from_bytes
+            except BaseException:
+                writer.abort()
+                raise
+        stack.enter_context(writer)
         bar = stack.enter_context(tqdm(total=scenario.duration_s, unit="sim s", desc="generate",
                                        disable=not progress, leave=False))
         images = None
@@ -241,6 +250,87 @@ class TrackResult:
         return self.camera_frames_per_s / self.num_cameras
 
 
+class Tracking:
+    """One tracker's run: a tracker fed camera frames one at a time in delivery order (`update`), its outputs
+    written to a tracks file (`crossview.recording.TracksWriter`, published to `live` as written), and the
+    tracker's own seconds counted. What `track` does over a recording's frames and what `run --live` does over the
+    frames as the simulation makes them (`live_run`): the same tracker, frames and bytes.
+
+    Use as a context manager: the tracks file appears when it exits cleanly; `result` then says what was done.
+
+    Args:
+        header_of: the recording's header (scenario name, digest, seed, skeleton name).
+        cameras: the cameras as the recording's header holds them (`Recording.cameras`).
+        warm_up_s: feed the frames stamped up to this also to a throwaway tracker first, untimed, so that the
+            tracker's compiled kernels load (`warm_up_tracker`) outside the tracker's seconds; None: no warm-up
+            here (`track` warms up on the recording before).
+    """
+
+    def __init__(self, header_of, cameras, out: Path, *, method: str = "crossview", preset: str = "store",
+                 config_path: Path | None = None, overrides: dict | None = None, inputs: tuple = (), live=None,
+                 warm_up_s: float | None = None):
+        from core.types import SKELETONS
+        from crossview import recording
+        from crossview.plugins import resolve
+
+        self._resolved = resolve(method)
+        self._skeleton = skeleton = SKELETONS[header_of.skeleton_name]
+        self._cameras = list(cameras)
+        self._tracker, config = make_tracker(method, self._cameras, preset, config_path, skeleton, overrides)
+        self._warm = None
+        self._warm_up_s = warm_up_s
+        if warm_up_s is not None:
+            self._warm, _ = make_tracker(method, self._cameras, preset, config_path, skeleton, overrides)
+        header = recording.TracksHeader(
+            scenario_name=header_of.scenario_name,
+            scenario_digest=header_of.scenario_digest,
+            seed=header_of.seed,
+            method=method,
+            preset=preset,
+            config=jsonable(dataclasses.asdict(config)),
+            skeleton_name=skeleton.name,
+            software_version=recording.software_version(),
+            format_version=recording.TRACKS_FORMAT_VERSION,
+        )
+        self._writer = recording.TracksWriter(out, header, self._cameras, inputs=inputs, live=live)
+        self.updates = 0
+        self.tracker_s = 0.0
+        self._out = out
+        self.result: TrackResult | None = None
+
+    def update(self, frame) -> None:
+        """Tracks one camera frame (`core.types.Frame`), the next in delivery order, and writes the output."""
+        if self._warm is not None:
+            if frame.stamp_s <= self._warm_up_s:
+                self._resolved.update(self._warm, frame, self.updates)
+            else:
+                self._warm = None
+        start = time.perf_counter()
+        targets = self._resolved.update(self._tracker, frame, self.updates)
+        self.tracker_s += time.perf_counter() - start
+        self._writer.write(self._resolved.output(self._tracker, targets, frame, self.updates, self._skeleton))
+        self.updates += 1
+
+    def update_from_bytes(self, data: bytes) -> None:
+        """`update` of a frame given as the recording's `crossview.CameraFrame` bytes
+        (`crossview.recording.RecordingWriter`'s `frames_to`)."""
+        from crossview.recording import camera_frame_from_bytes
+
+        self.update(camera_frame_from_bytes(data).frame)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self._writer.finish({"tracker_s": self.tracker_s, "updates": self.updates,
+                                 "num_cameras": len(self._cameras),
+                                 ASSIGNMENTS_KEY: self._resolved.reports_assignments(self._tracker)})
+        self._writer.__exit__(exc_type, exc, tb)
+        if exc_type is None:
+            self.result = TrackResult(self._out, self.updates, self.tracker_s, len(self._cameras))
+
+
 def track(
     rec_path: Path,
     out: Path,
@@ -259,38 +349,41 @@ def track(
 
     from core.types import SKELETONS
     from crossview import recording
-    from crossview.plugins import resolve
 
     check_writable(out, inputs=(rec_path, config_path))
-    resolved = resolve(method)
     rec = recording.open_recording(rec_path)
     skeleton = SKELETONS[rec.header.skeleton_name]
-    tracker, config = make_tracker(method, rec.cameras, preset, config_path, skeleton, overrides)
-    header = recording.TracksHeader(
-        scenario_name=rec.header.scenario_name,
-        scenario_digest=rec.header.scenario_digest,
-        seed=rec.header.seed,
-        method=method,
-        preset=preset,
-        config=jsonable(dataclasses.asdict(config)),
-        skeleton_name=skeleton.name,
-        software_version=recording.software_version(),
-        format_version=recording.TRACKS_FORMAT_VERSION,
-    )
     warm_up_tracker(method, rec, preset, config_path, skeleton, overrides)
-    updates = 0
-    tracker_s = 0.0
-    with recording.TracksWriter(out, header, rec.cameras, inputs=(rec_path, config_path), live=live) as writer:
+    with Tracking(rec.header, rec.cameras, out, method=method, preset=preset, config_path=config_path,
+                  overrides=overrides, inputs=(rec_path, config_path), live=live) as tracking:
         for camera_frame in tqdm(rec.frames(), unit="frame", desc="track", disable=not progress, leave=False):
-            frame = camera_frame.frame
-            start = time.perf_counter()
-            targets = resolved.update(tracker, frame, updates)
-            tracker_s += time.perf_counter() - start
-            writer.write(resolved.output(tracker, targets, frame, updates, skeleton))
-            updates += 1
-        writer.finish({"tracker_s": tracker_s, "updates": updates, "num_cameras": len(rec.cameras),
-                       ASSIGNMENTS_KEY: resolved.reports_assignments(tracker)})
-    return TrackResult(out, updates, tracker_s, len(rec.cameras))
+            tracking.update(camera_frame.frame)
+    return tracking.result
+
+
+def live_run(scenario: scenario_mod.Scenario, rec_path: Path, tracks_path: Path, *, method: str = "crossview",
+             preset: str = "store", config_path: Path | None = None, progress: bool = True,
+             live=None) -> tuple[GenerateResult, TrackResult]:
+    """`run --live`'s generate and track in one pass: each camera frame is tracked as soon as the recording
+    writer has written it (and published it to `live`), so the tracker's outputs are published on the tracks
+    file's channels right after the frame's detections, paced to simulated time with them. The tracker sees the
+    frames in delivery order, decoded from the bytes the recording holds (a frame delivered after a block's end
+    waits for the next block, as in the file), so both files are the bytes `generate` then `track` write.
+    Returns what each would."""
+    from crossview import recording
+
+    check_writable(tracks_path, inputs=(rec_path, config_path))
+    tracking: list[Tracking] = []
+
+    def tracking_of(header, cameras) -> Tracking:
+        # The cameras as the recording's header holds them (its JSON read back), as `track` gets them.
+        as_read = [recording.camera_from_json(json.loads(json.dumps(recording.camera_json(c)))) for c in cameras]
+        tracking.append(Tracking(header, as_read, tracks_path, method=method, preset=preset, config_path=config_path,
+                                 inputs=(rec_path, config_path), live=live, warm_up_s=WARM_UP_S))
+        return tracking[0]
+
+    gen = generate(scenario, rec_path, progress=progress, live=live, tracking=tracking_of)
+    return gen, tracking[0].result
 
 
 ASSIGNMENTS_KEY = "detection_assignments"

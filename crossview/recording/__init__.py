@@ -23,7 +23,7 @@ Modules: `schemas` (topics, schemas, headers, versions), `messages` (message byt
 
 from core.errors import RecordingError
 from crossview.recording.info import format_info, info
-from crossview.recording.messages import EncodedFrame, Encoder
+from crossview.recording.messages import EncodedFrame, Encoder, camera_frame_from_bytes
 from crossview.recording.reader import CameraImage, Recording, Tracks, open_recording, open_tracks
 from crossview.recording.schemas import (  # a store box's JSON form, as the header's
     CHUNK_SIZE,
@@ -42,6 +42,8 @@ from crossview.recording.schemas import (  # a store box's JSON form, as the hea
     TracksHeader,
     box_from_json,
     box_json,
+    camera_from_json,
+    camera_json,
     camera_topic,
     software_version,
     to_ns,
@@ -53,5 +55,6 @@ __all__ = [
     "TOPIC_TRACK_SCENE", "TOPIC_TRUTH", "CameraImage", "ChannelInfo", "LiveSink",
     "TOPIC_TRUTH_SCENE", "EncodedFrame", "Encoder", "PoseTruthMsg", "Recording", "RecordingError", "RecordingHeader",
     "RecordingWriter", "Tracks", "TracksHeader", "TracksWriter", "box_from_json", "box_json",
-    "camera_topic", "format_info", "info", "open_recording", "open_tracks", "software_version", "to_ns",
+    "camera_frame_from_bytes", "camera_from_json", "camera_json", "camera_topic",
+    "format_info", "info", "open_recording", "open_tracks", "software_version", "to_ns",
 ]

@@ -19,7 +19,7 @@ import numpy as np
 import crossview.recording.foxglove as foxglove
 from core.records import CameraFrame, DetectionRows, DetectionTruth, PoseTruth
 from core.types import Frame, Skeleton
-from crossview.recording.schemas import PoseTruthMsg, TrackerOutputMsg, to_ns
+from crossview.recording.schemas import CameraFrameMsg, PoseTruthMsg, TrackerOutputMsg, to_ns
 from tracker.types import JointState, Target, TargetArrays, TargetState, TrackerOutput
 
 
@@ -283,6 +283,11 @@ def camera_frame_from_msg(msg, poses_at_capture: PoseTruth | None = None) -> Cam
         effects=np.array(msg.effects, dtype=np.int64),
     )
     return CameraFrame(frame=frame, truth=truth, poses_at_capture=poses_at_capture)
+
+
+def camera_frame_from_bytes(data: bytes) -> CameraFrame:
+    """The camera frame of `crossview.CameraFrame` bytes, as `Recording.frames` reads it (no poses at capture)."""
+    return camera_frame_from_msg(CameraFrameMsg.FromString(data))
 
 
 _TARGET_STATES = {s.value: s for s in TargetState}

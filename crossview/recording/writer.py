@@ -3,7 +3,7 @@ target folder, fsynced and renamed onto the final name only when complete."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from mcap.writer import Writer
@@ -166,10 +166,15 @@ class RecordingWriter(_WriterContext):
 
     Use as a context manager: the file appears under `path` only when the block exits cleanly; on an
     exception (KeyboardInterrupt included) the temporary file is removed.
+
+    With `frames_to` (an argument or set later), each camera frame's `crossview.CameraFrame` message (the bytes
+    the file holds) is also given to it as soon as that frame's messages are written (and published to `live`),
+    in the file's order: how `run --live` tracks the frames while they are made (`crossview.pipeline.Tracking`).
     """
 
     def __init__(self, path, header: RecordingHeader, cameras: Sequence[Camera], boxes: Sequence[Box], *,
-                 chunk_size: int = CHUNK_SIZE, inputs: tuple = (), live: LiveSink | None = None):
+                 chunk_size: int = CHUNK_SIZE, inputs: tuple = (), live: LiveSink | None = None,
+                 frames_to: Callable[[bytes], None] | None = None):
         self.header = header
         self.cameras = list(cameras)
         self.boxes = tuple(boxes)
@@ -223,6 +228,7 @@ class RecordingWriter(_WriterContext):
         self._counts = {"truth": 0, "frames": 0, "images": 0}
         self._camera_of = {c.name: c for c in self.cameras}
         self._order = LogTimeOrder()  # the blocks' truth ticks and encoded frames not yet due
+        self.frames_to = frames_to
 
     def _log_time(self, t_ns: int, what: str) -> int:
         if t_ns < self._last_ns:
@@ -241,6 +247,7 @@ class RecordingWriter(_WriterContext):
         in one compiled call (`Encoder.camera_frames`): what a producer of many events at a time should use."""
         encoded = iter(self.encoder.camera_frames([e for e in events if isinstance(e, CameraFrame)]))
         messages = []
+        written: list[tuple[int, bytes]] = []  # (messages up to and with a frame's, its CameraFrame bytes)
         for event in events:
             if isinstance(event, CameraFrame):
                 event = next(encoded)
@@ -256,6 +263,7 @@ class RecordingWriter(_WriterContext):
                     messages.append((self._image_ch[event.camera], t, picture.SerializeToString()))
                     self._counts["images"] += 1
                 self._counts["frames"] += 1
+                written.append((len(messages), event.frame_bytes))
             elif isinstance(event, PoseTruth):
                 t = self._log_time(to_ns(event.t_s), "PoseTruth")
                 messages.append((self._truth, t, self.encoder.pose_truth(event)))
@@ -267,7 +275,15 @@ class RecordingWriter(_WriterContext):
             else:
                 raise TypeError(f"RecordingWriter.write: expected PoseTruth, CameraFrame or EncodedFrame, got "
                                 f"{type(event).__name__}")
-        self._out.add_many(messages)
+        if self.frames_to is None:
+            self._out.add_many(messages)
+            return
+        start = 0
+        for end, frame in written:  # (each frame goes on once its own messages are out, before the next's)
+            self._out.add_many(messages[start:end])
+            self.frames_to(frame)
+            start = end
+        self._out.add_many(messages[start:])
 
     def write_block(self, block: Block, images: Sequence[bytes | None] | None = None) -> int:
         """Takes a simulation's next block (`sim.simulate.Simulation.blocks`): encodes its frames straight from

@@ -42,7 +42,7 @@ def play_request(speed: float = 1.0, seek_ns: int | None = None, request_id: str
 
 
 async def _collect(url: str, expected: int | None, quiet_s: float, timeout_s: float, play: bool,
-                   read_delay_s: float, play_speed: float, seek_ns: int | None) -> dict:
+                   read_delay_s: float, play_speed: float, seek_ns: int | None, arrivals: list | None) -> dict:
     received: dict[tuple[str, str], list[tuple[int, bytes]]] = defaultdict(list)
     channels: dict[int, dict] = {}
     decoders: dict[int, object] = {}
@@ -85,6 +85,8 @@ async def _collect(url: str, expected: int | None, quiet_s: float, timeout_s: fl
             decoders[subscription](data)  # (raises on bytes the advertised schema does not describe)
             channel = channels[subscription]
             received[(channel["topic"], channel["schemaName"])].append((log_time, data))
+            if arrivals is not None:
+                arrivals.append((channel["topic"], channel["schemaName"]))
             count += 1
             if read_delay_s:
                 await asyncio.sleep(read_delay_s)
@@ -92,9 +94,10 @@ async def _collect(url: str, expected: int | None, quiet_s: float, timeout_s: fl
 
 
 def collect(url: str, *, expected: int | None = None, quiet_s: float = 3.0, timeout_s: float = 60.0,
-            play: bool = False, play_speed: float = 1.0, seek_ns: int | None = None, read_delay_s: float = 0.0) -> dict:
+            play: bool = False, play_speed: float = 1.0, seek_ns: int | None = None, read_delay_s: float = 0.0,
+            arrivals: list | None = None) -> dict:
     """Connects to `url` and returns {(topic, schema name): [(log time ns, bytes), ...]} of what it received, until
     `expected` messages came, none came for `quiet_s` after the first, or `timeout_s`. With `play`, asks a replay
     server to play at `play_speed` once subscribed, from `seek_ns` when given; `read_delay_s` after each message makes
-    a slow client."""
-    return asyncio.run(_collect(url, expected, quiet_s, timeout_s, play, read_delay_s, play_speed, seek_ns))
+    a slow client. `arrivals`, when given, gets the (topic, schema name) of each message in the order they came."""
+    return asyncio.run(_collect(url, expected, quiet_s, timeout_s, play, read_delay_s, play_speed, seek_ns, arrivals))

@@ -2,12 +2,15 @@
 receives equals the file's messages, read by the mcap library alone, channel by channel (count and bytes)."""
 
 import collections
+import json
 import os
 import re
 import signal
 import socket
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -74,17 +77,66 @@ def test_generate_live_publishes_the_file_s_messages(store_recording, tmp_path):
     assert received == expected
 
 
-def test_run_live_publishes_the_recording_then_the_tracks(tmp_path):
-    proc, url = start("run", "store_layout1", "--duration", "3", "--seed", "0", "-o", str(tmp_path), "--live",
-                      "--speed", "4")
-    received = collect(url, quiet_s=10.0, timeout_s=180.0)
-    assert proc.wait(180) == 0, proc.stderr.read()
-    expected = file_messages(tmp_path / "store_layout1.mcap", tmp_path / "store_layout1.tracks.mcap")
+def summary_apart_from_timing(path) -> tuple[bytes, dict]:
+    """A tracks file's bytes before its summary metadata record (every message, chunk and header), and the summary
+    without `tracker_s`, the tracker's wall-clock seconds: the one thing that differs between two runs."""
+    data = path.read_bytes()
+    cut = data.index(b"crossview.summary") - 13  # (the record's opcode, length and name length: MCAP's Metadata)
+    with open(path, "rb") as f:
+        summary = json.loads(next(m for m in make_reader(f).iter_metadata() if m.name == "crossview.summary")
+                             .metadata["json"])
+    assert summary.pop("tracker_s") > 0
+    return data[:cut], summary
+
+
+def test_run_live_tracks_as_it_goes(store_recording, store_tracks, tmp_path):
+    """`run --live --speed max` tracks each frame as it is made: the client gets the tracker's outputs interleaved
+    with the recording's messages, each decoded with its advertised schema, and what it gets is the files' messages
+    less the SDK's drops; the files are those of `generate` then `track` (the session's fixtures)."""
+    # In this process (its kernels loaded: seconds less than a command started afresh), on a port found free.
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    arrivals: list = []
+    got: dict = {}
+
+    def client():
+        deadline = time.monotonic() + 60.0
+        while time.monotonic() < deadline:  # (until the run's server listens)
+            try:
+                socket.create_connection(("127.0.0.1", port), timeout=1.0).close()
+                break
+            except OSError:
+                time.sleep(0.02)
+        got["received"] = collect(f"ws://127.0.0.1:{port}", quiet_s=10.0, timeout_s=120.0, arrivals=arrivals)
+
+    thread = threading.Thread(target=client)
+    thread.start()
+    status = main(["--no-progress", "run", "store_layout1", "--duration", "6", "--seed", "0", "-o", str(tmp_path),
+                   "--live", "--speed", "max", "--port", str(port)])
+    thread.join(60)
+    assert status == 0
+    received = got["received"]
+    rec, tracks = tmp_path / "store_layout1.mcap", tmp_path / "store_layout1.tracks.mcap"
+    assert rec.read_bytes() == store_recording.read_bytes()
+    assert summary_apart_from_timing(tracks) == summary_apart_from_timing(store_tracks)
     header = ("/crossview/header", "crossview.TracksHeader")
     received[header] = received.pop(("/crossview/header/crossview.TracksHeader", "crossview.TracksHeader"))
+    expected = file_messages(rec, tracks)
     received, repeats = once(received)
-    print(f"run --live --speed 4: {total(received)} of {total(expected)} messages received ({repeats} repeated)")
-    assert received == expected
+    for key, messages in received.items():
+        it = iter(expected[key])
+        assert all(m in it for m in messages), key  # (a subsequence: dropped, never altered or reordered)
+    tracks_topics = {"/tracker/outputs", "/tracker/skeletons"}
+    first_track = next(i for i, (topic, _) in enumerate(arrivals) if topic in tracks_topics)
+    last_frame = max(i for i, (topic, _) in enumerate(arrivals) if topic.endswith("/frame"))
+    assert first_track < last_frame  # (tracked while the frames come, not after them)
+    outputs = [i for i, (topic, _) in enumerate(arrivals) if topic == "/tracker/outputs"]
+    frames = [i for i, (topic, _) in enumerate(arrivals) if topic.endswith("/frame")]
+    dropped = total(expected) - total(received)
+    print(f"run --live --speed max: {total(received)} of {total(expected)} messages received, {dropped} dropped "
+          f"({repeats} repeated); the median output came after {sum(f < outputs[len(outputs) // 2] for f in frames)} "
+          f"of {len(frames)} frames")
 
 
 def test_serve_replays_recording_and_tracks(store_recording, store_tracks):
