@@ -305,7 +305,8 @@ def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="score from S seconds on, "
                    "leaving out the warm-up before (default: the warm-up rule of docs/metrics.md)")
     _zone_options(p)
-    _live_options(p, "publish the recording, then the tracks,")
+    _live_options(p, "publish the recording and its tracks (each frame tracked as it is made; with --zones, the "
+                  "recording only),")
 
 
 def _scenarios_args(p: argparse.ArgumentParser) -> None:

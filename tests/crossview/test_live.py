@@ -139,6 +139,17 @@ def test_run_live_tracks_as_it_goes(store_recording, store_tracks, tmp_path):
           f"of {len(frames)} frames")
 
 
+def test_run_live_with_a_tracker_going_wrong_leaves_nothing(tmp_path, capsys):
+    """A plug-in that raises on frame 5, tracked as the frames are made: one line naming the frame, status 2, and
+    neither the recording nor the tracks file (nor a temporary) left."""
+    status = main(["--no-progress", "run", "store_layout1", "--duration", "1", "--seed", "0", "-o", str(tmp_path),
+                   "--method", "tests.crossview.test_plugins:Raises", "--live", "--speed", "max", "--port", "0"])
+    err = capsys.readouterr().err.strip()
+    assert status == EXIT_BAD_INPUT
+    assert len(err.splitlines()) == 1 and "frame 5 (camera " in err and "the model file is missing" in err, err
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_serve_replays_recording_and_tracks(store_recording, store_tracks):
     proc, url = start("serve", str(store_recording), str(store_tracks))
     try:
