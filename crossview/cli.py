@@ -305,8 +305,7 @@ def _run_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--from", dest="from_s", type=_non_negative_float, metavar="S", help="score from S seconds on, "
                    "leaving out the warm-up before (default: the warm-up rule of docs/metrics.md)")
     _zone_options(p)
-    _live_options(p, "publish the recording and its tracks (each frame tracked as it is made; with --zones, the "
-                  "recording only),")
+    _live_options(p, "publish the recording and its tracks, each frame tracked as it is made,")
 
 
 def _scenarios_args(p: argparse.ArgumentParser) -> None:
@@ -775,19 +774,18 @@ def _cmd_run(args) -> None:
                   StoreGeometry(scenario.store, name=scenario.where).boxes, args.zones, args.overlap)
     progress = not args.no_progress
     with _live(args) as stream:
-        tracking_live = stream and args.zones is None  # (tracked as the frames are made: `pipeline.live_run`)
-        if tracking_live:
+        if stream:  # (tracked as the frames are made: `pipeline.live_run`; not with --zones, `_check_zone_options`)
             gen, trk = pipeline.live_run(scenario, rec_path, tracks_path, method=args.method, preset=args.preset,
                                          config_path=args.config, progress=progress, live=stream())
         else:
-            gen = pipeline.generate(scenario, rec_path, progress=progress, live=stream and stream())
+            gen = pipeline.generate(scenario, rec_path, progress=progress)
         print(f"generated {gen.path}: {gen.num_cameras} cameras, {gen.num_frames} camera frames in {gen.wall_s:.1f} s "
               f"({_speed(gen)})")
         if args.zones is not None:
             args.recording, args.output = rec_path, tracks_path
             _track_zoned(args, prefix="tracked   ")
         else:
-            if not tracking_live:
+            if not stream:
                 trk = pipeline.track(rec_path, tracks_path, method=args.method, preset=args.preset,
                                      config_path=args.config, progress=progress)
             print(f"tracked   {trk.path}: {_updates_and_speed(trk, 'at {fps:.1f} FPS (all cameras once)')}")
