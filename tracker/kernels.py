@@ -153,9 +153,11 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
     lengths = np.empty(2 * prior.bones.shape[0] * targets.bone_samples.shape[1] + 1)
     fresh = np.empty(C, dtype=np.int64)
     observations = Observations(cams, points, dts, decays)  # refilled per joint
-    # Each joint's observations of this update, for the bone prior's re-solve (`_resolve_bone`).
-    kept = Observations(np.empty((J, C), dtype=np.int64), np.empty((J, C, 2)), np.empty((J, C)), np.empty((J, C)))
-    subset = Observations(np.empty(C, dtype=np.int64), np.empty((C, 2)), np.empty(C), np.empty(C))
+    # Each joint's observations of this update, for the bone prior's re-solve (`_resolve_bones`; empty without).
+    Jr, Cr = (J, C) if prior.resolve else (0, 0)
+    kept = Observations(np.empty((Jr, Cr), dtype=np.int64), np.empty((Jr, Cr, 2)), np.empty((Jr, Cr)),
+                        np.empty((Jr, Cr)))
+    subset = Observations(np.empty(Cr, dtype=np.int64), np.empty((Cr, 2)), np.empty(Cr), np.empty(Cr))
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
