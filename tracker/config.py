@@ -130,6 +130,11 @@ class TrackerConfig:
         head_bones: the prior also holds the nose to each shoulder (the person's own neck and head proportions;
             the Campus protocol places the head on the line from the mid-shoulders to the nose,
             `core.layouts.coco17_to_campus14`), so that a nose estimate that breaks them is pulled back.
+        bone_prior_resolve: a new estimate that breaks its bone is first triangulated again without each of its
+            views in turn (eq. 6-11 from the others); of the solves whose views agree (each reprojects within
+            `reject_floor_px`), the one whose bone comes nearest the person's length is taken when it lies within
+            the tolerance (one view that disagrees, which the robust pass left in,
+            as where a joint has few views); otherwise the bound applies.
     Triangulation, eq. (6)-(11):
         lambda_t_per_s: time penalty rate λt of eq. (11), 1/s.
         triangulation: PAPER (eq. 6-11), VELOCITY (stale points moved forward with the joint velocity), or the
@@ -235,6 +240,7 @@ class TrackerConfig:
     bone_prior_sample_s: float = 0.2
     bone_symmetry: bool = False
     head_bones: bool = False
+    bone_prior_resolve: bool = False
     lambda_t_per_s: float = 10.0
     triangulation: Triangulation = Triangulation.PAPER
     row_norm: RowNorm = RowNorm.ROW
@@ -327,7 +333,7 @@ class TrackerConfig:
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ConfigError(f"TrackerConfig.{name}: {value!r} must be an integer >= {low}")
         _check_upper_bounds(self)
-        for name in ("normalize_affinity", "velocity_quadratic", "bone_symmetry", "head_bones"):
+        for name in ("normalize_affinity", "velocity_quadratic", "bone_symmetry", "head_bones", "bone_prior_resolve"):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(f"TrackerConfig.{name}: {getattr(self, name)!r} must be true or false")
         if self.init_min_top_m >= self.init_max_top_m:

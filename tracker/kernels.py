@@ -14,7 +14,7 @@ import numpy as np
 
 from core.jit import jit, sort_prefix
 from tracker.body import fill_poses, joint_states
-from tracker.triangulation import Observations, TriangulationParams, triangulate_point
+from tracker.triangulation import Observations, TriangulationParams, _solve_observations, triangulate_point
 
 MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
 
@@ -33,6 +33,8 @@ class Priors(NamedTuple):
         symmetric: whether a bone's length pools its mirror's samples.
         bones: (B, 2) int64 (parent, child) joint pairs ordered outward; mirror: (B,) int64 each one's mirror
             bone, -1 none (`body.prior_bones`).
+        resolve: a joint whose estimate breaks its bone is first triangulated again without each of its views in
+            turn; the solve whose bone comes nearest the person's length is taken when within the tolerance.
         quadratic: eq. (5)'s velocity from a constant-acceleration fit (`_fit_velocities`).
         window_s: (J,) each joint's window of eq. (5)'s velocity fit, s (`velocity_window_s`, or
             `limb_velocity_window_s` for the joints of the forearms and shanks).
@@ -47,6 +49,7 @@ class Priors(NamedTuple):
     symmetric: bool
     bones: np.ndarray
     mirror: np.ndarray
+    resolve: bool
     quadratic: bool
     window_s: np.ndarray
 
@@ -150,6 +153,11 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
     lengths = np.empty(2 * prior.bones.shape[0] * targets.bone_samples.shape[1] + 1)
     fresh = np.empty(C, dtype=np.int64)
     observations = Observations(cams, points, dts, decays)  # refilled per joint
+    # Each joint's observations of this update, for the bone prior's re-solve (`_resolve_bones`; empty without).
+    Jr, Cr = (J, C) if prior.resolve else (0, 0)
+    kept = Observations(np.empty((Jr, Cr), dtype=np.int64), np.empty((Jr, Cr, 2)), np.empty((Jr, Cr)),
+                        np.empty((Jr, Cr)))
+    subset = Observations(np.empty(Cr, dtype=np.int64), np.empty((Cr, 2)), np.empty(Cr), np.empty(Cr))
     for m in range(rows.size):
         r, d = rows[m], cols[m]
         cached_s[:] = np.nan
@@ -187,6 +195,10 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
             triangulate_point(P, observations, num, V, triangulation, plain, compensated, work, scratch)
             update[j] = np.isfinite(plain[0])
             num_views[j] = num
+            if prior.resolve:
+                for i in range(num):
+                    kept.cam[j, i], kept.dts[j, i], kept.decays[j, i] = cams[i], dts[i], decays[i]
+                    kept.points_px[j, i, 0], kept.points_px[j, i, 1] = points[i, 0], points[i, 1]
             use_compensated = use_velocity and np.isfinite(compensated[0])
             for k in range(3):
                 samples[j, k] = plain[k]
@@ -196,6 +208,9 @@ def update_matched(rows, cols, det_px, camera, stamp_s, targets, P, bones, param
             _gate_jumps(pos, vel, joint_s, seen_s, r, stamp_s, params.max_predict_s, prior, X, update)
         if prior.tolerance > 0.0:
             _sample_bones(targets, r, stamp_s, X, update, num_views, prior, lengths)
+            if prior.resolve:
+                _resolve_bones(pos, vel, targets.bone_len, r, X, samples, update, prior, P, kept, num_views, subset,
+                               triangulation, work, scratch)
             _bound_bones(pos, targets.bone_len, r, X, samples, update, prior)
         # 3. The bone gate (beyond the paper).
         for j in range(J):
@@ -293,6 +308,82 @@ def _sample_bones(targets, r, stamp_s, X, update, num_views, prior, lengths):
         else:
             sort_prefix(lengths, n)
             targets.bone_len[r, b] = (lengths[(n - 1) // 2] + lengths[n // 2]) / 2.0
+
+
+@jit
+def _resolve_bones(pos, vel, bone_len, r, X, samples, update, prior, P, kept, num_views, subset, triangulation, work,
+                   scratch):
+    """Re-solves each joint whose new estimate makes a bone of target r differ from the person's length L by more
+    than `prior.tolerance` L: eq. (6)-(11) again from its views of this update (`kept`) without one view, each view
+    in turn (a view that disagrees with the others, which the robust pass left in); of the solves whose views
+    agree (each view's reprojection error within `reject_floor_px`), the one whose bone length comes nearest L
+    replaces the estimate when it lies within the tolerance (parents before children: a parent's re-solved
+    estimate is the child's end). Without such a solve, or with fewer than min_views + 1 views, the
+    estimate is left to `_bound_bones`."""
+    bones, tol = prior.bones, prior.tolerance
+    min_views, use_velocity = triangulation.min_views, triangulation.use_velocity
+    floor_px = triangulation.reject_floor_px
+    V = np.empty(3)
+    plain = np.empty(3)
+    compensated = np.empty(3)
+    best = np.empty(3)
+    best_plain = np.empty(3)
+    for b in range(bones.shape[0]):
+        p, c = bones[b, 0], bones[b, 1]
+        L = bone_len[r, b]
+        num = num_views[c]
+        if not update[c] or not np.isfinite(L) or num < min_views + 1:
+            continue
+        if abs(_length_to(pos, r, X, update, p, X[c, 0], X[c, 1], X[c, 2]) - L) <= tol * L:
+            continue  # within the tolerance (or no parent: NaN, no re-solve either)
+        V[0], V[1], V[2] = vel[r, c, 0], vel[r, c, 1], vel[r, c, 2]
+        best_gap = np.inf
+        for left_out in range(num):
+            n = 0
+            for i in range(num):
+                if i != left_out:
+                    subset.cam[n], subset.dts[n], subset.decays[n] = kept.cam[c, i], kept.dts[c, i], kept.decays[c, i]
+                    subset.points_px[n, 0], subset.points_px[n, 1] = kept.points_px[c, i, 0], kept.points_px[c, i, 1]
+                    n += 1
+            _solve_observations(P, subset, n, V, triangulation, plain, compensated, work, scratch)
+            if not np.isfinite(plain[0]):
+                continue
+            use_compensated = use_velocity and np.isfinite(compensated[0])
+            x0 = compensated[0] if use_compensated else plain[0]
+            x1 = compensated[1] if use_compensated else plain[1]
+            x2 = compensated[2] if use_compensated else plain[2]
+            gap = abs(_length_to(pos, r, X, update, p, x0, x1, x2) - L)
+            if gap < best_gap and _views_agree(P, subset, n, x0, x1, x2, V, use_velocity, floor_px):
+                best_gap = gap
+                best[0], best[1], best[2] = x0, x1, x2
+                best_plain[0], best_plain[1], best_plain[2] = plain[0], plain[1], plain[2]
+        if best_gap <= tol * L:
+            for k in range(3):
+                X[c, k] = best[k]
+                samples[c, k] = best_plain[k]
+
+
+@jit
+def _views_agree(P, observations, num, x0, x1, x2, V, use_velocity, floor_px):
+    """Whether every one of the first `num` observations reprojects within floor_px of the point (moved back to
+    the observation's time with V when use_velocity, as `triangulate_point` judges its views)."""
+    for i in range(num):
+        k, dt = observations.cam[i], observations.dts[i] if use_velocity else 0.0
+        y0, y1, y2 = x0 - V[0] * dt, x1 - V[1] * dt, x2 - V[2] * dt
+        u = P[k, 0, 0] * y0 + P[k, 0, 1] * y1 + P[k, 0, 2] * y2 + P[k, 0, 3]
+        v = P[k, 1, 0] * y0 + P[k, 1, 1] * y1 + P[k, 1, 2] * y2 + P[k, 1, 3]
+        w = P[k, 2, 0] * y0 + P[k, 2, 1] * y1 + P[k, 2, 2] * y2 + P[k, 2, 3]
+        du, dv = u / w - observations.points_px[i, 0], v / w - observations.points_px[i, 1]
+        if not du * du + dv * dv <= floor_px * floor_px:
+            return False
+    return True
+
+
+@jit
+def _length_to(pos, r, X, update, p, x0, x1, x2):
+    """Distance from (x0, x1, x2) to joint p's new estimate (or its held one), NaN when p is unknown."""
+    a0, a1, a2 = (X[p, 0], X[p, 1], X[p, 2]) if update[p] else (pos[r, p, 0], pos[r, p, 1], pos[r, p, 2])
+    return np.sqrt((x0 - a0) * (x0 - a0) + (x1 - a1) * (x1 - a1) + (x2 - a2) * (x2 - a2))
 
 
 @jit

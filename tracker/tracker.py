@@ -143,6 +143,7 @@ class Tracker:
             tolerance=float(cfg.bone_prior_tolerance), min_views=int(cfg.bone_prior_min_views),
             min_samples=int(cfg.bone_prior_min_samples), sample_s=float(cfg.bone_prior_sample_s),
             symmetric=bool(cfg.bone_symmetry), bones=self._prior_bones, mirror=mirror,
+            resolve=bool(cfg.bone_prior_resolve),
             quadratic=bool(cfg.velocity_quadratic), window_s=velocity_windows(skeleton, cfg))
         self._update_params = UpdateParams(
             max_observation_age_s=float(cfg.max_observation_age_s),

@@ -291,7 +291,7 @@ def single_view(ctx: Context) -> dict:
 
 
 PRIORS_OFF = {"limb_velocity_window_s": 0.0, "velocity_quadratic": False, "joint_gate_m": 0.0,
-              "bone_prior_tolerance": 0.0, "bone_symmetry": False, "head_bones": False}
+              "bone_prior_tolerance": 0.0, "bone_symmetry": False, "head_bones": False, "bone_prior_resolve": False}
 """The tracker's body and joint priors (docs/tracker.md, "Body and joint priors"), every one off: the paper's
 updates, which each row of the `priors` experiment changes."""
 
@@ -303,11 +303,12 @@ PRIORS_ROWS = (
     ("bone_prior_tolerance", {"bone_prior_tolerance": 0.15}),
     ("bone_symmetry", {"bone_prior_tolerance": 0.15, "bone_symmetry": True}),
     ("head_bones", {"bone_prior_tolerance": 0.15, "head_bones": True}),
+    ("bone_prior_resolve", {"bone_prior_tolerance": 0.15, "bone_prior_resolve": True}),
     ("all", {"limb_velocity_window_s": 0.2, "velocity_quadratic": True, "joint_gate_m": 0.25,
-             "bone_prior_tolerance": 0.15, "bone_symmetry": True, "head_bones": True}),
+             "bone_prior_tolerance": 0.15, "bone_symmetry": True, "head_bones": True, "bone_prior_resolve": True}),
 )
 """The rows of the `priors` experiment: a name and the switches it turns on over `PRIORS_OFF` (the bone prior's
-own switches, symmetry and head bones, need its tolerance)."""
+own switches, symmetry, head bones and the re-solve, need its tolerance)."""
 
 def priors(ctx: Context) -> dict:
     """Each body and joint prior alone and all together, over the `store` preset with every prior off: PCP by

@@ -38,10 +38,10 @@ def test_the_paper_presets_keep_every_body_and_joint_prior_off():
     for name in ("campus-paper", "shelf-paper", "store-paper"):
         paper = TrackerConfig.preset(name)
         for key in ("limb_velocity_window_s", "velocity_quadratic", "joint_gate_m", "bone_prior_tolerance",
-                    "bone_symmetry", "head_bones"):
+                    "bone_symmetry", "head_bones", "bone_prior_resolve"):
             assert getattr(paper, key) == getattr(off, key), (name, key)
     assert off.limb_velocity_window_s == off.joint_gate_m == off.bone_prior_tolerance == 0.0
-    assert not (off.velocity_quadratic or off.bone_symmetry or off.head_bones)
+    assert not (off.velocity_quadratic or off.bone_symmetry or off.head_bones or off.bone_prior_resolve)
 
 
 def test_unknown_preset_lists_the_valid_ones():
@@ -59,6 +59,7 @@ def test_unknown_preset_lists_the_valid_ones():
     ("bone_prior_tolerance", -0.1), ("bone_prior_min_views", 1), ("bone_prior_min_samples", 0),
     ("bone_prior_min_samples", 26), ("bone_prior_sample_s", -1.0), ("limb_velocity_window_s", -0.2),
     ("velocity_quadratic", 1), ("bone_symmetry", "yes"), ("head_bones", 0),
+    ("bone_prior_resolve", "on"),
 ])
 def test_out_of_range_values_name_the_field(field, value):
     with pytest.raises(ConfigError, match=field):

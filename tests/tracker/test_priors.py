@@ -1,6 +1,7 @@
 """The body and joint priors beyond the paper (docs/tracker.md, "Body and joint priors"): the bone prior, the
 temporal gate, the per-joint velocity windows and the constant-acceleration velocity fit."""
 
+import cv2
 import numpy as np
 import pytest
 
@@ -8,8 +9,9 @@ from core.types import CAMPUS14, COCO17, Frame
 from tests.tracker.synthetic import store_like
 from tracker.body import prior_bones, velocity_windows
 from tracker.config import BONE_SAMPLES, TrackerConfig
-from tracker.kernels import _bound_bones, _fit_velocities, _gate_jumps
+from tracker.kernels import _bound_bones, _fit_velocities, _gate_jumps, _resolve_bones
 from tracker.tracker import Tracker
+from tracker.triangulation import Observations, triangulate_point
 
 CONFIG = TrackerConfig.preset("store")
 ALL_ON = CONFIG.replace(limb_velocity_window_s=0.2, velocity_quadratic=True, joint_gate_m=0.3,
@@ -188,3 +190,57 @@ def test_with_every_prior_on_the_bones_keep_the_persons_lengths_and_no_joint_is_
                 length = np.linalg.norm(tg.pos[r, c] - tg.pos[r, p])
                 assert abs(length - tg.bone_len[r, b]) <= 0.15 * tg.bone_len[r, b] + 1e-9
     assert all(np.isfinite(t.pose).all() for t in tracker.last_output.targets)
+
+
+
+def test_resolve_drops_the_one_view_that_breaks_the_bone_and_leaves_two_views_to_the_bound():
+    tracker = Tracker(store_like("layout1", 0.1, seed=0)[0], ALL_ON.replace(bone_prior_resolve=True,
+                                                                            reject_factor=0.0))
+    params, P = tracker._update_params, tracker._P
+    prior = params.prior
+    b = next(i for i, (p, c) in enumerate(prior.bones.tolist()) if (COCO17.joints[p], COCO17.joints[c])
+             == ("left_elbow", "left_wrist"))
+    p, c = prior.bones[b]
+    J, C = COCO17.num_joints, len(P)
+    elbow, wrist = np.array([2.0, 2.0, 1.1]), np.array([2.1, 2.05, 0.87])  # a forearm of 0.256 m
+    views = [0, 3, 5, 8]
+
+    def pixels(point, k):
+        x = P[k] @ np.append(point, 1.0)
+        return x[:2] / x[2]
+
+    kept = Observations(np.zeros((J, C), dtype=np.int64), np.zeros((J, C, 2)), np.zeros((J, C)), np.ones((J, C)))
+    for i, k in enumerate(views):
+        kept.cam[c, i] = k
+        kept.points_px[c, i] = pixels(wrist, k)
+    kept.points_px[c, 2] += (0.0, 90.0)  # one view's wrist 90 px off
+    # Independent reference: OpenCV's DLT of two of the good views is the true wrist, noise-free.
+    ref = cv2.triangulatePoints(P[0], P[8], pixels(wrist, 0).reshape(2, 1), pixels(wrist, 8).reshape(2, 1))
+    np.testing.assert_allclose(ref[:3, 0] / ref[3, 0], wrist, atol=1e-6)
+    X = np.zeros((J, 3))
+    X[p] = elbow
+    plain, compensated = np.empty(3), np.empty(3)
+    work, scratch = np.empty((3, 4, 4)), np.empty((4, 8))
+    subset = Observations(np.empty(C, dtype=np.int64), np.empty((C, 2)), np.empty(C), np.empty(C))
+    triangulate_point(P, Observations(kept.cam[c], kept.points_px[c], kept.dts[c], kept.decays[c]), 4, np.zeros(3),
+                      params.triangulation, plain, compensated, work, scratch)
+    X[c] = compensated  # the estimate from all four views: the forearm broken
+    assert abs(np.linalg.norm(X[c] - elbow) / np.linalg.norm(wrist - elbow) - 1.0) > 0.15
+    samples = X.copy()
+    pos, vel = np.full((1, J, 3), np.nan), np.zeros((1, J, 3))
+    bone_len = np.full((1, len(prior.bones)), np.nan)
+    bone_len[0, b] = np.linalg.norm(wrist - elbow)
+    update = np.zeros(J, dtype=np.bool_)
+    update[[p, c]] = True
+    num_views = np.zeros(J, dtype=np.int64)
+    num_views[c] = 4
+    _resolve_bones(pos, vel, bone_len, 0, X, samples, update, prior, P, kept, num_views, subset, params.triangulation,
+                   work, scratch)
+    np.testing.assert_allclose(X[c], ref[:3, 0] / ref[3, 0], atol=1e-6)
+    np.testing.assert_allclose(samples[c], X[c], atol=1e-6)
+    # With two views, leaving one out leaves too few to solve: the estimate goes on to the bound unchanged.
+    X[c] = compensated
+    num_views[c] = 2
+    _resolve_bones(pos, vel, bone_len, 0, X, samples, update, prior, P, kept, num_views, subset, params.triangulation,
+                   work, scratch)
+    np.testing.assert_array_equal(X[c], compensated)
