@@ -55,6 +55,13 @@ class _Snapshot:
     heading: np.ndarray  # (S,) unwrapped yaw
 
 
+# MuJoCo's arena (its stack and constraint memory), megabytes: fixed, and per body slot. Left to MuJoCo, its size
+# grows with the square of the bodies (11.7 GB at 500 people, more than the machine at 800: "Could not allocate
+# memory"); with contacts off and no constraints, the kinematics need a few MB per hundred people.
+ARENA_MB = 16
+ARENA_MB_PER_SLOT = 0.25
+
+
 class World:
     """The store, its people and their bodies in MuJoCo.
 
@@ -156,6 +163,7 @@ class World:
         people = "".join(hm.humanoid_xml(f"p{k}_") for k in range(self.slots))
         return (
             '<mujoco model="store"><compiler angle="radian"/>'
+            f'<size memory="{ARENA_MB + math.ceil(ARENA_MB_PER_SLOT * self.slots)}M"/>'
             '<option><flag contact="disable" gravity="disable"/></option>'
             '<default><geom contype="0" conaffinity="0" density="1000"/><site group="4"/></default>'
             f'<worldbody>{"".join(geoms)}{people}</worldbody></mujoco>'
