@@ -83,7 +83,7 @@ PAUSE_TURN_RAD = (0.4, 1.3)
 GROUP_GAP_M = 0.6
 GROUP_RADIUS_M = 1.3
 # Bounds of the [crowd] section: people at once, and any duration of a visit or an activity (a day).
-MAX_PEOPLE = 500
+MAX_PEOPLE = 2000
 _MAX_TIME_S = 86400.0
 
 

@@ -103,7 +103,7 @@ def test_scenarios_show_prints_a_file_that_loads_and_reference_is_the_docs(tmp_p
     assert capsys.readouterr().out == scenario_reference.reference_markdown()
     err = _run_bad(capsys, ["scenarios", "--show", "nowhere"])
     assert ("nowhere: no such scenario file (shipped scenarios: border, campus, convenience, hypermarket, "
-            "panoptic_dome, shelf, store_layout1") in err
+            "megastore, panoptic_dome, shelf, store_layout1") in err
 
 
 def test_an_output_that_is_an_input_is_refused_and_the_input_kept(tmp_path, capsys):

@@ -128,3 +128,25 @@ def test_every_key_has_a_meaning_and_every_number_a_range():
             assert docs.get(f.name), f"{section}{f.name} has no meaning in {cls.__name__}'s Attributes"
             if _holds_numbers(hints[f.name]):
                 assert field_range(f) is not None, f"{section}{f.name} declares no range"
+
+
+def test_megastore_is_the_hypermarket_four_times_over_at_its_density():
+    # Issue 47's store beyond one core: a rig of 1,000 ceiling cameras and a crowd of 800 that its walkable floor
+    # holds, at the hypermarket's cameras and people per m² of walkable floor (within 5 %). Nothing simulated.
+    from sim.cameras import build_rig
+    from sim.crowd import validate
+    from sim.rng import child_rng
+    from sim.store import StoreGeometry
+
+    mega, hyper = scenario.load("megastore"), scenario.load("hypermarket")
+    store = StoreGeometry(mega.store, name="megastore")
+    rig = build_rig(mega, child_rng(mega.seed, "cameras"))
+    validate(mega.crowd, store)
+    cameras, people, floor = len({c.name for c in rig}), mega.crowd.people, store.free_area_m2
+    assert (cameras, people) == (1000, 800)
+    h_floor = StoreGeometry(hyper.store, name="hypermarket").free_area_m2
+    h_cameras, h_people = hyper.cameras.rows * hyper.cameras.cols, hyper.crowd.people
+    assert (h_cameras, h_people) == (240, 200)
+    assert floor == pytest.approx(4 * h_floor, rel=0.05)
+    assert cameras / floor == pytest.approx(h_cameras / h_floor, rel=0.05)
+    assert people / floor == pytest.approx(h_people / h_floor, rel=0.05)
