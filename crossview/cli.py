@@ -374,7 +374,8 @@ def _track_args(p: argparse.ArgumentParser) -> None:
 def _zone_options(p):
     """The options tracking a store as zones (`track`, `run`)."""
     p.add_argument("--zones", metavar="auto|N", help="track the store as N zones, each by its own tracker, "
-                   "identities handed over at their borders (auto: one zone per 60 cameras; docs/zones.md)")
+                   "identities handed over at their borders (auto: about one zone per 60 cameras, the cut of fewest "
+                   "zone cameras; docs/zones.md)")
     p.add_argument("--overlap", type=_positive_float, default=2.0, metavar="M", help="with --zones: how far "
                    "neighbouring zones overlap, metres (at least 2; default 2)")
     where = p.add_mutually_exclusive_group()
@@ -386,8 +387,8 @@ def _zone_options(p):
 
 def _zones_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("scenario", help="scenario file or shipped name")
-    p.add_argument("--zones", default="auto", metavar="auto|N", help="number of zones (default auto: one per 60 "
-                   "cameras)")
+    p.add_argument("--zones", default="auto", metavar="auto|N", help="number of zones (default auto: about one per 60 "
+                   "cameras, the cut of fewest zone cameras)")
     p.add_argument("--overlap", type=_positive_float, default=2.0, metavar="M", help="how far neighbouring zones "
                    "overlap, metres (at least 2; default 2)")
     p.add_argument("--cameras", type=_positive_int, help="number of cameras, as a grid fitted to the floor")
@@ -994,6 +995,12 @@ def _track_zoned(args, prefix: str = "") -> None:
           f"{result.camera_frames_per_s:.0f} camera frames/s wall-clock, {result.tracker_fps_wall:.1f} FPS (all "
           f"cameras once); zones' update time {summed:.1f} s in all ({result.summed_frames_per_s:.0f} camera "
           "frames/s on one core)")
+    for z, (cameras, frames, spent) in enumerate(zip(result.zone_cameras, result.zone_frames, result.zone_tracker_s,
+                                                     strict=True)):
+        speed = f"{frames / spent:.0f} camera frames/s" if spent > 0 else "no speed measured"
+        print(f"  zone {z}: {cameras} cameras, {frames} camera frames, update {spent:.1f} s ({speed})")
+    print(f"  peak memory: {result.peak_memory / 2**20:.0f} MiB this process; workers "
+          f"{', '.join(f'{m / 2**20:.0f}' for m in result.worker_peak_memory)} MiB")
 
 
 def _cmd_zones(args) -> None:

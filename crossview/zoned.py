@@ -28,15 +28,13 @@ BATCH_S = 0.5
 its tracking, short enough that the driver's memory holds little."""
 
 
-def zone_count(text: str, num_cameras: int) -> int:
-    """`--zones auto|N` as a count (`tracker.zones.auto_count` for auto).
+def zone_count(text: str) -> int | None:
+    """`--zones auto|N` as a count, None for auto (`tracker.zones.cut` then picks it).
 
     Raises:
         ConfigError: neither auto nor a positive integer."""
-    from tracker import zones
-
     if text == "auto":
-        return zones.auto_count(num_cameras)
+        return None
     if not text.isdigit() or int(text) < 1:
         raise ConfigError(f"--zones {text}: must be auto or a whole number of zones, at least 1")
     return int(text)
@@ -49,7 +47,7 @@ def cut(cameras, boxes, text: str, overlap_m: float):
     floor = watched_floor(boxes)
     if floor is None:
         raise CrossviewError("--zones: the recording keeps no store floor to cut into zones")
-    return zones.cut(cameras, floor, zone_count(text, len(cameras)), overlap_m)
+    return zones.cut(cameras, floor, zone_count(text), overlap_m)
 
 
 class ZoneTracker:
@@ -96,6 +94,17 @@ class ZoneGroup:
     def update(self, frames_per_zone: list) -> list[tuple[list, float]]:
         return [tracker.update(frames) for tracker, frames in zip(self.trackers, frames_per_zone, strict=True)]
 
+    def peak_memory(self) -> int:
+        """Peak resident memory of the process holding these zones so far, bytes."""
+        return peak_memory()
+
+
+def peak_memory() -> int:
+    """Peak resident memory of this process so far, bytes (`resource.getrusage`; Linux counts kilobytes)."""
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
 
 def assign(loads: list[int], workers: int) -> list[list[int]]:
     """Zones to workers: the zone with the most cameras first, each to the worker with the fewest cameras so far
@@ -114,7 +123,9 @@ def assign(loads: list[int], workers: int) -> list[list[int]]:
 @dataclass(frozen=True)
 class ZonedResult:
     """What `track_zoned` did: the tracks file, camera frames, wall-clock seconds of the whole, the zones' update
-    seconds (each, and so their sum), the zones' camera counts and the hand-overs."""
+    seconds (each, and so their sum), the zones' camera counts, the camera frames each zone tracked, the
+    hand-overs, and the peak resident memory (bytes) of the command's process and of each worker's (the workers'
+    are the command's own when it holds the zones itself)."""
 
     path: Path
     updates: int
@@ -124,6 +135,9 @@ class ZonedResult:
     zone_cameras: tuple[int, ...]
     handovers: int
     num_cameras: int
+    zone_frames: tuple[int, ...] = ()
+    peak_memory: int = 0
+    worker_peak_memory: tuple[int, ...] = ()
 
     @property
     def camera_frames_per_s(self) -> float:
@@ -182,6 +196,7 @@ def track_zoned(rec_path: Path, out: Path, *, zones_text: str, overlap_m: float,
     args = [(method, [cameras[i] for i in z.cameras], preset, config_path, skeleton, overrides) for z in zones]
     merger = Merger(zones, skeleton, gate_m=config.alpha_3d_m)
     spent = [0.0] * len(zones)
+    tracked = [0] * len(zones)
     updates = 0
     groups = assign([len(z.cameras) for z in zones], workers)
     setup = parallel.Setup(preload=("crossview.zoned", "crossview.recording", "tracker.tracker"))
@@ -209,8 +224,9 @@ def track_zoned(rec_path: Path, out: Path, *, zones_text: str, overlap_m: float,
                     for z, result in zip(g, answer, strict=True):
                         results[z] = result
                 cursor = [0] * len(zones)
-                for z, (_, s) in enumerate(results):
+                for z, (frames, s) in enumerate(results):
                     spent[z] += s
+                    tracked[z] += len(frames)
                 for cf in batch:
                     outputs = {}
                     for z in zones_of[cf.frame.camera]:
@@ -237,8 +253,10 @@ def track_zoned(rec_path: Path, out: Path, *, zones_text: str, overlap_m: float,
                            "zones": [{"cell": list(z.cell), "region": list(z.region), "cameras": len(z.cameras)}
                                      for z in zones],
                            "handovers": len(merger.handovers)})
-    return ZonedResult(out, updates, len(groups), time.perf_counter() - start, tuple(spent),
-                       tuple(len(z.cameras) for z in zones), len(merger.handovers), len(cameras))
+        wall_s = time.perf_counter() - start
+        worker_peaks = tuple(group.call("peak_memory", [() for _ in groups]))
+    return ZonedResult(out, updates, len(groups), wall_s, tuple(spent), tuple(len(z.cameras) for z in zones),
+                       len(merger.handovers), len(cameras), tuple(tracked), peak_memory(), worker_peaks)
 
 
 def write_map(name: str, boxes, cameras, zones, overlap_m: float, path: Path) -> Path:

@@ -72,33 +72,64 @@ def grid_shape(count: int, width_m: float, depth_m: float) -> tuple[int, int]:
     return best[1], best[2]
 
 
+AUTO_SPREAD = 0.25
+"""`--zones auto` tries every count within this fraction of `auto_count` and keeps the cut with the fewest zone
+cameras: a camera near a border belongs to both zones, and a prime count is a row of strips whose long borders
+cost the most (megastore, 1,000 cameras on 80 m x 60 m: 17 zones are 17 x 1 strips, 3.33 zone cameras per
+camera; 16 are 4 x 4, 1.97)."""
+
+
 def auto_count(num_cameras: int) -> int:
-    """The number of zones `--zones auto` asks for: one per `CAMERAS_PER_ZONE` cameras, at least one."""
+    """About how many zones `--zones auto` asks for: one per `CAMERAS_PER_ZONE` cameras, at least one (`cut`
+    with no count tries those within `AUTO_SPREAD` of it)."""
     return max(1, round(num_cameras / CAMERAS_PER_ZONE))
 
 
-def cut(cameras: Sequence[Camera], floor: tuple[float, float, float, float], count: int,
+def cut(cameras: Sequence[Camera], floor: tuple[float, float, float, float], count: int | None,
         overlap_m: float = MIN_OVERLAP_M) -> list[Zone]:
-    """The floor (x0, y0, x1, y1) cut into `count` zones (`grid_shape`), each with the cameras that see into it.
+    """The floor (x0, y0, x1, y1) cut into `count` zones (`grid_shape`), each with the cameras that see into it;
+    `count` None (`--zones auto`): of the counts within `AUTO_SPREAD` of `auto_count`, the cut with the fewest
+    zone cameras (ties: the count nearest `auto_count`, then the fewer).
 
     Raises:
         ConfigError: count < 1; an overlap below `MIN_OVERLAP_M` or as wide as a cell; a zone that no camera
             sees (more zones than the cameras allow).
     """
-    if count < 1:
+    if count is not None and count < 1:
         raise ConfigError(f"--zones {count}: must be at least 1 (or auto)")
     if not overlap_m >= MIN_OVERLAP_M:
         raise ConfigError(f"zone overlap {overlap_m} m: must be at least {MIN_OVERLAP_M} m")
+    x0, y0, x1, y1 = floor
+    xs = np.arange(x0 + SAMPLE_M / 2, x1, SAMPLE_M)
+    ys = np.arange(y0 + SAMPLE_M / 2, y1, SAMPLE_M)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
+    sight = floor_sight(cameras, grid, HIP_HEIGHT_M)  # (C, N)
+    if count is not None:
+        return _cut(floor, count, overlap_m, grid, sight)
+    target = len(cameras) / CAMERAS_PER_ZONE
+    nearest = auto_count(len(cameras))
+    counts = sorted({nearest, *range(max(1, math.ceil(target * (1 - AUTO_SPREAD))),
+                                     math.floor(target * (1 + AUTO_SPREAD)) + 1)}, key=lambda n: (abs(n - target), n))
+    best = None
+    for n in counts:
+        try:
+            zones = _cut(floor, n, overlap_m, grid, sight)
+        except ConfigError:
+            continue
+        cost = sum(len(zone.cameras) for zone in zones)
+        if best is None or cost < best[0]:
+            best = (cost, zones)
+    return best[1] if best is not None else _cut(floor, nearest, overlap_m, grid, sight)
+
+
+def _cut(floor, count: int, overlap_m: float, grid: np.ndarray, sight: np.ndarray) -> list[Zone]:
+    """`cut` into `count` zones, given the floor points `grid` (N, 2) and which cameras see them (C, N)."""
     x0, y0, x1, y1 = floor
     cols, rows = grid_shape(count, x1 - x0, y1 - y0)
     cell_w, cell_d = (x1 - x0) / cols, (y1 - y0) / rows
     if count > 1 and overlap_m >= min(cell_w if cols > 1 else math.inf, cell_d if rows > 1 else math.inf):
         raise ConfigError(f"--zones {count}: cells of {cell_w:.1f} x {cell_d:.1f} m ({cols} x {rows}) are not wider "
                           f"than the overlap {overlap_m} m; ask for fewer zones or a smaller overlap")
-    xs = np.arange(x0 + SAMPLE_M / 2, x1, SAMPLE_M)
-    ys = np.arange(y0 + SAMPLE_M / 2, y1, SAMPLE_M)
-    grid = np.stack(np.meshgrid(xs, ys), axis=-1).reshape(-1, 2)
-    sight = floor_sight(cameras, grid, HIP_HEIGHT_M)  # (C, N)
     zones = []
     half = overlap_m / 2 if count > 1 else 0.0
     for r in range(rows):

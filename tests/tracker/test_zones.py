@@ -77,3 +77,14 @@ def test_bad_zones_are_refused_with_the_value_and_what_is_valid(rig):
 
 def test_auto_asks_for_one_zone_per_sixty_cameras():
     assert [zones.auto_count(n) for n in (1, 12, 89, 90, 240, 1000)] == [1, 1, 1, 2, 4, 17]
+
+
+def test_auto_keeps_the_cut_with_the_fewest_zone_cameras_near_one_per_sixty(rig, monkeypatch):
+    # About 7 zones asked for: 7 is prime, a row of 7 x 1 strips on the 24 m x 12 m floor; 6 (3 x 2) and 8 (4 x 2)
+    # lie within the spread. Auto must be the cheapest of the three cuts (zone cameras), each cut on its own.
+    monkeypatch.setattr(zones, "CAMERAS_PER_ZONE", len(rig) / 7)
+    assert zones.auto_count(len(rig)) == 7
+    costs = {n: sum(len(z.cameras) for z in zones.cut(rig, FLOOR, n)) for n in (6, 7, 8)}
+    auto = zones.cut(rig, FLOOR, None)
+    assert sum(len(z.cameras) for z in auto) == min(costs.values()) < costs[7]
+    assert len(auto) == min(costs, key=lambda n: (costs[n], abs(n - 7)))
