@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import re
 import signal
 import subprocess
 import time
@@ -41,13 +42,27 @@ def zoned_serial(store_recording, tmp_path_factory):
     return out, result
 
 
-def test_zoned_tracks_are_the_same_bytes_in_process_and_on_a_pool(zoned_serial, store_recording, tmp_path):
+def test_zoned_tracks_are_the_same_bytes_in_process_and_on_a_pool(zoned_serial, store_recording, tmp_path, capsys):
     out, result = zoned_serial
     assert result.zone_cameras == (12, 12) and result.updates > 0
+    # Each zone tracked every frame of its cameras, counted here from the recording itself.
+    rec = recording.open_recording(store_recording)
+    cut = zoned.cut(list(rec.cameras), rec.boxes, "2", 2.0)
+    names = [{rec.cameras[i].name for i in z.cameras} for z in cut]
+    frames = [cf.frame.camera for cf in rec.frames()]
+    assert result.zone_frames == tuple(sum(c in n for c in frames) for n in names)
+    assert result.worker_peak_memory == (result.peak_memory,)  # (one worker: this process)
     pooled = tmp_path / "pool.tracks.mcap"
+    capsys.readouterr()
     assert main(["--no-progress", "track", str(store_recording), "--zones", "2", "--workers", "2", "-o",
                  str(pooled)]) == 0
     assert outputs_digest(pooled) == outputs_digest(out)
+    printed = capsys.readouterr().out
+    for z, n in enumerate(result.zone_frames):
+        assert f"  zone {z}: 12 cameras, {n} camera frames, update " in printed
+    # Two worker processes, each holding numpy, numba's kernels and a tracker: tens of MiB at least.
+    peaks = re.search(r"peak memory: (\d+) MiB this process; workers (\d+), (\d+) MiB", printed)
+    assert peaks and all(50 <= int(m) < 64 * 1024 for m in peaks.groups())
 
 
 def test_a_zoned_tracks_file_is_ordinary_and_scores_near_the_single_tracker(zoned_serial, store_recording,
