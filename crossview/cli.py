@@ -723,7 +723,7 @@ def _cmd_sweep(args) -> None:
     if args.zones is not None:  # (auto or a whole number; whether the rig holds it is each cell's to say)
         from crossview import zoned
 
-        zoned.zone_count(args.zones, 1)
+        zoned.zone_count(args.zones)
     if args.ray is not None:
         executor = sweep.Executor.RAY
     else:
