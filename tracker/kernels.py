@@ -14,7 +14,7 @@ import numpy as np
 
 from core.jit import jit, sort_prefix
 from tracker.body import fill_poses, joint_states
-from tracker.triangulation import Observations, TriangulationParams, _solve_observations, triangulate_point
+from tracker.triangulation import Observations, TriangulationParams, solve_observations, triangulate_point
 
 MIN_VELOCITY_SPAN_S = 0.02  # a velocity fit needs samples at least this far apart in time
 
@@ -345,7 +345,7 @@ def _resolve_bones(pos, vel, bone_len, r, X, samples, update, prior, P, kept, nu
                     subset.cam[n], subset.dts[n], subset.decays[n] = kept.cam[c, i], kept.dts[c, i], kept.decays[c, i]
                     subset.points_px[n, 0], subset.points_px[n, 1] = kept.points_px[c, i, 0], kept.points_px[c, i, 1]
                     n += 1
-            _solve_observations(P, subset, n, V, triangulation, plain, compensated, work, scratch)
+            solve_observations(P, subset, n, V, triangulation, plain, compensated, work, scratch)
             if not np.isfinite(plain[0]):
                 continue
             use_compensated = use_velocity and np.isfinite(compensated[0])

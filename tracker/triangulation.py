@@ -352,7 +352,7 @@ def triangulate_point(P, observations, num, V, params, plain, compensated, work,
     cam, points_px, dts, decays = observations.cam, observations.points_px, observations.dts, observations.decays
     use_velocity, min_views, reject_factor = params.use_velocity, params.min_views, params.reject_factor
     reject_floor_px = params.reject_floor_px
-    _solve_observations(P, observations, num, V, params, plain, compensated, work, scratch)
+    solve_observations(P, observations, num, V, params, plain, compensated, work, scratch)
     if reject_factor <= 0.0 or num == 0:
         return
     X = compensated if use_velocity else plain
@@ -388,7 +388,7 @@ def triangulate_point(P, observations, num, V, params, plain, compensated, work,
         decays2[i] = decays[keep[i]]
     plain2 = np.empty(3)
     compensated2 = np.empty(3)
-    _solve_observations(P, Observations(cam2, points2, dts2, decays2), kept, V, params, plain2, compensated2, work,
+    solve_observations(P, Observations(cam2, points2, dts2, decays2), kept, V, params, plain2, compensated2, work,
                         scratch)
     if np.isfinite(plain2[0]):
         plain[:] = plain2
@@ -397,7 +397,7 @@ def triangulate_point(P, observations, num, V, params, plain, compensated, work,
 
 
 @jit
-def _solve_observations(P, observations, num, V, params, plain, compensated, work, scratch):
+def solve_observations(P, observations, num, V, params, plain, compensated, work, scratch):
     """The normal matrices of eq. (8), (10) with the weights of eq. (11) (without its row norms unless
     `params.row_norm`), and their smallest eigenvectors (arguments as `triangulate_point`)."""
     cam, points_px, dts, decays = observations.cam, observations.points_px, observations.dts, observations.decays

@@ -368,14 +368,8 @@ class Coverage:
 
     def warning(self) -> str | None:
         """One line when less than `WARN_TWO_VIEW_SHARE` of the walkable floor is seen by two cameras or more;
-        None otherwise."""
-        worst = min(self.heights, key=lambda h: h.share(2))
-        if worst.share(2) >= WARN_TWO_VIEW_SHARE:
-            return None
-        return (f"warning: {self.scenario}: only {100 * worst.share(2):.0f} % of the walkable floor is seen by two "
-                f"cameras or more at {worst.name} height ({worst.height_m:g} m), below "
-                f"{100 * WARN_TWO_VIEW_SHARE:.0f} %: people elsewhere cannot be triangulated "
-                "(`crossview coverage SCENARIO -o MAP.png` shows where)")
+        None otherwise (`upper_bound_warning`)."""
+        return upper_bound_warning(self.scenario, self.heights)
 
     def lines(self) -> list[str]:
         """The answer in words: the rig, the floor and the crowd; the prediction (PCP, the share of floor-time
@@ -413,6 +407,42 @@ class Coverage:
         }
 
 
+def upper_bound_warning(name: str, heights) -> str | None:
+    """One line when less than `WARN_TWO_VIEW_SHARE` of the walkable floor is seen by two cameras or more at
+    either height of `heights` (`HeightCoverage`s) of the scenario `name`; None otherwise."""
+    worst = min(heights, key=lambda h: h.share(2))
+    if worst.share(2) >= WARN_TWO_VIEW_SHARE:
+        return None
+    return (f"warning: {name}: only {100 * worst.share(2):.0f} % of the walkable floor is seen by two "
+            f"cameras or more at {worst.name} height ({worst.height_m:g} m), below "
+            f"{100 * WARN_TWO_VIEW_SHARE:.0f} %: people elsewhere cannot be triangulated "
+            "(`crossview coverage SCENARIO -o MAP.png` shows where)")
+
+
+def upper_bound(scenario, cameras: list[Camera] | None = None):
+    """The upper bound alone (no prediction): the store, the rig, its grid (None for placed or calibrated
+    cameras), the walkable cells' centres and their `HeightCoverage` at hip and at head height."""
+    from sim.cameras import build_rig
+    from sim.rng import child_rng
+    from sim.store import StoreGeometry
+
+    store = StoreGeometry(scenario.store, name=scenario.where)
+    rig = scenario.cameras
+    grid = (rig.rows, rig.cols) if cameras is None and not rig.placements and not rig.calibration else None
+    if cameras is None:
+        cameras = build_rig(scenario, child_rng(scenario.seed, "cameras"))
+    cells_xy = store.cell_centers[store.free]
+    heights = tuple(HeightCoverage(name, height_m,
+                                   floor_sight(cameras, cells_xy, height_m).sum(axis=0, dtype=np.int64))
+                    for name, height_m in HEIGHTS_M)
+    return store, list(cameras), grid, cells_xy, heights
+
+
+def warning(scenario) -> str | None:
+    """`generate`'s and `run`'s warning about a scenario's rig (`upper_bound_warning`), without the prediction."""
+    return upper_bound_warning(scenario.name, upper_bound(scenario)[4])
+
+
 def coverage(scenario, cameras: list[Camera] | None = None, people: int | None = None) -> Coverage:
     """The prediction (`predict`) and the upper bound (how many cameras see each cell of the walkable floor at hip
     and at head height) of a scenario's rig.
@@ -426,18 +456,9 @@ def coverage(scenario, cameras: list[Camera] | None = None, people: int | None =
     Raises:
         ScenarioError: the store or the rig cannot be built (named by the scenario's file and key).
     """
-    from sim.cameras import build_rig
-    from sim.rng import child_rng
-    from sim.store import GRID_CELL_M, StoreGeometry
+    from sim.store import GRID_CELL_M
 
-    store = StoreGeometry(scenario.store, name=scenario.where)
-    rig = scenario.cameras
-    grid = (rig.rows, rig.cols) if cameras is None and not rig.placements and not rig.calibration else None
-    if cameras is None:
-        cameras = build_rig(scenario, child_rng(scenario.seed, "cameras"))
-    cells_xy = store.cell_centers[store.free]
-    heights = [HeightCoverage(name, height_m, floor_sight(cameras, cells_xy, height_m).sum(axis=0, dtype=np.int64))
-               for name, height_m in HEIGHTS_M]
+    store, cameras, grid, cells_xy, heights = upper_bound(scenario, cameras)
     crowd = scenario.crowd.people if people is None else people
     params = scenario.detector.params()
     prediction = predict(store, list(cameras), params, crowd, occlusion=scenario.detector.occlusion,
