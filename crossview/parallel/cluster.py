@@ -110,8 +110,13 @@ def connect_ray(address: str | None, reaper: Reaper | None = None) -> bool:
                 ray.shutdown()
             raise
     except (ConnectionError, RuntimeError, ValueError, TimeoutError) as e:
-        raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({one_line(e)})".replace("  ", " ")
-                             ) from None
+        # A cluster that `ray start` made (Ray 2.59 on) wants token authentication, and a driver joins it only with
+        # the same mode set: Ray's refusal does not say so, the line does.
+        hint = (f"; a cluster started by `ray start` wants its token: {RAY_AUTH_MODE_ENV}={RAY_LOCAL_AUTH_MODE} "
+                "(and its token in ~/.ray/auth_token or RAY_AUTH_TOKEN)"
+                if address and not os.environ.get(RAY_AUTH_MODE_ENV) else "")
+        raise CrossviewError(f"--ray {address or ''}: cannot start or reach Ray ({one_line(e)}){hint}"
+                             .replace("  ", " ")) from None
     return True
 
 
