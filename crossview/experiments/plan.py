@@ -123,26 +123,7 @@ def search(ladder: list[tuple[int, int]], target: float, predict_at) -> tuple[in
             seen[i] = predict_at(ladder[i])
         return seen[i].predicted_pcp >= target
 
-    low, high, step = -1, None, 1  # ladder[low] does not meet the target (-1: none tried), ladder[high] does
-    i = 0
-    while i < len(ladder):
-        if meets(i):
-            high = i
-            break
-        low, i, step = i, i + step, step * 2
-    if high is None:
-        last = len(ladder) - 1
-        if last > low and meets(last):
-            high = last
-        else:
-            return None, seen
-    while high - low > 1:
-        mid = (low + high) // 2
-        if meets(mid):
-            high = mid
-        else:
-            low = mid
-    return high, seen
+    return walk(0, len(ladder), meets), seen
 
 
 @dataclass(frozen=True)
