@@ -43,7 +43,7 @@ SCENARIO_CASES = [
     ("million-cameras", None, ["--cameras", "1000000"],
      "--cameras: 1000000 is more than the 10000 cameras a grid may hold"),
     ("huge-seed", None, ["--seed", str(10**30)], f"argument --seed: {10**30} must be in [0, 2^63 - 1]"),
-    ("huge-crowd", None, ["--people", "100000000"], "people: 100000000 must be in [0, 500] people"),
+    ("huge-crowd", None, ["--people", "100000000"], "people: 100000000 must be in [0, 2000] people"),
     ("calibration-missing", '[cameras]\ncalibration = "nowhere.json"\ncalibration_format = "dataset"\n', [],
      "s.toml: cameras.calibration: 'nowhere.json': no such file"),
     ("calibration-format-unknown", '[cameras]\ncalibration = "rig.json"\ncalibration_format = "opencv"\n', [],

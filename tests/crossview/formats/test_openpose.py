@@ -154,7 +154,7 @@ DAMAGED = [
     ("scene-huge-seed", _set_json("scene.json", lambda d: d.update(seed=2**70)), "scene.json",
      f"seed {2**70} must be an integer in [0, 2^63)", None),
     ("scene-text-no-scenario", _set_json("scene.json", lambda d: d.update(scenario_text="[crowd]\npeople = -3\n")),
-     "scene.json", "scenario_text: [crowd] people: -3 must be in [0, 500]", None),
+     "scene.json", "scenario_text: [crowd] people: -3 must be in [0, 2000]", None),
 ]
 
 
