@@ -869,11 +869,14 @@ def _cmd_plan(args) -> None:
     result = plan.plan(args.scenario, args.target_pcp, people=args.people, heights_m=heights, lenses_deg=lenses,
                        max_cameras=args.max_cameras, progress=progress)
     rec = result.recommended
-    _say(args, f"map: {coverage.write_map(rec.coverage, map_path)}")
     if args.confirm:
         result = plan.Plan(**{**vars(result), "confirmed": plan.confirm(
             args.scenario, result, confirm_dir, people=args.people, seeds=seeds, duration_s=args.duration,
             workers=args.workers, progress=progress)})
+    _, grid, _ = result.answer  # (the map is the recommendation's: with --confirm, the measured rig's)
+    chosen = rec if grid == rec.grid else plan.predict_candidate(
+        args.scenario, pipeline.load_scenario(args.scenario), grid, rec.height_m, rec.hfov_deg, args.people)
+    _say(args, f"map: {coverage.write_map(chosen.coverage, map_path)}")
     head = f"{result.scenario}, {result.people} people, target PCP {result.target_pcp:g}:"
     words = [f"recommended: {rec.cameras} cameras ({rec.grid[0]} x {rec.grid[1]}) at {rec.height_m:g} m with "
              f"{rec.hfov_deg:g} deg lenses, predicted PCP {rec.predicted_pcp:.3f}"]
